@@ -1,0 +1,1 @@
+"""The user-facing layer: command line (``motionx``) and, later, the HTTP service."""

@@ -1,0 +1,100 @@
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from solver import character as C
+from solver.kinematics import segment_frames
+
+
+@pytest.mark.parametrize("name,n", [("halfboy", 16), ("fullbody", 43), ("capture-lower", 30), ("capture-full", 63)])
+def test_reference_characters_have_the_specified_coordinates(name, n):
+    ch = C.reference(name)
+    assert ch.n == n
+    assert ch.coordinate_names[:6] == ("root_tx", "root_ty", "root_tz", "root_rz", "root_ry", "root_rx")
+    assert ch.dof_kinds[:3] == ("slide",) * 3 and ch.dof_kinds[3:6] == ("hinge",) * 3
+    assert math.isclose(ch.total_mass, 23.0, rel_tol=1e-12)
+    assert {c.name for c in ch.contacts} == {"heel_r", "toe_r", "heel_l", "toe_l"}
+    assert {f.side for f in ch.feet} == {"right", "left"}
+
+
+def test_halfboy_dofs_are_the_thesis_ones():
+    ch = C.halfboy()
+    # root 6, each hip 3, each knee 1, each ankle 1
+    per_side = ["hip_flexion", "hip_adduction", "hip_rotation", "knee_angle", "ankle_angle"]
+    assert set(ch.coordinate_names[6:]) == {f"{j}_{s}" for j in per_side for s in "rl"}
+
+
+def test_ellipsoid_matches_spec_3_1_to_3_4():
+    length, mass, rho = 0.4, 2.3, 1050.0
+    a, b, inertia = C.ellipsoid(length, mass, rho)
+    assert a == pytest.approx(0.2)
+    # the ellipsoid's volume times density is its mass
+    assert 4.0 / 3.0 * math.pi * a * b * b * rho == pytest.approx(mass)
+    assert np.allclose(np.diag(inertia), [mass * 2 * b * b / 5, mass * (a * a + b * b) / 5, mass * (a * a + b * b) / 5])
+
+
+def test_segment_inertia_follows_its_direction():
+    seg = C.build_segment(C.SegmentSpec("s", None, (0, 0, 0), C.root_dofs(), 0.5, 3.0, direction=(0, 0, -1)))
+    a, b, _ = C.ellipsoid(0.5, 3.0, 1050.0)
+    assert np.allclose(seg.com, [0, 0, -a])
+    # the long axis (smallest moment) is z
+    assert np.argmin(np.diag(seg.inertia)) == 2
+    assert np.allclose(seg.marker, [0, 0, -0.5])
+
+
+def test_winter_fractions_sum_to_the_body():
+    ch = C.capture_full(1.8, 70.0)
+    assert ch.total_mass == pytest.approx(70.0)
+    thigh = ch.segment("thigh_r")
+    assert thigh.mass == pytest.approx(7.0)
+    assert thigh.length == pytest.approx(0.245 * 1.8)
+
+
+def test_reduce_welds_segments_without_changing_mass_or_com():
+    cap = C.capture_lower()
+    hb = C.halfboy()
+    q_cap = np.zeros(cap.n)
+    q_hb = np.zeros(hb.n)
+    rc, pc = segment_frames(cap, q_cap)
+    rh, ph = segment_frames(hb, q_hb)
+    # every segment is where it was (locked at 0)
+    assert np.allclose(pc, ph) and np.allclose(rc, rh)
+    # total mass and the model's composite centre of mass are unchanged
+    m_cap, m_hb = cap.model, hb.model
+    assert sum(m_cap.mass) == pytest.approx(sum(m_hb.mass))
+    assert len(hb.segments) == len(cap.segments)  # toes kept, welded to the feet
+    assert m_hb.seg_body["toes_r"] == m_hb.seg_body["foot_r"]
+
+
+def test_characters_are_immutable():
+    ch = C.halfboy()
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        ch.name = "x"  # type: ignore[misc]
+    with pytest.raises(ValueError):
+        ch.segments[1].offset[0] = 1.0
+
+
+def test_bad_descriptions_are_refused_with_a_message():
+    good = C.SegmentSpec("pelvis", None, (0, 0, 0), C.root_dofs(), 0.2, 10.0)
+    with pytest.raises(C.CharacterError, match="parent 'nope'"):
+        C.build_character("x", [good, C.SegmentSpec("a", "nope", (0, 0, 0), (), 0.1, 1.0)])
+    with pytest.raises(C.CharacterError, match="axis"):
+        C.Dof("j", "hinge", np.zeros(3))
+    with pytest.raises(C.CharacterError, match="kind"):
+        C.Dof("j", "ball", np.array([0, 0, 1.0]))
+    with pytest.raises(C.CharacterError, match="length"):
+        C.build_character("x", [C.SegmentSpec("pelvis", None, (0, 0, 0), C.root_dofs(), -1.0, 10.0)])
+    with pytest.raises(C.CharacterError, match="non-finite"):
+        C.build_character("x", [C.SegmentSpec("pelvis", None, (0, float("nan"), 0), C.root_dofs(), 0.2, 10.0)])
+    with pytest.raises(C.CharacterError, match="unknown coordinates"):
+        C.halfboy().reduce(["elbow_flexion_r"])
+    with pytest.raises(C.CharacterError, match="unknown character"):
+        C.reference("robot")
+
+
+def test_singular_dofs_are_the_middle_of_each_ball_joint():
+    ch = C.capture_lower()
+    names = [ch.coordinate_names[i] for i in ch.singular_dofs]
+    assert "hip_adduction_r" in names and "knee_adduction_l" in names and "root_ry" in names
