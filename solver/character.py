@@ -765,3 +765,139 @@ def reference(name: str) -> Character:
         return REFERENCE[name]()
     except KeyError:
         raise CharacterError(f"unknown character {name!r}; known: {sorted(REFERENCE)}") from None
+
+
+# --- serialization (motion files carry their character) --------------------------------
+
+
+def _arr(x: np.ndarray) -> list:
+    return np.asarray(x, dtype=float).tolist()
+
+
+def _num(x: float) -> float | None:
+    return None if not math.isfinite(x) else float(x)
+
+
+def character_to_dict(ch: Character) -> dict:
+    """A JSON-ready description from which :func:`character_from_dict` rebuilds ``ch`` exactly."""
+    return {
+        "name": ch.name,
+        "height": ch.height,
+        "description": ch.description,
+        "segments": [
+            {
+                "name": s.name,
+                "parent": s.parent,
+                "offset": _arr(s.offset),
+                "orientation": _arr(s.orientation),
+                "dofs": [
+                    {"name": d.name, "kind": d.kind, "axis": _arr(d.axis), "lower": _num(d.lower), "upper": _num(d.upper)}
+                    for d in s.dofs
+                ],
+                "mass": s.mass,
+                "com": _arr(s.com),
+                "inertia": _arr(s.inertia),
+                "length": s.length,
+                "direction": _arr(s.direction),
+                "radius": s.radius,
+            }
+            for s in ch.segments
+        ],
+        "contacts": [
+            {"name": c.name, "side": c.side, "segment": c.segment, "position": _arr(c.position)} for c in ch.contacts
+        ],
+        "feet": [{"side": f.side, "segment": f.segment, "center": _arr(f.center), "half": _arr(f.half)} for f in ch.feet],
+    }
+
+
+def character_from_dict(d: Mapping) -> Character:
+    try:
+        segs = []
+        for s in d["segments"]:
+            dofs = tuple(
+                Dof(
+                    str(j["name"]), str(j["kind"]), np.asarray(j["axis"], dtype=float),
+                    -math.inf if j.get("lower") is None else float(j["lower"]),
+                    math.inf if j.get("upper") is None else float(j["upper"]),
+                )
+                for j in s["dofs"]
+            )
+            segs.append(
+                Segment(
+                    name=str(s["name"]), parent=s["parent"], offset=np.asarray(s["offset"], dtype=float), dofs=dofs,
+                    mass=float(s["mass"]), com=np.asarray(s["com"], dtype=float),
+                    inertia=np.asarray(s["inertia"], dtype=float), length=float(s.get("length", 0.0)),
+                    direction=np.asarray(s.get("direction", [0, 0, 1]), dtype=float),
+                    radius=float(s.get("radius", 0.0)),
+                    orientation=np.asarray(s.get("orientation", np.eye(3)), dtype=float),
+                )
+            )
+        contacts = tuple(
+            ContactPoint(str(c["name"]), str(c["side"]), str(c["segment"]), np.asarray(c["position"], dtype=float))
+            for c in d.get("contacts", [])
+        )
+        feet = tuple(
+            FootBox(str(f["side"]), str(f["segment"]), np.asarray(f["center"], dtype=float), np.asarray(f["half"], dtype=float))
+            for f in d.get("feet", [])
+        )
+    except (KeyError, TypeError, ValueError) as e:
+        if isinstance(e, CharacterError):
+            raise
+        raise CharacterError(f"invalid character description: {e!r}") from None
+    return Character(
+        name=str(d["name"]), segments=tuple(segs), contacts=contacts, feet=feet,
+        height=float(d.get("height", 0.0)), description=str(d.get("description", "")),
+    )
+
+
+def merge_segments(ch: Character, names: Iterable[str], name: str | None = None) -> Character:
+    """Remove segments (and their descendants' coordinates), lumping their mass into the parent.
+
+    The removed segments are frozen in their q = 0 pose relative to the parent they are
+    merged into (exact rigid-body inertia composition). Used to turn a whole-body capture
+    into a lower-body one whose pelvis carries head, arms and trunk.
+    """
+    names = set(names)
+    by_name = {s.name: s for s in ch.segments}
+    unknown = names - set(by_name)
+    if unknown:
+        raise CharacterError(f"cannot merge unknown segments {sorted(unknown)}")
+    # every descendant of a removed segment is removed too
+    removed: set[str] = set()
+    for s in ch.segments:
+        if s.name in names or (s.parent is not None and s.parent in removed):
+            removed.add(s.name)
+    if ch.segments[0].name in removed:
+        raise CharacterError("cannot merge the root segment")
+    # pose of every removed segment in the frame of its nearest kept ancestor (q = 0)
+    rel: dict[str, tuple[str, np.ndarray, np.ndarray]] = {}
+    for s in ch.segments:
+        if s.name not in removed:
+            rel[s.name] = (s.name, np.eye(3), np.zeros(3))
+            continue
+        anc, r, p = rel[s.parent]  # type: ignore[index]
+        rel[s.name] = (anc, r @ s.orientation, p + r @ s.offset)
+    extra: dict[str, list] = {}
+    for s in ch.segments:
+        if s.name in removed:
+            anc, r, p = rel[s.name]
+            extra.setdefault(anc, []).append((s.mass, p + r @ s.com, r @ s.inertia @ r.T))
+    segs = []
+    for s in ch.segments:
+        if s.name in removed:
+            continue
+        if s.name not in extra:
+            segs.append(s)
+            continue
+        parts = [(s.mass, s.com, s.inertia)] + extra[s.name]
+        m = sum(x[0] for x in parts)
+        c = sum(x[0] * x[1] for x in parts) / m
+        inertia = np.zeros((3, 3))
+        for mi, ci, ii in parts:
+            d = ci - c
+            inertia += ii + mi * (float(d @ d) * np.eye(3) - np.outer(d, d))
+        segs.append(replace(s, mass=m, com=c, inertia=0.5 * (inertia + inertia.T)))
+    for c in ch.contacts:
+        if c.segment in removed:
+            raise CharacterError(f"contact point {c.name!r} is on merged segment {c.segment!r}")
+    return replace(ch, segments=tuple(segs), name=name or f"{ch.name}-merged")

@@ -1,0 +1,1 @@
+"""Importers: real mocap formats -> :class:`solver.capture.Capture`."""

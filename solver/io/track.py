@@ -1,0 +1,67 @@
+"""The format-independent result of reading a trial, before fitting our capture skeleton.
+
+Every reader (OpenSim, C3D, BVH, DeepMimic) extracts a :class:`SkeletonTrack`: world
+positions of anatomical landmarks (joint centres, segment tips) and, when the source has
+them, world orientations of segments, all already in OUR world frame (Z up, X forward,
+Y left, metres) — the reader owns the axis/unit conversion and records it in a
+:class:`~solver.capture.GroundFrame`. One fitting step (``solver.io.fit``) then builds the
+canonical capture character from the track (segment lengths from the data) and solves
+inverse kinematics, whatever the format.
+
+Landmark names (a reader provides what its source has; lower body is required):
+
+    pelvis (mid-point of the hip joint centres), hip_r, knee_r, ankle_r, heel_r, mtp_r, toe_r
+    (and _l), lumbar, neck (base of the head), head_top, sternum, shoulder_r, elbow_r,
+    wrist_r, hand_r (and _l)
+
+Segment orientations (optional) use our segment axes (x forward, y left, z up when the
+subject stands in the neutral pose), keyed by our segment names: pelvis, thigh_r, shank_r,
+foot_r, toes_r, abdomen, thorax, head, clavicle_r, upper_arm_r, forearm_r, hand_r, ...
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+import numpy as np
+
+from solver.capture import GroundFrame, MeasuredGRF
+
+LOWER_LANDMARKS = tuple(
+    f"{j}_{s}" for s in ("r", "l") for j in ("hip", "knee", "ankle", "heel", "mtp", "toe")
+) + ("pelvis",)
+UPPER_LANDMARKS = ("lumbar", "neck", "head_top", "sternum") + tuple(
+    f"{j}_{s}" for s in ("r", "l") for j in ("shoulder", "elbow", "wrist", "hand")
+)
+
+
+@dataclass(frozen=True, eq=False)
+class SkeletonTrack:
+    times: np.ndarray  # (T,) s
+    landmarks: Mapping[str, np.ndarray]  # name -> (3, T), our world frame, metres
+    orientations: Mapping[str, np.ndarray] = field(default_factory=dict)  # segment -> (3, 3, T) world <- segment
+    frame: GroundFrame = field(default_factory=GroundFrame)
+    mass: float | None = None  # subject mass (kg) when the source states it
+    height: float | None = None  # subject height (m) when known
+    segment_masses: Mapping[str, float] | None = None  # our segment name -> kg (from a source model)
+    measured: MeasuredGRF | None = None
+    contacts: np.ndarray | None = None  # (4, T) heel_r, toe_r, heel_l, toe_l when plates tell
+    source: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        t = np.asarray(self.times, dtype=float)
+        T = t.shape[0]
+        for name, p in self.landmarks.items():
+            if np.asarray(p).shape != (3, T):
+                raise ValueError(f"landmark {name!r} must be (3, T={T}), got {np.asarray(p).shape}")
+        for name, r in self.orientations.items():
+            if np.asarray(r).shape != (3, 3, T):
+                raise ValueError(f"orientation {name!r} must be (3, 3, T={T}), got {np.asarray(r).shape}")
+        missing = [n for n in LOWER_LANDMARKS if n not in self.landmarks]
+        if missing:
+            raise ValueError(f"track lacks lower-body landmarks {missing}")
+
+    @property
+    def has_upper_body(self) -> bool:
+        return all(n in self.landmarks for n in UPPER_LANDMARKS)

@@ -1,0 +1,249 @@
+"""Motions: immutable (character, fps, Q n×T, contact schedule, contact wrenches) values.
+
+The *motion file v1* (JSON; schema in ``solver/schemas/motion-v1.schema.json``) stores one
+motion, self-contained: the character is either a reference name or its full
+description (characters scaled to a subject are not reference characters).
+
+Contact wrenches are per foot and frame, spatial forces in the **world frame** (Z up),
+ordered (mx, my, mz, fx, fy, fz), the moment taken **about the world origin** — the
+convention of the dynamics (SPEC 4.7): the sum of the two feet's wrenches equals the
+root wrench h0 of a plausible motion.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field, replace
+from datetime import datetime, timezone
+from functools import cache
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from solver.character import REFERENCE, Character, CharacterError, character_from_dict, character_to_dict, reference
+
+FORMAT = "motionx.motion"
+VERSION = 1
+FEET = ("right", "left")
+WRENCH_ORDER = ("mx", "my", "mz", "fx", "fy", "fz")
+SCHEMA_PATH = Path(__file__).with_name("schemas") / "motion-v1.schema.json"
+MAX_FRAMES = 100_000
+
+
+class MotionError(ValueError):
+    """A motion (or motion file) is malformed; the message names the problem."""
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    a = np.array(a, copy=True)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class Motion:
+    character: Character
+    fps: float
+    q: np.ndarray  # (n, T)
+    contacts: np.ndarray | None = None  # (P, T) bool, P = len(character.contacts), same order
+    wrenches: np.ndarray | None = None  # (2, 6, T): feet (right, left) x (moment about origin; force)
+    provenance: Mapping[str, Any] = field(default_factory=dict)
+    report: Mapping[str, Any] | None = None
+    reference_name: str | None = None  # set when ``character`` is an unmodified reference character
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.fps, (int, float)) and math.isfinite(self.fps) and self.fps > 0):
+            raise MotionError(f"fps must be a positive finite number, got {self.fps!r}")
+        q = np.asarray(self.q, dtype=float)
+        n = self.character.n
+        if q.ndim != 2 or q.shape[0] != n:
+            raise MotionError(f"q must have shape (n={n}, T), got {q.shape}")
+        if q.shape[1] < 3:
+            raise MotionError(f"a motion needs at least 3 frames, got {q.shape[1]}")
+        if q.shape[1] > MAX_FRAMES:
+            raise MotionError(f"a motion may have at most {MAX_FRAMES} frames, got {q.shape[1]}")
+        if not np.all(np.isfinite(q)):
+            bad = np.argwhere(~np.isfinite(q))[0]
+            raise MotionError(
+                f"coordinate {self.character.coordinate_names[bad[0]]!r} is not finite at frame {bad[1]}"
+            )
+        object.__setattr__(self, "q", _frozen(q))
+        T = q.shape[1]
+        if self.contacts is not None:
+            c = np.asarray(self.contacts)
+            P = len(self.character.contacts)
+            if c.shape != (P, T):
+                raise MotionError(f"contact schedule must have shape (points={P}, T={T}), got {c.shape}")
+            object.__setattr__(self, "contacts", _frozen(c.astype(bool)))
+        if self.wrenches is not None:
+            w = np.asarray(self.wrenches, dtype=float)
+            if w.shape != (2, 6, T):
+                raise MotionError(f"wrenches must have shape (2 feet, 6, T={T}), got {w.shape}")
+            if not np.all(np.isfinite(w)):
+                raise MotionError("contact wrenches must be finite")
+            object.__setattr__(self, "wrenches", _frozen(w))
+        object.__setattr__(self, "provenance", dict(self.provenance))
+        if self.report is not None:
+            object.__setattr__(self, "report", dict(self.report))
+
+    @property
+    def T(self) -> int:
+        return int(self.q.shape[1])
+
+    @property
+    def n(self) -> int:
+        return int(self.q.shape[0])
+
+    @property
+    def dt(self) -> float:
+        return 1.0 / float(self.fps)
+
+    @property
+    def times(self) -> np.ndarray:
+        return np.arange(self.T) * self.dt
+
+    @property
+    def coordinate_names(self) -> tuple[str, ...]:
+        return self.character.coordinate_names
+
+    def coordinate(self, name: str) -> np.ndarray:
+        return self.q[self.character.index(name)]
+
+    def foot_contact(self) -> np.ndarray:
+        """B (SPEC 5.4): (2, T) bool, a foot is in contact when any of its points is."""
+        if self.contacts is None:
+            raise MotionError("motion has no contact schedule")
+        out = np.zeros((2, self.T), dtype=bool)
+        for i, c in enumerate(self.character.contacts):
+            out[FEET.index(c.side)] |= self.contacts[i]
+        return out
+
+    def evolve(self, **changes: Any) -> "Motion":
+        """A new motion with some fields replaced (motions are immutable)."""
+        return replace(self, **changes)
+
+    # --- motion file v1 -------------------------------------------------------------
+    def to_dict(self) -> dict:
+        ch = self.character
+        d: dict[str, Any] = {
+            "format": FORMAT,
+            "version": VERSION,
+            "character": (
+                {"reference": self.reference_name}
+                if self.reference_name
+                else {"definition": character_to_dict(ch)}
+            ),
+            "fps": float(self.fps),
+            "coordinates": list(ch.coordinate_names),
+            "units": {"slide": "m", "hinge": "rad"},
+            "frames": self.q.T.tolist(),
+        }
+        if self.contacts is not None:
+            d["contacts"] = {
+                "points": [c.name for c in ch.contacts],
+                "feet": [c.side for c in ch.contacts],
+                "active": self.contacts.T.astype(int).tolist(),
+            }
+        if self.wrenches is not None:
+            d["wrenches"] = {
+                "frame": "world",
+                "reference_point": "world origin",
+                "order": list(WRENCH_ORDER),
+                "units": {"moment": "N*m", "force": "N"},
+                "feet": {foot: self.wrenches[i].T.tolist() for i, foot in enumerate(FEET)},
+            }
+        prov = dict(self.provenance)
+        prov.setdefault("created", datetime.now(timezone.utc).isoformat(timespec="seconds"))
+        d["provenance"] = prov
+        if self.report is not None:
+            d["report"] = self.report
+        return d
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), allow_nan=False, separators=(",", ":"))
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(self.to_json())
+
+    @staticmethod
+    def from_dict(d: Mapping[str, Any]) -> "Motion":
+        return motion_from_dict(d)
+
+    @staticmethod
+    def load(path: str | Path) -> "Motion":
+        p = Path(path)
+        try:
+            data = json.loads(p.read_text())
+        except FileNotFoundError:
+            raise MotionError(f"motion file not found: {p}") from None
+        except json.JSONDecodeError as e:
+            raise MotionError(f"{p}: not valid JSON ({e})") from None
+        return motion_from_dict(data)
+
+
+@cache
+def schema() -> dict:
+    return json.loads(SCHEMA_PATH.read_text())
+
+
+def validate_schema(d: Any) -> None:
+    """Check a motion file's structure against the published JSON Schema."""
+    import jsonschema
+
+    validator = jsonschema.Draft202012Validator(schema())
+    errors = sorted(validator.iter_errors(d), key=lambda e: list(e.absolute_path))
+    if errors:
+        e = errors[0]
+        where = "/".join(str(p) for p in e.absolute_path) or "(top level)"
+        raise MotionError(f"motion file invalid at {where}: {e.message}")
+
+
+def motion_from_dict(d: Any) -> Motion:
+    validate_schema(d)
+    cd = d["character"]
+    try:
+        if "reference" in cd:
+            if cd["reference"] not in REFERENCE:
+                raise MotionError(f"unknown reference character {cd['reference']!r}; known: {sorted(REFERENCE)}")
+            ch, ref = reference(cd["reference"]), cd["reference"]
+        else:
+            ch, ref = character_from_dict(cd["definition"]), None
+    except CharacterError as e:
+        raise MotionError(str(e)) from None
+    names = list(d["coordinates"])
+    unknown = [nm for nm in names if nm not in ch.coordinate_names]
+    if unknown:
+        raise MotionError(f"unknown joints for character {ch.name!r}: {unknown}")
+    missing = [nm for nm in ch.coordinate_names if nm not in names]
+    if missing:
+        raise MotionError(f"missing coordinates for character {ch.name!r}: {missing}")
+    frames = np.asarray(d["frames"], dtype=float)
+    if frames.ndim != 2 or frames.shape[1] != len(names):
+        raise MotionError(f"every frame needs {len(names)} values (one per coordinate)")
+    order = [names.index(nm) for nm in ch.coordinate_names]
+    q = frames[:, order].T
+    contacts = None
+    if "contacts" in d:
+        pts = list(d["contacts"]["points"])
+        want = [c.name for c in ch.contacts]
+        if sorted(pts) != sorted(want):
+            raise MotionError(f"contact points {pts} do not match the character's {want}")
+        act = np.asarray(d["contacts"]["active"], dtype=bool)
+        if act.ndim != 2 or act.shape != (q.shape[1], len(pts)):
+            raise MotionError(f"contacts.active must have one row of {len(pts)} flags per frame")
+        contacts = act[:, [pts.index(nm) for nm in want]].T
+    wrenches = None
+    if "wrenches" in d:
+        w = d["wrenches"]
+        if w.get("frame") != "world" or w.get("reference_point") != "world origin":
+            raise MotionError("wrenches must be given in the world frame about the world origin")
+        try:
+            wrenches = np.stack([np.asarray(w["feet"][f], dtype=float).T for f in FEET])
+        except ValueError:
+            raise MotionError("wrenches.feet must hold one 6-vector per frame for each foot") from None
+    return Motion(
+        character=ch, fps=float(d["fps"]), q=q, contacts=contacts, wrenches=wrenches,
+        provenance=d.get("provenance", {}), report=d.get("report"), reference_name=ref,
+    )
