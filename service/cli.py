@@ -1,12 +1,11 @@
-"""``motionx`` command line."""
+"""``motionx`` command line: a thin shell over ``solver``/``mjcf`` (commands in service.commands)."""
 
 from __future__ import annotations
 
 import argparse
-import json
+import importlib
 import logging
 import sys
-from pathlib import Path
 
 log = logging.getLogger("motionx")
 
@@ -15,7 +14,7 @@ class CliError(Exception):
     """A user-facing error: printed as one line, exit status 2."""
 
 
-def _character(name: str):
+def reference_character(name: str):
     from solver.character import CharacterError, reference
 
     try:
@@ -24,46 +23,14 @@ def _character(name: str):
         raise CliError(str(e)) from None
 
 
-def cmd_mjcf(args: argparse.Namespace) -> int:
-    from mjcf.builder import to_xml
-
-    ch = _character(args.character)
-    xml = to_xml(ch)
-    if args.out == "-":
-        sys.stdout.write(xml)
-    else:
-        Path(args.out).write_text(xml)
-        print(json.dumps({"character": ch.name, "out": args.out, "nq": ch.n, "total_mass": ch.total_mass}))
-    return 0
-
-
-def cmd_check_dynamics(args: argparse.Namespace) -> int:
-    from mjcf.check import check_dynamics
-
-    if args.samples < 1:
-        raise CliError("--samples must be >= 1")
-    res = check_dynamics(_character(args.character), args.samples, args.seed)
-    print(json.dumps(res))
-    return 0 if res["ok"] else 1
-
-
 def build_parser() -> argparse.ArgumentParser:
-    from solver.character import REFERENCE
+    from service.commands import MODULES
 
     p = argparse.ArgumentParser(prog="motionx", description="Physically plausible walk extrapolation.")
     p.add_argument("-v", "--verbose", action="store_true", help="log progress to stderr")
     sub = p.add_subparsers(dest="command", required=True)
-
-    s = sub.add_parser("mjcf", help="write the MuJoCo model (MJCF XML) of a reference character")
-    s.add_argument("--character", required=True, choices=sorted(REFERENCE))
-    s.add_argument("--out", required=True, help="output file, or - for stdout")
-    s.set_defaults(func=cmd_mjcf)
-
-    s = sub.add_parser("check-dynamics", help="compare our inverse dynamics with MuJoCo's mj_inverse")
-    s.add_argument("--character", required=True, choices=sorted(REFERENCE))
-    s.add_argument("--samples", type=int, default=100)
-    s.add_argument("--seed", type=int, default=0)
-    s.set_defaults(func=cmd_check_dynamics)
+    for name in MODULES:
+        importlib.import_module(name).register(sub)
     return p
 
 

@@ -3,7 +3,16 @@ from pathlib import Path
 
 import pytest
 
-SHARED_DATA = Path(os.environ.get("MOTIONX_DATA", Path(__file__).resolve().parents[2] / "shared" / "data"))
+def _find_data() -> Path:
+    if os.environ.get("MOTIONX_DATA"):
+        return Path(os.environ["MOTIONX_DATA"])
+    for cand in (Path(__file__).resolve().parents[2] / "shared" / "data", Path("/work/shared/data")):
+        if cand.is_dir():
+            return cand
+    return Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+SHARED_DATA = _find_data()
 
 
 @pytest.fixture(scope="session")

@@ -1,0 +1,9 @@
+"""``motionx`` subcommands. Each module exposes ``register(subparsers)``.
+
+Add a module to ``MODULES`` to add its commands; keep argument parsing and printing here
+and the work in ``solver``/``mjcf``.
+"""
+
+MODULES = [
+    "service.commands.physics",
+]
