@@ -1,0 +1,725 @@
+"""The fitting step shared by every importer: SkeletonTrack -> Capture.
+
+Public API (stable; the C3D, OpenSim, DeepMimic and BVH readers all call it)::
+
+    fit_track(track: SkeletonTrack, *, lower_only: bool | None = None,
+              orientation_weight: float = 0.05) -> Capture
+
+* ``track``: landmarks (3, T) in OUR world frame (Z up, X forward, Y left, metres; NaN where
+  a landmark is missing at a frame), optional segment orientations (3, 3, T), subject mass,
+  optional per-segment masses (our segment names), measured GRF, contact schedule. See
+  :mod:`solver.io.track` for the landmark names.
+* ``lower_only``: ``None`` = automatic (whole body when the track has every upper-body
+  landmark, otherwise lower body); ``True`` = the ``capture-lower`` topology, the pelvis
+  carrying head, arms and trunk (their masses lumped as :func:`merge_segments` does);
+  ``False`` = whole body (an error if the track has no upper body).
+* ``orientation_weight``: metres of landmark error one unit of ``‖R_model − R_track‖_F``
+  is worth (0.05: 1° ≈ 1.2 mm). Orientations resolve axial rotations that joint-centre
+  landmarks cannot see.
+
+What it does:
+
+1. **Segment frames** per frame: the track's orientation when given, otherwise a frame built
+   from landmarks (bone along ``z``, hinge axis ``y`` from the parent, ``x`` forward; the
+   foot's ``x`` runs heel -> toe so "foot flat" is the neutral pose).
+2. **Dimensions** from the data: every joint offset, bone tip and attached landmark is the
+   per-axis *median* over the trial of its coordinates in its segment's frame (robust to
+   outliers and gaps). The topology, coordinate names, axes and limits are those of
+   ``capture_full()`` / ``capture_lower()``; only the numbers are the subject's.
+3. **Masses** from ``track.segment_masses`` (a source model), otherwise Winter's table ×
+   ``track.mass``; a track with neither is refused. Inertias are the prolate ellipsoids of
+   SPEC 3.1-3.4 unless ``track.source["segment_inertias"]`` gives ``{segment: {"com": (3,),
+   "inertia": (3, 3)}}`` (segment frame, about the COM) for segments whose frame comes
+   from a track orientation.
+4. **Feet**: the box spans heel -> toe (foot frame), is ``track.source["foot_width"]`` or
+   Winter's 0.055 H wide, from the sole (lowest of the heel/toe landmarks) to a quarter of
+   the ankle height above the ankle; heel and toe contact points sit 1 cm inside (SPEC §2).
+5. **Inverse kinematics**: residuals (landmarks, weighted orientations) are built once as
+   CasADi SX expressions from :mod:`solver.kinematics`; each frame is solved by
+   Levenberg-Marquardt, started from the analytic joint angles of the segment frames
+   (relative rotations decomposed on each joint's hinge axes) shifted by 2π multiples to be
+   continuous with the previous frame. Joint limits are ignored during IK; the character's
+   limits are widened (5° margin) where the data exceed them, and the widening recorded.
+6. ``capture.source["fit"]``: landmark error (mm) overall and per landmark, orientation
+   error (deg) per segment, widened limits, timings.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import replace
+from typing import Any, Mapping
+
+import numpy as np
+
+from solver import spatial as sp
+from solver.capture import Capture
+from solver.character import (
+    WINTER_LENGTH,
+    Character,
+    ContactPoint,
+    Dof,
+    FootBox,
+    SegmentSpec,
+    build_character,
+    capture_full,
+    capture_lower,
+    merge_segments,
+    winter_density,
+    winter_mass,
+)
+from solver.io.track import LOWER_LANDMARKS, UPPER_LANDMARKS, SkeletonTrack
+
+log = logging.getLogger(__name__)
+
+__all__ = ["FitError", "fit_track", "SEGMENT_LANDMARKS", "decompose_hinges"]
+
+
+class FitError(ValueError):
+    """The track cannot be fitted (missing data, unknown mass, ...); the message says why."""
+
+
+SIDES = ("r", "l")
+UPPER_SEGMENTS = ("abdomen", "thorax", "head") + tuple(
+    f"{s}_{side}" for side in SIDES for s in ("clavicle", "upper_arm", "forearm", "hand")
+)
+LEG_SEGMENTS = tuple(f"{s}_{side}" for side in SIDES for s in ("thigh", "shank", "foot", "toes"))
+
+#: segment -> (origin landmark, tip landmark, Winter kind). ``@thorax_joint`` and
+#: ``@clavicle_*`` are virtual points derived from the landmarks (see ``_virtual_points``).
+SEGMENT_LANDMARKS: dict[str, tuple[str, str | None, str]] = {
+    "pelvis": ("pelvis", "lumbar", "pelvis"),
+    "abdomen": ("lumbar", "@thorax_joint", "abdomen"),
+    "thorax": ("@thorax_joint", "neck", "thorax"),
+    "head": ("neck", "head_top", "head_neck"),
+    **{
+        k: v
+        for side in SIDES
+        for k, v in {
+            f"clavicle_{side}": (f"@clavicle_{side}", f"shoulder_{side}", "clavicle"),
+            f"upper_arm_{side}": (f"shoulder_{side}", f"elbow_{side}", "upper_arm"),
+            f"forearm_{side}": (f"elbow_{side}", f"wrist_{side}", "forearm"),
+            f"hand_{side}": (f"wrist_{side}", f"hand_{side}", "hand"),
+            f"thigh_{side}": (f"hip_{side}", f"knee_{side}", "thigh"),
+            f"shank_{side}": (f"knee_{side}", f"ankle_{side}", "shank"),
+            f"foot_{side}": (f"ankle_{side}", f"mtp_{side}", "foot"),
+            f"toes_{side}": (f"mtp_{side}", f"toe_{side}", "toes"),
+        }.items()
+    },
+}
+
+#: Landmarks fixed on a segment that are neither its origin nor its tip.
+EXTRA_LANDMARKS = {"sternum": "thorax", "heel_r": "foot_r", "heel_l": "foot_l"}
+
+#: Fraction of lumbar -> neck at which the thorax joint sits (capture_full: 0.10 H / 0.24 H).
+THORAX_JOINT_FRACTION = 0.10 / 0.24
+#: Hip joint centre height as a fraction of body height (Winter: greater trochanter 0.530 H).
+HIP_HEIGHT_FRACTION = 0.530
+CONTACT_INSET = 0.01
+LIMIT_MARGIN = 5.0 * math.pi / 180.0
+#: absolute damping (m² per rad²) of every IK step: coordinates the data cannot see
+#: (e.g. the axial rotation of a straight limb without orientations) stay where they are.
+PROXIMAL = 1e-6
+
+
+# --- small vector helpers (batched over time: arrays (3, T), frames (3, 3, T)) ------------
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    n = np.linalg.norm(v, axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return v / np.where(n > 1e-12, n, np.nan)
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.cross(a, b, axis=0)
+
+
+def _frame_zy(z: np.ndarray, y_ref: np.ndarray, x_ref: np.ndarray | None = None) -> np.ndarray:
+    """Frame with z along ``z`` and y as close as possible to ``y_ref`` (fallback x_ref)."""
+    z = _unit(z)
+    y = y_ref - np.sum(y_ref * z, axis=0) * z
+    if x_ref is not None:
+        bad = np.linalg.norm(y, axis=0) < 0.3 * np.linalg.norm(y_ref, axis=0)
+        if np.any(bad):
+            x = x_ref - np.sum(x_ref * z, axis=0) * z
+            y_alt = _cross(z, x)
+            y = np.where(bad[None, :], y_alt, y)
+    y = _unit(y)
+    x = _cross(y, z)
+    return np.stack([x, y, z], axis=1)  # columns x, y, z
+
+
+def _frame_xy(x: np.ndarray, y_ref: np.ndarray) -> np.ndarray:
+    """Frame with x along ``x`` and y as close as possible to ``y_ref``."""
+    x = _unit(x)
+    y = _unit(y_ref - np.sum(y_ref * x, axis=0) * x)
+    z = _cross(x, y)
+    return np.stack([x, y, z], axis=1)
+
+
+def _local(R: np.ndarray, origin: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Coordinates (3, T) of world points p in the frames (R, origin)."""
+    return np.einsum("jit,jt->it", R, p - origin)
+
+
+def _median_local(R: np.ndarray, origin: np.ndarray, p: np.ndarray, what: str) -> np.ndarray:
+    loc = _local(R, origin, p)
+    ok = np.all(np.isfinite(loc), axis=0)
+    if not np.any(ok):
+        raise FitError(f"cannot measure {what}: no frame where the landmarks and the segment frame are all known")
+    return np.median(loc[:, ok], axis=1)
+
+
+# --- joint-angle decomposition ------------------------------------------------------------
+
+
+def decompose_hinges(R: np.ndarray, axes: list[np.ndarray]) -> np.ndarray | None:
+    """Angles (θ1, θ2, θ3) with R = Rot(a1, θ1) Rot(a2, θ2) Rot(a3, θ3) for orthogonal unit axes.
+
+    ``R`` may be (3, 3) or (3, 3, T). Returns (3,) / (3, T), or None when the axes are not
+    three mutually orthogonal unit vectors (the caller then starts from 0).
+    """
+    if len(axes) != 3:
+        return None
+    P = np.column_stack([np.asarray(a, dtype=float) for a in axes])
+    if not np.allclose(P.T @ P, np.eye(3), atol=1e-9):
+        return None
+    flip = np.linalg.det(P) < 0
+    if flip:
+        P[:, 2] = -P[:, 2]
+    M = np.einsum("ji,jk...,kl->il...", P, R, P)  # P^T R P = Rx(a) Ry(b) Rz(c)
+    b = np.arcsin(np.clip(M[0, 2], -1.0, 1.0))
+    a = np.arctan2(-M[1, 2], M[2, 2])
+    c = np.arctan2(-M[0, 1], M[0, 0])
+    if flip:
+        c = -c
+    return np.stack([a, b, c])
+
+
+# --- the fit --------------------------------------------------------------------------------
+
+
+def _check_track(track: SkeletonTrack) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray]]:
+    times = np.asarray(track.times, dtype=float)
+    if times.ndim != 1 or times.size == 0:
+        raise FitError("the track has no frames")
+    if not np.all(np.isfinite(times)):
+        raise FitError("the track's times contain NaN or infinite values")
+    if times.size >= 2 and not np.all(np.diff(times) > 0):
+        raise FitError("the track's times must increase strictly")
+    lm = {k: np.asarray(v, dtype=float) for k, v in track.landmarks.items()}
+    for name, p in lm.items():
+        if np.any(np.isinf(p)):
+            raise FitError(f"landmark {name!r} has infinite coordinates")
+        if not np.any(np.all(np.isfinite(p), axis=0)):
+            raise FitError(f"landmark {name!r} is missing (NaN) at every frame")
+    ori = {k: np.asarray(v, dtype=float) for k, v in track.orientations.items()}
+    for name, r in ori.items():
+        ok = np.all(np.isfinite(r), axis=(0, 1))
+        if not np.any(ok):
+            raise FitError(f"orientation of segment {name!r} is missing (NaN) at every frame")
+        rr = r[:, :, ok]
+        err = np.abs(np.einsum("jit,jkt->ikt", rr, rr) - np.eye(3)[:, :, None]).max()
+        if err > 1e-3 or np.any(np.linalg.det(np.moveaxis(rr, 2, 0)) < 0):
+            raise FitError(f"orientation of segment {name!r} is not a rotation matrix at some frame")
+    return times, lm, ori
+
+
+def _virtual_points(lm: dict[str, np.ndarray]) -> None:
+    if "lumbar" in lm and "neck" in lm:
+        lm["@thorax_joint"] = lm["lumbar"] + THORAX_JOINT_FRACTION * (lm["neck"] - lm["lumbar"])
+
+
+def _segment_frames(
+    segs: list[str], lm: dict[str, np.ndarray], ori: dict[str, np.ndarray], T: int
+) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    """World frames (3, 3, T) of every segment and where each came from ("track"/"landmarks")."""
+    F: dict[str, np.ndarray] = {}
+    src: dict[str, str] = {}
+    up = np.tile(np.array([[0.0], [0.0], [1.0]]), (1, T))
+
+    def get(name: str) -> np.ndarray:
+        return F[name]
+
+    for s in segs:
+        if s in ori:
+            F[s], src[s] = ori[s], "track"
+            continue
+        src[s] = "landmarks"
+        side = s[-1]
+        if s == "pelvis":
+            y = _unit(lm["hip_l"] - lm["hip_r"])
+            ref_up = lm["lumbar"] - lm["pelvis"] if "lumbar" in lm else up
+            x = _unit(_cross(y, ref_up))
+            F[s] = np.stack([x, y, _cross(x, y)], axis=1)
+        elif s == "abdomen":
+            F[s] = _frame_zy(lm["neck"] - lm["lumbar"], get("pelvis")[:, 1], get("pelvis")[:, 0])
+        elif s == "thorax":
+            yref = lm["shoulder_l"] - lm["shoulder_r"] if "shoulder_l" in lm else get("abdomen")[:, 1]
+            F[s] = _frame_zy(lm["neck"] - lm["lumbar"], yref, get("abdomen")[:, 0])
+        elif s == "head":
+            F[s] = _frame_zy(lm["head_top"] - lm["neck"], get("thorax")[:, 1], get("thorax")[:, 0])
+        elif s.startswith("clavicle"):
+            F[s] = get("thorax")
+        elif s.startswith("upper_arm"):
+            F[s] = _frame_zy(lm[f"shoulder_{side}"] - lm[f"elbow_{side}"], get("thorax")[:, 1], get("thorax")[:, 0])
+        elif s.startswith("forearm"):
+            p = get(f"upper_arm_{side}")
+            F[s] = _frame_zy(lm[f"elbow_{side}"] - lm[f"wrist_{side}"], p[:, 1], p[:, 0])
+        elif s.startswith("hand"):
+            p = get(f"forearm_{side}")
+            F[s] = _frame_zy(lm[f"wrist_{side}"] - lm[f"hand_{side}"], p[:, 1], p[:, 0])
+        elif s.startswith("thigh"):
+            p = get("pelvis")
+            F[s] = _frame_zy(lm[f"hip_{side}"] - lm[f"knee_{side}"], p[:, 1], p[:, 0])
+        elif s.startswith("shank"):
+            p = get(f"thigh_{side}")
+            F[s] = _frame_zy(lm[f"knee_{side}"] - lm[f"ankle_{side}"], p[:, 1], p[:, 0])
+        elif s.startswith("foot"):
+            F[s] = _frame_xy(lm[f"toe_{side}"] - lm[f"heel_{side}"], get(f"shank_{side}")[:, 1])
+        elif s.startswith("toes"):
+            F[s] = _frame_xy(lm[f"toe_{side}"] - lm[f"mtp_{side}"], get(f"foot_{side}")[:, 1])
+        else:  # pragma: no cover - the topology is fixed above
+            raise FitError(f"no frame rule for segment {s!r}")
+    return F, src
+
+
+def _masses(track: SkeletonTrack, segs: list[str], lower_topology: bool) -> tuple[dict[str, float], float, str]:
+    given = dict(track.segment_masses or {})
+    known = set(SEGMENT_LANDMARKS)
+    unknown = sorted(set(given) - known)
+    if unknown:
+        raise FitError(f"segment_masses names unknown segments {unknown}; known: {sorted(known)}")
+    for k, v in given.items():
+        if not (np.isfinite(v) and v >= 0):
+            raise FitError(f"segment mass of {k!r} must be finite and >= 0, got {v}")
+    total = track.mass
+    if total is not None and not (np.isfinite(total) and total > 0):
+        raise FitError(f"subject mass must be a positive number of kg, got {total}")
+    if total is None and given:
+        total = float(sum(given.values()))
+    if total is None:
+        raise FitError("subject mass unknown: the source does not state it; pass mass=... (kg)")
+    out: dict[str, float] = {}
+    if lower_topology:
+        legs = {s: given.get(s, winter_mass(SEGMENT_LANDMARKS[s][2], total)) for s in LEG_SEGMENTS}
+        out.update(legs)
+        out["pelvis"] = total - sum(legs.values())
+        if out["pelvis"] <= 0:
+            raise FitError(f"segment masses of the legs ({sum(legs.values()):.1f} kg) exceed the subject mass {total} kg")
+        how = "segment_masses (legs) + remainder in pelvis" if given else "Winter table"
+    else:
+        for s in segs:
+            out[s] = float(given[s]) if s in given else winter_mass(SEGMENT_LANDMARKS[s][2], total)
+        missing = [s for s in segs if s not in given]
+        if given and missing:
+            # the source model had no such segment: share the rest of the mass by Winter's ratios
+            rest = total - sum(given[s] for s in segs if s in given)
+            w = sum(winter_mass(SEGMENT_LANDMARKS[s][2], 1.0) for s in missing)
+            if rest > 0:
+                for s in missing:
+                    out[s] = rest * winter_mass(SEGMENT_LANDMARKS[s][2], 1.0) / w
+        how = "segment_masses" if given and not missing else ("segment_masses + Winter" if given else "Winter table")
+    return out, float(total), how
+
+
+def fit_track(
+    track: SkeletonTrack, *, lower_only: bool | None = None, orientation_weight: float = 0.05
+) -> Capture:
+    """Build the subject's capture skeleton and solve IK for every frame (see module doc)."""
+    t_start = time.perf_counter()
+    times, lm, ori = _check_track(track)
+    T = times.size
+    has_upper = track.has_upper_body
+    if lower_only is False and not has_upper:
+        missing = [n for n in UPPER_LANDMARKS if n not in lm]
+        raise FitError(f"lower_only=False needs the upper-body landmarks; missing {missing}")
+    lower = bool(lower_only) or not has_upper
+    full_geometry = has_upper  # measure the upper body whenever the data have it
+    unknown_ori = sorted(set(ori) - set(SEGMENT_LANDMARKS))
+    if unknown_ori:
+        raise FitError(f"orientations given for unknown segments {unknown_ori}; known: {sorted(SEGMENT_LANDMARKS)}")
+    ignored = sorted(set(lm) - set(LOWER_LANDMARKS) - set(UPPER_LANDMARKS))
+    if ignored:
+        log.info("fit_track: landmarks not used by the capture skeleton: %s", ignored)
+
+    ref = capture_full() if full_geometry else capture_lower()
+    segs = [s.name for s in ref.segments]
+    _virtual_points(lm)
+    F, frame_src = _segment_frames(segs, lm, ori, T)
+    if full_geometry:
+        # clavicle joints: on the thorax mid-line at the shoulders' mean height and depth
+        th = F["thorax"]
+        o_th = lm["@thorax_joint"]
+        loc = [_median_local(th, o_th, lm[f"shoulder_{s}"], f"shoulder_{s} on the thorax") for s in SIDES]
+        cj = 0.5 * (loc[0] + loc[1])
+        cj[1] = 0.0
+        p = o_th + np.einsum("ijt,j->it", th, cj)
+        for s in SIDES:
+            lm[f"@clavicle_{s}"] = p
+
+    origin = {s: lm[SEGMENT_LANDMARKS[s][0]] for s in segs}
+    height = _height(track, lm, F, origin, segs, full_geometry)
+
+    # --- geometry: offsets, tips, attached landmarks (segment frames) -----------------
+    by_name = {s.name: s for s in ref.segments}
+    offset: dict[str, np.ndarray] = {}
+    tip: dict[str, np.ndarray] = {}
+    for s in segs:
+        par = by_name[s].parent
+        if par is not None:
+            offset[s] = _median_local(F[par], origin[par], origin[s], f"the {s} joint on {par}")
+        tname = SEGMENT_LANDMARKS[s][1]
+        if tname is not None and tname in lm:
+            tip[s] = _median_local(F[s], origin[s], lm[tname], f"{tname} on {s}")
+    if not full_geometry:  # lower-body data: Winter's HAT ellipsoid above the hips
+        tip["pelvis"] = np.array([0.0, 0.0, 2 * 0.18 * height])
+    # landmark -> (segment, point in segment coordinates): what IK matches
+    attach: dict[str, tuple[str, np.ndarray]] = {}
+    for s in segs:
+        o_name, t_name, _ = SEGMENT_LANDMARKS[s]
+        if not o_name.startswith("@"):
+            attach.setdefault(o_name, (s, np.zeros(3)))
+    for s in segs:
+        t_name = SEGMENT_LANDMARKS[s][1]
+        if t_name is not None and not t_name.startswith("@") and t_name in lm and (s != "pelvis" or full_geometry):
+            attach.setdefault(t_name, (s, tip[s]))
+    for n, seg in EXTRA_LANDMARKS.items():
+        if n in lm and seg in F:
+            attach[n] = (seg, _median_local(F[seg], origin[seg], lm[n], f"{n} on {seg}"))
+
+    # --- masses, inertias -------------------------------------------------------------------
+    masses, total, mass_how = _masses(track, segs, lower_topology=not full_geometry)
+    inertias = dict((track.source or {}).get("segment_inertias", {}) or {})
+    specs = []
+    for s in ref.segments:
+        d = tip[s.name]
+        length = float(np.linalg.norm(d))
+        if length < 1e-3:
+            raise FitError(f"segment {s.name!r} has zero length in the data ({SEGMENT_LANDMARKS[s.name][:2]})")
+        kind = SEGMENT_LANDMARKS[s.name][2]
+        com = inertia = None
+        if s.name in inertias and frame_src.get(s.name) == "track":
+            com = np.asarray(inertias[s.name]["com"], dtype=float).reshape(3)
+            inertia = np.asarray(inertias[s.name]["inertia"], dtype=float).reshape(3, 3)
+        specs.append(
+            SegmentSpec(
+                s.name, s.parent, tuple(offset.get(s.name, np.zeros(3))), s.dofs, length, masses[s.name],
+                tuple(d / length), winter_density(kind), com=com, inertia=inertia,
+            )
+        )
+
+    # --- feet ---------------------------------------------------------------------------------
+    contacts, feet, foot_report = [], [], {}
+    width = float((track.source or {}).get("foot_width") or WINTER_LENGTH["foot_width"] * height)
+    for side in SIDES:
+        full = "right" if side == "r" else "left"
+        heel = attach[f"heel_{side}"][1]
+        toe = offset[f"toes_{side}"] + tip[f"toes_{side}"]
+        sole = min(heel[2], toe[2])
+        top = 0.25 * max(-sole, 0.02)
+        if toe[0] - heel[0] < 0.05:
+            raise FitError(f"{full} foot: heel->toe length {toe[0] - heel[0]:.3f} m is not a foot (check the landmarks)")
+        yc = 0.5 * (heel[1] + toe[1])
+        feet.append(FootBox(full, f"foot_{side}", np.array([(heel[0] + toe[0]) / 2, yc, (sole + top) / 2]),
+                            np.array([(toe[0] - heel[0]) / 2, width / 2, (top - sole) / 2])))
+        contacts += [
+            ContactPoint(f"heel_{side}", full, f"foot_{side}", np.array([heel[0] + CONTACT_INSET, yc, sole + CONTACT_INSET])),
+            ContactPoint(f"toe_{side}", full, f"foot_{side}", np.array([toe[0] - CONTACT_INSET, yc, sole + CONTACT_INSET])),
+        ]
+        foot_report[full] = {"length_m": float(toe[0] - heel[0]), "width_m": width, "ankle_height_m": float(-sole)}
+
+    name = "capture-full" if full_geometry else "capture-lower"
+    ch = build_character(name, specs, contacts, feet, height=height,
+                         description=f"{name} fitted to {track.source.get('format', 'a track')}, "
+                                     f"{height:.3f} m, {total:.2f} kg")
+    if lower and full_geometry:
+        ch = merge_segments(ch, UPPER_SEGMENTS, name="capture-lower")
+        ch = replace(ch, description=ch.description.replace("capture-full", "capture-lower")
+                     + " (head, arms and trunk lumped in the pelvis)")
+
+    # --- inverse kinematics ---------------------------------------------------------------------
+    t_ik = time.perf_counter()
+    kept = {x.name for x in ch.segments}
+    attach = {n: a for n, a in attach.items() if a[0] in kept}
+    q, ik_report = _solve_ik(ch, times, lm, F, origin, ori, attach, orientation_weight)
+    t_done = time.perf_counter()
+    ch, widened = _widen_limits(ch, q)
+
+    report = dict(ik_report)
+    report.update({
+        "topology": ch.name,
+        "frames_from": {s: frame_src[s] for s in segs if s in {x.name for x in ch.segments}},
+        "masses_from": mass_how,
+        "total_mass_kg": float(ch.total_mass),
+        "height_m": float(height),
+        "feet": foot_report,
+        "widened_limits": widened,
+        "build_s": round(t_ik - t_start, 4),
+        "ik_s": round(t_done - t_ik, 4),
+        "ik_ms_per_frame": round(1e3 * (t_done - t_ik) / T, 3),
+    })
+    source = dict(track.source or {})
+    source.pop("segment_inertias", None)
+    source["fit"] = report
+    log.info("fit_track: %s, %d frames, landmark error mean %.1f mm max %.1f mm, IK %.2f ms/frame",
+             ch.name, T, report["landmark_error_mm"]["mean"], report["landmark_error_mm"]["max"],
+             report["ik_ms_per_frame"])
+    contacts_sched = None if track.contacts is None else np.asarray(track.contacts, dtype=bool)
+    if contacts_sched is not None and contacts_sched.shape != (len(ch.contacts), T):
+        raise FitError(f"track.contacts must be (4, T={T}) (heel_r, toe_r, heel_l, toe_l), got {contacts_sched.shape}")
+    return Capture(character=ch, q=q, times=times, frame=track.frame, source=source,
+                   contacts=contacts_sched, measured=track.measured)
+
+
+def _height(track, lm, F, origin, segs, full_geometry) -> float:
+    if track.height is not None:
+        if not (np.isfinite(track.height) and 0.3 < track.height < 3.0):
+            raise FitError(f"subject height {track.height} m is not plausible")
+        return float(track.height)
+    # leg length hip -> ankle -> sole, from robust distances
+    legs = []
+    for s in SIDES:
+        d1 = np.linalg.norm(lm[f"hip_{s}"] - lm[f"knee_{s}"], axis=0)
+        d2 = np.linalg.norm(lm[f"knee_{s}"] - lm[f"ankle_{s}"], axis=0)
+        ah = _median_local(F[f"foot_{s}"], origin[f"foot_{s}"], lm[f"heel_{s}"], f"heel_{s} on foot_{s}")[2]
+        legs.append(np.nanmedian(d1) + np.nanmedian(d2) - min(ah, 0.0))
+    leg = float(np.mean(legs))
+    if full_geometry:
+        up = np.nanmedian(np.linalg.norm(lm["head_top"] - lm["neck"], axis=0)) + np.nanmedian(
+            np.linalg.norm(lm["neck"] - lm["lumbar"], axis=0)
+        ) + np.nanmedian(np.linalg.norm(lm["lumbar"] - lm["pelvis"], axis=0))
+        h = leg + float(up)
+    else:
+        h = leg / HIP_HEIGHT_FRACTION
+    if not (np.isfinite(h) and 0.3 < h < 3.0):
+        raise FitError(f"estimated subject height {h:.2f} m is not plausible: check the landmark units (metres)")
+    return h
+
+
+# --- IK ----------------------------------------------------------------------------------------
+
+
+def _initial_guess(ch: Character, F: Mapping[str, np.ndarray], origin: Mapping[str, np.ndarray], T: int) -> np.ndarray:
+    """Analytic coordinates from the segment frames (relative rotations on the hinge axes)."""
+    q0 = np.zeros((ch.n, T))
+    k = 0
+    for s in ch.segments:
+        nd = len(s.dofs)
+        if s.parent is None:
+            p = origin[s.name]
+            R = F[s.name]
+            q0[k:k + 3] = p
+            yaw = np.arctan2(R[1, 0], R[0, 0])
+            pitch = np.arcsin(np.clip(-R[2, 0], -1, 1))
+            roll = np.arctan2(R[2, 1], R[2, 2])
+            q0[k + 3:k + 6] = np.stack([yaw, pitch, roll])
+        elif s.name in F and s.parent in F and nd == 3 and all(d.kind == "hinge" for d in s.dofs):
+            Rrel = np.einsum("jit,jkt->ikt", F[s.parent], F[s.name])
+            Rrel = np.einsum("ji,jkt->ikt", s.orientation, Rrel)
+            ang = decompose_hinges(Rrel, [d.axis for d in s.dofs])
+            if ang is not None:
+                q0[k:k + 3] = ang
+        k += nd
+    return q0
+
+
+def _solve_ik(ch, times, lm, F, origin, ori, attach, w_ori):
+    import casadi as ca
+
+    from solver.kinematics import forward_kinematics, points_world
+
+    T = times.size
+    att = [(name, seg, p) for name, (seg, p) in attach.items()]
+    oris = [s.name for s in ch.segments if s.name in ori]  # merged segments' orientations are not fitted
+    n = ch.n
+    qs = ca.SX.sym("q", n)
+    pts = points_world(ch, qs, [(seg, p) for _, seg, p in att])
+    model = ch.model
+    pose = forward_kinematics(ch, qs)
+    rows = []
+    for s in oris:
+        b = model.seg_body[s]
+        R = sp.matmul(pose.rot[b], sp.const_mat(model.seg_rot[s]))
+        rows.extend(R[i][j] for i in range(3) for j in range(3))
+    rot_expr = sp.stack(rows, like=qs) if rows else ca.SX(0, 1)
+    L, O = len(att), len(oris)
+    target = ca.SX.sym("target", 3 * L + 9 * O)
+    weight = ca.SX.sym("w", 3 * L + 9 * O)
+    model_expr = ca.vertcat(pts, rot_expr)
+    r = weight * (model_expr - target)
+    fun = _NormalEquations(qs, target, weight, r)
+
+    # targets and weights (T, 3L + 9O); missing data weigh 0
+    tgt = np.zeros((T, 3 * L + 9 * O))
+    wts = np.zeros_like(tgt)
+    for i, (name, _, _) in enumerate(att):
+        p = lm[name].T
+        ok = np.all(np.isfinite(p), axis=1)
+        tgt[ok, 3 * i:3 * i + 3] = p[ok]
+        wts[ok, 3 * i:3 * i + 3] = 1.0
+    for j, s in enumerate(oris):
+        R = np.moveaxis(ori[s], 2, 0).reshape(T, 9)
+        ok = np.all(np.isfinite(R), axis=1)
+        c = 3 * L + 9 * j
+        tgt[ok, c:c + 9] = R[ok]
+        wts[ok, c:c + 9] = w_ori
+
+    q0 = _initial_guess(ch, F, origin, T)
+    hinge = np.array([k == "hinge" for k in ch.dof_kinds])
+    Q = np.zeros((n, T))
+    iters = np.zeros(T, dtype=int)
+    prev = None
+    for t in range(T):
+        cands = []
+        x0 = q0[:, t].copy()
+        if np.all(np.isfinite(x0)):
+            if prev is not None:  # the 2π branch nearest the previous frame
+                x0[hinge] = prev[hinge] + np.angle(np.exp(1j * (x0[hinge] - prev[hinge])))
+            cands.append(x0)
+        if prev is not None:
+            cands.append(prev)  # warm start
+        if not cands:
+            cands.append(np.nan_to_num(x0))
+        if not np.any(wts[t]):
+            Q[:, t] = cands[-1]
+            prev = Q[:, t]
+            continue
+        if len(cands) > 1:
+            fun.set_data(tgt[t], wts[t])
+            costs = [fun.cost(c) for c in cands]
+            x0 = cands[int(np.argmin(costs))]
+        else:
+            x0 = cands[0]
+        fun.set_data(tgt[t], wts[t])
+        Q[:, t], iters[t] = _levenberg_marquardt(fun, x0)
+        prev = Q[:, t]
+
+    # errors
+    pts_all = points_world(ch, Q, [(seg, p) for _, seg, p in att])  # (L, 3, T)
+    per = {}
+    all_err = []
+    for i, (name, _, _) in enumerate(att):
+        e = np.linalg.norm(pts_all[i] - lm[name], axis=0) * 1e3
+        e = e[np.isfinite(e)]
+        per[name] = {"mean": round(float(e.mean()), 2), "max": round(float(e.max()), 2)}
+        all_err.append(e)
+    cat = np.concatenate(all_err)
+    from solver.kinematics import segment_frames
+
+    rots, _ = segment_frames(ch, Q)
+    seg_idx = {s.name: i for i, s in enumerate(ch.segments)}
+    ori_err = {}
+    for s in oris:
+        Rm, Rt = rots[seg_idx[s]], ori[s]
+        c = (np.einsum("ijt,ijt->t", Rm, Rt) - 1.0) / 2.0
+        ang = np.degrees(np.arccos(np.clip(c[np.isfinite(c)], -1, 1)))
+        ori_err[s] = {"mean": round(float(ang.mean()), 2), "max": round(float(ang.max()), 2)}
+    report = {
+        "landmark_error_mm": {"mean": round(float(cat.mean()), 2), "max": round(float(cat.max()), 2),
+                              "rms": round(float(np.sqrt(np.mean(cat**2))), 2)},
+        "per_landmark_mm": per,
+        "orientation_error_deg": ori_err,
+        "orientation_weight_m": w_ori,
+        "landmarks_used": [a[0] for a in att],
+        "ik_iterations": {"mean": round(float(iters.mean()), 2), "max": int(iters.max())},
+    }
+    return Q, report
+
+
+class _NormalEquations:
+    """Cost ‖r‖², gradient Jᵀr and Gauss-Newton matrix JᵀJ of r(q; target, weight), compiled once.
+
+    Evaluated through CasADi's zero-copy buffer interface: no numpy BLAS call on small
+    matrices (a multithreaded BLAS costs ~100x more than the arithmetic there).
+    """
+
+    def __init__(self, qs, target, weight, r) -> None:
+        import casadi as ca
+
+        n, m = qs.shape[0], r.shape[0]
+        J = ca.jacobian(r, qs)
+        full = ca.Function("ik_normal", [qs, target, weight],
+                           [ca.dot(r, r), ca.densify(ca.mtimes(J.T, r)), ca.densify(ca.mtimes(J.T, J))])
+        cost = ca.Function("ik_cost", [qs, target, weight], [ca.dot(r, r)])
+        self._x, self._tgt, self._w = np.zeros(n), np.zeros(m), np.zeros(m)
+        self._c, self._g, self._H = np.zeros(1), np.zeros(n), np.zeros((n, n))
+        self._cc = np.zeros(1)
+        self._full, self._full_run = full.buffer()
+        self._cost, self._cost_run = cost.buffer()
+        for buf in (self._full, self._cost):
+            for i, a in enumerate((self._x, self._tgt, self._w)):
+                buf.set_arg(i, memoryview(a))
+        for i, a in enumerate((self._c, self._g, self._H)):
+            self._full.set_res(i, memoryview(a))
+        self._cost.set_res(0, memoryview(self._cc))
+
+    def set_data(self, tgt: np.ndarray, w: np.ndarray) -> None:
+        self._tgt[:] = tgt
+        self._w[:] = w
+
+    def cost(self, x: np.ndarray) -> float:
+        self._x[:] = x
+        self._cost_run()
+        return float(self._cc[0])
+
+    def normal(self, x: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+        self._x[:] = x
+        self._full_run()
+        return float(self._c[0]), self._g.copy(), self._H.copy()  # H is symmetric: layout-free
+
+
+def _levenberg_marquardt(fun: _NormalEquations, x0: np.ndarray, max_iter: int = 100) -> tuple[np.ndarray, int]:
+    """Minimise ‖r(x)‖² from x0; returns (x, iterations). Stops on a tiny step or decrease."""
+    x = x0
+    lam = 1e-4
+    it = 0
+    cost, g, H = fun.normal(x)
+    for it in range(1, max_iter + 1):
+        d = lam * np.diag(H) + PROXIMAL
+        accepted = False
+        while lam < 1e12:
+            dx = -np.linalg.solve(H + np.diag(d), g)
+            cn = fun.cost(x + dx)
+            if cn <= cost:
+                accepted = True
+                x = x + dx
+                decrease = cost - cn
+                lam = max(lam / 10.0, 1e-9)
+                break
+            lam *= 10.0
+            d = lam * np.diag(H) + PROXIMAL
+        if not accepted:
+            break
+        cost, g, H = fun.normal(x)
+        if np.max(np.abs(dx)) < 1e-6 or decrease <= 1e-8 * cost + 1e-14:
+            break
+    return x, it
+
+
+def _widen_limits(ch: Character, q: np.ndarray) -> tuple[Character, dict[str, list[float]]]:
+    """Capture data are not clipped to anatomical limits: widen where the data exceed them."""
+    widened: dict[str, list[float]] = {}
+    segs = []
+    k = 0
+    for s in ch.segments:
+        dofs = []
+        for d in s.dofs:
+            lo, hi = float(np.min(q[k])), float(np.max(q[k]))
+            nl, nu = d.lower, d.upper
+            if lo < d.lower:
+                nl = lo - LIMIT_MARGIN
+            if hi > d.upper:
+                nu = hi + LIMIT_MARGIN
+            if (nl, nu) != (d.lower, d.upper):
+                widened[d.name] = [round(math.degrees(nl), 1), round(math.degrees(nu), 1)] if d.kind == "hinge" else [nl, nu]
+                d = Dof(d.name, d.kind, d.axis, nl, nu)
+            dofs.append(d)
+            k += 1
+        segs.append(replace(s, dofs=tuple(dofs)))
+    if widened:
+        log.info("fit_track: joint limits widened to the data (deg): %s", widened)
+    return replace(ch, segments=tuple(segs)), widened
