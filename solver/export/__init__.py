@@ -1,0 +1,273 @@
+"""Exporters: pure functions from a :class:`~solver.motion.Motion` to the bytes/text of a file.
+
+Formats (see ``docs/export.md``):
+
+- ``json``: the motionx clip (:func:`solver.export.clip.to_clip_json`), a compact
+  game-oriented clip with a published JSON Schema (``clip.schema.json``);
+- ``gltf`` / ``glb``: glTF 2.0 skinned character and animation
+  (:func:`solver.export.gltf.to_gltf`, :func:`solver.export.gltf.to_glb`);
+- ``bvh``: Biovision hierarchy (:func:`solver.export.bvh.to_bvh`).
+
+This module holds what the formats share: the local transform of every segment relative
+to its parent (our intrinsic joint sequences composed into one rotation and translation),
+the Z-up -> Y-up axis change, rotation matrix -> quaternion conversion, and the ground
+reaction (force, centre of pressure, free moment) of each foot derived from the contact
+wrenches. :func:`export_motion` dispatches on a format name and refuses unknown options.
+"""
+
+from __future__ import annotations
+
+import inspect
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from solver.character import Character
+from solver.motion import FEET, Motion
+
+__all__ = [
+    "FORMATS",
+    "Y_UP",
+    "ExportError",
+    "GroundReaction",
+    "LocalTransforms",
+    "export_motion",
+    "ground_reactions",
+    "local_transforms",
+    "matrix_to_quaternion",
+    "media_type",
+]
+
+#: Z-up (ours: X forward, Y left, Z up) -> Y-up (glTF's: X left, Y up, Z forward).
+#: A proper rotation (cyclic permutation, det = +1): out = Y_UP @ ours, i.e.
+#: x_out = y (left), y_out = z (up), z_out = x (forward).
+Y_UP = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
+Y_UP.setflags(write=False)
+
+AXES_Z_UP = {"up": "+z", "forward": "+x", "left": "+y", "handedness": "right"}
+AXES_Y_UP = {"up": "+y", "forward": "+z", "left": "+x", "handedness": "right"}
+
+
+class ExportError(ValueError):
+    """An export request is invalid (unknown format or option, bad option value)."""
+
+
+def _check_motion(motion: Any) -> Motion:
+    if not isinstance(motion, Motion):
+        raise ExportError(f"expected a solver.motion.Motion, got {type(motion).__name__}")
+    return motion
+
+
+# --- local transforms -------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class LocalTransforms:
+    """Every segment's frame in its parent segment's frame (the world for the root).
+
+    ``rot[i, t]`` (S, T, 3, 3) is parent <- segment, ``pos[i, t]`` (S, T, 3) the segment
+    origin in parent coordinates, i.e. ``orientation · Π joint(q)`` and
+    ``offset + (slides)``. ``moving_rot[i]`` / ``moving_pos[i]`` tell whether segment i has
+    a hinge / a slide (otherwise its rotation / translation is the rest value).
+    """
+
+    rot: np.ndarray
+    pos: np.ndarray
+    moving_rot: tuple[bool, ...]
+    moving_pos: tuple[bool, ...]
+
+
+def _axis_rotations(axis: np.ndarray, angles: np.ndarray) -> np.ndarray:
+    """Rodrigues: rotations about a unit ``axis`` by each angle, shape (T, 3, 3)."""
+    k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+    s = np.sin(angles)[:, None, None]
+    c = np.cos(angles)[:, None, None]
+    return np.eye(3) + s * k + (1.0 - c) * (k @ k)
+
+
+def local_transforms(character: Character, q: np.ndarray) -> LocalTransforms:
+    """Compose each segment's joint sequence into one local rotation and translation.
+
+    A segment hangs at ``offset`` with rest rotation ``orientation`` and then moves through
+    its DOF in order (intrinsic): a hinge right-multiplies the rotation by a rotation about
+    its axis, a slide moves the origin along its axis expressed in the current frame.
+    """
+    q = np.asarray(q, dtype=float)
+    if q.ndim != 2 or q.shape[0] != character.n:
+        raise ExportError(f"q must have shape (n={character.n}, T), got {q.shape}")
+    T = q.shape[1]
+    S = len(character.segments)
+    rot = np.empty((S, T, 3, 3))
+    pos = np.empty((S, T, 3))
+    moving_rot, moving_pos = [], []
+    k = 0
+    for i, seg in enumerate(character.segments):
+        r = np.broadcast_to(seg.orientation, (T, 3, 3)).copy()
+        p = np.broadcast_to(seg.offset, (T, 3)).copy()
+        for dof in seg.dofs:
+            if dof.kind == "hinge":
+                r = r @ _axis_rotations(dof.axis, q[k])
+            else:
+                p = p + np.einsum("tij,j->ti", r, dof.axis) * q[k][:, None]
+            k += 1
+        rot[i], pos[i] = r, p
+        moving_rot.append(any(d.kind == "hinge" for d in seg.dofs))
+        moving_pos.append(any(d.kind == "slide" for d in seg.dofs))
+    return LocalTransforms(rot, pos, tuple(moving_rot), tuple(moving_pos))
+
+
+def change_axes(rot: np.ndarray, pos: np.ndarray, y_up: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Express rotations (..., 3, 3) and points (..., 3) in Y-up axes (conjugation by Y_UP)."""
+    if not y_up:
+        return rot, pos
+    return Y_UP @ rot @ Y_UP.T, pos @ Y_UP.T
+
+
+def matrix_to_quaternion(rot: np.ndarray) -> np.ndarray:
+    """Unit quaternions (..., 4) in (x, y, z, w) order (glTF's) of rotation matrices (..., 3, 3).
+
+    Shepperd's method (largest diagonal pivot), so it is accurate for every rotation.
+    The sign is chosen with w >= 0; use :func:`continuous_quaternions` along time.
+    """
+    m = np.asarray(rot, dtype=float)
+    shape = m.shape[:-2]
+    m = m.reshape(-1, 3, 3)
+    tr = m[:, 0, 0] + m[:, 1, 1] + m[:, 2, 2]
+    diag = np.stack([m[:, 0, 0], m[:, 1, 1], m[:, 2, 2], tr], axis=1)
+    pivot = np.argmax(diag, axis=1)
+    out = np.empty((m.shape[0], 4))
+    # pivot w
+    i = pivot == 3
+    s = np.sqrt(1.0 + tr[i]) * 2.0
+    out[i, 3] = 0.25 * s
+    out[i, 0] = (m[i, 2, 1] - m[i, 1, 2]) / s
+    out[i, 1] = (m[i, 0, 2] - m[i, 2, 0]) / s
+    out[i, 2] = (m[i, 1, 0] - m[i, 0, 1]) / s
+    # pivot x
+    i = pivot == 0
+    s = np.sqrt(1.0 + m[i, 0, 0] - m[i, 1, 1] - m[i, 2, 2]) * 2.0
+    out[i, 3] = (m[i, 2, 1] - m[i, 1, 2]) / s
+    out[i, 0] = 0.25 * s
+    out[i, 1] = (m[i, 0, 1] + m[i, 1, 0]) / s
+    out[i, 2] = (m[i, 0, 2] + m[i, 2, 0]) / s
+    # pivot y
+    i = pivot == 1
+    s = np.sqrt(1.0 + m[i, 1, 1] - m[i, 0, 0] - m[i, 2, 2]) * 2.0
+    out[i, 3] = (m[i, 0, 2] - m[i, 2, 0]) / s
+    out[i, 0] = (m[i, 0, 1] + m[i, 1, 0]) / s
+    out[i, 1] = 0.25 * s
+    out[i, 2] = (m[i, 1, 2] + m[i, 2, 1]) / s
+    # pivot z
+    i = pivot == 2
+    s = np.sqrt(1.0 + m[i, 2, 2] - m[i, 0, 0] - m[i, 1, 1]) * 2.0
+    out[i, 3] = (m[i, 1, 0] - m[i, 0, 1]) / s
+    out[i, 0] = (m[i, 0, 2] + m[i, 2, 0]) / s
+    out[i, 1] = (m[i, 1, 2] + m[i, 2, 1]) / s
+    out[i, 2] = 0.25 * s
+    out /= np.linalg.norm(out, axis=1, keepdims=True)
+    out[out[:, 3] < 0] *= -1.0
+    return out.reshape(shape + (4,))
+
+
+def continuous_quaternions(quat: np.ndarray) -> np.ndarray:
+    """Flip signs along the time axis (second to last) so consecutive quaternions have a
+    non-negative dot product: linear interpolation/slerp then takes the short way."""
+    qt = np.array(quat, dtype=float, copy=True)
+    dots = np.sum(qt[..., 1:, :] * qt[..., :-1, :], axis=-1)
+    flips = np.cumsum(dots < 0, axis=-1) % 2 == 1
+    qt[..., 1:, :][flips] *= -1.0
+    return qt
+
+
+# --- ground reactions ---------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class GroundReaction:
+    """Per foot (right, left) and frame, in our world frame (Z up).
+
+    ``force`` (2, T, 3) N; ``loaded`` (2, T) bool (vertical force above the threshold);
+    ``cop`` (2, T, 3) the centre of pressure on the ground z = 0 (NaN when unloaded);
+    ``free_moment`` (2, T) N·m, the vertical moment about the CoP (NaN when unloaded).
+    """
+
+    force: np.ndarray
+    cop: np.ndarray
+    free_moment: np.ndarray
+    loaded: np.ndarray
+    threshold: float
+
+
+def ground_reactions(motion: Motion, min_load: float | None = None) -> GroundReaction:
+    """Decompose each foot's wrench (moment about the world origin; force) on the ground.
+
+    The centre of pressure is the point p = (x, y, 0) about which the moment's horizontal
+    components vanish: m - p × f has zero x and y components, so x = -m_y / f_z and
+    y = m_x / f_z; the free moment is the remaining vertical component
+    m_z - (x f_y - y f_x). A foot is *loaded* when f_z > ``min_load`` (N; default 1 % of
+    the character's weight); CoP and free moment are defined only then.
+    """
+    _check_motion(motion)
+    if motion.wrenches is None:
+        raise ExportError("the motion has no contact wrenches")
+    threshold = 0.01 * motion.character.weight if min_load is None else float(min_load)
+    if not (math.isfinite(threshold) and threshold > 0):
+        raise ExportError(f"min_load must be a positive finite force (N), got {min_load!r}")
+    w = np.transpose(motion.wrenches, (0, 2, 1))  # (2, T, 6)
+    m, f = w[..., :3], w[..., 3:]
+    loaded = f[..., 2] > threshold
+    fz = np.where(loaded, f[..., 2], 1.0)
+    x = -m[..., 1] / fz
+    y = m[..., 0] / fz
+    free = m[..., 2] - (x * f[..., 1] - y * f[..., 0])
+    cop = np.stack([x, y, np.zeros_like(x)], axis=-1)
+    cop[~loaded] = np.nan
+    free[~loaded] = np.nan
+    return GroundReaction(force=f.copy(), cop=cop, free_moment=free, loaded=loaded, threshold=threshold)
+
+
+# --- dispatch -------------------------------------------------------------------------------
+
+#: format name -> (module, function, media type)
+FORMATS: dict[str, tuple[str, str, str]] = {
+    "json": ("solver.export.clip", "to_clip_json", "application/json"),
+    "gltf": ("solver.export.gltf", "to_gltf", "model/gltf+json"),
+    "glb": ("solver.export.gltf", "to_glb", "model/gltf-binary"),
+    "bvh": ("solver.export.bvh", "to_bvh", "text/plain"),
+}
+
+
+def _exporter(fmt: str):
+    import importlib
+
+    try:
+        module, func, _ = FORMATS[fmt]
+    except KeyError:
+        raise ExportError(f"unknown export format {fmt!r}; known: {sorted(FORMATS)}") from None
+    return getattr(importlib.import_module(module), func)
+
+
+def media_type(fmt: str) -> str:
+    _exporter(fmt)
+    return FORMATS[fmt][2]
+
+
+def export_options(fmt: str) -> tuple[str, ...]:
+    """The keyword options a format accepts."""
+    sig = inspect.signature(_exporter(fmt))
+    return tuple(p.name for p in sig.parameters.values() if p.kind is inspect.Parameter.KEYWORD_ONLY)
+
+
+def export_motion(motion: Motion, fmt: str, **options: Any) -> str | bytes:
+    """Export ``motion`` as ``fmt`` (json, gltf, glb, bvh): text for text formats, bytes for glb.
+
+    Unknown options are refused with an :class:`ExportError` naming the accepted ones.
+    """
+    func = _exporter(fmt)
+    known = export_options(fmt)
+    unknown = sorted(set(options) - set(known))
+    if unknown:
+        raise ExportError(f"unknown option(s) {unknown} for format {fmt!r}; accepted: {list(known)}")
+    return func(motion, **options)
