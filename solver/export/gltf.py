@@ -1,0 +1,279 @@
+"""glTF 2.0 export: a skinned, animated character (``.glb`` binary or ``.gltf`` with an
+embedded base64 buffer).
+
+- one node per segment, node i = segment i (``character.segments`` order), holding the
+  segment's rest transform (translation = rest offset, rotation = rest orientation);
+- one skin whose joints are the segment nodes, with inverse bind matrices of the rest
+  pose (q = 0, the pose the node transforms describe);
+- one mesh per segment with a non-degenerate ellipsoid (polar semi-axis half the bone
+  length along the bone ``direction``, equatorial semi-axis the segment's ``radius``),
+  every vertex skinned with weight 1 to its segment, instantiated by a node at the scene
+  root that uses the skin;
+- one animation: a rotation channel per segment that has hinges and a translation
+  channel for the root (and any segment with slides), sampled at the motion's fps,
+  LINEAR interpolation.
+
+Axes: glTF is Y up, +Z forward, +X left, metres. The *data* are converted (no extra
+root node): every vector v becomes ``Y_UP @ v`` and every rotation R ``Y_UP R Y_UPᵀ``,
+so each node's local axes are the glTF axes at rest. World positions in the file are
+therefore ``Y_UP @`` our world positions: x_gltf = y, y_gltf = z, z_gltf = x.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import logging
+import struct
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from solver.export import (
+    AXES_Y_UP,
+    AXES_Z_UP,
+    Y_UP,
+    ExportError,
+    _check_motion,
+    change_axes,
+    continuous_quaternions,
+    local_transforms,
+    matrix_to_quaternion,
+)
+from solver.motion import Motion
+
+log = logging.getLogger(__name__)
+
+FLOAT, UNSIGNED_BYTE, UNSIGNED_SHORT, UNSIGNED_INT = 5126, 5121, 5123, 5125
+ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
+TRIANGLES = 4
+GLB_MAGIC, GLB_JSON, GLB_BIN = 0x46546C67, 0x4E4F534A, 0x004E4942
+_NCOMP = {"SCALAR": 1, "VEC3": 3, "VEC4": 4, "MAT4": 16}
+_DTYPE = {FLOAT: np.float32, UNSIGNED_BYTE: np.uint8, UNSIGNED_SHORT: np.uint16, UNSIGNED_INT: np.uint32}
+
+#: ellipsoid tessellation: meridian rings (pole to pole) and points around each ring
+RINGS, SECTORS = 8, 12
+
+
+@dataclass
+class _Buffer:
+    """Accumulates buffer views and accessors over one binary buffer."""
+
+    data: bytearray = field(default_factory=bytearray)
+    views: list = field(default_factory=list)
+    accessors: list = field(default_factory=list)
+
+    def add(self, array: np.ndarray, ctype: int, atype: str, target: int | None = None, minmax: bool = False) -> int:
+        arr = np.ascontiguousarray(array, dtype=_DTYPE[ctype])
+        count = arr.shape[0]
+        if arr.size != count * _NCOMP[atype]:
+            raise ExportError(f"internal: {atype} accessor of shape {arr.shape}")
+        while len(self.data) % 4:
+            self.data.append(0)
+        view: dict[str, Any] = {"buffer": 0, "byteOffset": len(self.data), "byteLength": arr.nbytes}
+        if target is not None:
+            view["target"] = target
+        self.data += arr.tobytes()
+        self.views.append(view)
+        acc: dict[str, Any] = {"bufferView": len(self.views) - 1, "componentType": ctype, "count": count, "type": atype}
+        if minmax:
+            flat = arr.reshape(count, -1)
+            conv = float if ctype == FLOAT else int
+            acc["min"] = [conv(x) for x in flat.min(axis=0)]
+            acc["max"] = [conv(x) for x in flat.max(axis=0)]
+        self.accessors.append(acc)
+        return len(self.accessors) - 1
+
+
+def _trs_matrix(rot: np.ndarray, pos: np.ndarray) -> np.ndarray:
+    m = np.eye(4)
+    m[:3, :3] = rot
+    m[:3, 3] = pos
+    return m
+
+
+def ellipsoid_mesh(center: np.ndarray, axis: np.ndarray, a: float, b: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A low-poly prolate ellipsoid: (vertices (V, 3), outward normals (V, 3), triangles (F, 3)).
+
+    Polar semi-axis ``a`` along the unit ``axis``, equatorial semi-axis ``b``, centred at
+    ``center``; triangles wound counter-clockwise seen from outside.
+    """
+    u = np.asarray(axis, dtype=float)
+    ref = np.array([1.0, 0.0, 0.0]) if abs(u[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    v = ref - u * (ref @ u)
+    v /= np.linalg.norm(v)
+    w = np.cross(u, v)
+    verts, norms = [center + a * u], [u]
+    for i in range(1, RINGS):
+        phi = np.pi * i / RINGS
+        for j in range(SECTORS):
+            th = 2.0 * np.pi * j / SECTORS
+            cu, cv, cw = np.cos(phi), np.sin(phi) * np.cos(th), np.sin(phi) * np.sin(th)
+            verts.append(center + a * cu * u + b * cv * v + b * cw * w)
+            n = cu / a * u + cv / b * v + cw / b * w
+            norms.append(n / np.linalg.norm(n))
+    verts.append(center - a * u)
+    norms.append(-u)
+    last = len(verts) - 1
+
+    def ring(i: int, j: int) -> int:  # vertex j of ring i (1..RINGS-1)
+        return 1 + (i - 1) * SECTORS + j % SECTORS
+
+    tris = []
+    for j in range(SECTORS):
+        tris.append((0, ring(1, j), ring(1, j + 1)))
+        tris.append((last, ring(RINGS - 1, j + 1), ring(RINGS - 1, j)))
+        for i in range(1, RINGS - 1):
+            tris.append((ring(i, j), ring(i + 1, j), ring(i + 1, j + 1)))
+            tris.append((ring(i, j), ring(i + 1, j + 1), ring(i, j + 1)))
+    verts_a, norms_a, tris_a = np.array(verts), np.array(norms), np.array(tris)
+    # orient every triangle outward (counter-clockwise seen from outside)
+    p0, p1, p2 = verts_a[tris_a[:, 0]], verts_a[tris_a[:, 1]], verts_a[tris_a[:, 2]]
+    outward = np.einsum("ij,ij->i", np.cross(p1 - p0, p2 - p0), (p0 + p1 + p2) / 3.0 - center) < 0
+    tris_a[outward] = tris_a[outward][:, [0, 2, 1]]
+    return verts_a, norms_a, tris_a
+
+
+def _document(motion: Motion, meshes: bool) -> tuple[dict, bytes]:
+    _check_motion(motion)
+    if not isinstance(meshes, bool):
+        raise ExportError(f"meshes must be a boolean, got {meshes!r}")
+    ch = motion.character
+    segs = ch.segments
+    S, T = len(segs), motion.T
+    index = {s.name: i for i, s in enumerate(segs)}
+    parents = [index[s.parent] if s.parent is not None else -1 for s in segs]
+    buf = _Buffer()
+
+    # rest transforms (Y-up) and bind pose
+    rest_rot, rest_pos = change_axes(
+        np.array([s.orientation for s in segs]), np.array([s.offset for s in segs]), True
+    )
+    rest_quat = matrix_to_quaternion(rest_rot)
+    bind = np.empty((S, 4, 4))
+    for i in range(S):
+        local = _trs_matrix(rest_rot[i], rest_pos[i])
+        bind[i] = local if parents[i] < 0 else bind[parents[i]] @ local
+    nodes: list[dict] = []
+    for i, s in enumerate(segs):
+        node: dict[str, Any] = {"name": s.name}
+        if np.any(rest_pos[i]):
+            node["translation"] = [float(x) for x in rest_pos[i]]
+        if not np.array_equal(rest_quat[i], [0.0, 0.0, 0.0, 1.0]):
+            node["rotation"] = [float(x) for x in rest_quat[i]]
+        children = [j for j in range(S) if parents[j] == i]
+        if children:
+            node["children"] = children
+        nodes.append(node)
+
+    # skin: glTF stores matrices column-major
+    ibm = np.linalg.inv(bind)
+    ibm_acc = buf.add(np.transpose(ibm, (0, 2, 1)).reshape(S, 16), FLOAT, "MAT4")
+    skins = [{"name": ch.name, "joints": list(range(S)), "inverseBindMatrices": ibm_acc, "skeleton": 0}]
+
+    mesh_list: list[dict] = []
+    scene_nodes = [0]
+    if meshes:
+        joint_type = UNSIGNED_BYTE if S <= 256 else UNSIGNED_SHORT
+        for i, s in enumerate(segs):
+            if not (s.length > 0 and s.radius > 0):
+                continue
+            v, n, f = ellipsoid_mesh(s.direction * (s.length / 2.0), s.direction, s.length / 2.0, s.radius)
+            # segment frame (ours) -> segment frame (Y-up) -> bind-pose (mesh) space
+            v = (v @ Y_UP.T) @ bind[i, :3, :3].T + bind[i, :3, 3]
+            n = (n @ Y_UP.T) @ bind[i, :3, :3].T
+            nv = v.shape[0]
+            joints = np.zeros((nv, 4))
+            joints[:, 0] = i
+            weights = np.zeros((nv, 4))
+            weights[:, 0] = 1.0
+            prim = {
+                "attributes": {
+                    "POSITION": buf.add(v, FLOAT, "VEC3", ARRAY_BUFFER, minmax=True),
+                    "NORMAL": buf.add(n, FLOAT, "VEC3", ARRAY_BUFFER),
+                    "JOINTS_0": buf.add(joints, joint_type, "VEC4", ARRAY_BUFFER),
+                    "WEIGHTS_0": buf.add(weights, FLOAT, "VEC4", ARRAY_BUFFER),
+                },
+                "indices": buf.add(f.reshape(-1), UNSIGNED_SHORT, "SCALAR", ELEMENT_ARRAY_BUFFER, minmax=True),
+                "material": 0,
+                "mode": TRIANGLES,
+            }
+            mesh_list.append({"name": s.name, "primitives": [prim]})
+            nodes.append({"name": f"{s.name}_mesh", "mesh": len(mesh_list) - 1, "skin": 0})
+            scene_nodes.append(len(nodes) - 1)
+
+    # animation
+    lt = local_transforms(ch, motion.q)
+    rot, pos = change_axes(lt.rot, lt.pos, True)
+    quat = continuous_quaternions(matrix_to_quaternion(rot))  # (S, T, 4)
+    times = np.arange(T, dtype=float) / float(motion.fps)
+    t_acc = buf.add(times, FLOAT, "SCALAR", minmax=True)
+    samplers: list[dict] = []
+    channels: list[dict] = []
+    for i in range(S):
+        if lt.moving_rot[i]:
+            out = buf.add(quat[i], FLOAT, "VEC4", minmax=True)
+            samplers.append({"input": t_acc, "output": out, "interpolation": "LINEAR"})
+            channels.append({"sampler": len(samplers) - 1, "target": {"node": i, "path": "rotation"}})
+        if i == 0 or lt.moving_pos[i]:
+            out = buf.add(pos[i], FLOAT, "VEC3", minmax=True)
+            samplers.append({"input": t_acc, "output": out, "interpolation": "LINEAR"})
+            channels.append({"sampler": len(samplers) - 1, "target": {"node": i, "path": "translation"}})
+
+    while len(buf.data) % 4:
+        buf.data.append(0)
+    doc: dict[str, Any] = {
+        "asset": {
+            "version": "2.0",
+            "generator": "motionx",
+            "extras": {
+                "character": ch.name,
+                "fps": float(motion.fps),
+                "frame_count": T,
+                "axes": dict(AXES_Y_UP),
+                "source_axes": dict(AXES_Z_UP),
+                "axis_conversion": "data converted: (x, y, z)_gltf = (y, z, x)_motionx",
+            },
+        },
+        "scene": 0,
+        "scenes": [{"name": ch.name, "nodes": scene_nodes}],
+        "nodes": nodes,
+        "skins": skins,
+        "animations": [{"name": str(motion.provenance.get("step", "motion")), "samplers": samplers, "channels": channels}],
+        "buffers": [{"byteLength": len(buf.data)}],
+        "bufferViews": buf.views,
+        "accessors": buf.accessors,
+    }
+    if mesh_list:
+        doc["meshes"] = mesh_list
+        doc["materials"] = [
+            {
+                "name": "segment",
+                "pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.8, 0.8, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.8},
+            }
+        ]
+    log.debug("glTF of %s: %d nodes, %d meshes, %d channels, %d bytes", ch.name, len(nodes), len(mesh_list),
+              len(channels), len(buf.data))
+    return doc, bytes(buf.data)
+
+
+def to_glb(motion: Motion, *, meshes: bool = True) -> bytes:
+    """Binary glTF (.glb): JSON chunk and BIN chunk. ``meshes``: include the segment ellipsoids."""
+    doc, data = _document(motion, meshes)
+    js = json.dumps(doc, allow_nan=False, separators=(",", ":")).encode("utf-8")
+    js += b" " * (-len(js) % 4)
+    data += b"\0" * (-len(data) % 4)
+    total = 12 + 8 + len(js) + 8 + len(data)
+    return b"".join([
+        struct.pack("<III", GLB_MAGIC, 2, total),
+        struct.pack("<II", len(js), GLB_JSON), js,
+        struct.pack("<II", len(data), GLB_BIN), data,
+    ])
+
+
+def to_gltf(motion: Motion, *, meshes: bool = True) -> str:
+    """glTF JSON (.gltf) with the buffer embedded as a base64 data URI."""
+    doc, data = _document(motion, meshes)
+    doc["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64.b64encode(data).decode("ascii")
+    return json.dumps(doc, allow_nan=False, separators=(",", ":"))
