@@ -1,0 +1,123 @@
+"""BVH (Biovision hierarchy) export.
+
+One joint per segment, written depth-first from the root. ``OFFSET`` is the segment's
+rest offset (its joint location in the parent's frame); the root's OFFSET is 0 and its
+position channels carry its full world position, so readers that add the root OFFSET
+and readers that ignore it agree. Every joint has 3 rotation channels in one order
+(``rotation_order``, intrinsic: "XZY" means R = Rx(a) Rz(b) Ry(c) and the channels are
+written Xrotation Zrotation Yrotation); the root also has Xposition Yposition Zposition
+first. A joint's rotation is its full local rotation parent <- segment (rest orientation
+times our intrinsic hinge sequence), converted exactly from the rotation matrix to Euler
+angles in degrees, made continuous in time (each angle is unwrapped, which leaves the
+rotation unchanged). Leaf segments get an ``End Site`` at their bone tip (marker).
+
+Axes: Y up, converted like glTF (x_bvh = y, y_bvh = z, z_bvh = x: X left, Y up,
+Z forward). Units: centimetres (default) or metres. ``Frame Time`` = 1 / fps.
+
+The default order "XZY" follows our joints: with the Y-up axes a hip, knee, ankle,
+spine, shoulder, elbow or wrist sequence (flexion about our y, then ab/adduction about
+our x, then axial rotation about our z) *is* X, Z, Y, so the middle (singular) angle is
+ab/adduction, which never reaches 90°.
+"""
+
+from __future__ import annotations
+
+import io
+import logging
+import re
+import warnings
+
+import numpy as np
+
+from solver.export import ExportError, _check_motion, change_axes, local_transforms, Y_UP
+from solver.motion import Motion
+
+log = logging.getLogger(__name__)
+
+ORDERS = ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX")
+UNITS = {"cm": 100.0, "m": 1.0}
+_BAD_NAME = re.compile(r"[\s{}]")
+
+
+def euler_angles(rot: np.ndarray, order: str) -> np.ndarray:
+    """Intrinsic Euler angles (radians) of rotation matrices (..., 3, 3): R = R_o0(a) R_o1(b) R_o2(c)."""
+    from scipy.spatial.transform import Rotation
+
+    shape = rot.shape[:-2]
+    with warnings.catch_warnings():
+        # at gimbal lock scipy sets the third angle to 0 and still represents the rotation exactly
+        warnings.simplefilter("ignore", UserWarning)
+        ang = Rotation.from_matrix(rot.reshape(-1, 3, 3)).as_euler(order)
+    return ang.reshape(shape + (3,))
+
+
+def _check(units: object, rotation_order: object, decimals: object) -> None:
+    if units not in UNITS:
+        raise ExportError(f"units must be one of {sorted(UNITS)}, got {units!r}")
+    if rotation_order not in ORDERS:
+        raise ExportError(f"rotation_order must be one of {list(ORDERS)}, got {rotation_order!r}")
+    if isinstance(decimals, bool) or not isinstance(decimals, int) or not 1 <= decimals <= 12:
+        raise ExportError(f"decimals must be an integer in [1, 12], got {decimals!r}")
+
+
+def to_bvh(motion: Motion, *, units: str = "cm", rotation_order: str = "XZY", decimals: int = 6) -> str:
+    """BVH text of ``motion`` (Y up; ``units`` "cm" or "m"; ``decimals`` per number)."""
+    _check_motion(motion)
+    _check(units, rotation_order, decimals)
+    ch = motion.character
+    segs = ch.segments
+    for s in segs:
+        if _BAD_NAME.search(s.name) or not s.name:
+            raise ExportError(f"segment name {s.name!r} cannot be a BVH joint name (whitespace or braces)")
+    slid = [s.name for s in segs[1:] if any(d.kind == "slide" for d in s.dofs)]
+    if slid:
+        raise ExportError(f"BVH export supports slide joints only at the root; segments with slides: {slid}")
+    scale = UNITS[units]
+    children: dict[str, list[int]] = {s.name: [] for s in segs}
+    for i, s in enumerate(segs):
+        if s.parent is not None:
+            children[s.parent].append(i)
+
+    lt = local_transforms(ch, motion.q)
+    rot, pos = change_axes(lt.rot, lt.pos, True)
+    euler = np.degrees(np.unwrap(euler_angles(rot, rotation_order), axis=1))  # (S, T, 3)
+    offsets = np.array([s.offset for s in segs]) @ Y_UP.T * scale
+    tips = np.array([s.marker for s in segs]) @ Y_UP.T * scale
+    rot_channels = " ".join(f"{a}rotation" for a in rotation_order)
+
+    out = io.StringIO()
+    fmt = f"{{:.{decimals}f}}"
+
+    def vec(v: np.ndarray) -> str:
+        return " ".join(fmt.format(x + 0.0) for x in v)
+
+    columns: list[np.ndarray] = []
+
+    def write(i: int, depth: int) -> None:
+        s = segs[i]
+        pad = "  " * depth
+        if depth == 0:
+            out.write(f"ROOT {s.name}\n{pad}{{\n")
+            out.write(f"{pad}  OFFSET {vec(np.zeros(3))}\n")
+            out.write(f"{pad}  CHANNELS 6 Xposition Yposition Zposition {rot_channels}\n")
+            columns.append(pos[i] * scale)
+        else:
+            out.write(f"{pad}JOINT {s.name}\n{pad}{{\n")
+            out.write(f"{pad}  OFFSET {vec(offsets[i])}\n")
+            out.write(f"{pad}  CHANNELS 3 {rot_channels}\n")
+        columns.append(euler[i])
+        for c in children[s.name]:
+            write(c, depth + 1)
+        if not children[s.name]:
+            out.write(f"{pad}  End Site\n{pad}  {{\n{pad}    OFFSET {vec(tips[i])}\n{pad}  }}\n")
+        out.write(f"{pad}}}\n")
+
+    out.write("HIERARCHY\n")
+    write(0, 0)
+    out.write("MOTION\n")
+    out.write(f"Frames: {motion.T}\n")
+    out.write(f"Frame Time: {1.0 / float(motion.fps)!r}\n")
+    table = np.concatenate(columns, axis=1) + 0.0
+    np.savetxt(out, table, fmt=f"%.{decimals}f", delimiter=" ")
+    log.debug("BVH of %s: %d joints, %d channels, %d frames", ch.name, len(segs), table.shape[1], motion.T)
+    return out.getvalue()
