@@ -6,4 +6,5 @@ and the work in ``solver``/``mjcf``.
 
 MODULES = [
     "service.commands.physics",
+    "service.commands.export",
 ]

@@ -1,0 +1,59 @@
+"""``motionx export``: write a motion file as a JSON clip, glTF 2.0 (.gltf / .glb) or BVH."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from service.cli import CliError
+
+CHOICES = ("json", "gltf", "glb", "bvh")
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    from solver.export import ExportError, export_motion
+    from solver.motion import Motion, MotionError
+
+    fmt = args.format
+    options: dict = {}
+    if args.units is not None:
+        if fmt != "bvh":
+            raise CliError(f"--units applies to BVH only (format {fmt!r} is always in metres)")
+        options["units"] = args.units
+    if args.y_up and fmt == "json":
+        options["y_up"] = True  # glTF and BVH are always Y-up: the flag changes nothing for them
+    if args.out == "-" and fmt == "glb":
+        raise CliError("--out - (stdout) is only for text formats; give a .glb file name")
+    try:
+        motion = Motion.load(args.motion)
+        data = export_motion(motion, fmt, **options)
+    except (MotionError, ExportError) as e:
+        raise CliError(str(e)) from None
+    if args.out == "-":
+        sys.stdout.write(data)
+        return 0
+    out = Path(args.out)
+    try:
+        if isinstance(data, bytes):
+            out.write_bytes(data)
+        else:
+            out.write_text(data)
+    except OSError as e:
+        raise CliError(f"cannot write {out}: {e.strerror or e}") from None
+    print(json.dumps({"out": str(out), "format": fmt, "frames": motion.T, "fps": motion.fps,
+                      "character": motion.character.name, "bytes": out.stat().st_size}))
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    s = sub.add_parser("export", help="export a motion file as a JSON clip, glTF 2.0 or BVH")
+    s.add_argument("motion", help="motion file (motionx motion v1, JSON)")
+    s.add_argument("--format", required=True, choices=CHOICES,
+                   help="json: motionx clip; gltf: glTF JSON with embedded buffer; glb: binary glTF; bvh")
+    s.add_argument("--out", required=True, help="output file (- for stdout, text formats only)")
+    s.add_argument("--y-up", action="store_true",
+                   help="JSON clip in Y-up axes (x left, y up, z forward); glTF and BVH are always Y-up")
+    s.add_argument("--units", choices=("cm", "m"), default=None, help="BVH length unit (default cm)")
+    s.set_defaults(func=cmd_export)
