@@ -1,0 +1,612 @@
+"""Contact-force estimation from kinematics (SPEC §5, thesis ch. 4 and appendix A).
+
+Inverse dynamics of the motion with no external force gives, at every frame, the total
+ground wrench the motion needs, ``c = h0`` (SPEC 4.7). Single support: the foot on the
+ground takes ``c``. Double support: the right-foot wrench ``x`` (the left one is ``c − x``)
+minimises the internal effort, the sum of squared joint forces (SPEC 4.8-4.18)
+
+    τ_i(x) = τ0_i − S_i·x          i ∈ A (ancestors of the right foot only)
+    τ_i(x) = τ0_i − S_i·(c − x)    i ∈ B (ancestors of the left foot only)
+    τ_i    = τ0_i − S_i·c          i ∈ C (common ancestors: constant, 0 at the root)
+    τ_i    = τ0_i                  i ∈ D (the others)
+
+where τ0 are the joint forces of the motion without external force and S_i the world
+screw of joint i (:func:`solver.kinematics.joint_screws`), subject to
+
+* each centre of pressure inside its foot's contact polygon (foot box ∩ ground),
+  written linearly by multiplying by the vertical force (SPEC 4.26-4.29),
+* ``0 ≤ x_fz ≤ c_fz`` (implied by the polygon rows) and a friction pyramid
+  ``|f_x|, |f_y| ≤ μ f_z`` on each foot (μ = 1 as in the correction problem, SPEC
+  Table 5.1; pass ``friction=None`` to drop it).
+
+``method="qp"`` solves this as one strictly convex 6-variable QP per double-support
+frame (**[beyond]** the thesis): the QP data of every double-support frame are assembled
+at once with numpy; frames whose unconstrained optimum is feasible are done with one
+batched linear solve, the others go to quadprog (Goldfarb-Idnani). ``method="nested"`` is
+the thesis's form kept as a reference: inner QP with ``x_fz`` fixed, outer bounded scalar
+search (SPEC 4.30-4.31). Both minimise the same function under the same constraints.
+
+Strict convexity. ``H = Σ_{A∪B} S_i S_iᵀ`` is singular whenever the legs' joints do not
+span every wrench direction (e.g. a character with locked coordinates has no joint that
+feels a free moment or some force direction), and the split is then not unique. We add
+a tie-breaker that is symmetric between the feet and expressed where the loads act:
+
+    ε · ( ‖D_r x‖² + ‖D_l (c − x)‖² ),   D_s w = (moment about foot s's centre ; ℓ_s·force)
+
+with ℓ_s the foot box half-length (so a force at the toe weighs like its moment about the
+foot centre). Alone, it shares the load evenly with each CoP under the foot's centre.
+ε = ``regularization`` × tr(H)/tr(Dᵀ_rD_r + Dᵀ_lD_l) per frame: scale-free (a ratio of
+matrices of the same units) and small (1e-6), so it only decides directions in which the
+effort is flat and moves the solution by ~1e-6 relative elsewhere.
+
+Contact polygon. The ground is the plane z = 0 (SPEC §6). A foot the schedule declares
+on the ground but whose box does not reach z = 0 (a rigid box and a fitted skeleton
+approximate a real foot: it may float a few mm) would get no polygon at all; for such a
+foot the contact plane is moved up to ``penetration`` (1 cm, SPEC §2) above the box's
+lowest corner, i.e. its lowest 1 cm is the contact surface. Where the box reaches the
+ground, the polygon is exactly box ∩ {z = 0} as in the thesis.
+
+Infeasible frames. If no split satisfies every constraint (c's CoP outside both polygons
+— noisy accelerations, model errors — or c_fz ≤ 0), the frame is solved in two stages
+(status ``RELAXED``): first the smallest (least-squares, N·m) relaxation of the polygon
+and friction rows that makes the problem feasible, then the least-effort split under the
+relaxed rows. ``cop_violation`` reports how far (m) each CoP ends up outside its
+polygon. Nothing is silently clipped and no frame raises.
+
+Accelerations are central differences (SPEC 3.7-3.8), undefined at the first and last
+frames of a non-cyclic motion (status ``UNDEFINED``, NaN). With ``cyclic=True`` the last
+frame must close the cycle (the first pose one period later, root advanced): differences
+wrap around with that offset and every frame is defined.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+from enum import IntEnum
+from typing import Any, Sequence
+
+import numpy as np
+
+from solver.character import Character, CharacterError
+from solver.dynamics import DEFAULT_GRAVITY, rnea
+from solver.kinematics import forward_kinematics, joint_screws
+
+log = logging.getLogger(__name__)
+
+FEET = ("right", "left")
+METHODS = ("qp", "nested")
+DEFAULT_PENETRATION = 0.01  # m, SPEC §2
+DEFAULT_FRICTION = 1.0  # SPEC Table 5.1
+DEFAULT_REGULARIZATION = 1e-6
+FEASIBILITY_TOL = 1e-9  # relative, on the constraint rows (N·m per N of load)
+
+
+class ContactError(ValueError):
+    """Bad input to contact-force estimation; the message names the problem."""
+
+
+class Support(IntEnum):
+    FLIGHT = 0
+    RIGHT = 1
+    LEFT = 2
+    DOUBLE = 3
+
+
+class Status(IntEnum):
+    UNDEFINED = 0  # accelerations undefined (ends of a non-cyclic motion): NaN
+    SINGLE = 1  # single support: the foot on the ground takes c exactly
+    OPTIMAL = 2  # double support: least-effort split, every constraint satisfied
+    RELAXED = 3  # double support, infeasible: least relaxation, then least effort
+    FLIGHT = 4  # no foot on the ground: zero wrenches (c unexplained)
+    FAILED = 5  # the QP solver failed: NaN
+
+
+def _frozen(a: Any, dtype: Any = float) -> np.ndarray:
+    a = np.array(a, dtype=dtype, copy=True)
+    a.setflags(write=False)
+    return a
+
+
+def cop_and_free_moment(wrenches: np.ndarray, min_fz: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """CoP on the ground z = 0 and free moment about the vertical at the CoP.
+
+    ``wrenches`` (..., 6, T): world frame about the origin (moment; force). Returns CoP
+    (..., 3, T) (NaN where f_z ≤ ``min_fz``) and the free moment (..., T) (0 there).
+    """
+    w = np.asarray(wrenches, dtype=float)
+    mx, my, mz, fx, fy, fz = (w[..., k, :] for k in range(6))
+    loaded = fz > min_fz
+    with np.errstate(divide="ignore", invalid="ignore"):
+        px = np.where(loaded, -my / fz, np.nan)
+        py = np.where(loaded, mx / fz, np.nan)
+    cop = np.stack([px, py, np.where(loaded, 0.0, np.nan)], axis=-2)
+    tz = np.where(loaded, mz - (px * fy - py * fx), 0.0)
+    return cop, tz
+
+
+@dataclass(frozen=True, eq=False)
+class ContactEstimate:
+    """Estimated ground reaction of each foot at every frame (our world frame, SI).
+
+    ``wrenches`` (2, 6, T): feet (right, left), world frame, (moment about the world
+    origin; force) — the :class:`~solver.motion.Motion` convention. ``total`` (6, T) is
+    c = h0. ``support`` and ``status`` hold :class:`Support` / :class:`Status` codes per
+    frame. ``cop`` (2, 3, T) on the ground (NaN for an unloaded foot), ``free_moment``
+    (2, T) about the vertical at the CoP, ``cop_violation`` (2, T) metres outside the
+    contact polygon (0 inside; NaN where undefined).
+    """
+
+    wrenches: np.ndarray
+    total: np.ndarray
+    support: np.ndarray
+    status: np.ndarray
+    cop_violation: np.ndarray
+    fps: float
+    method: str
+    cyclic: bool = False
+    cop: np.ndarray = field(init=False)
+    free_moment: np.ndarray = field(init=False)
+
+    def __post_init__(self) -> None:
+        for name in ("wrenches", "total", "cop_violation"):
+            object.__setattr__(self, name, _frozen(getattr(self, name)))
+        object.__setattr__(self, "support", _frozen(self.support, np.int8))
+        object.__setattr__(self, "status", _frozen(self.status, np.int8))
+        cop, tz = cop_and_free_moment(self.wrenches)
+        object.__setattr__(self, "cop", _frozen(cop))
+        object.__setattr__(self, "free_moment", _frozen(tz))
+
+    @property
+    def T(self) -> int:
+        return int(self.wrenches.shape[-1])
+
+    @property
+    def force(self) -> np.ndarray:
+        return self.wrenches[:, 3:, :]
+
+    @property
+    def defined(self) -> np.ndarray:
+        return np.isin(self.status, (Status.SINGLE, Status.OPTIMAL, Status.RELAXED, Status.FLIGHT))
+
+    @property
+    def double_support(self) -> np.ndarray:
+        return (self.support == Support.DOUBLE) & self.defined
+
+    def summary(self) -> dict:
+        return {
+            "frames": self.T,
+            "method": self.method,
+            **{f"support_{s.name.lower()}": int(np.sum(self.support == s)) for s in Support},
+            **{f"status_{s.name.lower()}": int(np.sum(self.status == s)) for s in Status},
+            "max_cop_violation_m": float(np.nanmax(self.cop_violation)) if np.any(self.defined) else None,
+        }
+
+
+# --- input checks ------------------------------------------------------------------------
+
+
+def _check_inputs(character: Character, q: Any, fps: float, foot_contact: Any, gravity: Any) -> tuple:
+    q = np.asarray(q, dtype=float)
+    n = character.n
+    if q.ndim != 2:
+        raise ContactError(f"the motion must be a (coordinates, frames) array, got shape {q.shape}")
+    if q.shape[0] != n:
+        raise ContactError(
+            f"model/motion mismatch: character {character.name!r} has {n} coordinates, "
+            f"the motion has {q.shape[0]} rows"
+        )
+    T = q.shape[1]
+    if T < 3:
+        raise ContactError(f"accelerations need at least 3 frames, got {T}")
+    bad = ~np.isfinite(q)
+    if bad.any():
+        i, t = np.argwhere(bad)[0]
+        raise ContactError(
+            f"coordinate {character.coordinate_names[i]!r} is not finite (NaN/inf) at frame {t} "
+            f"({int(bad.sum())} bad values)"
+        )
+    if not (isinstance(fps, (int, float, np.floating)) and math.isfinite(fps) and fps > 0):
+        raise ContactError(f"fps must be a positive finite number, got {fps!r}")
+    fc = np.asarray(foot_contact)
+    if fc.shape != (2, T):
+        raise ContactError(f"foot_contact must have shape (2 feet (right, left), T={T}), got {fc.shape}")
+    if fc.dtype != bool:
+        if not np.all(np.isin(fc, (0, 1))):
+            raise ContactError("foot_contact must be boolean (or 0/1)")
+        fc = fc.astype(bool)
+    g = np.asarray(gravity, dtype=float).reshape(-1)
+    if g.shape != (3,) or not np.all(np.isfinite(g)):
+        raise ContactError(f"gravity must be a finite 3-vector, got {gravity!r}")
+    for side in FEET:
+        try:
+            character.foot(side)
+        except CharacterError as e:
+            raise ContactError(str(e)) from None
+    return q, fc, g
+
+
+def _check_schedule(fc: np.ndarray, defined: np.ndarray) -> None:
+    for i, side in enumerate(FEET):
+        if not fc[i].any():
+            raise ContactError(f"the {side} foot is never on the ground in the contact schedule")
+    ds = fc[0] & fc[1]
+    if not ds.any():
+        raise ContactError("the contact schedule has no double support (no frame with both feet on the ground)")
+    if not (ds & defined).any():
+        raise ContactError(
+            "double support only at frames where accelerations are undefined (first/last frame); "
+            "give more frames or cyclic=True"
+        )
+
+
+# --- derivatives ---------------------------------------------------------------------------
+
+
+def _derivatives(q: np.ndarray, dt: float, cyclic: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Central differences (SPEC 3.7-3.8): (frames where defined, q̇, q̈) at those frames."""
+    T = q.shape[1]
+    if not cyclic:
+        qd = (q[:, 2:] - q[:, :-2]) / (2.0 * dt)
+        qdd = (q[:, 2:] - 2.0 * q[:, 1:-1] + q[:, :-2]) / (dt * dt)
+        return np.arange(1, T - 1), qd, qdd
+    # the last frame closes the cycle: q[T-1] = q[0] + offset (offset: root advance)
+    offset = q[:, -1] - q[:, 0]
+    P = T - 1
+    ext = np.concatenate([q[:, P - 1 : P] - offset[:, None], q[:, :P], q[:, :1] + offset[:, None]], axis=1)
+    qd = (ext[:, 2:] - ext[:, :-2]) / (2.0 * dt)
+    qdd = (ext[:, 2:] - 2.0 * ext[:, 1:-1] + ext[:, :-2]) / (dt * dt)
+    # frame T-1 is frame 0 one period later: same velocity and acceleration
+    return np.arange(T), np.concatenate([qd, qd[:, :1]], axis=1), np.concatenate([qdd, qdd[:, :1]], axis=1)
+
+
+# --- the double-support QP -------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class _QPBatch:
+    """min yᵀPy + 2 qᵀy  s.t.  G y ≤ h, for N frames; y = right-foot wrench about r."""
+
+    P: np.ndarray  # (N, 6, 6)
+    q: np.ndarray  # (N, 6)
+    G: np.ndarray  # (N, m, 6)
+    h: np.ndarray  # (N, m)
+    row_weight: np.ndarray  # (N, m): scales rows to N·m for the relaxation stage
+    row_foot: np.ndarray  # (m,) 0 right, 1 left
+    row_is_cop: np.ndarray  # (m,) bool: polygon rows (N·m); else friction rows (N)
+    r: np.ndarray  # (N, 3) reference point on the ground
+    c: np.ndarray  # (N, 6) total wrench about r
+
+
+def _side_sets(character: Character) -> tuple[np.ndarray, np.ndarray]:
+    model = character.model
+    anc = [set(model.ancestors(model.seg_body[character.foot(s).segment])) for s in FEET]
+    a = sorted(anc[0] - anc[1])
+    b = sorted(anc[1] - anc[0])
+    return np.array(a, dtype=int), np.array(b, dtype=int)
+
+
+def _foot_frames(character: Character, pose: Any, side: str, N: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """World rotation (N, 3, 3) world <- box, centre (N, 3) and half extents (3,) of a foot box."""
+    box = character.foot(side)
+    model = character.model
+    b = model.seg_body[box.segment]
+    r_sb = model.seg_rot[box.segment]
+    c_b = model.seg_pos[box.segment] + r_sb @ box.center
+    rot = np.empty((N, 3, 3))
+    pos = np.empty((N, 3))
+    for i in range(3):
+        pos[:, i] = pose.pos[b][i]
+        for j in range(3):
+            rot[:, i, j] = pose.rot[b][i][j]
+    return rot @ r_sb, pos + rot @ c_b, np.asarray(box.half, dtype=float)
+
+
+def _qp_batch(
+    character: Character,
+    q: np.ndarray,
+    tau0: np.ndarray,
+    c: np.ndarray,
+    *,
+    friction: float | None,
+    penetration: float,
+    regularization: float,
+) -> _QPBatch:
+    """QP data of N double-support frames at once. q (n, N), tau0 (n, N), c (6, N) about origin."""
+    N = q.shape[1]
+    a_idx, b_idx = _side_sets(character)
+    pose = forward_kinematics(character, q)
+    boxes = [_foot_frames(character, pose, s, N) for s in FEET]
+    # contact plane per foot: z = 0, or 1 cm above the lowest corner when the box floats
+    centres, polys = [], []
+    for rot, ctr, half in boxes:
+        z_low = ctr[:, 2] - np.abs(rot[:, 2, :]) @ half
+        z_plane = np.maximum(0.0, z_low + penetration)
+        centres.append(ctr)
+        polys.append(ctr - np.stack([np.zeros(N), np.zeros(N), z_plane], -1))  # box centre relative to its plane
+    r = 0.5 * (centres[0] + centres[1])
+    r[:, 2] = 0.0
+
+    # screws about r: (ω, v + ω × r)
+    S = joint_screws(character, q)  # (n, 6, N)
+    S = np.moveaxis(S, -1, 0)  # (N, n, 6)
+    idx = np.concatenate([a_idx, b_idx])
+    Sab = S[:, idx, :].copy()
+    Sab[:, :, 3:] += np.cross(Sab[:, :, :3], r[:, None, :])
+    # c about r: m_r = m_O − r × f
+    cr = c.T.copy()
+    cr[:, :3] -= np.cross(r, cr[:, 3:])
+    t0 = tau0[idx].T  # (N, k)
+    nA = len(a_idx)
+    # A: τ = τ0 − S·y ; B: τ = (τ0 − S·c) + S·y
+    base = t0.copy()
+    base[:, nA:] -= np.einsum("nki,ni->nk", Sab[:, nA:], cr)
+    sign = np.concatenate([-np.ones(nA), np.ones(len(b_idx))])
+    H = np.einsum("nki,nkj->nij", Sab, Sab)
+    g = np.einsum("nk,nki->ni", base * sign, Sab)
+
+    # symmetric tie-breaker: ‖D_r y‖² + ‖D_l (c − y)‖²
+    D = []
+    for rot, ctr, half in boxes:
+        p = ctr.copy()
+        p[:, 2] = 0.0
+        d = p - r  # foot centre relative to r
+        Dm = np.zeros((N, 6, 6))
+        Dm[:, 0, 0] = Dm[:, 1, 1] = Dm[:, 2, 2] = 1.0
+        # moment about p: m_r − d × f = m_r + [f]× d ... as a matrix on f: −[d]×
+        Dm[:, :3, 3:] = -_skew(d)
+        Dm[:, 3, 3] = Dm[:, 4, 4] = Dm[:, 5, 5] = half[0]
+        D.append(Dm)
+    M = np.einsum("nki,nkj->nij", D[0], D[0]) + np.einsum("nki,nkj->nij", D[1], D[1])
+    eps = regularization * np.trace(H, axis1=1, axis2=2) / np.trace(M, axis1=1, axis2=2)
+    ML = np.einsum("nki,nkj->nij", D[1], D[1])
+    P = H + eps[:, None, None] * M
+    qv = g - eps[:, None] * np.einsum("nij,nj->ni", ML, cr)
+
+    # polygon rows: for box axis e_k (row k of Rᵀ), centre b relative to the plane:
+    # a_k·y = e_k1 m_rx − e_k0 m_ry + e_k·(r − b) f_z ;  |a_k·y| ≤ h_k f_z
+    rows, rhs, weights, foot, is_cop = [], [], [], [], []
+    for s, ((rot, _, half), bc) in enumerate(zip(boxes, polys)):
+        E = np.swapaxes(rot, 1, 2)  # (N, 3, 3): rows = box axes in world
+        a = np.zeros((N, 3, 6))
+        a[:, :, 0] = E[:, :, 1]
+        a[:, :, 1] = -E[:, :, 0]
+        a[:, :, 5] = np.einsum("nkj,nj->nk", E, r - bc)
+        hz = np.zeros((N, 3, 6))
+        hz[:, :, 5] = half[None, :]
+        Gs = np.concatenate([a - hz, -a - hz], axis=1)  # Gs w ≤ 0 for this foot's wrench w
+        fr = None
+        if friction is not None:
+            fr = np.zeros((N, 4, 6))
+            for j, (axis, sg) in enumerate(((3, 1.0), (3, -1.0), (4, 1.0), (4, -1.0))):
+                fr[:, j, axis] = sg
+                fr[:, j, 5] = -friction
+            Gs = np.concatenate([Gs, fr], axis=1)
+        m = Gs.shape[1]
+        w = np.ones((N, m))
+        if friction is not None:
+            w[:, 6:] = half[0]
+        if s == 0:
+            rows.append(Gs)
+            rhs.append(np.zeros((N, m)))
+        else:  # Gs (c − y) ≤ 0  ->  −Gs y ≤ −Gs c
+            rows.append(-Gs)
+            rhs.append(-np.einsum("nmi,ni->nm", Gs, cr))
+        weights.append(w)
+        foot.append(np.full(m, s))
+        is_cop.append(np.arange(m) < 6)
+    return _QPBatch(
+        P=P, q=qv, G=np.concatenate(rows, 1), h=np.concatenate(rhs, 1), row_weight=np.concatenate(weights, 1),
+        row_foot=np.concatenate(foot), row_is_cop=np.concatenate(is_cop), r=r, c=cr,
+    )
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    z = np.zeros(v.shape[:-1])
+    x, y, w = v[..., 0], v[..., 1], v[..., 2]
+    return np.stack([np.stack([z, -w, y], -1), np.stack([w, z, -x], -1), np.stack([-y, x, z], -1)], -2)
+
+
+def _row_scale(batch: _QPBatch, i: int) -> float:
+    """Tolerance scale for frame i's rows: |c_fz| × a length (rows are N·m)."""
+    return max(abs(batch.c[i, 5]), 1.0)
+
+
+def _solve_qp(P: np.ndarray, qv: np.ndarray, G: np.ndarray, h: np.ndarray) -> np.ndarray | None:
+    """min yᵀPy + 2qᵀy s.t. G y ≤ h with quadprog; None if infeasible."""
+    import quadprog
+
+    try:
+        return quadprog.solve_qp(2.0 * P, -2.0 * qv, -G.T, -h, 0)[0]
+    except ValueError:
+        return None
+
+
+def _relaxation(batch: _QPBatch, i: int) -> np.ndarray | None:
+    """Smallest least-squares relaxation s (N·m-weighted) of the rows making frame i feasible."""
+    import quadprog
+
+    G, h, w = batch.G[i], batch.h[i], batch.row_weight[i]
+    m = G.shape[0]
+    # variables (y, s): min ‖w∘s‖² + δ (yᵀPy + 2qᵀy)  s.t.  G y − s ≤ h
+    P = batch.P[i]
+    delta = 1e-8 / max(np.trace(P), 1e-300)
+    big = np.zeros((6 + m, 6 + m))
+    big[:6, :6] = delta * P
+    big[6:, 6:] = np.diag(w**2)
+    qq = np.concatenate([delta * batch.q[i], np.zeros(m)])
+    A = np.hstack([G, -np.eye(m)])
+    try:
+        sol = quadprog.solve_qp(2.0 * big, -2.0 * qq, -A.T, -h, 0)[0]
+    except ValueError:
+        return None
+    s = np.maximum(G @ sol[:6] - h, 0.0)
+    return s
+
+
+def _nested(P: np.ndarray, qv: np.ndarray, G: np.ndarray, h: np.ndarray, scale: float) -> np.ndarray | None:
+    """Thesis form: inner QP with y_fz = z fixed, outer bounded search over z (SPEC 4.30-4.31)."""
+    from scipy.optimize import linprog, minimize_scalar
+
+    # feasible interval of z = y_fz (an LP each way)
+    e = np.zeros(6)
+    e[5] = 1.0
+    lo = linprog(e, A_ub=G, b_ub=h, bounds=[(None, None)] * 6, method="highs")
+    hi = linprog(-e, A_ub=G, b_ub=h, bounds=[(None, None)] * 6, method="highs")
+    if lo.status != 0 or hi.status != 0:
+        return None
+    z_lo, z_hi = float(lo.x[5]), float(hi.x[5])
+    Puu, Puz = P[:5, :5], P[:5, 5]
+    Gu, Gz = G[:, :5], G[:, 5]
+
+    def inner(z: float) -> tuple[float, np.ndarray | None]:
+        u = _solve_qp(Puu, qv[:5] + Puz * z, Gu, h - Gz * z + 1e-12 * scale)
+        if u is None:
+            return math.inf, None
+        y = np.concatenate([u, [z]])
+        return float(y @ P @ y + 2.0 * qv @ y), y
+
+    if z_hi - z_lo <= 1e-12 * scale:
+        return inner(0.5 * (z_lo + z_hi))[1]
+    res = minimize_scalar(lambda z: inner(z)[0], bounds=(z_lo, z_hi), method="bounded",
+                          options={"xatol": 1e-10 * scale, "maxiter": 500})
+    return inner(float(res.x))[1]
+
+
+def _solve_batch(batch: _QPBatch, method: str) -> tuple[np.ndarray, np.ndarray]:
+    """Solve every frame: (y (N, 6) about r, status (N,))."""
+    N = batch.P.shape[0]
+    y = np.full((N, 6), np.nan)
+    status = np.full(N, Status.FAILED, dtype=np.int8)
+    scale = np.maximum(np.abs(batch.c[:, 5]), 1.0)
+    tol = FEASIBILITY_TOL * scale
+    todo = np.arange(N)
+    if method == "qp":
+        # unconstrained optimum, batched; keep it where it is feasible
+        yu = -np.linalg.solve(batch.P, batch.q[..., None])[..., 0]
+        ok = np.all(np.einsum("nmi,ni->nm", batch.G, yu) <= batch.h + tol[:, None], axis=1)
+        y[ok] = yu[ok]
+        status[ok] = Status.OPTIMAL
+        todo = np.flatnonzero(~ok)
+    for i in todo:
+        sol = None
+        if method == "qp":
+            sol = _solve_qp(batch.P[i], batch.q[i], batch.G[i], batch.h[i])
+        else:
+            sol = _nested(batch.P[i], batch.q[i], batch.G[i], batch.h[i], scale[i])
+        st = Status.OPTIMAL
+        if sol is None or np.any(batch.G[i] @ sol > batch.h[i] + 1e3 * tol[i]):
+            s = _relaxation(batch, i)
+            if s is None:
+                log.warning("contact QP: relaxation failed at double-support frame %d", i)
+                continue
+            h_rel = batch.h[i] + s + 1e-7 * scale[i]
+            if method == "qp":
+                sol = _solve_qp(batch.P[i], batch.q[i], batch.G[i], h_rel)
+            else:
+                sol = _nested(batch.P[i], batch.q[i], batch.G[i], h_rel, scale[i])
+            st = Status.RELAXED
+            if sol is None:
+                log.warning("contact QP: relaxed problem failed at double-support frame %d", i)
+                continue
+        y[i] = sol
+        status[i] = st
+    return y, status
+
+
+def _cop_violation(wrenches: np.ndarray, character: Character, q: np.ndarray, penetration: float) -> np.ndarray:
+    """Metres by which each foot's CoP lies outside its contact polygon (0 inside), (2, N)."""
+    pose = forward_kinematics(character, q)
+    N = q.shape[1]
+    out = np.zeros((2, N))
+    cop, _ = cop_and_free_moment(wrenches)
+    for s, side in enumerate(FEET):
+        rot, ctr, half = _foot_frames(character, pose, side, N)
+        z_low = ctr[:, 2] - np.abs(rot[:, 2, :]) @ half
+        z_plane = np.maximum(0.0, z_low + penetration)
+        p = cop[s].T + np.stack([np.zeros(N), np.zeros(N), z_plane], -1)  # the CoP on the foot's plane
+        local = np.einsum("nji,nj->ni", rot, p - ctr)
+        excess = np.max(np.abs(local) - half[None, :], axis=1)
+        out[s] = np.where(np.isfinite(excess), np.maximum(excess, 0.0), 0.0)
+    return out
+
+
+# --- the estimator -------------------------------------------------------------------------
+
+
+def estimate_contact_wrenches(
+    character: Character,
+    q: Any,
+    fps: float,
+    foot_contact: Any,
+    *,
+    gravity: Sequence[float] = DEFAULT_GRAVITY,
+    method: str = "qp",
+    cyclic: bool = False,
+    friction: float | None = DEFAULT_FRICTION,
+    penetration: float = DEFAULT_PENETRATION,
+    regularization: float = DEFAULT_REGULARIZATION,
+) -> ContactEstimate:
+    """Ground reaction wrench of each foot at every frame, from kinematics alone.
+
+    ``q`` (n, T) the motion (our world frame: Z up, ground z = 0), ``fps`` its rate,
+    ``foot_contact`` (2, T) bool (right, left) the contact schedule. See the module
+    docstring for the method; ``method`` is ``"qp"`` (default) or ``"nested"`` (the
+    thesis's reference form, slow).
+    """
+    if method not in METHODS:
+        raise ContactError(f"unknown method {method!r}; use one of {METHODS}")
+    if friction is not None and not (math.isfinite(friction) and friction > 0):
+        raise ContactError(f"friction must be a positive number or None, got {friction!r}")
+    if not (math.isfinite(penetration) and penetration >= 0):
+        raise ContactError(f"penetration must be >= 0, got {penetration!r}")
+    if not (math.isfinite(regularization) and regularization > 0):
+        raise ContactError(f"regularization must be > 0 (it makes the QP strictly convex), got {regularization!r}")
+    q, fc, g = _check_inputs(character, q, fps, foot_contact, gravity)
+    T = q.shape[1]
+    frames, qd, qdd = _derivatives(q, 1.0 / float(fps), cyclic)
+    defined = np.zeros(T, dtype=bool)
+    defined[frames] = True
+    _check_schedule(fc, defined)
+
+    support = np.where(fc[0] & fc[1], Support.DOUBLE,
+                       np.where(fc[0], Support.RIGHT, np.where(fc[1], Support.LEFT, Support.FLIGHT))).astype(np.int8)
+    qf = q[:, frames]
+    res = rnea(character, qf, qd, qdd, g)
+    tau0, h0 = np.asarray(res.tau), np.asarray(res.h0)
+
+    wrenches = np.full((2, 6, T), np.nan)
+    total = np.full((6, T), np.nan)
+    status = np.full(T, Status.UNDEFINED, dtype=np.int8)
+    total[:, frames] = h0
+    sup = support[frames]
+    w = np.zeros((2, 6, len(frames)))
+    st = np.full(len(frames), Status.FLIGHT, dtype=np.int8)
+    right, left = sup == Support.RIGHT, sup == Support.LEFT
+    w[0][:, right] = h0[:, right]
+    w[1][:, left] = h0[:, left]
+    st[right | left] = Status.SINGLE
+    ds = np.flatnonzero(sup == Support.DOUBLE)
+    if len(ds):
+        batch = _qp_batch(character, qf[:, ds], tau0[:, ds], h0[:, ds], friction=friction,
+                          penetration=penetration, regularization=regularization)
+        y, st_ds = _solve_batch(batch, method)
+        # back to moments about the origin: m_O = m_r + r × f
+        y_o = y.copy()
+        y_o[:, :3] += np.cross(batch.r, y[:, 3:])
+        w[0][:, ds] = y_o.T
+        w[1][:, ds] = h0[:, ds] - y_o.T
+        st[ds] = st_ds
+        failed = st_ds == Status.FAILED
+        if failed.any():
+            w[:, :, ds[failed]] = np.nan
+    wrenches[:, :, frames] = w
+    status[frames] = st
+    viol = np.full((2, T), np.nan)
+    viol[:, frames] = np.where((sup != Support.FLIGHT)[None, :], _cop_violation(w, character, qf, penetration), 0.0)
+    n_rel = int(np.sum(st == Status.RELAXED))
+    if n_rel:
+        log.info("contact estimation: %d of %d double-support frames infeasible, relaxed", n_rel, len(ds))
+    return ContactEstimate(wrenches=wrenches, total=total, support=support, status=status,
+                           cop_violation=viol, fps=float(fps), method=method, cyclic=bool(cyclic))

@@ -1,0 +1,291 @@
+"""Contact-force estimation (SPEC §5): equations, known answers, references, bad inputs."""
+
+import numpy as np
+import pytest
+from scipy.optimize import minimize
+
+from solver import character as C
+from solver.contact import (
+    ContactError,
+    Status,
+    Support,
+    _qp_batch,
+    cop_and_free_moment,
+    estimate_contact_wrenches,
+)
+from solver.dynamics import rnea
+from solver.kinematics import contact_points
+
+H_SUBJ, M_SUBJ = 1.75, 70.0
+
+
+@pytest.fixture(scope="module")
+def ch():
+    return C.capture_lower(H_SUBJ, M_SUBJ)
+
+
+def _sole_height(ch) -> float:
+    """Root height putting the soles 5 mm into the ground in the neutral pose."""
+    cp = contact_points(ch, np.zeros(ch.n))
+    return -(cp[:, 2].min() - 0.01) - 0.005
+
+
+def _swaying_motion(ch, T=121, fps=60.0, symmetric=False):
+    """Both feet near the ground, the body swaying: a motion whose dynamics we do not know in closed form."""
+    t = np.arange(T) / fps
+    q = np.zeros((ch.n, T))
+    q[ch.index("root_tz")] = _sole_height(ch) + 0.01 * np.sin(2 * np.pi * 1.0 * t)
+    q[ch.index("root_tx")] = 0.02 * np.sin(2 * np.pi * 0.7 * t)
+    q[ch.index("root_ry")] = 0.05 * np.sin(2 * np.pi * 0.9 * t)
+    for side in ("r", "l"):
+        knee = q[ch.index(f"knee_angle_{side}")] = 0.2 + 0.1 * np.sin(2 * np.pi * 1.1 * t)
+        # a squat keeping the feet under the hips, plus some fore-aft swing
+        hip = q[ch.index(f"hip_flexion_{side}")] = knee / 2 + 0.03 * np.sin(2 * np.pi * 1.3 * t + 0.3)
+        # keep the foot flat: pitch of the foot = root pitch − hip flexion + knee − ankle
+        q[ch.index(f"ankle_angle_{side}")] = q[ch.index("root_ry")] - hip + knee
+    if not symmetric:
+        q[ch.index("root_ty")] = 0.005 * np.sin(2 * np.pi * 1.3 * t)
+        q[ch.index("hip_adduction_l")] = 0.02 * np.sin(2 * np.pi * 1.7 * t)
+        q[ch.index("hip_rotation_r")] = 0.08 * np.sin(2 * np.pi * 0.8 * t)
+    return q, fps
+
+
+def _walk_schedule(T):
+    fc = np.ones((2, T), bool)
+    fc[0, 40:60] = False  # right swing
+    fc[1, 90:110] = False  # left swing
+    return fc
+
+
+@pytest.fixture(scope="module")
+def sway(ch):
+    q, fps = _swaying_motion(ch)
+    fc = _walk_schedule(q.shape[1])
+    return q, fps, fc, estimate_contact_wrenches(ch, q, fps, fc)
+
+
+# --- the quadratic objective is the joint effort ------------------------------------------
+
+
+def test_qp_objective_is_the_sum_of_squared_joint_forces_from_rnea(ch):
+    """F(y) of the QP equals Σ τ_i² computed by RNEA with the two foot wrenches applied (up to a constant)."""
+    rng = np.random.default_rng(0)
+    q = rng.uniform(-0.3, 0.3, (ch.n, 3))
+    qd, qdd = rng.uniform(-1, 1, (ch.n, 3)), rng.uniform(-3, 3, (ch.n, 3))
+    res = rnea(ch, q, qd, qdd)
+    batch = _qp_batch(ch, q, res.tau, res.h0, friction=None, penetration=0.01, regularization=1e-15)
+    feet = [ch.model.seg_body[ch.foot(s).segment] for s in ("right", "left")]
+    for t in range(3):
+        ys = [rng.normal(size=6) * [50, 50, 10, 100, 100, 400] for _ in range(4)]
+        f_qp, f_id = [], []
+        for y in ys:
+            f_qp.append(y @ batch.P[t] @ y + 2 * batch.q[t] @ y)
+            yo = y.copy()
+            yo[:3] += np.cross(batch.r[t], y[3:])
+            out = rnea(ch, q[:, t], qd[:, t], qdd[:, t], fext={feet[0]: yo, feet[1]: res.h0[:, t] - yo})
+            assert np.allclose(out.h0, 0.0, atol=1e-8)  # the two wrenches sum to c: root needs nothing
+            f_id.append(np.sum(np.asarray(out.tau)[6:] ** 2))
+        assert np.allclose(np.diff(f_qp), np.diff(f_id), rtol=1e-9, atol=1e-6)
+
+
+# --- equations that must hold -----------------------------------------------------------------
+
+
+def test_single_support_frames_reproduce_c_exactly(sway):
+    q, fps, fc, est = sway
+    for side, foot, other in ((Support.RIGHT, 0, 1), (Support.LEFT, 1, 0)):
+        f = np.flatnonzero((est.support == side) & est.defined)
+        assert len(f) > 10
+        assert np.array_equal(est.wrenches[foot][:, f], est.total[:, f])
+        assert np.all(est.wrenches[other][:, f] == 0.0)
+        assert np.all(est.status[f] == Status.SINGLE)
+
+
+def test_double_support_wrenches_sum_to_c_with_cops_in_the_boxes(sway):
+    q, fps, fc, est = sway
+    ds = est.double_support
+    assert ds.sum() > 50
+    assert np.allclose(est.wrenches[0][:, ds] + est.wrenches[1][:, ds], est.total[:, ds], atol=1e-9, rtol=0)
+    opt = ds & (est.status == Status.OPTIMAL)
+    assert opt.sum() > 30
+    assert np.all(est.cop_violation[:, opt] < 1e-7)  # metres outside the polygon
+    fz, cfz = est.wrenches[0][5, opt], est.total[5, opt]
+    assert np.all(fz >= -1e-6) and np.all(fz <= cfz + 1e-6)
+    # friction pyramid (μ = 1) on each foot
+    for s in range(2):
+        f = est.wrenches[s][3:, opt]
+        assert np.all(np.abs(f[:2]) <= f[2] + 1e-6)
+
+
+def test_cop_and_free_moment_describe_the_same_wrench(sway):
+    """Rebuilding each foot's wrench from (force, CoP, free moment) gives the wrench back."""
+    q, fps, fc, est = sway
+    ok = est.defined
+    for s in range(2):
+        loaded = ok & (est.wrenches[s][5] > 1.0)
+        f = est.force[s][:, loaded]
+        p = est.cop[s][:, loaded]
+        m = np.cross(p.T, f.T).T
+        m[2] += est.free_moment[s][loaded]
+        assert np.allclose(m, est.wrenches[s][:3, loaded], atol=1e-8)
+        assert np.all(p[2] == 0.0)
+
+
+def test_ends_of_a_non_cyclic_motion_are_marked_undefined(sway):
+    q, fps, fc, est = sway
+    assert est.status[0] == Status.UNDEFINED and est.status[-1] == Status.UNDEFINED
+    assert np.all(np.isnan(est.wrenches[:, :, [0, -1]]))
+    assert np.all(est.defined[1:-1])
+
+
+# --- known answers and references ---------------------------------------------------------------
+
+
+def test_mirror_symmetric_stance_splits_the_load_in_half(ch):
+    """A motion symmetric about the sagittal plane on a symmetric character: the unique optimum is symmetric."""
+    q, fps = _swaying_motion(ch, symmetric=True)
+    fc = np.ones((2, q.shape[1]), bool)
+    est = estimate_contact_wrenches(ch, q, fps, fc)
+    ok = est.status == Status.OPTIMAL
+    assert ok.sum() > 90
+    r, l = est.wrenches[0][:, ok], est.wrenches[1][:, ok]
+    c = est.total[:, ok]
+    assert np.allclose(r[5], c[5] / 2, rtol=1e-6)  # vertical force halved
+    assert np.allclose(r[3], l[3], atol=1e-6 * np.abs(c[5]).max())  # same fore-aft force
+    assert np.allclose(r[4], -l[4], atol=1e-6 * np.abs(c[5]).max())  # opposite lateral forces
+    cr, cl = est.cop[0][:, ok], est.cop[1][:, ok]
+    assert np.allclose(cr[0], cl[0], atol=1e-6) and np.allclose(cr[1], -cl[1], atol=1e-6)
+
+
+def test_qp_matches_the_thesis_nonlinear_formulation_solved_by_slsqp(ch):
+    """Independent reference: effort from RNEA with the foot wrenches, CoP box constraints in their
+    original nonlinear form (SPEC 4.20-4.25), solved by SLSQP (the thesis's "naive" formulation)."""
+    q, fps = _swaying_motion(ch)
+    fc = np.ones((2, q.shape[1]), bool)
+    est = estimate_contact_wrenches(ch, q, fps, fc, friction=None, regularization=1e-12)
+    dt = 1 / fps
+    feet = [ch.model.seg_body[ch.foot(s).segment] for s in ("right", "left")]
+    from solver.kinematics import segment_frames
+
+    seg_idx = [next(i for i, s in enumerate(ch.segments) if s.name == ch.foot(side).segment) for side in ("right", "left")]
+    checked = 0
+    for t in np.flatnonzero(est.status == Status.OPTIMAL)[::25]:
+        qt = q[:, t]
+        qd = (q[:, t + 1] - q[:, t - 1]) / (2 * dt)
+        qdd = (q[:, t + 1] - 2 * qt + q[:, t - 1]) / dt**2
+        c = est.total[:, t]
+        R, P = segment_frames(ch, qt)
+
+        def effort(x):
+            out = rnea(ch, qt, qd, qdd, fext={feet[0]: x, feet[1]: c - x})
+            return float(np.sum(np.asarray(out.tau)[6:] ** 2))
+
+        def box_margins(x):
+            out = []
+            for s, w in ((0, x), (1, c - x)):
+                box = ch.foot(("right", "left")[s])
+                rot = R[seg_idx[s]]
+                ctr = P[seg_idx[s]] + rot @ box.center
+                z_low = ctr[2] - np.abs(rot[2]) @ box.half
+                plane = max(0.0, z_low + 0.01)
+                u = np.array([-w[1] / w[5], w[0] / w[5], plane])  # CoP (4.22-4.25), on the foot's plane
+                loc = rot.T @ (u - ctr)
+                out += list(box.half - loc) + list(box.half + loc)
+            return np.array(out)
+
+        x0 = c / 2
+        scale = np.abs(c).max()
+        res = minimize(lambda z: effort(z * scale) / scale**2, x0 / scale, method="SLSQP",
+                       constraints=[{"type": "ineq", "fun": lambda z: box_margins(z * scale)}],
+                       options={"ftol": 1e-14, "maxiter": 500})
+        assert res.success, res.message
+        x_ref = res.x * scale
+        assert effort(est.wrenches[0][:, t]) <= effort(x_ref) * (1 + 1e-6) + 1e-6
+        assert np.allclose(est.wrenches[0][:, t], x_ref, atol=0.05 + 1e-4 * scale)
+        checked += 1
+    assert checked >= 4
+
+
+def test_qp_and_nested_forms_agree(ch):
+    q, fps = _swaying_motion(ch, T=61)
+    fc = _walk_schedule(121)[:, :61]
+    a = estimate_contact_wrenches(ch, q, fps, fc, method="qp")
+    b = estimate_contact_wrenches(ch, q, fps, fc, method="nested")
+    ds = a.double_support
+    assert ds.sum() > 30
+    assert np.array_equal(a.status, b.status)
+    assert np.max(np.abs(a.wrenches[:, :, ds] - b.wrenches[:, :, ds])) < 1e-3
+
+
+def test_infeasible_frames_are_relaxed_and_reported(ch):
+    """A violent sideways acceleration puts c's CoP far outside both feet: no exact split exists."""
+    q, fps = _swaying_motion(ch, T=61)
+    t = np.arange(61) / fps
+    q[ch.index("root_ty")] = 0.15 * np.sin(2 * np.pi * 3.0 * t)  # ±5 g sideways
+    fc = np.ones((2, 61), bool)
+    est = estimate_contact_wrenches(ch, q, fps, fc)
+    rel = est.status == Status.RELAXED
+    assert rel.sum() > 5
+    assert np.all(np.isfinite(est.wrenches[:, :, rel]))
+    assert np.allclose(est.wrenches[0][:, rel] + est.wrenches[1][:, rel], est.total[:, rel], atol=1e-9)
+    assert np.all(np.max(est.cop_violation[:, rel], axis=0) > 1e-3)  # reported, in metres
+    assert est.summary()["status_relaxed"] == rel.sum()
+
+
+def test_cyclic_motion_wraps_differences(ch):
+    """One period with a closing frame gives, at every frame, what three periods give in the middle one."""
+    T, fps = 41, 40.0  # period 40 frames = 1 s
+    per = np.arange(T) / fps
+    def motion(t):
+        q = np.zeros((ch.n, len(t)))
+        q[ch.index("root_tz")] = _sole_height(ch) + 0.01 * np.sin(2 * np.pi * t)
+        q[ch.index("root_tx")] = 0.5 * t + 0.02 * np.sin(2 * np.pi * t)  # advancing
+        q[ch.index("hip_flexion_r")] = 0.2 * np.sin(2 * np.pi * t)
+        q[ch.index("hip_flexion_l")] = -0.2 * np.sin(2 * np.pi * t)
+        return q
+    fc1 = np.ones((2, T), bool)
+    fc1[0, 5:12] = False
+    fc1[1, 25:32] = False
+    one = estimate_contact_wrenches(ch, motion(per), fps, fc1, cyclic=True)
+    assert np.all(one.defined)
+    three_t = np.arange(3 * (T - 1) + 1) / fps
+    fc3 = np.concatenate([fc1[:, :-1]] * 3 + [fc1[:, :1]], axis=1)
+    three = estimate_contact_wrenches(ch, motion(three_t), fps, fc3)
+    mid = three.wrenches[:, :, T - 1: 2 * (T - 1) + 1]
+    # moments about the origin differ by the root advance; compare forces and free moments and CoP offsets
+    assert np.allclose(one.wrenches[:, 3:], mid[:, 3:], atol=1e-6)
+    assert np.allclose(one.free_moment, three.free_moment[:, T - 1: 2 * (T - 1) + 1], atol=1e-6)
+
+
+# --- bad inputs ------------------------------------------------------------------------------
+
+
+def test_bad_inputs_are_refused_with_a_clear_message(ch, sway):
+    q, fps, fc, _ = sway
+    bad = q.copy()
+    bad[ch.index("knee_angle_r"), 7] = np.nan
+    with pytest.raises(ContactError, match="knee_angle_r.*frame 7"):
+        estimate_contact_wrenches(ch, bad, fps, fc)
+    with pytest.raises(ContactError, match="model/motion mismatch"):
+        estimate_contact_wrenches(C.halfboy(), q, fps, fc)
+    with pytest.raises(ContactError, match="no double support"):
+        estimate_contact_wrenches(ch, q, fps, np.stack([fc[0], ~fc[0]]))
+    with pytest.raises(ContactError, match="left foot is never on the ground"):
+        estimate_contact_wrenches(ch, q, fps, np.stack([fc[0], np.zeros_like(fc[0])]))
+    with pytest.raises(ContactError, match="foot_contact must have shape"):
+        estimate_contact_wrenches(ch, q, fps, fc[:, :-1])
+    with pytest.raises(ContactError, match="fps"):
+        estimate_contact_wrenches(ch, q, -1.0, fc)
+    with pytest.raises(ContactError, match="unknown method"):
+        estimate_contact_wrenches(ch, q, fps, fc, method="lp")
+    with pytest.raises(ContactError, match="at least 3 frames"):
+        estimate_contact_wrenches(ch, q[:, :2], fps, fc[:, :2])
+
+
+def test_cop_of_a_known_wrench():
+    """A 700 N vertical force at (0.3, -0.1) with a 2 N·m free moment."""
+    f = np.array([10.0, -5.0, 700.0])
+    p = np.array([0.3, -0.1, 0.0])
+    m = np.cross(p, f) + np.array([0, 0, 2.0])
+    cop, tz = cop_and_free_moment(np.concatenate([m, f])[:, None])
+    assert np.allclose(cop[:, 0], p) and tz[0] == pytest.approx(2.0)
