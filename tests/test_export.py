@@ -404,7 +404,7 @@ def test_gltf_glb_layout_and_bad_options():
     assert len(glb) % 4 == 0
     without = G.to_glb(motion, meshes=False)
     g, _ = load_gltf(without)
-    assert not g.meshes and len(g.nodes) == len(motion.character.segments)
+    assert not g.meshes and not g.skins and len(g.nodes) == len(motion.character.segments)
     with pytest.raises(ExportError, match="meshes"):
         G.to_glb(motion, meshes="yes")
     with pytest.raises(ExportError, match="unknown option"):

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from solver.character import Character
-from solver.motion import FEET, Motion
+from solver.motion import Motion
 
 __all__ = [
     "FORMATS",

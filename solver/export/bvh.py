@@ -29,7 +29,7 @@ import warnings
 
 import numpy as np
 
-from solver.export import ExportError, _check_motion, change_axes, local_transforms, Y_UP
+from solver.export import Y_UP, ExportError, _check_motion, change_axes, local_transforms
 from solver.motion import Motion
 
 log = logging.getLogger(__name__)

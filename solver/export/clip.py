@@ -146,7 +146,7 @@ def to_clip(
         if y_up:
             force, cop = force @ Y_UP.T, cop @ Y_UP.T
         clip["ground_reaction"] = {
-            "load_threshold": gr.threshold,
+            "load_threshold": float(f"{gr.threshold:.9g}"),
             "free_moment_axis": "up",
             **{
                 foot: {

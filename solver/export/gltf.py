@@ -4,7 +4,7 @@ embedded base64 buffer).
 - one node per segment, node i = segment i (``character.segments`` order), holding the
   segment's rest transform (translation = rest offset, rotation = rest orientation);
 - one skin whose joints are the segment nodes, with inverse bind matrices of the rest
-  pose (q = 0, the pose the node transforms describe);
+  pose (q = 0, the pose the node transforms describe), present with the meshes;
 - one mesh per segment with a non-degenerate ellipsoid (polar semi-axis half the bone
   length along the bone ``direction``, equatorial semi-axis the segment's ``radius``),
   every vertex skinned with weight 1 to its segment, instantiated by a node at the scene
@@ -168,13 +168,13 @@ def _document(motion: Motion, meshes: bool) -> tuple[dict, bytes]:
         nodes.append(node)
 
     # skin: glTF stores matrices column-major
-    ibm = np.linalg.inv(bind)
-    ibm_acc = buf.add(np.transpose(ibm, (0, 2, 1)).reshape(S, 16), FLOAT, "MAT4")
-    skins = [{"name": ch.name, "joints": list(range(S)), "inverseBindMatrices": ibm_acc, "skeleton": 0}]
-
     mesh_list: list[dict] = []
+    skins: list[dict] = []
     scene_nodes = [0]
     if meshes:
+        ibm = np.linalg.inv(bind)
+        ibm_acc = buf.add(np.transpose(ibm, (0, 2, 1)).reshape(S, 16), FLOAT, "MAT4")
+        skins.append({"name": ch.name, "joints": list(range(S)), "inverseBindMatrices": ibm_acc, "skeleton": 0})
         joint_type = UNSIGNED_BYTE if S <= 256 else UNSIGNED_SHORT
         for i, s in enumerate(segs):
             if not (s.length > 0 and s.radius > 0):
@@ -239,13 +239,13 @@ def _document(motion: Motion, meshes: bool) -> tuple[dict, bytes]:
         "scene": 0,
         "scenes": [{"name": ch.name, "nodes": scene_nodes}],
         "nodes": nodes,
-        "skins": skins,
         "animations": [{"name": str(motion.provenance.get("step", "motion")), "samplers": samplers, "channels": channels}],
         "buffers": [{"byteLength": len(buf.data)}],
         "bufferViews": buf.views,
         "accessors": buf.accessors,
     }
-    if mesh_list:
+    if mesh_list:  # without meshes nothing would use the skin
+        doc["skins"] = skins
         doc["meshes"] = mesh_list
         doc["materials"] = [
             {
