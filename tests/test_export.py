@@ -37,7 +37,23 @@ with warnings.catch_warnings():  # bvhio imports PyGLM the way PyGLM plans to de
     warnings.simplefilter("ignore", PendingDeprecationWarning)
     import bvhio
 
-CHARACTERS = {"halfboy": C.halfboy, "fullbody": C.fullbody, "capture-full": C.capture_full}
+
+
+def tilted() -> C.Character:
+    """capture-lower with a random rest orientation on every segment and an offset root:
+    exercises what the reference characters (world-aligned, root at the origin) do not."""
+    from dataclasses import replace
+
+    from scipy.spatial.transform import Rotation
+
+    ch = C.capture_lower()
+    rots = Rotation.random(len(ch.segments), random_state=7).as_matrix()
+    segs = [replace(s, orientation=r) for s, r in zip(ch.segments, rots)]
+    segs[0] = replace(segs[0], offset=np.array([0.1, -0.2, 0.05]))
+    return replace(ch, segments=tuple(segs), name="tilted")
+
+
+CHARACTERS = {"halfboy": C.halfboy, "fullbody": C.fullbody, "capture-full": C.capture_full, "tilted": tilted}
 
 # --- test motions ------------------------------------------------------------------------
 
@@ -413,6 +429,32 @@ def test_gltf_glb_layout_and_bad_options():
         export_motion(motion, "glb", y_up=False)
 
 
+def test_slide_joint_below_the_root_is_animated_in_clip_and_gltf_and_refused_by_bvh():
+    from dataclasses import replace
+
+    ch = C.halfboy()
+    segs = list(ch.segments)
+    k = [s.name for s in segs].index("shank_r")
+    segs[k] = replace(segs[k], dofs=(C.Dof("shank_slide_r", "slide", np.array([0.0, 0.3, -1.0]), -0.1, 0.1),) + segs[k].dofs)
+    ch = replace(ch, segments=tuple(segs), name="sliding")
+    motion, _ = smooth_motion(ch, T=12, seed=5)
+    q = motion.q.copy()
+    q[ch.index("shank_slide_r")] = 0.08 * np.sin(np.linspace(0, 3, motion.T))
+    motion = motion.evolve(q=q)
+    _, pos = K.segment_frames(ch, motion.q)
+    pos = pos.transpose(0, 2, 1)
+    clip = CL.to_clip(motion)
+    CL.validate_clip(clip)
+    assert set(clip["translations"]) == {"shank_r"}
+    np.testing.assert_allclose(clip_world(clip), pos, atol=1e-5)
+    g, blob = load_gltf(G.to_glb(motion))
+    world, _ = animated_world(g, blob)
+    np.testing.assert_allclose(world[: len(segs), :, :3, 3], pos @ Y_UP.T, atol=1e-5)
+    assert any(c.target.node == k and c.target.path == "translation" for c in g.animations[0].channels)
+    with pytest.raises(ExportError, match="shank_r"):
+        B.to_bvh(motion)
+
+
 # --- BVH ------------------------------------------------------------------------------------
 
 
@@ -535,7 +577,7 @@ def motionx(*args: str) -> subprocess.CompletedProcess:
 
 
 def test_cli_export_writes_files_independent_readers_load(tmp_path):
-    motion, _ = smooth_motion(C.fullbody(), T=20)
+    motion, _ = smooth_motion(tilted(), T=20)  # not a reference: the file carries its definition
     src = tmp_path / "motion.json"
     motion.save(src)
     _, pos = K.segment_frames(motion.character, motion.q)
