@@ -7,4 +7,5 @@ and the work in ``solver``/``mjcf``.
 MODULES = [
     "service.commands.physics",
     "service.commands.export",
+    "service.commands.serve",
 ]

@@ -1,0 +1,123 @@
+"""Service configuration: one pydantic-settings model, read through :func:`get_settings`.
+
+Nothing here runs at import time: ``get_settings()`` reads the environment when called
+(and caches the result per process; ``get_settings.cache_clear()`` re-reads it). The API
+takes its settings through a FastAPI dependency, so tests override them
+(``app.dependency_overrides[get_settings] = ...``) or pass them to ``create_app``.
+
+Environment variables are prefixed ``MOTIONX_`` (e.g. ``MOTIONX_RUNNER=celery``); the
+database also answers to ``DATABASE_URL`` and the broker to ``REDIS_URL``.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+from typing import Literal
+
+from pydantic import AliasChoices, Field, field_validator, model_validator
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+
+def _default_data_dir() -> Path:
+    return Path.home() / ".local" / "share" / "motionx"
+
+
+class Settings(BaseSettings):
+    model_config = SettingsConfigDict(env_prefix="MOTIONX_", extra="ignore", frozen=True)
+
+    # --- storage ---------------------------------------------------------------------
+    data_dir: Path = Field(default_factory=_default_data_dir, description="where the default SQLite file lives")
+    database_url: str | None = Field(
+        default=None,
+        validation_alias=AliasChoices("MOTIONX_DATABASE_URL", "DATABASE_URL", "database_url"),
+        description="SQLAlchemy URL; default sqlite:///<data_dir>/motionx.db (WAL). "
+        "postgresql://... is mapped to the psycopg 3 driver.",
+    )
+    auto_migrate: bool = Field(True, description="`motionx serve` upgrades the schema (Alembic) on start")
+
+    # --- runner ----------------------------------------------------------------------
+    runner: Literal["local", "celery"] = "local"
+    local_workers: int = Field(2, ge=1, le=64, description="process-pool size of the LocalRunner")
+
+    # --- Celery / Redis --------------------------------------------------------------
+    broker_url: str = Field(
+        "redis://127.0.0.1:6379/0",
+        validation_alias=AliasChoices("MOTIONX_BROKER_URL", "REDIS_URL", "broker_url"),
+    )
+    result_backend: str | None = Field(None, description="results live in SQL; a Celery result backend is optional")
+    celery_queue: str = "motionx"
+    job_time_limit_s: float = Field(3600.0, gt=0, description="a job running longer is stopped and marked failed")
+    visibility_timeout_s: int = Field(
+        7200, gt=0, description="Redis redelivers an unacknowledged job after this; must exceed job_time_limit_s"
+    )
+    unacked_restore_interval_s: int = Field(10, ge=1, description="kombu: seconds between unacked-restore sweeps")
+    unacked_restore_throttle: int = Field(10, ge=1, description="kombu: scan Redis on every Nth sweep")
+    worker_concurrency: int = Field(1, ge=1, le=64, description="pool processes per `motionx worker`")
+
+    # --- jobs ------------------------------------------------------------------------
+    job_max_attempts: int = Field(3, ge=1, le=100, description="a job is given up (failed) after this many starts")
+    job_lease_s: float = Field(
+        60.0, gt=0, description="a running job's lease; renewed while it runs, another attempt may take over after"
+    )
+    sweep_interval_s: float = Field(30.0, gt=0, description="how often the API re-dispatches stranded jobs")
+    redispatch_after_s: float | None = Field(
+        None, description="re-dispatch a job still queued (or orphaned) this long after its dispatch; "
+        "default: visibility_timeout_s + 300"
+    )
+    validate_steps: bool = Field(True, description="store the plausibility report (MuJoCo replay) of every λ optimum")
+    default_character: str = "halfboy"
+    default_tutor_fps: float = Field(15.0, gt=0, le=240)
+
+    # --- HTTP ------------------------------------------------------------------------
+    host: str = "127.0.0.1"
+    port: int = Field(8000, ge=0, le=65535)
+    max_body_bytes: int = Field(32 * 1024 * 1024, ge=1024, description="larger request bodies get 413")
+    api_keys: str = Field("", description="comma-separated API keys accepted besides those stored in SQL")
+    page_size: int = Field(50, ge=1, le=1000)
+    sse_poll_s: float = Field(0.5, gt=0)
+    sse_max_s: float = Field(3600.0, gt=0, description="an event stream closes after this")
+
+    @field_validator("database_url")
+    @classmethod
+    def _driver(cls, v: str | None) -> str | None:
+        if v and v.startswith("postgres://"):
+            v = "postgresql://" + v[len("postgres://"):]
+        if v and v.startswith("postgresql://"):
+            v = "postgresql+psycopg://" + v[len("postgresql://"):]
+        return v or None
+
+    @model_validator(mode="after")
+    def _timeouts(self) -> "Settings":
+        if self.visibility_timeout_s <= self.hard_time_limit_s:
+            raise ValueError(
+                f"visibility_timeout_s ({self.visibility_timeout_s}) must exceed the longest job "
+                f"({self.hard_time_limit_s:g} s: job_time_limit_s plus Celery's hard-limit margin), "
+                "otherwise Redis hands a running job to a second worker"
+            )
+        return self
+
+    @property
+    def hard_time_limit_s(self) -> float:
+        """Celery's hard time limit: a backstop after the job's own cooperative limit."""
+        return self.job_time_limit_s + max(5.0, 0.1 * self.job_time_limit_s)
+
+    @property
+    def sqlalchemy_url(self) -> str:
+        if self.database_url:
+            return self.database_url
+        return f"sqlite:///{self.data_dir / 'motionx.db'}"
+
+    @property
+    def redispatch_after(self) -> float:
+        return self.redispatch_after_s if self.redispatch_after_s is not None else self.visibility_timeout_s + 300.0
+
+    @property
+    def static_api_keys(self) -> tuple[str, ...]:
+        return tuple(k.strip() for k in self.api_keys.split(",") if k.strip())
+
+
+@lru_cache(maxsize=1)
+def get_settings() -> Settings:
+    """The process's settings, read from the environment on first call."""
+    return Settings()

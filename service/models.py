@@ -1,0 +1,114 @@
+"""SQL tables (SQLAlchemy 2 declarative). Durable state: motions, jobs, progress points.
+
+Times are epoch seconds (double precision) so SQLite and PostgreSQL behave alike.
+The schema is created and upgraded by Alembic (``service/migrations``), never by
+``create_all`` in production code.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sqlalchemy import JSON, Boolean, Float, ForeignKey, Index, Integer, LargeBinary, String, Text, UniqueConstraint
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
+
+JOB_STATUSES = ("queued", "running", "succeeded", "failed", "canceled", "impasse")
+TERMINAL = frozenset({"succeeded", "failed", "canceled", "impasse"})
+MOTION_KINDS = ("capture", "motion", "tutor", "step")
+
+
+class Base(DeclarativeBase):
+    pass
+
+
+class ApiKey(Base):
+    __tablename__ = "api_keys"
+
+    id: Mapped[str] = mapped_column(String(40), primary_key=True)
+    name: Mapped[str] = mapped_column(String(200), default="")
+    key_hash: Mapped[str] = mapped_column(String(64), unique=True)
+    created_at: Mapped[float] = mapped_column(Float)
+    revoked_at: Mapped[float | None] = mapped_column(Float, nullable=True)
+
+
+class MotionRow(Base):
+    __tablename__ = "motions"
+    __table_args__ = (
+        UniqueConstraint("job_id", "step", name="uq_motions_job_step"),
+        UniqueConstraint("parent_id", "tutor_key", name="uq_motions_parent_tutor"),
+        Index("ix_motions_owner_created", "owner", "created_at"),
+    )
+
+    id: Mapped[str] = mapped_column(String(40), primary_key=True)
+    owner: Mapped[str] = mapped_column(String(40), index=True)
+    kind: Mapped[str] = mapped_column(String(16))  # capture | motion | tutor | step
+    name: Mapped[str] = mapped_column(String(200), default="")
+    character: Mapped[str] = mapped_column(String(200))
+    n: Mapped[int] = mapped_column(Integer)
+    frames: Mapped[int] = mapped_column(Integer)
+    fps: Mapped[float] = mapped_column(Float)
+    has_wrenches: Mapped[bool] = mapped_column(Boolean, default=False)
+    job_id: Mapped[str | None] = mapped_column(String(40), ForeignKey("jobs.id", ondelete="CASCADE"), nullable=True)
+    step: Mapped[int | None] = mapped_column(Integer, nullable=True)
+    lam: Mapped[float | None] = mapped_column(Float, nullable=True)
+    parent_id: Mapped[str | None] = mapped_column(String(40), nullable=True)
+    tutor_key: Mapped[str | None] = mapped_column(String(100), nullable=True)
+    data: Mapped[bytes] = mapped_column(LargeBinary)  # zlib-compressed motion file v1 (JSON)
+    sha256: Mapped[str] = mapped_column(String(64))  # of the uncompressed JSON
+    validation: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
+    plausible: Mapped[bool | None] = mapped_column(Boolean, nullable=True)
+    created_at: Mapped[float] = mapped_column(Float)
+
+
+class JobRow(Base):
+    __tablename__ = "jobs"
+    __table_args__ = (Index("ix_jobs_status_dispatched", "status", "dispatched_at"),)
+
+    id: Mapped[str] = mapped_column(String(40), primary_key=True)
+    owner: Mapped[str] = mapped_column(String(40), index=True)
+    motion_id: Mapped[str] = mapped_column(String(40), index=True)  # the source motion
+    tutor_motion_id: Mapped[str | None] = mapped_column(String(40), nullable=True)
+    spec: Mapped[dict[str, Any]] = mapped_column(JSON)
+    status: Mapped[str] = mapped_column(String(16), default="queued")
+    message: Mapped[str] = mapped_column(Text, default="")
+    lam_reached: Mapped[float] = mapped_column(Float, default=0.0)
+    steps: Mapped[int] = mapped_column(Integer, default=0)
+    solves: Mapped[int] = mapped_column(Integer, default=0)
+    attempts: Mapped[int] = mapped_column(Integer, default=0)
+    max_attempts: Mapped[int] = mapped_column(Integer, default=3)
+    cancel_requested: Mapped[bool] = mapped_column(Boolean, default=False)
+    lease_owner: Mapped[str | None] = mapped_column(String(200), nullable=True)
+    lease_until: Mapped[float | None] = mapped_column(Float, nullable=True)
+    runner: Mapped[str] = mapped_column(String(16), default="local")
+    created_at: Mapped[float] = mapped_column(Float)
+    dispatched_at: Mapped[float | None] = mapped_column(Float, nullable=True)
+    started_at: Mapped[float | None] = mapped_column(Float, nullable=True)
+    finished_at: Mapped[float | None] = mapped_column(Float, nullable=True)
+    updated_at: Mapped[float] = mapped_column(Float)
+
+
+class ProgressRow(Base):
+    __tablename__ = "progress"
+
+    job_id: Mapped[str] = mapped_column(String(40), ForeignKey("jobs.id", ondelete="CASCADE"), primary_key=True)
+    attempt: Mapped[int] = mapped_column(Integer, primary_key=True)
+    seq: Mapped[int] = mapped_column(Integer, primary_key=True)
+    phase: Mapped[str] = mapped_column(String(16), default="extrapolate")  # tutor | extrapolate
+    wall_time: Mapped[float] = mapped_column(Float)
+    lam: Mapped[float] = mapped_column(Float)
+    lam_reached: Mapped[float] = mapped_column(Float)
+    environment: Mapped[dict[str, Any]] = mapped_column(JSON)
+    iterations: Mapped[int] = mapped_column(Integer)
+    accepted: Mapped[bool] = mapped_column(Boolean)
+    status: Mapped[str] = mapped_column(String(200))
+    at: Mapped[float] = mapped_column(Float)
+
+
+class IdempotencyRow(Base):
+    __tablename__ = "idempotency"
+
+    owner: Mapped[str] = mapped_column(String(40), primary_key=True)
+    key: Mapped[str] = mapped_column(String(255), primary_key=True)
+    request_hash: Mapped[str] = mapped_column(String(64))
+    job_id: Mapped[str] = mapped_column(String(40), ForeignKey("jobs.id", ondelete="CASCADE"))
+    created_at: Mapped[float] = mapped_column(Float)

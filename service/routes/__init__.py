@@ -1,0 +1,1 @@
+"""HTTP routes: thin — validate, call the store, hand job ids to the runner."""

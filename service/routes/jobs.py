@@ -1,0 +1,220 @@
+"""Jobs: create (202 + Location), status + progress curve, λ optima, cancel, events (SSE)."""
+
+from __future__ import annotations
+
+import asyncio
+import hashlib
+import json
+import time
+
+from fastapi import APIRouter, Depends, Header, Query, Request
+from fastapi.concurrency import run_in_threadpool
+from fastapi.responses import JSONResponse, StreamingResponse
+from sqlalchemy.exc import IntegrityError
+
+from service import store
+from service.config import Settings, get_settings
+from service.db import Database
+from service.deps import get_db, get_owner, get_runner
+from service.models import TERMINAL
+from service.problems import Problem, not_found
+from service.runners import Runner
+from service.schemas import ExtrapolateIn, JobOut, JobPage, MotionPage
+from service.views import job_out, motion_out, progress_out
+
+router = APIRouter(tags=["jobs"])
+
+IDEMPOTENCY_KEY = Header(
+    None, alias="Idempotency-Key", min_length=1, max_length=255, pattern=r"^[\x21-\x7e]+$",
+    description="retrying with the same key (and the same request) returns the same job",
+)
+
+
+def _job(db: Database, job_id: str, owner: str) -> dict:
+    with db.read() as s:
+        job = store.get_job(s, job_id=job_id, owner=owner)
+        if job is None:
+            raise not_found("job", job_id)
+        return job_out(job, store.progress(s, job_id=job_id, attempt=job.attempts))
+
+
+def _accepted(out: dict, replayed: bool = False) -> JSONResponse:
+    headers = {"Location": out["links"]["self"]}
+    if replayed:
+        headers["Idempotent-Replayed"] = "true"
+    return JSONResponse(out, status_code=202, headers=headers)
+
+
+@router.post(
+    "/motions/{motion_id}/extrapolate",
+    status_code=202,
+    response_model=JobOut,
+    summary="start an extrapolation job (a raw capture gets its tutor first)",
+    responses={202: {"headers": {"Location": {"schema": {"type": "string"}}}},
+               404: {"description": "no such motion for this key"}},
+)
+def extrapolate(
+    motion_id: str,
+    body: ExtrapolateIn,
+    idempotency_key: str | None = IDEMPOTENCY_KEY,
+    owner: str = Depends(get_owner),
+    db: Database = Depends(get_db),
+    runner: Runner = Depends(get_runner),
+    settings: Settings = Depends(get_settings),
+) -> JSONResponse:
+    from solver.continuation import StepControl, Target
+
+    try:  # the solver's own checks, so a job never starts with a target it refuses
+        Target(**body.target.model_dump())
+        StepControl(**body.control.model_dump())
+    except ValueError as e:
+        raise Problem(422, str(e)) from None
+    spec = body.model_dump(mode="json")
+    request_hash = hashlib.sha256(json.dumps({"motion": motion_id, "spec": spec}, sort_keys=True).encode()).hexdigest()
+    for _ in range(3):
+        try:
+            with db.write() as s:
+                if store.get_motion(s, motion_id=motion_id, owner=owner) is None:
+                    raise not_found("motion", motion_id)
+                existing = None
+                if idempotency_key is not None:
+                    existing = store.find_idempotent(s, owner=owner, key=idempotency_key, request_hash=request_hash)
+                if existing is not None:
+                    return _accepted(job_out(existing, store.progress(s, job_id=existing.id)), replayed=True)
+                job = store.create_job(
+                    s, owner=owner, motion_id=motion_id, spec=spec, runner=runner.name,
+                    max_attempts=settings.job_max_attempts, idempotency_key=idempotency_key,
+                    request_hash=request_hash,
+                )
+                job_id = job.id
+            break
+        except store.IdempotencyConflict:
+            raise Problem(422, "this Idempotency-Key was already used with a different request",
+                          type="https://motionx.dev/problems/idempotency-key-reuse") from None
+        except IntegrityError:  # a concurrent request with the same key won: return its job
+            continue
+    else:
+        raise Problem(409, "concurrent requests with the same Idempotency-Key; retry")
+    runner.submit(job_id)  # if the broker is down the job stays queued in SQL; the sweep dispatches it
+    return _accepted(_job(db, job_id, owner))
+
+
+@router.get("/jobs", response_model=JobPage, summary="your jobs, oldest first (without progress curves)")
+def list_jobs(
+    offset: int = Query(0, ge=0, le=10**9),
+    limit: int | None = Query(None, ge=1, le=1000),
+    owner: str = Depends(get_owner),
+    db: Database = Depends(get_db),
+    settings: Settings = Depends(get_settings),
+) -> dict:
+    limit = limit or settings.page_size
+    with db.read() as s:
+        rows, total = store.list_jobs(s, owner=owner, offset=offset, limit=limit)
+        items = [job_out(j, []) for j in rows]
+    nxt = f"/jobs?offset={offset + limit}&limit={limit}" if offset + limit < total else None
+    return dict(items=items, total=total, limit=limit, next=nxt)
+
+
+@router.get("/jobs/{job_id}", response_model=JobOut, summary="status, λ reached, progress curve, links",
+            responses={404: {"description": "no such job for this key"}})
+def get_job(job_id: str, owner: str = Depends(get_owner), db: Database = Depends(get_db)) -> dict:
+    return _job(db, job_id, owner)
+
+
+@router.get("/jobs/{job_id}/motions", response_model=MotionPage, summary="every λ optimum of the job, by step",
+            responses={404: {"description": "no such job for this key"}})
+def job_motions(
+    job_id: str,
+    after: int = Query(-1, ge=-1, le=10**9, description="cursor: return steps after this one"),
+    limit: int | None = Query(None, ge=1, le=1000),
+    owner: str = Depends(get_owner),
+    db: Database = Depends(get_db),
+    settings: Settings = Depends(get_settings),
+) -> JSONResponse:
+    limit = limit or settings.page_size
+    with db.read() as s:
+        if store.get_job(s, job_id=job_id, owner=owner) is None:
+            raise not_found("job", job_id)
+        rows = store.job_motions(s, job_id=job_id, after_step=after, limit=limit + 1)
+        total = store.count_job_motions(s, job_id=job_id)
+        items = [motion_out(r) for r in rows[:limit]]
+    nxt = f"/jobs/{job_id}/motions?after={items[-1]['step']}&limit={limit}" if len(rows) > limit else None
+    headers = {"Link": f'<{nxt}>; rel="next"'} if nxt else {}
+    return JSONResponse(dict(items=items, total=total, limit=limit, next=nxt), headers=headers)
+
+
+@router.post("/jobs/{job_id}/cancel", status_code=202, response_model=JobOut,
+             summary="cooperative cancel (a running job stops between λ steps)",
+             responses={404: {"description": "no such job for this key"},
+                        409: {"description": "the job has already finished"}})
+def cancel_job(job_id: str, owner: str = Depends(get_owner), db: Database = Depends(get_db)) -> JSONResponse:
+    with db.write() as s:
+        job = store.get_job(s, job_id=job_id, owner=owner)
+        if job is None:
+            raise not_found("job", job_id)
+        if job.status in TERMINAL:
+            raise Problem(409, f"job {job_id} has already finished ({job.status})")
+        store.request_cancel(s, job_id=job_id)
+    return JSONResponse(_job(db, job_id, owner), status_code=202, headers={"Location": f"/jobs/{job_id}"})
+
+
+def _sse(event: str, data: dict, ident: str | None = None) -> str:
+    head = f"id: {ident}\n" if ident else ""
+    return f"{head}event: {event}\ndata: {json.dumps(data, separators=(',', ':'))}\n\n"
+
+
+@router.get(
+    "/jobs/{job_id}/events",
+    summary="Server-Sent Events: progress points, new λ optima, status changes; ends when the job does",
+    responses={200: {"content": {"text/event-stream": {}}}, 404: {"description": "no such job for this key"}},
+)
+async def job_events(
+    job_id: str,
+    request: Request,
+    owner: str = Depends(get_owner),
+    db: Database = Depends(get_db),
+    settings: Settings = Depends(get_settings),
+) -> StreamingResponse:
+    def snapshot(after_seq: int, after_step: int, attempt: int):
+        with db.read() as s:
+            job = store.get_job(s, job_id=job_id, owner=owner)
+            if job is None:
+                return None, [], []
+            if job.attempts != attempt:
+                after_seq = -1
+            pts = store.progress(s, job_id=job_id, attempt=job.attempts, after_seq=after_seq)
+            steps = store.job_motions(s, job_id=job_id, after_step=after_step, limit=1000)
+            return job_out(job, []), [progress_out(p) for p in pts], [motion_out(m) for m in steps]
+
+    first, _, _ = await run_in_threadpool(snapshot, 10**9, 10**9, 0)
+    if first is None:
+        raise not_found("job", job_id)
+
+    async def stream():
+        after_seq, after_step, attempt, last_status = -1, -1, -1, None
+        deadline = time.monotonic() + settings.sse_max_s
+        while time.monotonic() < deadline:
+            job, pts, steps = await run_in_threadpool(snapshot, after_seq, after_step, attempt)
+            if job is None:
+                return
+            if job["attempts"] != attempt:
+                attempt, after_seq = job["attempts"], -1
+            for p in pts:
+                after_seq = p["seq"]
+                yield _sse("progress", p, f"{attempt}:{p['seq']}")
+            for m in steps:
+                after_step = m["step"]
+                yield _sse("motion", m)
+            key = (job["status"], job["attempts"], job["lam_reached"])
+            if key != last_status:
+                last_status = key
+                yield _sse("status", job)
+            if job["status"] in TERMINAL:
+                yield _sse("end", {"status": job["status"]})
+                return
+            if await request.is_disconnected():
+                return
+            await asyncio.sleep(settings.sse_poll_s)
+
+    return StreamingResponse(stream(), media_type="text/event-stream",
+                             headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"})

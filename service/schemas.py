@@ -1,0 +1,164 @@
+"""Request and response models (pydantic v2). Floats must be finite everywhere."""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from solver.continuation import StepControl
+
+_SC = StepControl()
+
+JobStatus = Literal["queued", "running", "succeeded", "failed", "canceled", "impasse"]
+MotionKind = Literal["capture", "motion", "tutor", "step"]
+
+
+class Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+
+def _changes_something(schema: dict) -> None:
+    schema["anyOf"] = [
+        {"required": ["slope_deg"], "properties": {"slope_deg": {"not": {"const": 0}}}},
+        {"required": ["curve_deg"], "properties": {"curve_deg": {"not": {"const": 0}}}},
+        {"required": ["friction"], "properties": {"friction": {"type": "number"}}},
+        {"required": ["gravity"], "properties": {"gravity": {"type": "number"}}},
+    ]
+
+
+class TargetIn(Strict):
+    """The target environment reached at λ = 1; fields combine (at least one must change)."""
+
+    model_config = ConfigDict(json_schema_extra=_changes_something)
+
+    slope_deg: float = Field(0.0, gt=-89.0, lt=89.0, description="ground slope, positive = uphill (degrees)")
+    curve_deg: float = Field(0.0, ge=-720.0, le=720.0, description="heading change over one cycle, positive = left")
+    friction: float | None = Field(None, gt=0.0, le=10.0, description="target friction coefficient")
+    gravity: float | None = Field(None, gt=0.0, le=100.0, description="target gravity magnitude (m/s²)")
+
+    @model_validator(mode="after")
+    def _not_identity(self) -> "TargetIn":
+        if self.slope_deg == 0 and self.curve_deg == 0 and self.friction is None and self.gravity is None:
+            raise ValueError("the target changes nothing: give slope_deg, curve_deg, friction and/or gravity")
+        return self
+
+
+class StepControlIn(Strict):
+    """Step control of the continuation (SPEC §7)."""
+
+    method: Literal["adaptive", "thesis"] = _SC.method  # type: ignore[assignment]
+    delta0: float = Field(_SC.delta0, gt=0.0, le=1.0, description="first λ step Δ0")
+    max_iter: int = Field(_SC.max_iter, ge=1, le=100_000, description="solver iterations allowed per step (k)")
+    eps: float = Field(_SC.eps, gt=0.0, le=1.0, description="smallest step before an impasse (ε)")
+    max_solves: int = Field(_SC.max_solves, ge=1, le=100_000)
+
+    @model_validator(mode="after")
+    def _eps(self) -> "StepControlIn":
+        if self.eps > self.delta0:
+            raise ValueError("eps must not exceed delta0")
+        return self
+
+
+class TutorIn(Strict):
+    """How the tutor is made when the source motion is a raw capture."""
+
+    character: Literal["halfboy", "fullbody"] = "halfboy"
+    fps: float = Field(15.0, gt=0.0, le=240.0)
+
+
+class ExtrapolateIn(Strict):
+    target: TargetIn
+    control: StepControlIn = Field(default_factory=StepControlIn)
+    tutor: TutorIn = Field(default_factory=TutorIn)
+
+
+class Links(BaseModel):
+    model_config = ConfigDict(extra="allow")
+    self: str
+
+
+class MotionOut(BaseModel):
+    id: str
+    kind: MotionKind
+    name: str
+    character: str
+    coordinates: int
+    frames: int
+    fps: float
+    duration_s: float
+    has_wrenches: bool
+    job_id: str | None = None
+    step: int | None = None
+    lam: float | None = None
+    parent_id: str | None = None
+    plausible: bool | None = None
+    created_at: str
+    links: dict[str, str]
+
+
+class ProgressPoint(BaseModel):
+    seq: int
+    phase: Literal["tutor", "extrapolate"]
+    wall_time: float
+    lam: float
+    lam_reached: float
+    environment: dict[str, Any]
+    iterations: int
+    accepted: bool
+    status: str
+
+
+class JobOut(BaseModel):
+    id: str
+    status: JobStatus
+    motion_id: str
+    tutor_motion_id: str | None
+    target: dict[str, Any]
+    control: dict[str, Any]
+    lam_reached: float
+    steps: int
+    solves: int
+    attempts: int
+    max_attempts: int
+    cancel_requested: bool
+    message: str
+    runner: str
+    created_at: str
+    started_at: str | None
+    finished_at: str | None
+    progress: list[ProgressPoint]
+    links: dict[str, str]
+
+
+class Page(BaseModel):
+    total: int
+    limit: int
+    next: str | None
+
+
+class MotionPage(Page):
+    items: list[MotionOut]
+
+
+class JobPage(Page):
+    items: list[JobOut]
+
+
+class Problem(BaseModel):
+    """RFC 9457 problem details."""
+
+    type: str = "about:blank"
+    title: str
+    status: int
+    detail: str
+    instance: str | None = None
+    errors: list[dict[str, Any]] | None = None
+
+
+class Health(BaseModel):
+    status: Literal["ok", "degraded"]
+    database: str
+    runner: str
+    broker: str | None = None
+    schema_revision: str | None = None

@@ -1,0 +1,470 @@
+"""The durable store: free functions over a SQLAlchemy session (keyword-only arguments).
+
+Everything a job produces lives here, in SQL: jobs (status, attempts, lease), progress
+points keyed by (job, attempt, seq), motions keyed by id — a job's λ optima also by
+(job, step), so a re-run upserts instead of duplicating.
+
+Callers own the transaction (``Database.write()`` / ``Database.read()``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import secrets
+import time
+import uuid
+import zlib
+from dataclasses import dataclass
+from typing import Any, Callable, Literal, Sequence
+
+from sqlalchemy import Select, delete, func, or_, select, update
+from sqlalchemy.orm import Session
+
+from service.models import TERMINAL, ApiKey, IdempotencyRow, JobRow, MotionRow, ProgressRow
+from solver.motion import Motion
+
+
+def new_id(prefix: str) -> str:
+    return f"{prefix}_{uuid.uuid4().hex}"
+
+
+def now() -> float:
+    return time.time()
+
+
+def insert_for(session: Session, table):
+    """The dialect's INSERT construct (both have ``on_conflict_do_update/nothing``)."""
+    if session.get_bind().dialect.name == "postgresql":
+        from sqlalchemy.dialects.postgresql import insert
+    else:
+        from sqlalchemy.dialects.sqlite import insert
+    return insert(table)
+
+
+# --- API keys ---------------------------------------------------------------------------
+
+
+def hash_key(key: str) -> str:
+    return hashlib.sha256(key.encode("utf-8")).hexdigest()
+
+
+def static_owner(key: str) -> str:
+    """Owner id of a key given in the settings (stable across restarts)."""
+    return "s_" + hash_key(key)[:32]
+
+
+def create_api_key(session: Session, *, name: str = "") -> tuple[str, str]:
+    """A new API key: returns (owner id, the key). Only its hash is stored."""
+    key = "mx_" + secrets.token_urlsafe(32)
+    kid = new_id("k")
+    session.add(ApiKey(id=kid, name=name, key_hash=hash_key(key), created_at=now()))
+    return kid, key
+
+
+def count_api_keys(session: Session) -> int:
+    return session.scalar(select(func.count()).select_from(ApiKey).where(ApiKey.revoked_at.is_(None))) or 0
+
+
+def revoke_api_key(session: Session, *, key_id: str) -> bool:
+    r = session.execute(update(ApiKey).where(ApiKey.id == key_id, ApiKey.revoked_at.is_(None)).values(revoked_at=now()))
+    return r.rowcount == 1
+
+
+def owner_for_key(session: Session, *, key: str, static_keys: Sequence[str] = ()) -> str | None:
+    for k in static_keys:
+        if secrets.compare_digest(k.encode(), key.encode()):
+            return static_owner(k)
+    row = session.scalar(select(ApiKey).where(ApiKey.key_hash == hash_key(key), ApiKey.revoked_at.is_(None)))
+    return row.id if row else None
+
+
+# --- motions ----------------------------------------------------------------------------
+
+
+def encode_motion(motion: Motion) -> tuple[bytes, str]:
+    text = motion.to_json().encode("utf-8")
+    return zlib.compress(text, 6), hashlib.sha256(text).hexdigest()
+
+
+def motion_json(row: MotionRow) -> bytes:
+    """The stored motion file v1 (JSON bytes)."""
+    return zlib.decompress(row.data)
+
+
+def load_motion(row: MotionRow) -> Motion:
+    return Motion.from_dict(json.loads(motion_json(row)))
+
+
+def _motion_fields(motion: Motion) -> dict[str, Any]:
+    data, digest = encode_motion(motion)
+    return dict(
+        character=motion.reference_name or motion.character.name,
+        n=motion.n,
+        frames=motion.T,
+        fps=float(motion.fps),
+        has_wrenches=motion.wrenches is not None,
+        data=data,
+        sha256=digest,
+    )
+
+
+def add_motion(
+    session: Session, *, owner: str, motion: Motion, kind: str, name: str = "", parent_id: str | None = None
+) -> MotionRow:
+    row = MotionRow(
+        id=new_id("m"), owner=owner, kind=kind, name=name, parent_id=parent_id, created_at=now(),
+        **_motion_fields(motion),
+    )
+    session.add(row)
+    session.flush()
+    return row
+
+
+def get_motion(session: Session, *, motion_id: str, owner: str | None) -> MotionRow | None:
+    """The motion, if it exists and belongs to ``owner`` (None = any owner: internal use)."""
+    row = session.get(MotionRow, motion_id)
+    if row is None or (owner is not None and row.owner != owner):
+        return None
+    return row
+
+
+def get_or_add_tutor(
+    session: Session, *, owner: str, parent_id: str, tutor_key: str, motion: Motion | None = None
+) -> MotionRow | None:
+    """The tutor of motion ``parent_id`` for ``tutor_key`` (character@fps); stored once.
+
+    With ``motion`` None it only looks it up.
+    """
+    q = select(MotionRow).where(MotionRow.parent_id == parent_id, MotionRow.tutor_key == tutor_key)
+    row = session.scalar(q)
+    if row is not None or motion is None:
+        return row
+    values = dict(
+        id=new_id("m"), owner=owner, kind="tutor", name="", parent_id=parent_id, tutor_key=tutor_key,
+        created_at=now(), **_motion_fields(motion),
+    )
+    session.execute(insert_for(session, MotionRow).values(**values).on_conflict_do_nothing())
+    return session.scalar(q)
+
+
+def save_step(
+    session: Session,
+    *,
+    job_id: str,
+    owner: str,
+    step: int,
+    lam: float,
+    motion: Motion,
+    validation: dict | None = None,
+) -> str:
+    """Upsert the λ optimum ``step`` of ``job_id``; returns its motion id (stable across re-runs)."""
+    fields = _motion_fields(motion)
+    plausible = None if validation is None else bool(validation.get("plausible"))
+    values = dict(
+        id=new_id("m"), owner=owner, kind="step", name="", job_id=job_id, step=step, lam=float(lam),
+        created_at=now(), validation=validation, plausible=plausible, **fields,
+    )
+    stmt = insert_for(session, MotionRow).values(**values)
+    stmt = stmt.on_conflict_do_update(
+        index_elements=[MotionRow.job_id, MotionRow.step],
+        set_=dict(lam=stmt.excluded.lam, validation=stmt.excluded.validation, plausible=stmt.excluded.plausible,
+                  **{k: getattr(stmt.excluded, k) for k in fields}),
+    )
+    session.execute(stmt)
+    mid = session.scalar(select(MotionRow.id).where(MotionRow.job_id == job_id, MotionRow.step == step))
+    session.execute(
+        update(JobRow).where(JobRow.id == job_id).values(
+            steps=func.max(JobRow.steps, step + 1) if session.get_bind().dialect.name == "sqlite"
+            else func.greatest(JobRow.steps, step + 1),
+            updated_at=now(),
+        )
+    )
+    return mid
+
+
+def set_validation(session: Session, *, motion_id: str, report: dict) -> None:
+    session.execute(
+        update(MotionRow).where(MotionRow.id == motion_id).values(validation=report, plausible=bool(report.get("plausible")))
+    )
+
+
+def job_motions(
+    session: Session, *, job_id: str, after_step: int = -1, limit: int = 50
+) -> list[MotionRow]:
+    q = (
+        select(MotionRow)
+        .where(MotionRow.job_id == job_id, MotionRow.step > after_step)
+        .order_by(MotionRow.step)
+        .limit(limit)
+    )
+    return list(session.scalars(q))
+
+
+def count_job_motions(session: Session, *, job_id: str) -> int:
+    return session.scalar(select(func.count()).select_from(MotionRow).where(MotionRow.job_id == job_id)) or 0
+
+
+def list_motions(session: Session, *, owner: str, offset: int = 0, limit: int = 50) -> tuple[list[MotionRow], int]:
+    q = select(MotionRow).where(MotionRow.owner == owner)
+    total = session.scalar(select(func.count()).select_from(q.subquery())) or 0
+    rows = list(session.scalars(q.order_by(MotionRow.created_at, MotionRow.id).offset(offset).limit(limit)))
+    return rows, total
+
+
+# --- jobs -------------------------------------------------------------------------------
+
+
+class IdempotencyConflict(Exception):
+    """The Idempotency-Key was used before with a different request."""
+
+
+def find_idempotent(session: Session, *, owner: str, key: str, request_hash: str) -> JobRow | None:
+    row = session.get(IdempotencyRow, (owner, key))
+    if row is None:
+        return None
+    if row.request_hash != request_hash:
+        raise IdempotencyConflict(key)
+    return session.get(JobRow, row.job_id)
+
+
+def create_job(
+    session: Session,
+    *,
+    owner: str,
+    motion_id: str,
+    spec: dict,
+    runner: str,
+    max_attempts: int,
+    idempotency_key: str | None = None,
+    request_hash: str = "",
+) -> JobRow:
+    """Insert a queued job (and its idempotency record). A concurrent duplicate key makes
+    the commit fail with IntegrityError; the caller then reads the winner."""
+    t = now()
+    job = JobRow(
+        id=new_id("j"), owner=owner, motion_id=motion_id, spec=spec, status="queued", message="",
+        lam_reached=0.0, steps=0, solves=0, attempts=0, max_attempts=max_attempts, cancel_requested=False,
+        runner=runner, created_at=t, updated_at=t,
+    )
+    session.add(job)
+    session.flush()
+    if idempotency_key is not None:
+        session.add(IdempotencyRow(owner=owner, key=idempotency_key, request_hash=request_hash, job_id=job.id,
+                                   created_at=t))
+        session.flush()
+    return job
+
+
+def get_job(session: Session, *, job_id: str, owner: str | None) -> JobRow | None:
+    row = session.get(JobRow, job_id)
+    if row is None or (owner is not None and row.owner != owner):
+        return None
+    return row
+
+
+def list_jobs(session: Session, *, owner: str, offset: int = 0, limit: int = 50) -> tuple[list[JobRow], int]:
+    q = select(JobRow).where(JobRow.owner == owner)
+    total = session.scalar(select(func.count()).select_from(q.subquery())) or 0
+    rows = list(session.scalars(q.order_by(JobRow.created_at, JobRow.id).offset(offset).limit(limit)))
+    return rows, total
+
+
+def mark_dispatched(session: Session, *, job_id: str) -> None:
+    session.execute(update(JobRow).where(JobRow.id == job_id).values(dispatched_at=now()))
+
+
+def request_cancel(session: Session, *, job_id: str) -> JobRow | None:
+    """Cooperative cancel: a queued job is canceled at once, a running one is flagged
+    (the job checks the flag between λ steps). Terminal jobs are left as they are."""
+    job = session.scalar(select(JobRow).where(JobRow.id == job_id).with_for_update())
+    if job is None or job.status in TERMINAL:
+        return job
+    t = now()
+    job.cancel_requested = True
+    job.updated_at = t
+    if job.status == "queued":
+        job.status, job.finished_at, job.message = "canceled", t, "canceled before it started"
+    return job
+
+
+Outcome = Literal["claimed", "terminal", "busy", "exhausted", "missing"]
+
+
+@dataclass(frozen=True)
+class Claim:
+    outcome: Outcome
+    attempt: int = 0
+    lease_owner: str | None = None
+
+
+def claim_job(
+    session: Session,
+    *,
+    job_id: str,
+    token: str,
+    lease_s: float,
+    holder_alive: Callable[[str], bool] = lambda _token: True,
+) -> Claim:
+    """Take the job for one attempt (run inside ``Database.write()``).
+
+    - terminal (succeeded/failed/canceled/impasse): nothing to do (a redelivered message);
+    - running under a live lease held by someone else: ``busy`` (a duplicate delivery);
+    - attempts used up: the job is marked failed (``exhausted``);
+    - otherwise the attempt counter goes up and the lease is ours (``claimed``).
+    """
+    job = session.scalar(select(JobRow).where(JobRow.id == job_id).with_for_update())
+    if job is None:
+        return Claim("missing")
+    if job.status in TERMINAL:
+        return Claim("terminal")
+    t = now()
+    if (
+        job.status == "running"
+        and job.lease_owner not in (None, token)
+        and (job.lease_until or 0) > t
+        and holder_alive(job.lease_owner)
+    ):
+        return Claim("busy", lease_owner=job.lease_owner)
+    if job.cancel_requested:
+        job.status, job.finished_at, job.updated_at = "canceled", t, t
+        job.message = job.message or "canceled"
+        return Claim("terminal")
+    if job.attempts >= job.max_attempts:
+        job.status, job.finished_at, job.updated_at = "failed", t, t
+        job.message = f"gave up after {job.attempts} attempts (the job's process stopped each time)"
+        job.lease_owner = None
+        return Claim("exhausted")
+    job.attempts += 1
+    job.status = "running"
+    job.lease_owner = token
+    job.lease_until = t + lease_s
+    job.started_at = job.started_at or t
+    job.updated_at = t
+    return Claim("claimed", attempt=job.attempts)
+
+
+@dataclass(frozen=True)
+class Lease:
+    held: bool
+    cancel_requested: bool
+
+
+def renew_lease(session: Session, *, job_id: str, token: str, lease_s: float) -> Lease:
+    """Extend our lease; tells whether we still hold it and whether a cancel was requested."""
+    t = now()
+    r = session.execute(
+        update(JobRow)
+        .where(JobRow.id == job_id, JobRow.lease_owner == token, JobRow.status == "running")
+        .values(lease_until=t + lease_s, updated_at=t)
+    )
+    cancel = bool(session.scalar(select(JobRow.cancel_requested).where(JobRow.id == job_id)))
+    return Lease(held=r.rowcount == 1, cancel_requested=cancel)
+
+
+def set_tutor(session: Session, *, job_id: str, token: str, tutor_motion_id: str) -> None:
+    session.execute(
+        update(JobRow).where(JobRow.id == job_id, JobRow.lease_owner == token)
+        .values(tutor_motion_id=tutor_motion_id, updated_at=now())
+    )
+
+
+def append_progress(
+    session: Session,
+    *,
+    job_id: str,
+    attempt: int,
+    seq: int,
+    phase: str,
+    wall_time: float,
+    lam: float,
+    lam_reached: float,
+    environment: dict,
+    iterations: int,
+    accepted: bool,
+    status: str,
+) -> None:
+    stmt = insert_for(session, ProgressRow).values(
+        job_id=job_id, attempt=attempt, seq=seq, phase=phase, wall_time=float(wall_time), lam=float(lam),
+        lam_reached=float(lam_reached), environment=environment, iterations=int(iterations), accepted=bool(accepted),
+        status=str(status)[:200], at=now(),
+    ).on_conflict_do_nothing()
+    session.execute(stmt)
+    session.execute(
+        update(JobRow).where(JobRow.id == job_id, JobRow.attempts == attempt)
+        .values(lam_reached=float(lam_reached), solves=seq + 1 if phase == "extrapolate" else JobRow.solves,
+                updated_at=now())
+    )
+
+
+def progress(session: Session, *, job_id: str, attempt: int | None = None, after_seq: int = -1) -> list[ProgressRow]:
+    """Progress points of one attempt (default: the job's latest)."""
+    if attempt is None:
+        attempt = session.scalar(select(JobRow.attempts).where(JobRow.id == job_id)) or 0
+    q = (
+        select(ProgressRow)
+        .where(ProgressRow.job_id == job_id, ProgressRow.attempt == attempt, ProgressRow.seq > after_seq)
+        .order_by(ProgressRow.seq)
+    )
+    return list(session.scalars(q))
+
+
+def finish_job(
+    session: Session,
+    *,
+    job_id: str,
+    token: str,
+    status: str,
+    message: str = "",
+    lam_reached: float | None = None,
+    steps: int | None = None,
+    solves: int | None = None,
+) -> bool:
+    """Record the outcome of our attempt — only if we still hold the lease (fencing).
+
+    ``steps``: the number of λ optima this attempt produced; rows of a previous attempt
+    beyond it are removed, so the job's motions are exactly this attempt's.
+    """
+    if status not in TERMINAL:
+        raise ValueError(f"not a terminal status: {status!r}")
+    t = now()
+    values: dict[str, Any] = dict(status=status, message=message[:4000], finished_at=t, updated_at=t,
+                                  lease_until=None)
+    if lam_reached is not None:
+        values["lam_reached"] = float(lam_reached)
+    if steps is not None:
+        values["steps"] = steps
+    if solves is not None:
+        values["solves"] = solves
+    r = session.execute(
+        update(JobRow).where(JobRow.id == job_id, JobRow.lease_owner == token, JobRow.status == "running")
+        .values(**values)
+    )
+    if r.rowcount != 1:
+        return False
+    if steps is not None:
+        session.execute(delete(MotionRow).where(MotionRow.job_id == job_id, MotionRow.step >= steps))
+    return True
+
+
+def stranded_jobs(
+    session: Session, *, runner: str, queued_after: float, running_after: float, limit: int = 100
+) -> list[str]:
+    """Jobs nobody will run unless dispatched again: queued and never dispatched (or
+    dispatched longer ago than ``queued_after`` s), or running with a lease expired for
+    longer than ``running_after`` s (its process died and no broker will redeliver it)."""
+    t = now()
+    q: Select = (
+        select(JobRow.id)
+        .where(
+            JobRow.runner == runner,
+            or_(
+                (JobRow.status == "queued")
+                & (JobRow.dispatched_at.is_(None) | (JobRow.dispatched_at < t - queued_after)),
+                (JobRow.status == "running") & (JobRow.lease_until < t - running_after),
+            ),
+        )
+        .order_by(JobRow.created_at)
+        .limit(limit)
+    )
+    return list(session.scalars(q))

@@ -1,0 +1,1 @@
+"""Celery worker: the app is built from the settings by :func:`worker.app.create_celery`."""
