@@ -286,6 +286,44 @@ def test_type3_kistler_plates_agree_with_ezc3d(path, trial, tmp_path):
         np.testing.assert_allclose(p3.cop[:2, ld], ez["center_of_pressure"][:2, ld] / 1000.0, atol=1e-4)
 
 
+def test_type1_plates_force_cop_and_free_moment_channels(path, trial, tmp_path):
+    """Type 1 stores Fx Fy Fz, the CoP (mm) and Tz in the plate frame: written from the trial."""
+
+    def edit(c):
+        an = c["data"]["analogs"]
+        corners = np.asarray(c["parameters"]["FORCE_PLATFORM"]["CORNERS"]["value"], dtype=float) / 1000.0
+        for n, sig in enumerate(trial.plates):
+            cn = corners[:, :, n].T
+            ax = (cn[0] - cn[1]) + (cn[3] - cn[2])
+            ay = (cn[0] - cn[3]) + (cn[1] - cn[2])
+            az = np.cross(ax, ay)
+            ay = np.cross(az, ax)
+            Rp = np.stack([v / np.linalg.norm(v) for v in (ax, ay, az)], axis=1)
+            ld = sig.loaded
+            F = Rp.T @ sig.force  # the file's convention here: reaction on the subject
+            cop = np.where(ld, Rp.T @ (np.nan_to_num(sig.cop) - cn.mean(axis=0)[:, None]), 0.0)
+            tz = sig.free_moment * Rp[2, 2]
+            an[0, 6 * n: 6 * n + 6] = np.vstack([F, cop[:2] * 1000.0, tz * 1000.0])
+        c["data"]["analogs"] = an
+        c["parameters"]["FORCE_PLATFORM"]["TYPE"]["value"] = np.array([1, 1])
+        units = list(c["parameters"]["ANALOG"]["UNITS"]["value"])
+        for n in range(2):
+            units[6 * n: 6 * n + 6] = ["N", "N", "N", "mm", "mm", "Nmm"]
+        c["parameters"]["ANALOG"]["UNITS"]["value"] = units
+
+    out = _variant(path, tmp_path / "type1.c3d", edit)
+    alt = read_c3d_trial(out)
+    theirs = ezc3d.c3d(str(out), extract_forceplat_data=True)["data"]["platform"]
+    for p0, p1, ez in zip(trial.plates, alt.plates, theirs):
+        assert p1.type == 1
+        ld = p0.loaded & p1.loaded
+        np.testing.assert_allclose(p1.force, p0.force, atol=1e-3)
+        np.testing.assert_allclose(p1.cop[:, ld], p0.cop[:, ld], atol=1e-5)
+        np.testing.assert_allclose(p1.free_moment[ld], p0.free_moment[ld], atol=1e-3)
+        np.testing.assert_allclose(p1.cop[:2, ld], ez["center_of_pressure"][:2, ld] / 1000.0, atol=1e-5)
+        np.testing.assert_allclose(p1.free_moment[ld], ez["Tz"][2, ld] / 1000.0, atol=1e-3)
+
+
 # --- landmarks ---------------------------------------------------------------------------
 
 
@@ -427,6 +465,20 @@ def test_missing_required_marker_is_named(path, tmp_path):
         read_c3d(_variant(path, tmp_path / "nolhee.c3d", edit))
 
 
+def test_subject_prefixes_and_a_missing_upper_body(path, trial, tmp_path):
+    def edit(c):
+        labels = [f"BELT_C:{s.strip()}" for s in c["parameters"]["POINT"]["LABELS"]["value"]]
+        labels[labels.index("BELT_C:C7")] = "BELT_C:XC7"
+        c["parameters"]["POINT"]["LABELS"]["value"] = labels
+
+    tr = read_c3d(_variant(path, tmp_path / "prefixed.c3d", edit))
+    assert not tr.has_upper_body and "lumbar" not in tr.landmarks
+    assert any("C7" in n for n in tr.source["notes"])
+    for name in ("hip_r", "knee_l", "toe_r", "heel_l"):
+        np.testing.assert_allclose(tr.landmarks[name], trial.track.landmarks[name], atol=1e-9)
+    np.testing.assert_array_equal(tr.measured.valid, trial.track.measured.valid)
+
+
 def test_marker_gaps_short_filled_long_refused(path, trial, tmp_path):
     def gap(frames):
         def edit(c):
@@ -477,3 +529,26 @@ def test_load_c3d_fits_the_capture_character(path):
     assert cap.measured is not None and cap.contacts is not None
     assert cap.character.mass == pytest.approx(MASS) if hasattr(cap.character, "mass") else True
     assert cap.frame.unit_m == 0.001
+
+
+def test_mass_from_plates_needs_a_complete_stride():
+    from solver.capture import MeasuredGRF
+    from solver.io.c3d import _mass_from_plates
+
+    T = 200
+    times = np.arange(T) / 100.0
+    force = np.zeros((2, 3, T))
+    contacts = np.zeros((4, T), dtype=bool)
+    for i, runs in enumerate(([(10, 70), (110, 170)], [(60, 120), (160, 200)])):
+        for a, b in runs:
+            contacts[2 * i: 2 * i + 2, a:b] = True
+    # body weight split between the feet in double support, oscillating about m g
+    w = 70.0 * 9.81 * (1.0 + 0.2 * np.sin(2 * np.pi * times / 0.5))
+    share = contacts[0] / np.maximum(contacts[0].astype(int) + contacts[2], 1)
+    force[0, 2], force[1, 2] = w * share, w * (1 - share)
+    valid = np.ones(T, dtype=bool)
+    m = MeasuredGRF(force=force, cop=np.zeros((2, 3, T)), free_moment=np.zeros((2, T)), valid=valid)
+    assert _mass_from_plates(m, contacts, times) == pytest.approx(70.0, rel=1e-6)
+    valid[100] = False  # the stride 10 -> 110 is no longer complete: none left
+    m = MeasuredGRF(force=force, cop=np.zeros((2, 3, T)), free_moment=np.zeros((2, T)), valid=valid)
+    assert _mass_from_plates(m, contacts, times) is None

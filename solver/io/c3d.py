@@ -526,8 +526,10 @@ def _plate_units(raw: _Raw, spec: PlateSpec) -> tuple[float | None, float | None
     if spec.type == 3:
         f = [_force_unit(u) for u in us if u]
         return (f[0] if f else None), None
-    if spec.type == 1:
-        return _force_unit(us[0]) if us[0] else None, None
+    if spec.type == 1:  # Fx Fy Fz CoPx CoPy Tz
+        f1 = _force_unit(us[0]) if us[0] else None
+        m1 = _moment_unit(us[5]) if us[5] else None
+        return f1, m1
     f = _force_unit(us[0]) if us[0] else None
     m = _moment_unit(us[3]) if us[3] else None
     if us[0] and f is None and us[0].strip().lower() not in _VOLT_UNITS:
@@ -553,7 +555,8 @@ def _plate_wrench_local(raw: _Raw, spec: PlateSpec, up_local: np.ndarray) -> tup
     if spec.type == 1:
         # Fx Fy Fz, CoPx CoPy (point units, plate frame about the surface centre), Tz (moment unit)
         F = a[:3] * f_unit
-        r = np.vstack([a[3:5] * raw.unit_m, np.zeros(a.shape[1])])
+        cu = raw.analog_units[spec.channels[3]].strip().lower() if spec.channels[3] < len(raw.analog_units) else ""
+        r = np.vstack([a[3:5] * _LENGTH_UNITS.get(cu, raw.unit_m), np.zeros(a.shape[1])])
         tz_unit = m_unit if m_unit is not None else f_unit * raw.unit_m
         M = np.cross(r, F, axis=0)
         M[2] += a[5] * tz_unit
