@@ -1,0 +1,448 @@
+"""BVH (Biovision hierarchy) importer.
+
+Public API::
+
+    read_bvh(path) -> BvhClip                        # hierarchy + channels, no interpretation
+    bvh_track(path, *, mass=None, units="auto", up="y", floor_height=None) -> SkeletonTrack
+    load_bvh(path, *, mass=None, units="auto", up="y", floor_height=None, lower_only=None) -> Capture
+
+A small reader of our own (numpy only; the ``bvhio`` package would add PyGLM and
+SpatialTransform for what is ~100 lines here). Rotation channels are applied in the order
+listed, intrinsically (``Zrotation Xrotation Yrotation`` means R = Rz Rx Ry, the BVH
+convention); position channels (root, and any other joint that has them) are added to
+the joint's OFFSET.
+
+**Joint names** (case-insensitive; prefixes such as ``mixamorig:``, ``Bip01``, ``Character1_``
+are ignored): CMU/Mixamo/MotionBuilder styles — ``Hips``; ``RightUpLeg`` / ``RightHip`` /
+``RThigh`` (hip), ``RightLeg`` / ``RightKnee`` / ``RightShin`` (knee), ``RightFoot`` /
+``RightAnkle`` (ankle), ``RightToeBase`` / ``RightToe`` (metatarsal heads; its End Site or
+child = toe tip); ``Spine`` (lumbar: the first spine joint), ``Neck``, ``Head`` (its End Site =
+head top), ``RightShoulder`` / ``RightCollar`` / ``RightClavicle`` (clavicle), ``RightArm`` /
+``RightUpArm`` (shoulder), ``RightForeArm`` / ``RightElbow`` (elbow), ``RightHand`` / ``RightWrist``
+(wrist; its End Site or first child = hand tip) — and ``Left*`` / ``L*`` alike. Our own
+segment names (``pelvis``, ``thigh_r``, ``shank_r``, ``foot_r``, ``toes_r``, ``abdomen``,
+``thorax``, ``head``, ``clavicle_r``, ``upper_arm_r``, ``forearm_r``, ``hand_r``, as written by
+``solver.export.bvh``) are understood too. The lower body is required; the upper body is
+used when every upper landmark can be placed.
+
+**Landmarks**: joint positions; pelvis = mid-point of the hips; neck = the Head joint
+(base of the head); sternum = mid-point of the clavicle joints (else the Neck joint, else
+the mid-point of the shoulders); hand
+tip as above. The heel is not a BVH joint: it is placed in the rest pose (all channels 0,
+standing) behind and below the ankle — 25 % of the ankle -> toe-tip horizontal length
+behind it, at the sole (the rest pose's lowest toe point) — and carried by the foot joint.
+The toe landmark is the toe tip moved to the sole the same way.
+
+**Axes and units.** ``up`` names the BVH up axis (``"y"``, the usual, or ``"z"``). Our X is
+the subject's facing direction (horizontal, perpendicular to the right -> left hip line,
+averaged over the clip), Y left, Z up; ``GroundFrame.R`` maps ours back to the file's axes.
+``units``: ``"auto"`` decides from the leg length (hip -> knee -> ankle of the rest pose:
+0.3-1.5 m), else ``"m"``, ``"cm"``, ``"mm"``, ``"in"`` or metres per unit. The floor (our z = 0)
+is ``floor_height`` (file units, along ``up``) or the 2nd percentile of the sole points'
+heights over the clip. BVH has no subject mass: pass ``mass`` (kg).
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+
+from solver.capture import Capture, GroundFrame
+from solver.io.track import SkeletonTrack
+
+log = logging.getLogger(__name__)
+
+__all__ = ["BvhError", "BvhClip", "read_bvh", "bvh_track", "load_bvh", "UNIT_M"]
+
+UNIT_M = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254}
+
+
+class BvhError(ValueError):
+    """A BVH file is unreadable or cannot be interpreted; the message names the problem."""
+
+
+@dataclass(frozen=True, eq=False)
+class BvhClip:
+    names: tuple[str, ...]  # joints, depth-first (End Sites excluded)
+    parents: tuple[int, ...]
+    offsets: np.ndarray  # (J, 3)
+    channels: tuple[tuple[str, ...], ...]  # per joint, e.g. ("Xposition", ..., "Zrotation", ...)
+    end_sites: Mapping[int, np.ndarray]  # joint index -> End Site offset
+    frame_time: float
+    motion: np.ndarray  # (T, total channels)
+
+    @property
+    def T(self) -> int:
+        return int(self.motion.shape[0])
+
+    def forward(self, motion: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """World rotation (J, T, 3, 3) and position (J, T, 3) of every joint (file axes/units)."""
+        m = self.motion if motion is None else motion
+        T = m.shape[0]
+        J = len(self.names)
+        R = np.zeros((J, T, 3, 3))
+        P = np.zeros((J, T, 3))
+        col = 0
+        for j in range(J):
+            loc_p = np.broadcast_to(self.offsets[j], (T, 3)).copy()
+            loc_R = np.broadcast_to(np.eye(3), (T, 3, 3)).copy()
+            for ch in self.channels[j]:
+                v = m[:, col]
+                col += 1
+                axis = "XYZ".index(ch[0].upper())
+                if ch.lower().endswith("position"):
+                    loc_p[:, axis] += v
+                else:
+                    loc_R = loc_R @ _rot(axis, np.radians(v))
+            par = self.parents[j]
+            if par < 0:
+                R[j], P[j] = loc_R, loc_p
+            else:
+                R[j] = R[par] @ loc_R
+                P[j] = P[par] + np.einsum("tij,tj->ti", R[par], loc_p)
+        return R, P
+
+
+def _rot(axis: int, a: np.ndarray) -> np.ndarray:
+    c, s = np.cos(a), np.sin(a)
+    o, z = np.ones_like(a), np.zeros_like(a)
+    if axis == 0:
+        rows = [[o, z, z], [z, c, -s], [z, s, c]]
+    elif axis == 1:
+        rows = [[c, z, s], [z, o, z], [-s, z, c]]
+    else:
+        rows = [[c, -s, z], [s, c, z], [z, z, o]]
+    return np.stack([np.stack(r, axis=-1) for r in rows], axis=-2)
+
+
+_CHANNELS = {f"{a}{k}" for a in "XYZ" for k in ("position", "rotation")}
+
+
+def read_bvh(path: str | Path) -> BvhClip:
+    p = Path(path)
+    if not p.is_file():
+        raise BvhError(f"BVH file not found: {p}")
+    toks = p.read_text(errors="replace").split()
+    pos = 0
+
+    def take(what: str) -> str:
+        nonlocal pos
+        if pos >= len(toks):
+            raise BvhError(f"{p}: unexpected end of file (expected {what})")
+        pos += 1
+        return toks[pos - 1]
+
+    def number(what: str) -> float:
+        t = take(what)
+        try:
+            return float(t)
+        except ValueError:
+            raise BvhError(f"{p}: expected a number for {what}, got {t!r}") from None
+
+    if take("HIERARCHY").upper() != "HIERARCHY":
+        raise BvhError(f"{p}: not a BVH file (must start with HIERARCHY)")
+    names: list[str] = []
+    parents: list[int] = []
+    offsets: list[list[float]] = []
+    channels: list[tuple[str, ...]] = []
+    ends: dict[int, np.ndarray] = {}
+    kw = take("ROOT")
+    if kw.upper() != "ROOT":
+        raise BvhError(f"{p}: expected ROOT, got {kw!r}")
+
+    def joint(parent: int) -> None:
+        name = take("joint name")
+        idx = len(names)
+        names.append(name)
+        parents.append(parent)
+        if take("{") != "{":
+            raise BvhError(f"{p}: expected '{{' after joint {name!r}")
+        off = None
+        chans: tuple[str, ...] = ()
+        while True:
+            t = take("OFFSET/CHANNELS/JOINT/End/}")
+            u = t.upper()
+            if u == "OFFSET":
+                off = [number(f"OFFSET of {name}") for _ in range(3)]
+            elif u == "CHANNELS":
+                n = int(number(f"CHANNELS count of {name}"))
+                chans = tuple(take(f"channel of {name}") for _ in range(n))
+                bad = [c for c in chans if c not in _CHANNELS]
+                if bad:
+                    raise BvhError(f"{p}: joint {name!r} has unknown channels {bad}")
+            elif u == "JOINT":
+                if off is None:
+                    raise BvhError(f"{p}: joint {name!r} has no OFFSET")
+                offsets_tmp[idx] = off
+                channels_tmp[idx] = chans
+                joint(idx)
+            elif u == "END":
+                take("Site")
+                if take("{") != "{" or take("OFFSET").upper() != "OFFSET":
+                    raise BvhError(f"{p}: malformed End Site in joint {name!r}")
+                ends[idx] = np.array([number("End Site OFFSET") for _ in range(3)])
+                if take("}") != "}":
+                    raise BvhError(f"{p}: malformed End Site in joint {name!r}")
+            elif u == "}":
+                break
+            else:
+                raise BvhError(f"{p}: unexpected token {t!r} in joint {name!r}")
+        if off is None:
+            raise BvhError(f"{p}: joint {name!r} has no OFFSET")
+        offsets_tmp[idx] = off
+        channels_tmp[idx] = chans
+
+    offsets_tmp: dict[int, list[float]] = {}
+    channels_tmp: dict[int, tuple[str, ...]] = {}
+    joint(-1)
+    offsets = [offsets_tmp[i] for i in range(len(names))]
+    channels = [channels_tmp[i] for i in range(len(names))]
+    if take("MOTION").upper() != "MOTION":
+        raise BvhError(f"{p}: expected MOTION after the hierarchy")
+    if take("Frames:").lower() != "frames:":
+        raise BvhError(f"{p}: expected 'Frames:'")
+    n_frames = int(number("frame count"))
+    if take("Frame").lower() != "frame" or take("Time:").lower() != "time:":
+        raise BvhError(f"{p}: expected 'Frame Time:'")
+    dt = number("frame time")
+    if not (np.isfinite(dt) and dt > 0):
+        raise BvhError(f"{p}: Frame Time must be positive, got {dt}")
+    nch = sum(len(c) for c in channels)
+    vals = toks[pos:]
+    if n_frames < 1:
+        raise BvhError(f"{p}: the clip has no frames")
+    if len(vals) != n_frames * nch:
+        raise BvhError(f"{p}: expected {n_frames} frames x {nch} channels = {n_frames * nch} values, "
+                       f"found {len(vals)}")
+    try:
+        motion = np.array(vals, dtype=float).reshape(n_frames, nch)
+    except ValueError:
+        raise BvhError(f"{p}: non-numeric values in the MOTION section") from None
+    if not np.all(np.isfinite(motion)):
+        r = int(np.argwhere(~np.isfinite(motion))[0, 0])
+        raise BvhError(f"{p}: frame {r} contains NaN/inf")
+    if len(set(names)) != len(names):
+        raise BvhError(f"{p}: duplicate joint names")
+    return BvhClip(tuple(names), tuple(parents), np.array(offsets, dtype=float), tuple(channels), ends, dt, motion)
+
+
+# --- name mapping -----------------------------------------------------------------------------
+
+_SIDE = {"right": "r", "left": "l", "r": "r", "l": "l"}
+_ROLES = {
+    "hip": ("upleg", "hip", "thigh", "upperleg"),
+    "knee": ("leg", "knee", "shin", "calf", "lowerleg"),
+    "ankle": ("foot", "ankle"),
+    "mtp": ("toebase", "toe", "toes", "ball"),
+    "clavicle": ("shoulder", "collar", "clavicle"),
+    "shoulder": ("arm", "uparm", "upperarm", "humerus"),
+    "elbow": ("forearm", "elbow", "lowerarm"),
+    "wrist": ("hand", "wrist"),
+}
+_OURS = {
+    "pelvis": "hips", "abdomen": "spine", "thorax": "spine", "head": "head",
+    **{f"{seg}_{s}": f"{role}_{s}" for s in "rl" for seg, role in (
+        ("thigh", "hip"), ("shank", "knee"), ("foot", "ankle"), ("toes", "mtp"), ("clavicle", "clavicle"),
+        ("upper_arm", "shoulder"), ("forearm", "elbow"), ("hand", "wrist"))},
+}
+
+
+def _clean(name: str) -> str:
+    n = name.split(":")[-1]
+    n = re.sub(r"^(bip0?1|character\d*|mixamorig\d*)[\s_]*", "", n, flags=re.I)
+    return re.sub(r"[\s_.\-]", "", n).lower()
+
+
+def _role(name: str) -> str | None:
+    """Our role for a BVH joint name: 'hips', 'spine', 'neck', 'head', 'knee_r', ..."""
+    low = name.lower()
+    if low in _OURS:
+        return _OURS[low]
+    n = _clean(name)
+    if n in ("hips", "hip", "pelvis", "root") and not n.startswith(("left", "right")):
+        return "hips"
+    if n == "neck" or n == "neck1":
+        return "neck"
+    if n == "head":
+        return "head"
+    if re.fullmatch(r"(spine|chest|back|torso|lowerback|upperback|abdomen|thorax)\d*", n):
+        return "spine"
+    m = re.fullmatch(r"(right|left|r|l)(.*)", n)
+    if m:
+        rest = m.group(2)
+        for role, keys in _ROLES.items():
+            if rest in keys:
+                return f"{role}_{_SIDE[m.group(1)]}"
+        return None
+    return None
+
+
+def _minimal_unit(v: np.ndarray) -> np.ndarray:
+    n = np.linalg.norm(v)
+    if n < 1e-12:
+        raise BvhError("degenerate skeleton geometry (zero-length bone)")
+    return v / n
+
+
+def bvh_track(
+    path: str | Path,
+    *,
+    mass: float | None = None,
+    units: str | float = "auto",
+    up: str = "y",
+    floor_height: float | None = None,
+) -> SkeletonTrack:
+    clip = read_bvh(path)
+    roles: dict[str, int] = {}
+    spines: list[int] = []
+    for j, n in enumerate(clip.names):
+        r = _role(n)
+        if r == "spine":
+            spines.append(j)
+        elif r is not None and r not in roles:
+            roles[r] = j
+    if "hips" not in roles:
+        roles["hips"] = 0
+    need = [f"{r}_{s}" for s in "rl" for r in ("hip", "knee", "ankle")]
+    missing = [r for r in need if r not in roles]
+    if missing:
+        raise BvhError(f"{path}: cannot find the leg joints {missing} among {list(clip.names)} "
+                       "(expected CMU/Mixamo names such as RightUpLeg, RightLeg, RightFoot)")
+    # axes: file -> our axes (before the facing rotation)
+    if up not in ("y", "z"):
+        raise BvhError(f"up must be 'y' or 'z', got {up!r}")
+    R_rest, P_rest = clip.forward(np.zeros((1, clip.motion.shape[1])))
+    R, P = clip.forward()
+    up_v = np.array([0.0, 1.0, 0.0]) if up == "y" else np.array([0.0, 0.0, 1.0])
+    # units from the rest leg length
+    leg = np.mean([np.linalg.norm(P_rest[roles[f"hip_{s}"], 0] - P_rest[roles[f"knee_{s}"], 0])
+                   + np.linalg.norm(P_rest[roles[f"knee_{s}"], 0] - P_rest[roles[f"ankle_{s}"], 0]) for s in "rl"])
+    if isinstance(units, str):
+        if units == "auto":
+            cands = [(u, leg * k) for u, k in UNIT_M.items() if 0.3 <= leg * k <= 1.5]
+            if len(cands) != 1:
+                raise BvhError(f"{path}: cannot tell the length unit from the leg length {leg:.4g} "
+                               f"(candidates {[c[0] for c in cands]}); pass units='m'|'cm'|'mm'|'in'")
+            units, scale = cands[0][0], UNIT_M[cands[0][0]]
+        elif units in UNIT_M:
+            scale = UNIT_M[units]
+        else:
+            raise BvhError(f"units must be 'auto', one of {sorted(UNIT_M)} or metres per unit, got {units!r}")
+    else:
+        scale = float(units)
+        if not (np.isfinite(scale) and scale > 0):
+            raise BvhError(f"units must be a positive number of metres per unit, got {units!r}")
+    # facing: perpendicular to the hip line, horizontal, averaged over the clip
+    hl = P[roles["hip_l"]] - P[roles["hip_r"]]  # (T, 3)
+    hl = hl - np.outer(hl @ up_v, up_v)
+    y_dir = _minimal_unit(np.mean(hl / np.linalg.norm(hl, axis=1, keepdims=True), axis=0))
+    x_dir = np.cross(y_dir, up_v)
+    A = np.stack([x_dir, y_dir, up_v])  # rows: our axes in file coordinates -> ours = A @ file
+    # sole points in the rest pose (file axes)
+    lm_local: dict[str, tuple[int, np.ndarray]] = {}
+    children = {j: [c for c, p in enumerate(clip.parents) if p == j] for j in range(len(clip.names))}
+
+    def tip(j: int) -> np.ndarray | None:
+        """Rest-pose position of a joint's tip: its End Site or its first child."""
+        if j in clip.end_sites:
+            return P_rest[j, 0] + R_rest[j, 0] @ clip.end_sites[j]
+        if children[j]:
+            return P_rest[children[j][0], 0]
+        return None
+
+    for s in "rl":
+        a = roles[f"ankle_{s}"]
+        mtp_j = roles.get(f"mtp_{s}")
+        toe_rest = tip(mtp_j) if mtp_j is not None else tip(a)
+        if toe_rest is None:
+            raise BvhError(f"{path}: the {'right' if s == 'r' else 'left'} foot has no toe joint nor End Site: "
+                           "cannot place the toes")
+        ank = P_rest[a, 0]
+        sole_h = min(float(toe_rest @ up_v), float(P_rest[mtp_j, 0] @ up_v) if mtp_j is not None else np.inf)
+        fwd = (toe_rest - ank) - ((toe_rest - ank) @ up_v) * up_v
+        heel = ank - 0.25 * fwd + (sole_h - ank @ up_v) * up_v
+        toe_sole = toe_rest + (sole_h - toe_rest @ up_v) * up_v
+        lm_local[f"heel_{s}"] = (a, R_rest[a, 0].T @ (heel - ank))
+        body = mtp_j if mtp_j is not None else a
+        lm_local[f"toe_{s}"] = (body, R_rest[body, 0].T @ (toe_sole - P_rest[body, 0]))
+        if mtp_j is None:  # no toes joint: metatarsal heads at 72 % heel -> toe, 2 cm (scaled) above the sole
+            m = heel + 0.72 * (toe_sole - heel) + (0.02 / scale) * up_v
+            lm_local[f"mtp_{s}"] = (a, R_rest[a, 0].T @ (m - ank))
+
+    def world(j: int, local: np.ndarray) -> np.ndarray:
+        return P[j] + np.einsum("tij,j->ti", R[j], local)
+
+    raw: dict[str, np.ndarray] = {}
+    for s in "rl":
+        for r in ("hip", "knee", "ankle"):
+            raw[f"{r}_{s}"] = P[roles[f"{r}_{s}"]]
+        raw[f"mtp_{s}"] = P[roles[f"mtp_{s}"]] if f"mtp_{s}" in roles else world(*lm_local[f"mtp_{s}"])
+        raw[f"heel_{s}"] = world(*lm_local[f"heel_{s}"])
+        raw[f"toe_{s}"] = world(*lm_local[f"toe_{s}"])
+    raw["pelvis"] = 0.5 * (raw["hip_r"] + raw["hip_l"])
+    # upper body (all or nothing)
+    upper: dict[str, np.ndarray] = {}
+    try:
+        if not spines:
+            raise KeyError("spine")
+        upper["lumbar"] = P[spines[0]]
+        head = roles["head"]
+        upper["neck"] = P[head]
+        ht = tip(head)
+        if ht is None:
+            raise KeyError("head top")
+        upper["head_top"] = world(head, R_rest[head, 0].T @ (ht - P_rest[head, 0]))
+        if "clavicle_r" in roles and "clavicle_l" in roles:
+            upper["sternum"] = 0.5 * (P[roles["clavicle_r"]] + P[roles["clavicle_l"]])
+        elif "neck" in roles:
+            upper["sternum"] = P[roles["neck"]]
+        else:
+            upper["sternum"] = 0.5 * (P[roles["shoulder_r"]] + P[roles["shoulder_l"]])
+        for s in "rl":
+            upper[f"shoulder_{s}"] = P[roles[f"shoulder_{s}"]]
+            upper[f"elbow_{s}"] = P[roles[f"elbow_{s}"]]
+            w = roles[f"wrist_{s}"]
+            upper[f"wrist_{s}"] = P[w]
+            ht = tip(w)
+            if ht is None:
+                raise KeyError(f"hand tip {s}")
+            upper[f"hand_{s}"] = world(w, R_rest[w, 0].T @ (ht - P_rest[w, 0]))
+        raw.update(upper)
+    except KeyError as e:
+        log.info("%s: no usable upper body (%s missing): lower-body track", path, e)
+    # floor along up (file units), then our frame in metres
+    if floor_height is None:
+        soles = np.concatenate([raw[f"{k}_{s}"] @ up_v for k in ("heel", "toe") for s in "rl"])
+        floor_height = float(np.percentile(soles, 2))
+    offset_file = floor_height * up_v
+    lm = {k: ((v - offset_file) @ A.T * scale).T for k, v in raw.items()}
+    times = np.arange(clip.T) * clip.frame_time
+    frame = GroundFrame(R=A.T, offset=offset_file * scale, unit_m=scale,
+                        axes=f"BVH: {up.upper()} up, facing {np.round(x_dir, 3).tolist()} (file axes), units {units}")
+    return SkeletonTrack(
+        times=times, landmarks=lm, frame=frame, mass=mass,
+        source={"format": "bvh", "file": str(Path(path).resolve()), "units": units, "metres_per_unit": scale,
+                "up": up, "joint_roles": {r: clip.names[j] for r, j in roles.items()},
+                "spine_joints": [clip.names[j] for j in spines], "floor_height_file_units": floor_height},
+    )
+
+
+def load_bvh(
+    path: str | Path,
+    *,
+    mass: float | None = None,
+    units: str | float = "auto",
+    up: str = "y",
+    floor_height: float | None = None,
+    lower_only: bool | None = None,
+) -> Capture:
+    """Import a BVH clip as a :class:`Capture` (conventions in the module doc)."""
+    from solver.io.fit import fit_track
+
+    return fit_track(bvh_track(path, mass=mass, units=units, up=up, floor_height=floor_height),
+                     lower_only=lower_only)
