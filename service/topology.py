@@ -169,7 +169,7 @@ def service_env(*, database_url: str, broker_url: str, api_keys: str, data_dir: 
     env.update(
         MOTIONX_RUNNER="celery", DATABASE_URL=database_url, MOTIONX_DATABASE_URL=database_url,
         MOTIONX_BROKER_URL=broker_url, MOTIONX_API_KEYS=api_keys, MOTIONX_DATA_DIR=str(data_dir),
-        PYTHONUNBUFFERED="1",
+        MOTIONX_AUTO_MIGRATE="false", PYTHONUNBUFFERED="1",
     )
     env.update(extra or {})
     return env

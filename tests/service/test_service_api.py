@@ -293,3 +293,17 @@ def test_hypothesis_targets_valid_or_422(api, motion_id, target):
     else:
         assert_problem(r, 422)
     assert not math.isnan(r.elapsed.total_seconds())
+
+
+def test_validation_report_with_mujoco_replay(api):
+    r = upload(api.a, halfboy_motion(seed=9).to_dict())
+    mid = r.json()["id"]
+    rep = api.a.get(f"/motions/{mid}/validation")
+    assert rep.status_code == 200, rep.text
+    body = rep.json()
+    assert body["plausible"] is False  # random coordinates and no contact wrenches
+    assert "mujoco_replay" in body and body["checks"]["mujoco_root"] is False
+    assert api.a.get(f"/motions/{mid}").json()["format"] == "motionx.clip"
+    info = api.a.get("/motions", params={"limit": 1000}).json()["items"]
+    assert [m["plausible"] for m in info if m["id"] == mid] == [False]  # the report is stored with the motion
+    assert api.a.get(f"/motions/{mid}/validation").json() == body
