@@ -33,7 +33,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from solver.capture import GroundFrame, MeasuredGRF
+from solver.capture import Capture, GroundFrame, MeasuredGRF
 from solver.io.track import SkeletonTrack
 
 log = logging.getLogger(__name__)
@@ -178,7 +178,7 @@ def _read_raw(path: Path) -> _Raw:
     if units and units[0].strip():
         unit_m = length_unit(units[0])
     else:
-        unit_m = _guess_length_unit(xyz, labels)
+        unit_m = _guess_length_unit(xyz)
         log.warning("%s: POINT:UNITS missing; marker heights suggest %g m per unit", path.name, unit_m)
     analogs = np.asarray(c["data"]["analogs"], dtype=float)
     analogs = analogs[0] if analogs.ndim == 3 else analogs.reshape(0, 0)
@@ -193,7 +193,7 @@ def _read_raw(path: Path) -> _Raw:
     )
 
 
-def _guess_length_unit(xyz: np.ndarray, labels: Sequence[str]) -> float:
+def _guess_length_unit(xyz: np.ndarray) -> float:
     """Without POINT:UNITS: the spread of the markers (a person is 1-2 m tall)."""
     finite = xyz[:, np.isfinite(xyz).all(axis=0)]
     if finite.size == 0:
@@ -238,7 +238,6 @@ CENTRAL_ALIASES: dict[str, tuple[str, ...]] = {
     "CLAV": ("CLAV", "IJ", "SJN", "STER", "MAN"),
     "STRN": ("STRN", "PX", "SXS", "XIPH"),
 }
-#: PiG's own virtual points (used only to cross-check, never required)
 
 
 class _Markers:
@@ -1096,10 +1095,9 @@ def _upper_landmarks(marker: Callable[..., np.ndarray | None], masi: np.ndarray,
 
 def _frame_average(sig: np.ndarray, times: np.ndarray, frame_times: np.ndarray, dt: float) -> np.ndarray:
     """Box average of (k, N) samples over [t - dt/2, t + dt/2) around each frame time."""
-    edges = np.searchsorted(times, np.concatenate([frame_times - dt / 2, [frame_times[-1] + dt / 2]]))
-    lo = np.searchsorted(times, frame_times - dt / 2)
-    hi = np.searchsorted(times, frame_times + dt / 2)
-    del edges
+    eps = 1e-6 * dt  # a sample exactly on a window edge belongs to the later window
+    lo = np.searchsorted(times, frame_times - dt / 2 - eps)
+    hi = np.searchsorted(times, frame_times + dt / 2 - eps)
     cs = np.concatenate([np.zeros((sig.shape[0], 1)), np.cumsum(sig, axis=1)], axis=1)
     n = np.maximum(hi - lo, 1)
     return (cs[:, hi] - cs[:, lo]) / n
@@ -1529,8 +1527,12 @@ def read_c3d(path: str | Path, *, mass: float | None = None, require_plates: boo
                           fz_threshold=fz_threshold).track
 
 
-def load_c3d(path: str | Path, *, mass: float | None = None, **fit_options: Any):
-    """The capture of a C3D trial: ``fit_track(read_c3d(path, mass=mass), **fit_options)``."""
+def load_c3d(path: str | Path, *, mass: float | None = None, require_plates: bool = True,
+             max_gap_s: float = 0.1, fz_threshold: float = 20.0, **fit_options: Any) -> Capture:
+    """The capture of a C3D trial: ``fit_track(read_c3d(path, ...), **fit_options)``
+    (``fit_options``: e.g. ``lower_only``, ``orientation_weight``; see ``solver.io.fit``)."""
     from solver.io.fit import fit_track
 
-    return fit_track(read_c3d(path, mass=mass), **fit_options)
+    track = read_c3d(path, mass=mass, require_plates=require_plates, max_gap_s=max_gap_s,
+                     fz_threshold=fz_threshold)
+    return fit_track(track, **fit_options)
