@@ -279,11 +279,13 @@ class _QPBatch:
     c: np.ndarray  # (N, 6) total wrench about r
 
 
-def _side_sets(character: Character) -> tuple[np.ndarray, np.ndarray]:
+def _side_sets(character: Character, effort: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Joints of A (ancestors of the right foot only) and B (left only) whose force counts in the effort."""
     model = character.model
     anc = [set(model.ancestors(model.seg_body[character.foot(s).segment])) for s in FEET]
-    a = sorted(anc[0] - anc[1])
-    b = sorted(anc[1] - anc[0])
+    keep = set(range(character.n)) if effort is None else set(np.flatnonzero(effort))
+    a = sorted((anc[0] - anc[1]) & keep)
+    b = sorted((anc[1] - anc[0]) & keep)
     return np.array(a, dtype=int), np.array(b, dtype=int)
 
 
@@ -312,10 +314,11 @@ def _qp_batch(
     friction: float | None,
     penetration: float,
     regularization: float,
+    effort: np.ndarray | None = None,
 ) -> _QPBatch:
     """QP data of N double-support frames at once. q (n, N), tau0 (n, N), c (6, N) about origin."""
     N = q.shape[1]
-    a_idx, b_idx = _side_sets(character)
+    a_idx, b_idx = _side_sets(character, effort)
     pose = forward_kinematics(character, q)
     boxes = [_foot_frames(character, pose, s, N) for s in FEET]
     # contact plane per foot: z = 0, or 1 cm above the lowest corner when the box floats
@@ -547,6 +550,7 @@ def estimate_contact_wrenches(
     friction: float | None = DEFAULT_FRICTION,
     penetration: float = DEFAULT_PENETRATION,
     regularization: float = DEFAULT_REGULARIZATION,
+    effort_coordinates: Sequence[str] | None = None,
 ) -> ContactEstimate:
     """Ground reaction wrench of each foot at every frame, from kinematics alone.
 
@@ -565,6 +569,12 @@ def estimate_contact_wrenches(
         raise ContactError(f"regularization must be > 0 (it makes the QP strictly convex), got {regularization!r}")
     q, fc, g = _check_inputs(character, q, fps, foot_contact, gravity)
     T = q.shape[1]
+    effort = None
+    if effort_coordinates is not None:
+        unknown = [c for c in effort_coordinates if c not in character.coordinate_names]
+        if unknown:
+            raise ContactError(f"effort_coordinates: unknown coordinates {unknown} for character {character.name!r}")
+        effort = np.isin(np.array(character.coordinate_names), list(effort_coordinates))
     frames, qd, qdd = _derivatives(q, 1.0 / float(fps), cyclic)
     defined = np.zeros(T, dtype=bool)
     defined[frames] = True
@@ -590,7 +600,7 @@ def estimate_contact_wrenches(
     ds = np.flatnonzero(sup == Support.DOUBLE)
     if len(ds):
         batch = _qp_batch(character, qf[:, ds], tau0[:, ds], h0[:, ds], friction=friction,
-                          penetration=penetration, regularization=regularization)
+                          penetration=penetration, regularization=regularization, effort=effort)
         y, st_ds = _solve_batch(batch, method)
         # back to moments about the origin: m_O = m_r + r × f
         y_o = y.copy()
@@ -610,3 +620,125 @@ def estimate_contact_wrenches(
         log.info("contact estimation: %d of %d double-support frames infeasible, relaxed", n_rel, len(ds))
     return ContactEstimate(wrenches=wrenches, total=total, support=support, status=status,
                            cop_violation=viol, fps=float(fps), method=method, cyclic=bool(cyclic))
+
+
+# --- trials: filter, schedule, estimate -----------------------------------------------------
+
+DEFAULT_CUTOFF_HZ = 6.0  # Winter, Biomechanics and Motor Control of Human Movement: gait kinematics
+CONTACT_SOURCES = ("auto", "kinematics", "plates")
+
+
+def lowpass_kinematics(character: Character, q: np.ndarray, fps: float, cutoff_hz: float = DEFAULT_CUTOFF_HZ,
+                       *, cyclic: bool = False, order: int = 2) -> np.ndarray:
+    """Zero-phase Butterworth low-pass of every coordinate before differentiation.
+
+    Hinge angles are unwrapped first. ``order`` 2 run forwards and backwards gives the
+    classic 4th-order zero-lag filter of gait biomechanics. End effects: the signal is
+    extended by odd reflection over 3 periods of the cut-off (``3·fps/cutoff`` samples,
+    the filter's transient has died out by then; scipy's default of a few samples leaves
+    a transient that corrupts accelerations near the ends). A cyclic motion (last frame =
+    first frame one period later) is filtered as the periodic signal it is.
+    """
+    from scipy.signal import butter, sosfiltfilt
+
+    q = np.array(q, dtype=float, copy=True)
+    if not (math.isfinite(cutoff_hz) and 0 < cutoff_hz < fps / 2):
+        raise ContactError(f"low-pass cut-off {cutoff_hz} Hz must lie in (0, fps/2 = {fps / 2:g} Hz)")
+    for i, kind in enumerate(character.dof_kinds):
+        if kind == "hinge":
+            q[i] = np.unwrap(q[i])
+    sos = butter(order, cutoff_hz, btype="low", fs=fps, output="sos")
+    T = q.shape[1]
+    if cyclic:
+        P = T - 1
+        offset = (q[:, -1] - q[:, 0])[:, None]
+        reps = max(3, 2 * int(math.ceil(3 * fps / cutoff_hz / P)) + 1)
+        k0 = reps // 2
+        ext = np.concatenate([q[:, :P] + (k - k0) * offset for k in range(reps)], axis=1)
+        out = sosfiltfilt(sos, ext, axis=1, padtype=None)
+        return np.concatenate([out[:, k0 * P:(k0 + 1) * P], out[:, k0 * P:k0 * P + 1] + offset], axis=1)
+    padlen = min(T - 1, int(math.ceil(3 * fps / cutoff_hz)))
+    return sosfiltfilt(sos, q, axis=1, padtype="odd", padlen=padlen)
+
+
+def foot_schedule(contacts: np.ndarray, character: Character) -> np.ndarray:
+    """(P, T) contact-point schedule -> (2, T) foot schedule (right, left): any point of the foot."""
+    c = np.asarray(contacts, dtype=bool)
+    if c.ndim != 2 or c.shape[0] != len(character.contacts):
+        raise ContactError(f"contact schedule must have one row per contact point "
+                           f"({len(character.contacts)}), got shape {c.shape}")
+    out = np.zeros((2, c.shape[1]), dtype=bool)
+    for i, p in enumerate(character.contacts):
+        out[FEET.index(p.side)] |= c[i]
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class TrialEstimate:
+    """A capture's estimated ground reactions with what produced them."""
+
+    estimate: ContactEstimate
+    times: np.ndarray  # (T,) the capture's times (s)
+    q: np.ndarray  # (n, T) the filtered coordinates that were differentiated
+    contacts: np.ndarray  # (P, T) contact-point schedule used
+    contacts_from: str  # "plates", "importer", "kinematics", "given"
+    cutoff_hz: float | None
+
+
+def estimate_capture(
+    capture: Any,
+    *,
+    cutoff_hz: float | None = DEFAULT_CUTOFF_HZ,
+    contacts: str | np.ndarray = "auto",
+    cyclic: bool | None = None,
+    **options: Any,
+) -> TrialEstimate:
+    """Filter a capture's kinematics, get its contact schedule, estimate its ground reactions.
+
+    ``cutoff_hz``: low-pass cut-off (6 Hz, the same for every trial; ``None`` = no filter).
+    ``contacts``: ``"kinematics"`` (:func:`solver.io.preprocess.detect_contacts` on the
+    filtered motion), ``"plates"`` (force-plate loading, kinematics where the plates are
+    incomplete; needs ``capture.measured``), ``"auto"`` (the importer's schedule when it has
+    one — from plates —, else the plates, else kinematics) or a (P, T) array.
+    ``cyclic``: ``None`` = the capture's ``source["loop"] == "wrap"``. Other options go to
+    :func:`estimate_contact_wrenches`.
+    """
+    from solver.io.preprocess import contacts_from_plates, detect_contacts
+
+    ch = capture.character
+    q, fps = np.asarray(capture.q, dtype=float), float(capture.fps)
+    if q.shape[0] != ch.n:
+        raise ContactError(f"model/motion mismatch: character {ch.name!r} has {ch.n} coordinates, "
+                           f"the motion has {q.shape[0]} rows")
+    bad = ~np.isfinite(q)
+    if bad.any():
+        i, t = np.argwhere(bad)[0]
+        raise ContactError(f"coordinate {ch.coordinate_names[i]!r} is not finite (NaN/inf) at frame {t}")
+    if cyclic is None:
+        cyclic = capture.source.get("loop") == "wrap"
+    dt = np.diff(capture.times)
+    if capture.T > 2 and np.max(np.abs(dt - np.median(dt))) > 0.01 * np.median(dt):
+        raise ContactError("the capture is not uniformly sampled; resample it first (solver.io.preprocess.resample)")
+    qf = q if cutoff_hz is None else lowpass_kinematics(ch, q, fps, cutoff_hz, cyclic=cyclic)
+    if isinstance(contacts, str):
+        if contacts not in CONTACT_SOURCES:
+            raise ContactError(f"contacts must be one of {CONTACT_SOURCES} or an array, got {contacts!r}")
+        how = contacts
+        if how == "auto":
+            how = "importer" if capture.contacts is not None else ("plates" if capture.measured is not None
+                                                                     else "kinematics")
+        if how == "importer":
+            sched = np.asarray(capture.contacts, dtype=bool)
+        elif how == "plates":
+            if capture.measured is None:
+                raise ContactError("contacts='plates' but the capture has no measured ground reactions")
+            sched = contacts_from_plates(capture.measured, character=ch, q=qf, fps=fps)
+        else:
+            sched = detect_contacts(ch, qf, fps)
+    else:
+        how, sched = "given", np.asarray(contacts, dtype=bool)
+    if sched.shape != (len(ch.contacts), capture.T):
+        raise ContactError(f"contact schedule must have shape ({len(ch.contacts)}, T={capture.T}), got {sched.shape}")
+    est = estimate_contact_wrenches(ch, qf, fps, foot_schedule(sched, ch), cyclic=cyclic, **options)
+    return TrialEstimate(estimate=est, times=np.asarray(capture.times, dtype=float), q=qf, contacts=sched,
+                         contacts_from=how, cutoff_hz=cutoff_hz)

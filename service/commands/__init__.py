@@ -8,4 +8,5 @@ MODULES = [
     "service.commands.physics",
     "service.commands.export",
     "service.commands.serve",
+    "service.commands.grf",
 ]

@@ -1,0 +1,235 @@
+"""``motionx grf`` (estimate ground reactions from kinematics) and ``motionx grf-compare``.
+
+``grf`` imports a trial (OpenSim model + coordinates, C3D, or any format ``load_trial``
+reads), low-passes its kinematics, takes its contact schedule, estimates each foot's
+ground reaction (``solver.contact``) and writes them **in the input's own ground frame and
+units** as CSV: ``time, side, fx, fy, fz, cop_x, cop_y, cop_z, tz``.
+
+``grf-compare`` compares such a CSV with the trial's force plates (OpenSim GRF .mot or the
+C3D's plates) and prints the thesis's Table 4.1 metrics; ``--plot`` writes a PNG.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from service.cli import CliError
+
+log = logging.getLogger("motionx")
+
+
+def _user_errors() -> tuple[type[Exception], ...]:
+    """Exceptions that describe bad input (their message is the user-facing error)."""
+    from solver.contact import ContactError
+    from solver.grf_compare import GRFFileError
+    from solver.io.c3d import C3DError
+    from solver.io.fit import FitError
+    from solver.io.opensim import OpenSimError
+    from solver.io.preprocess import PreprocessError
+
+    errs: list[type[Exception]] = [ContactError, GRFFileError, C3DError, FitError, OpenSimError, PreprocessError]
+    try:
+        from solver.io.deepmimic import DeepMimicError
+
+        errs.append(DeepMimicError)
+    except ImportError:  # pragma: no cover - importer not installed
+        pass
+    return tuple(errs)
+
+
+def _belt_speed(text: str | None) -> float | str | None:
+    if text is None:
+        return None
+    if text == "auto":
+        return "auto"
+    try:
+        v = float(text)
+    except ValueError:
+        raise CliError(f"--belt-speed must be 'auto' or a speed in m/s, got {text!r}") from None
+    if not math.isfinite(v):
+        raise CliError(f"--belt-speed must be finite, got {text!r}")
+    return v
+
+
+def _exists(path: str | None, flag: str) -> None:
+    if path is not None and not Path(path).is_file():
+        raise CliError(f"{flag}: file not found: {path}")
+
+
+def _load(args: argparse.Namespace):
+    """The capture named by the input flags (exactly one kind)."""
+    kinds = [k for k in ("osim", "c3d", "input") if getattr(args, k)]
+    if len(kinds) != 1:
+        raise CliError("give exactly one input: --osim MODEL --coordinates IK.mot, --c3d FILE or --input FILE...")
+    if args.mass is not None and not (math.isfinite(args.mass) and args.mass > 0):
+        raise CliError(f"--mass must be a positive number of kg, got {args.mass}")
+    belt = _belt_speed(args.belt_speed)
+    if kinds[0] == "osim":
+        if not args.coordinates:
+            raise CliError("--osim needs --coordinates IK.mot (the model's coordinates over time)")
+        _exists(args.osim, "--osim")
+        _exists(args.coordinates, "--coordinates")
+        _exists(args.grf, "--grf")
+        _exists(args.external_loads, "--external-loads")
+        from solver.io.opensim import load_opensim
+
+        return load_opensim(args.osim, args.coordinates, mass=args.mass, belt_speed=belt, grf=args.grf,
+                            grf_xml=args.external_loads)
+    if args.coordinates or args.grf or args.external_loads:
+        raise CliError("--coordinates, --grf and --external-loads go with --osim")
+    if belt is not None:
+        raise CliError("--belt-speed applies to OpenSim treadmill trials (--osim)")
+    if kinds[0] == "c3d":
+        _exists(args.c3d, "--c3d")
+        from solver.io.c3d import load_c3d
+
+        return load_c3d(args.c3d, mass=args.mass)
+    for p in args.input:
+        _exists(p, "--input")
+    try:
+        from solver.io import load_trial
+    except ImportError:
+        raise CliError("--input needs solver.io.load_trial, which this installation lacks") from None
+    return load_trial(list(args.input), mass=args.mass)
+
+
+def cmd_grf(args: argparse.Namespace) -> int:
+    from solver.contact import estimate_capture
+    from solver.grf_compare import from_estimate, to_input_frame, write_csv
+
+    errors = _user_errors()
+    if args.cutoff is not None and args.cutoff < 0:
+        raise CliError(f"--cutoff must be >= 0 Hz (0 = no filter), got {args.cutoff}")
+    t0 = time.perf_counter()
+    try:
+        cap = _load(args)
+        t1 = time.perf_counter()
+        tr = estimate_capture(cap, cutoff_hz=args.cutoff or None, contacts=args.contacts, method=args.method,
+                              cyclic=True if args.cyclic else None)
+    except errors as e:
+        raise CliError(str(e)) from None
+    t2 = time.perf_counter()
+    est = tr.estimate
+    gr = to_input_frame(from_estimate(est, tr.times), cap.frame)
+    try:
+        rows = write_csv(args.out, gr)
+    except OSError as e:
+        raise CliError(f"cannot write {args.out}: {e.strerror or e}") from None
+    summary = {k: v for k, v in est.summary().items() if v not in (0, None)}
+    print(json.dumps({
+        "out": args.out, "rows": rows, "character": cap.character.name, "mass_kg": round(cap.character.total_mass, 3),
+        "fps": round(cap.fps, 6), "frame": cap.frame.axes, "length_unit_m": cap.frame.unit_m,
+        "contacts_from": tr.contacts_from, "cutoff_hz": tr.cutoff_hz, **summary,
+        "import_s": round(t1 - t0, 3), "estimate_s": round(t2 - t1, 4),
+    }))
+    return 0
+
+
+# --- grf-compare -------------------------------------------------------------------------------
+
+
+def cmd_grf_compare(args: argparse.Namespace) -> int:
+    from solver.capture import GroundFrame
+    from solver.grf_compare import compare, format_table, from_input_frame, from_measured, plot, read_csv
+
+    errors = _user_errors()
+    if bool(args.grf) == bool(args.c3d):
+        raise CliError("give the measurement: --grf GRF.mot [--external-loads X.xml] or --c3d FILE.c3d")
+    if args.external_loads and not args.grf:
+        raise CliError("--external-loads goes with --grf")
+    _exists(args.estimate, "--estimate")
+    try:
+        est_in = read_csv(args.estimate)
+        times = est_in.times
+        if args.grf:
+            _exists(args.grf, "--grf")
+            _exists(args.external_loads, "--external-loads")
+            from solver.io.opensim import C_OSIM, read_opensim_grf
+
+            # compare in the plates' own (treadmill-fixed) frame, with our axis names
+            frame = GroundFrame(R=C_OSIM.T, axes="OpenSim ground: x forward, y up, z right")
+            est = from_input_frame(est_in, frame)
+            contacts = _contacts_of(est)
+            meas = from_measured(read_opensim_grf(args.grf, args.external_loads, times=times, frame=frame,
+                                                  contacts=contacts), times)
+        else:
+            _exists(args.c3d, "--c3d")
+            from solver.io.c3d import read_c3d
+
+            track = read_c3d(args.c3d, mass=args.mass)
+            if track.measured is None:
+                raise CliError(f"{args.c3d}: no force plates to compare with")
+            est = from_input_frame(est_in, track.frame)
+            meas = from_measured(track.measured, track.times).resample(times)
+    except errors as e:
+        raise CliError(str(e)) from None
+    # both in our axes (x forward, y left, z up), SI: CoPs in metres
+    try:
+        all_frames, ds = compare(est, meas)
+    except ValueError as e:
+        raise CliError(str(e)) from None
+    print(format_table(all_frames))
+    if ds is not None:
+        print()
+        print(format_table(ds))
+    if args.json:
+        Path(args.json).write_text(json.dumps({"all": all_frames.as_dict(), "double_support": ds and ds.as_dict()},
+                                              indent=2, allow_nan=True))
+    if args.plot:
+        both = est.valid & meas.valid
+        thr = 0.05 * float(np.nanmax(np.where(both, meas.force[:, 2].sum(0), np.nan)))
+        plot(args.plot, est, meas, axis_names=("x (forward)", "y (left)", "z (up)"), length_unit="m",
+             double_support=np.all(meas.force[:, 2] > thr, axis=0), title=Path(args.estimate).name)
+    return 0
+
+
+def _contacts_of(gr) -> np.ndarray:
+    """(4, T) contact rows (heel, toe per foot) from an estimate: a foot is on when it carries load."""
+    on = np.abs(gr.force[:, 2]) > 0.0
+    return np.stack([on[0], on[0], on[1], on[1]])
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    from solver.contact import CONTACT_SOURCES, DEFAULT_CUTOFF_HZ, METHODS
+
+    s = sub.add_parser("grf", help="estimate each foot's ground reaction from a trial's kinematics (CSV)")
+    g = s.add_argument_group("input (one of)")
+    g.add_argument("--osim", metavar="MODEL.osim", help="OpenSim model; with --coordinates")
+    g.add_argument("--coordinates", metavar="IK.mot", help="OpenSim coordinates over time (IK result)")
+    g.add_argument("--c3d", metavar="FILE.c3d", help="C3D trial (markers; plates give the contact timing)")
+    g.add_argument("--input", nargs="+", metavar="FILE", help="any trial solver.io.load_trial reads "
+                   "(DeepMimic motion + character, BVH, ...)")
+    s.add_argument("--mass", type=float, default=None, help="subject mass in kg (default: from the input)")
+    s.add_argument("--belt-speed", default=None, metavar="auto|V",
+                   help="treadmill belt speed (m/s) or 'auto' (OpenSim): kinematics made overground-equivalent")
+    s.add_argument("--grf", metavar="GRF.mot", help="OpenSim force-plate file: contact timing from the plates "
+                   "(--contacts auto|plates) and the belt-speed estimate")
+    s.add_argument("--external-loads", metavar="X.xml", help="OpenSim ExternalLoads file assigning --grf to feet")
+    s.add_argument("--contacts", choices=CONTACT_SOURCES, default="auto",
+                   help="contact schedule: plates (when the input has them) or kinematics (default auto: "
+                        "plates if available, else kinematic detection)")
+    s.add_argument("--cutoff", type=float, default=DEFAULT_CUTOFF_HZ, metavar="HZ",
+                   help=f"low-pass cut-off before differentiation (default {DEFAULT_CUTOFF_HZ:g} Hz; 0 = none)")
+    s.add_argument("--method", choices=METHODS, default="qp",
+                   help="qp: one 6-variable QP per double-support frame; nested: the thesis's form (slow)")
+    s.add_argument("--cyclic", action="store_true",
+                   help="the clip is one cycle whose last frame closes it (auto for DeepMimic loops)")
+    s.add_argument("--out", required=True, metavar="EST.csv", help="output CSV")
+    s.set_defaults(func=cmd_grf)
+
+    s = sub.add_parser("grf-compare", help="compare a grf estimate with measured force plates (Table 4.1)")
+    s.add_argument("--estimate", required=True, metavar="EST.csv", help="CSV written by motionx grf")
+    s.add_argument("--grf", metavar="GRF.mot", help="OpenSim force-plate file")
+    s.add_argument("--external-loads", metavar="X.xml", help="OpenSim ExternalLoads file for --grf")
+    s.add_argument("--c3d", metavar="FILE.c3d", help="C3D trial with force plates")
+    s.add_argument("--mass", type=float, default=None, help="subject mass (kg) for a C3D without one")
+    s.add_argument("--plot", metavar="OUT.png", help="write estimated vs measured curves")
+    s.add_argument("--json", metavar="OUT.json", help="write the metrics as JSON")
+    s.set_defaults(func=cmd_grf_compare)
