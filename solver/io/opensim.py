@@ -448,6 +448,9 @@ def opensim_track(
             raise OpenSimError(f"{model}: body {need!r} not found; the importer needs a gait-model leg "
                                f"(pelvis, femur, tibia, talus, calcn, toes per side); bodies: {names}")
     has_arms = all(f"{b}_{s}" in bi for b in ("humerus", "ulna", "radius", "hand") for s in "rl") and "torso" in bi
+    if not has_arms:  # head, arms and trunk ride with the pelvis (capture-lower)
+        seg_of = {b: ("pelvis" if s == "torso" or (s or "").startswith(("upper_arm", "forearm", "hand")) else s)
+                  for b, s in seg_of.items()}
     Rb = res["R"]  # (T, B, 3, 3) OpenSim ground
     Pb = res["P"]  # (T, B, 3)
     JC = res["JC"]  # (T, J, 3)
@@ -529,18 +532,15 @@ def opensim_track(
         if seg is None:
             raise OpenSimError(f"{model}: cannot map body {b!r} to a segment")
         if seg == "torso":
-            if has_arms:
-                for k, w in _TORSO_SPLIT.items():
-                    seg_mass[k] = seg_mass.get(k, 0.0) + m * w / sum(_TORSO_SPLIT.values())
-            continue  # without arms: the fit puts the remainder (torso) in the pelvis
+            for k, w in _TORSO_SPLIT.items():
+                seg_mass[k] = seg_mass.get(k, 0.0) + m * w / sum(_TORSO_SPLIT.values())
+            continue
         seg_mass[seg] = seg_mass.get(seg, 0.0) + m
-    inertias: dict = {}
     frame = GroundFrame(R=C_OSIM.T, offset=off, unit_m=1.0, axes="OpenSim ground: x forward, y up, z right")
     if mass is not None and abs(mass - total) > 0.01 * total:
         log.warning("subject mass %.2f kg given, the OpenSim model weighs %.2f kg: using the model's segment masses "
                     "scaled to %.2f kg", mass, total, mass)
         seg_mass = {k: v * mass / total for k, v in seg_mass.items()}
-        inertias = {k: {"com": v["com"], "inertia": np.asarray(v["inertia"]) * mass / total} for k, v in inertias.items()}
         total = float(mass)
     track = SkeletonTrack(
         times=times, landmarks=lm, orientations=ori, frame=frame, mass=total, height=height,
@@ -554,10 +554,9 @@ def opensim_track(
             "angles_in_degrees": deg,
             "floor_height_osim_y": floor,
             "body_to_segment": {b: s for b, s in seg_of.items()},
-            "segment_inertias": inertias,
         },
     )
-    track = _with_origin_corrections(track, res, seg_of, off)
+    track = _with_segment_inertias(track, res, seg_of, off)
     if belt_speed is not None:
         track = _belt_shift(track, belt_speed, grf, grf_xml)
     return track
@@ -570,7 +569,7 @@ def _height_from_legs(lm: Mapping[str, np.ndarray]) -> float:
     return float(np.nanmax([leg / HIP_HEIGHT_FRACTION, 0.5]))
 
 
-def _with_origin_corrections(track: SkeletonTrack, res, seg_of, off) -> SkeletonTrack:
+def _with_segment_inertias(track: SkeletonTrack, res, seg_of, off) -> SkeletonTrack:
     """Per-segment COM and inertia (segment frame, about the COM) from the OpenSim bodies.
 
     Composite of every body mapped to the segment, at the model's default pose, expressed
@@ -621,7 +620,8 @@ def _with_origin_corrections(track: SkeletonTrack, res, seg_of, off) -> Skeleton
         for m, c, Ic in parts:
             d = c - com
             inertia += Ic + m * (float(d @ d) * np.eye(3) - np.outer(d, d))
-        out[seg] = {"com": C_OSIM @ (com - o_body), "inertia": C_OSIM @ inertia @ C_OSIM.T}
+        k = float(track.mass) / float(sum(res["body_mass"]))  # a subject mass given: scaled inertias
+        out[seg] = {"com": C_OSIM @ (com - o_body), "inertia": k * (C_OSIM @ inertia @ C_OSIM.T)}
     src = dict(track.source)
     src["segment_inertias"] = out
     return SkeletonTrack(

@@ -1,0 +1,214 @@
+"""OpenSim importer on the two real OpenSim trials (overground 112 kg, treadmill 72.6 kg)."""
+
+import numpy as np
+import pytest
+
+from solver.io import load_trial
+from solver.io.opensim import C_OSIM, OpenSimError, load_opensim, read_mot, read_opensim_grf
+from solver.io.preprocess import detect_contacts, gait_events
+from solver.kinematics import contact_points, points_world
+
+LW = "opensim_loadedwalking_subject05"
+TM = "opensim_gait2354_subject01_treadmill"
+
+
+@pytest.fixture(scope="module")
+def loaded(shared_data):
+    d = shared_data / LW
+    return load_opensim(d / "Rajagopal2016_subject05_v30516.osim",
+                        d / "loadedwalking_subject05_noload_free_trial03_ik_solution.mot",
+                        grf=d / "loadedwalking_subject05_noload_free_trial03_grf.mot")
+
+
+@pytest.fixture(scope="module")
+def treadmill(shared_data):
+    d = shared_data / TM
+    return load_opensim(d / "subject01.osim", d / "subject01_walk1_ik.mot", grf=d / "subject01_walk1_grf.mot",
+                        grf_xml=d / "subject01_walk1_grf.xml", belt_speed="auto")
+
+
+def test_rajagopal_3x_model_imports_whole_body(loaded):
+    cap = loaded
+    ch = cap.character
+    fit = cap.source["fit"]
+    assert ch.name == "capture-full" and ch.n == 63 and cap.T == 131
+    assert any("repaired" in n for n in cap.source["notes"])  # the 3.x model needed its sockets fixed
+    assert ch.total_mass == pytest.approx(112.43, abs=0.01)
+    assert fit["masses_from"] == "segment_masses"
+    assert ch.segment("thigh_r").mass == pytest.approx(13.881, abs=1e-3)  # femur_r
+    # body frames and joint centres from OpenSim: the capture skeleton reproduces them
+    assert fit["landmark_error_mm"]["mean"] < 2.0 and fit["landmark_error_mm"]["max"] < 10.0
+    assert max(v["max"] for v in fit["orientation_error_deg"].values()) < 3.0
+    assert 0.40 < ch.segment("thigh_r").length < 0.50 and 0.40 < ch.segment("shank_r").length < 0.52
+    assert 1.6 < fit["height_m"] < 2.1
+
+
+def test_axes_floor_and_walking_direction(loaded):
+    cap = loaded
+    q, t, ch = cap.q, cap.times, cap.character
+    speed = np.polyfit(t, q[ch.index("root_tx")], 1)[0]
+    assert speed == pytest.approx(1.42, abs=0.05)  # README: 1.42 m/s along OpenSim +X = our +x
+    assert np.abs(q[ch.index("root_ty")]).max() < 0.5
+    assert 0.85 < np.median(q[ch.index("root_tz")]) < 1.15  # hips ~1 m above the floor: z is up
+    hips = points_world(ch, q, [("thigh_r", [0, 0, 0]), ("thigh_l", [0, 0, 0])])
+    assert np.all(hips[0, 1] < hips[1, 1])  # right hip at negative y (our y is the subject's left)
+    cp = contact_points(ch, q)
+    # the feet reach the floor (OpenSim ground y = 0 is our z = 0; contact points 1 cm above the sole)
+    for k in range(4):
+        assert -0.03 < np.percentile(cp[k, 2], 5) < 0.03
+    assert np.allclose(cap.frame.R, C_OSIM.T)
+    # mapping back: the root in OpenSim ground is the hip mid-point the model computes
+    back = cap.frame.point_to_input(q[:3].T, t)
+    assert np.all(np.abs(back[:, 2]) < 0.5) and np.all(back[:, 1] > 0.8)  # OpenSim y is up
+
+
+def test_grf_loaded_walk(loaded):
+    m = loaded.measured
+    t = loaded.times
+    assert m is not None and m.force.shape == (2, 3, loaded.T)
+    valid_t = t[m.valid]
+    # README: complete GRF from left toe-off (≈0.5-0.6 s, left foot not on a plate before) to 1.30 s
+    assert 0.5 <= valid_t[0] <= 0.65 and valid_t[-1] == pytest.approx(1.30)
+    assert np.all(np.diff(np.where(m.valid)[0]) == 1)
+    w = loaded.character.weight
+    total = m.force[:, 2, m.valid].sum(0)
+    assert 0.6 * w < total.mean() < 1.4 * w
+    # COP meaningless when unloaded: NaN there; on the ground where loaded
+    unloaded = m.force[:, 2] < 20
+    assert np.all(np.isnan(m.cop[:, 0][unloaded]))
+    assert np.nanmax(np.abs(m.cop[:, 2])) < 0.02
+    # right COP under the right foot during right single support (0.6-0.95 s)
+    k = (t > 0.6) & (t < 0.95)
+    heel = points_world(loaded.character, loaded.q[:, k], [("foot_r", [0, 0, 0])])[0]
+    assert np.abs(m.cop[0, 1, k] - heel[1]).max() < 0.1
+
+
+def test_gait_events_loaded_walk(loaded):
+    ev = gait_events(detect_contacts(loaded.character, loaded.q, loaded.fps), loaded.times)
+    # README (force plates, 20 N): right 0.3895-1.178 s, left from 0.9925 s; 100 Hz kinematics
+    assert ev["right_heel_strike"][0] == pytest.approx(0.3895, abs=0.025)
+    assert ev["left_heel_strike"][0] == pytest.approx(0.9925, abs=0.025)
+    assert ev["right_toe_off"][0] == pytest.approx(1.178, abs=0.035)
+
+
+def test_treadmill_belt_shift(treadmill, shared_data):
+    cap = treadmill
+    ch = cap.character
+    assert ch.name == "capture-lower" and ch.n == 30  # gait2354 has no arms: HAT in the pelvis
+    assert ch.total_mass == pytest.approx(72.6, abs=0.01)
+    assert cap.source["fit"]["landmark_error_mm"]["mean"] < 2.0
+    v = cap.source["belt_speed_m_s"]
+    assert 1.0 < v < 1.2  # README: ~1.07 from markers; the IK kinematics' stance feet say ~1.13
+    assert np.allclose(cap.frame.velocity, [v, 0, 0])
+    t = cap.times
+    # overground-equivalent: the root progresses at the belt speed ...
+    assert np.polyfit(t, cap.q[ch.index("root_tx")], 1)[0] == pytest.approx(v, abs=0.02)
+    # ... and a loaded foot no longer moves
+    cp = contact_points(ch, cap.q)
+    vx = np.gradient(cp[0, 0], t)
+    loaded = cap.measured.force[0, 2] > 300
+    assert abs(np.median(vx[loaded])) < 0.05
+    # mapped back onto the treadmill, the root (mid-hips, ~7 cm behind OpenSim's pelvis origin)
+    # stays where the IK put the pelvis (pelvis_tx 0.58-0.61 m)
+    back = cap.frame.point_to_input(cap.q[:3].T, t)
+    sto = read_mot(shared_data / TM / "subject01_walk1_ik.mot")
+    d = back[:, 0] - sto.column("pelvis_tx")
+    assert np.ptp(d) < 0.02 and -0.1 < d.mean() < 0.0
+    assert np.ptp(back[:, 0]) < 0.1
+    # floor: the plate surface (COP y = -0.0075 m) is our z = 0
+    assert cap.frame.offset[1] == pytest.approx(-0.0075)
+
+
+def test_treadmill_grf_and_gait_events(treadmill):
+    cap = treadmill
+    m = cap.measured
+    assert m.valid.all()  # both feet on their plates throughout (README)
+    assert m.force[:, 2].sum(0).mean() / 9.81 == pytest.approx(72.6, rel=0.05)
+    ev = gait_events(detect_contacts(cap.character, cap.q, cap.fps), cap.times)
+    readme = {"right_heel_strike": [0.618, 1.853, 3.078], "right_toe_off": [1.408, 2.633, 3.840],
+              "left_heel_strike": [1.247, 2.460, 3.677], "left_toe_off": [0.787, 2.017, 3.232]}
+    for k, ref in readme.items():
+        assert len(ev[k]) == len(ref), (k, ev[k])
+        assert np.abs(np.array(ev[k]) - ref).max() <= 2.5 / 60, (k, ev[k], ref)  # within two frames at 60 Hz
+
+
+def test_read_opensim_grf_sides_and_frame(shared_data):
+    d = shared_data / LW
+    times = np.linspace(0.4, 1.2, 81)
+    g = read_opensim_grf(d / "loadedwalking_subject05_noload_free_trial03_grf.mot", times=times)
+    sto = read_mot(d / "loadedwalking_subject05_noload_free_trial03_grf.mot")
+    # our z is OpenSim's y: the right vertical force is column ground_force_r_vy (low-passed)
+    ref = np.interp(times, sto.time, sto.column("ground_force_r_vy"))
+    assert np.abs(g.force[0, 2] - ref).max() < 0.05 * ref.max()
+    assert g.valid.all()
+    with pytest.raises(OpenSimError, match="does not overlap"):
+        read_opensim_grf(d / "loadedwalking_subject05_noload_free_trial03_grf.mot", times=np.array([5.0, 6.0]))
+
+
+def test_mot_errors(tmp_path, shared_data):
+    src = (shared_data / TM / "subject01_walk1_ik.mot").read_text().splitlines()
+    head = src.index("endheader") + 1
+    labels = src[head].split("\t")
+
+    def write(name, lines):
+        p = tmp_path / name
+        p.write_text("\n".join(lines) + "\n")
+        return p
+
+    # NaN row
+    rows = src[head + 1:]
+    bad = rows[3].split("\t")
+    bad[5] = "nan"
+    p = write("nan.mot", src[:head + 1] + rows[:3] + ["\t".join(bad)] + rows[4:])
+    with pytest.raises(OpenSimError, match="NaN"):
+        read_mot(p)
+    # not a .mot
+    with pytest.raises(OpenSimError, match="endheader"):
+        read_mot(write("x.mot", ["hello", "1 2 3"]))
+    # model/motion mismatch: a missing coordinate, an unknown column
+    keep = [i for i, lab in enumerate(labels) if lab.strip() != "knee_angle_r"]
+    cut = ["\t".join(r.split("\t")[i] for i in keep) for r in src[head:]]
+    p = write("missing.mot", src[:head] + cut)
+    model = shared_data / TM / "subject01.osim"
+    with pytest.raises(OpenSimError, match=r"lacks the model's coordinates \['knee_angle_r'\]"):
+        load_opensim(model, p)
+    ren = [src[head].replace("knee_angle_r", "knee_angle_x")] + src[head + 1:]
+    p = write("unknown.mot", src[:head] + ren)
+    with pytest.raises(OpenSimError, match=r"columns \['knee_angle_x'\] that are not coordinates"):
+        load_opensim(model, p)
+    # units unknown
+    plain = [ln for ln in src[:head] if "degrees" not in ln.lower()] + src[head:]
+    with pytest.raises(OpenSimError, match="inDegrees"):
+        load_opensim(model, write("units.mot", plain))
+    # belt speed must be a number or 'auto'
+    with pytest.raises(OpenSimError, match="belt_speed"):
+        load_opensim(model, shared_data / TM / "subject01_walk1_ik.mot", belt_speed="fast")
+
+
+def test_grf_without_sides_needs_the_xml(tmp_path, shared_data):
+    # the treadmill GRF names the right foot's columns without a side: the .xml is required
+    with pytest.raises(OpenSimError, match="ExternalLoads"):
+        read_opensim_grf(shared_data / TM / "subject01_walk1_grf.mot", times=np.array([1.0, 1.1]))
+    bad = tmp_path / "loads.xml"
+    bad.write_text("<OpenSimDocument><ExternalLoads><objects><ExternalForce name='F'><applied_to_body>torso"
+                   "</applied_to_body></ExternalForce></objects></ExternalLoads></OpenSimDocument>")
+    with pytest.raises(OpenSimError, match="cannot tell the side"):
+        read_opensim_grf(shared_data / TM / "subject01_walk1_grf.mot", bad, times=np.array([1.0, 1.1]))
+
+
+def test_load_trial_dispatches_opensim(shared_data, tmp_path):
+    d = shared_data / TM
+    cap = load_trial([d / "subject01.osim", d / "subject01_walk1_ik.mot", d / "subject01_walk1_grf.mot",
+                      d / "subject01_walk1_grf.xml"], belt_speed=1.1)
+    assert cap.source["format"] == "opensim" and cap.measured is not None
+    assert cap.frame.velocity[0] == pytest.approx(1.1)
+    from solver.io import TrialError
+
+    with pytest.raises(TrialError, match="exactly one coordinates"):
+        load_trial([d / "subject01.osim", d / "subject01_walk1_grf.mot"])
+    other = tmp_path / "walk.xyz"
+    other.write_text("1 2 3")
+    with pytest.raises(TrialError, match="unknown trial format"):
+        load_trial([other])
+    with pytest.raises(TrialError, match="file not found"):
+        load_trial([tmp_path / "nope.c3d"])
