@@ -74,6 +74,18 @@ class GroundFrame:
     def vector_from_input(self, v: np.ndarray) -> np.ndarray:
         return np.asarray(v, dtype=float) @ self.R
 
+    def to_dict(self) -> dict:
+        return {"R": self.R.tolist(), "offset": self.offset.tolist(), "unit_m": float(self.unit_m),
+                "velocity": self.velocity.tolist(), "axes": self.axes}
+
+    @staticmethod
+    def from_dict(d: Mapping[str, Any] | None) -> "GroundFrame":
+        if not d:
+            return GroundFrame()
+        return GroundFrame(R=np.asarray(d["R"], dtype=float), offset=np.asarray(d["offset"], dtype=float),
+                           unit_m=float(d["unit_m"]), velocity=np.asarray(d.get("velocity", [0, 0, 0]), dtype=float),
+                           axes=str(d.get("axes", "")))
+
 
 @dataclass(frozen=True, eq=False)
 class MeasuredGRF:

@@ -71,7 +71,7 @@ import numpy as np
 
 from solver.character import Character, CharacterError
 from solver.dynamics import DEFAULT_GRAVITY, rnea
-from solver.kinematics import forward_kinematics, joint_screws
+from solver.kinematics import forward_kinematics
 
 log = logging.getLogger(__name__)
 
@@ -289,25 +289,53 @@ def _side_sets(character: Character, effort: np.ndarray | None = None) -> tuple[
     return np.array(a, dtype=int), np.array(b, dtype=int)
 
 
-def _foot_frames(character: Character, pose: Any, side: str, N: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+@dataclass(frozen=True, eq=False)
+class _Pose:
+    """World pose of every body as dense arrays over N frames: rot (N, n, 3, 3) world <- body, pos (N, n, 3)."""
+
+    rot: np.ndarray
+    pos: np.ndarray
+
+    def take(self, idx: np.ndarray) -> "_Pose":
+        return _Pose(self.rot[idx], self.pos[idx])
+
+
+def _dense_pose(character: Character, q: np.ndarray) -> _Pose:
+    pose = forward_kinematics(character, q)
+    N, n = q.shape[1], character.n
+    rot = np.empty((N, n, 3, 3))
+    pos = np.empty((N, n, 3))
+    for k in range(n):
+        for i in range(3):
+            pos[:, k, i] = pose.pos[k][i]
+            for j in range(3):
+                rot[:, k, i, j] = pose.rot[k][i][j]
+    return _Pose(rot, pos)
+
+
+def _screws(character: Character, pose: _Pose) -> np.ndarray:
+    """World joint screws (N, n, 6) from a pose: the same as :func:`solver.kinematics.joint_screws`."""
+    z = pose.rot[:, :, :, 2]
+    rev = np.asarray(character.model.revolute)
+    ang = np.where(rev[None, :, None], z, 0.0)
+    lin = np.where(rev[None, :, None], np.cross(pose.pos, z), z)
+    return np.concatenate([ang, lin], axis=-1)
+
+
+def _foot_frames(character: Character, pose: _Pose, side: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """World rotation (N, 3, 3) world <- box, centre (N, 3) and half extents (3,) of a foot box."""
     box = character.foot(side)
     model = character.model
     b = model.seg_body[box.segment]
     r_sb = model.seg_rot[box.segment]
     c_b = model.seg_pos[box.segment] + r_sb @ box.center
-    rot = np.empty((N, 3, 3))
-    pos = np.empty((N, 3))
-    for i in range(3):
-        pos[:, i] = pose.pos[b][i]
-        for j in range(3):
-            rot[:, i, j] = pose.rot[b][i][j]
+    rot, pos = pose.rot[:, b], pose.pos[:, b]
     return rot @ r_sb, pos + rot @ c_b, np.asarray(box.half, dtype=float)
 
 
 def _qp_batch(
     character: Character,
-    q: np.ndarray,
+    pose: _Pose,
     tau0: np.ndarray,
     c: np.ndarray,
     *,
@@ -316,11 +344,10 @@ def _qp_batch(
     regularization: float,
     effort: np.ndarray | None = None,
 ) -> _QPBatch:
-    """QP data of N double-support frames at once. q (n, N), tau0 (n, N), c (6, N) about origin."""
-    N = q.shape[1]
+    """QP data of N double-support frames at once: their pose, tau0 (n, N), c (6, N) about the origin."""
+    N = pose.rot.shape[0]
     a_idx, b_idx = _side_sets(character, effort)
-    pose = forward_kinematics(character, q)
-    boxes = [_foot_frames(character, pose, s, N) for s in FEET]
+    boxes = [_foot_frames(character, pose, s) for s in FEET]
     # contact plane per foot: z = 0, or 1 cm above the lowest corner when the box floats
     centres, polys = [], []
     for rot, ctr, half in boxes:
@@ -332,8 +359,7 @@ def _qp_batch(
     r[:, 2] = 0.0
 
     # screws about r: (ω, v + ω × r)
-    S = joint_screws(character, q)  # (n, 6, N)
-    S = np.moveaxis(S, -1, 0)  # (N, n, 6)
+    S = _screws(character, pose)  # (N, n, 6)
     idx = np.concatenate([a_idx, b_idx])
     Sab = S[:, idx, :].copy()
     Sab[:, :, 3:] += np.cross(Sab[:, :, :3], r[:, None, :])
@@ -518,14 +544,13 @@ def _solve_batch(batch: _QPBatch, method: str) -> tuple[np.ndarray, np.ndarray]:
     return y, status
 
 
-def _cop_violation(wrenches: np.ndarray, character: Character, q: np.ndarray, penetration: float) -> np.ndarray:
+def _cop_violation(wrenches: np.ndarray, character: Character, pose: _Pose, penetration: float) -> np.ndarray:
     """Metres by which each foot's CoP lies outside its contact polygon (0 inside), (2, N)."""
-    pose = forward_kinematics(character, q)
-    N = q.shape[1]
+    N = pose.rot.shape[0]
     out = np.zeros((2, N))
     cop, _ = cop_and_free_moment(wrenches)
     for s, side in enumerate(FEET):
-        rot, ctr, half = _foot_frames(character, pose, side, N)
+        rot, ctr, half = _foot_frames(character, pose, side)
         z_low = ctr[:, 2] - np.abs(rot[:, 2, :]) @ half
         z_plane = np.maximum(0.0, z_low + penetration)
         p = cop[s].T + np.stack([np.zeros(N), np.zeros(N), z_plane], -1)  # the CoP on the foot's plane
@@ -598,8 +623,9 @@ def estimate_contact_wrenches(
     w[1][:, left] = h0[:, left]
     st[right | left] = Status.SINGLE
     ds = np.flatnonzero(sup == Support.DOUBLE)
+    pose = _dense_pose(character, qf)
     if len(ds):
-        batch = _qp_batch(character, qf[:, ds], tau0[:, ds], h0[:, ds], friction=friction,
+        batch = _qp_batch(character, pose.take(ds), tau0[:, ds], h0[:, ds], friction=friction,
                           penetration=penetration, regularization=regularization, effort=effort)
         y, st_ds = _solve_batch(batch, method)
         # back to moments about the origin: m_O = m_r + r × f
@@ -614,7 +640,7 @@ def estimate_contact_wrenches(
     wrenches[:, :, frames] = w
     status[frames] = st
     viol = np.full((2, T), np.nan)
-    viol[:, frames] = np.where((sup != Support.FLIGHT)[None, :], _cop_violation(w, character, qf, penetration), 0.0)
+    viol[:, frames] = np.where((sup != Support.FLIGHT)[None, :], _cop_violation(w, character, pose, penetration), 0.0)
     n_rel = int(np.sum(st == Status.RELAXED))
     if n_rel:
         log.info("contact estimation: %d of %d double-support frames infeasible, relaxed", n_rel, len(ds))

@@ -96,6 +96,10 @@ class Environment:
 class Weights:
     direction: float = 1.0  # η_dir
     singularity: float = 1e-5  # η_sing
+    #: [beyond] tiny weight on the squared contact wrenches (scaled by body weight and leg
+    #: length): in double support only their sum is constrained, so without it the split
+    #: is a flat direction of the NLP and IPOPT's tail convergence crawls.
+    wrench: float = 1e-4
 
 
 @dataclass(frozen=True, eq=False)
@@ -376,7 +380,7 @@ class SpacetimeProblem:
         nm3 = 3 * ff.n_markers
         self._p_layout = {}
         off = 0
-        for name, size in (("gm", nm3 * Tn), ("g", 3), ("mu", 1), ("wts", 2), ("ref", 4 * Tn), ("anchor", 3 * Tn)):
+        for name, size in (("gm", nm3 * Tn), ("g", 3), ("mu", 1), ("wts", 3), ("ref", 4 * Tn), ("anchor", 3 * Tn)):
             self._p_layout[name] = (off, size)
             off += size
         p = ca.MX.sym("p", off)
@@ -394,9 +398,13 @@ class SpacetimeProblem:
         terms: list[_Terms] = []
         # objective
         cost_terms = _Terms("cost", 1, q_index, 1)
-        fcost = ff.cost.map(Tn)(Q, GM, ca.repmat(wts, 1, Tn))
+        fcost = ff.cost.map(Tn)(Q, GM, ca.repmat(wts[:2], 1, Tn))
         objective = ca.sum2(fcost)
-        self._cost_map = (cost_terms, [GM, ca.repmat(wts, 1, Tn)])
+        self._cost_map = (cost_terms, [GM, ca.repmat(wts[:2], 1, Tn)])
+        xw = x[self.nq_vars:]
+        if self.nx > self.nq_vars:
+            objective = objective + wts[2] * ca.sumsqr(xw)
+        self._wts_sym = wts
 
         g_parts: list[ca.MX] = []
         lbg: list[np.ndarray] = []
@@ -564,6 +572,11 @@ class SpacetimeProblem:
             jv = self._mapped(jf, t_.ncalls)(*zvars, *params)
             jblocks.append((jv, t_.zidx, jf.sparsity_out(0), rowmap))
 
+        if self.nx > self.nq_vars:  # wrench regularization: 2 lam_f wts[2] on the wrench diagonal
+            nw = self.nx - self.nq_vars
+            idx = np.arange(self.nq_vars, self.nx)
+            diag = ca.repmat(2 * lam_f * p[self._p_layout["wts"][0] + 2], 1, nw)
+            hblocks.append((diag, idx[None, :], ca.Sparsity.dense(1, 1), None))
         H = self._scatter(hblocks, self.nx, self.nx, symmetric=True)
         J = self._scatter(jblocks, self.ng, self.nx, symmetric=False)
         self.hessian_nnz = int(H.nnz())
@@ -602,7 +615,7 @@ class SpacetimeProblem:
             cols_all.append(gc[keep])
             src_all.append(src[keep])
             fac_all.append(fac[keep])
-            parts.append(vals.nz[:])
+            parts.append(ca.vec(vals.nz[:]))
             offset += nnz * ncall
         rows_g = np.concatenate(rows_all)
         cols_g = np.concatenate(cols_all)
@@ -703,11 +716,12 @@ class SpacetimeProblem:
                    anchor: np.ndarray) -> np.ndarray:
         wdir = weights.direction / (self.n_markers * self.T * MARKER_SCALE**2)
         wsing = weights.singularity / (max(self.ff.n_sing, 1) * self.T * MARKER_SCALE**2)
+        wwr = weights.wrench / max(len(self.eom_frames), 1)
         return np.concatenate([
             np.asarray(guide_markers, dtype=float).ravel(order="F"),
             np.asarray(env.gravity, dtype=float),
             [float(env.friction)],
-            [wdir, wsing],
+            [wdir, wsing, wwr],
             ref.ravel(order="F"),
             anchor.ravel(order="F"),
         ])

@@ -9,12 +9,14 @@ from solver.contact import (
     ContactError,
     Status,
     Support,
+    _dense_pose,
     _qp_batch,
+    _screws,
     cop_and_free_moment,
     estimate_contact_wrenches,
 )
 from solver.dynamics import rnea
-from solver.kinematics import contact_points
+from solver.kinematics import contact_points, joint_screws
 
 H_SUBJ, M_SUBJ = 1.75, 70.0
 
@@ -73,7 +75,7 @@ def test_qp_objective_is_the_sum_of_squared_joint_forces_from_rnea(ch):
     q = rng.uniform(-0.3, 0.3, (ch.n, 3))
     qd, qdd = rng.uniform(-1, 1, (ch.n, 3)), rng.uniform(-3, 3, (ch.n, 3))
     res = rnea(ch, q, qd, qdd)
-    batch = _qp_batch(ch, q, res.tau, res.h0, friction=None, penetration=0.01, regularization=1e-15)
+    batch = _qp_batch(ch, _dense_pose(ch, q), res.tau, res.h0, friction=None, penetration=0.01, regularization=1e-15)
     feet = [ch.model.seg_body[ch.foot(s).segment] for s in ("right", "left")]
     for t in range(3):
         ys = [rng.normal(size=6) * [50, 50, 10, 100, 100, 400] for _ in range(4)]
@@ -86,6 +88,11 @@ def test_qp_objective_is_the_sum_of_squared_joint_forces_from_rnea(ch):
             assert np.allclose(out.h0, 0.0, atol=1e-8)  # the two wrenches sum to c: root needs nothing
             f_id.append(np.sum(np.asarray(out.tau)[6:] ** 2))
         assert np.allclose(np.diff(f_qp), np.diff(f_id), rtol=1e-9, atol=1e-6)
+
+
+def test_screws_from_the_dense_pose_are_the_kinematics_joint_screws(ch):
+    q = np.random.default_rng(3).uniform(-0.5, 0.5, (ch.n, 5))
+    assert np.allclose(_screws(ch, _dense_pose(ch, q)), np.moveaxis(joint_screws(ch, q), -1, 0), atol=1e-14)
 
 
 # --- equations that must hold -----------------------------------------------------------------

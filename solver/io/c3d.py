@@ -492,6 +492,11 @@ def _plate_specs(raw: _Raw) -> list[PlateSpec]:
     chans = np.asarray(chans, dtype=int)
     chans = chans.reshape(-1, n) if chans.ndim != 2 else chans  # (k, n)
     cal_arr = None if cal is None else np.asarray(cal, dtype=float)
+    if cal_arr is not None and cal_arr.ndim == 2 and cal_arr.shape[0] == cal_arr.shape[1]:
+        cal_arr = cal_arr[:, :, None]  # one plate
+    elif cal_arr is not None and cal_arr.ndim == 1:
+        k = 8 if int(types[0]) == 3 else 6
+        cal_arr = cal_arr.reshape((k, k, -1), order="F") if cal_arr.size % (k * k) == 0 else None
     specs = []
     for i in range(n):
         t = int(types[i])

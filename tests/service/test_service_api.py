@@ -307,3 +307,25 @@ def test_validation_report_with_mujoco_replay(api):
     info = api.a.get("/motions", params={"limit": 1000}).json()["items"]
     assert [m["plausible"] for m in info if m["id"] == mid] == [False]  # the report is stored with the motion
     assert api.a.get(f"/motions/{mid}/validation").json() == body
+
+
+def test_multipart_mocap_upload_deepmimic(api, shared_data):
+    d = shared_data / "deepmimic_humanoid3d_walk"
+    files = [("files", (p.name, p.read_bytes())) for p in (d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt")]
+    r = api.a.post("/motions", files=files, data={"name": "deepmimic walk"})
+    assert r.status_code == 201, r.text
+    info = r.json()
+    assert (info["kind"], info["name"], info["has_wrenches"]) == ("capture", "deepmimic walk", False)
+    assert info["frames"] > 20 and info["coordinates"] > 16
+    mf = api.a.get(info["links"]["motion_file"]).json()
+    assert mf["provenance"]["step"] == "capture"
+
+
+def test_multipart_mocap_upload_bad_trials(api, shared_data):
+    d = shared_data / "deepmimic_humanoid3d_walk"
+    one = [("files", ("humanoid3d_walk.txt", (d / "humanoid3d_walk.txt").read_bytes()))]
+    assert_problem(api.a.post("/motions", files=one), 422, "DeepMimic")
+    junk = [("files", ("trial.c3d", b"\x02\x50" + b"\x00" * 600))]
+    assert_problem(api.a.post("/motions", files=junk, data={"mass": "60"}), 422, "could not import")
+    osim_only = [("files", ("model.osim", b"<OpenSimDocument/>"))]
+    assert_problem(api.a.post("/motions", files=osim_only), 422)
