@@ -324,6 +324,48 @@ def test_type1_plates_force_cop_and_free_moment_channels(path, trial, tmp_path):
         np.testing.assert_allclose(p1.free_moment[ld], ez["Tz"][2, ld] / 1000.0, atol=1e-3)
 
 
+def test_one_long_plate_under_both_feet_in_turn(path, trial, tmp_path):
+    """FP1 + FP2 written as one 1 m plate: the right then the left stance split by the CoP,
+    the double support (both feet on the plate, not separable) excluded from ``valid``."""
+
+    def edit(c):
+        fp = c["parameters"]["FORCE_PLATFORM"]
+        corners = np.asarray(fp["CORNERS"]["value"], dtype=float)
+        big = np.stack([corners[:, 0, 0], corners[:, 1, 1], corners[:, 2, 1], corners[:, 3, 0]], axis=1)
+        P = big.mean(axis=1) / 1000.0
+        F = sum(sig.force for sig in trial.plates)  # lab = ours here, reaction on the subject
+        M = sum(np.cross(np.nan_to_num(sig.cop) - P[:, None], sig.force, axis=0)
+                + np.outer([0.0, 0.0, 1.0], sig.free_moment) for sig in trial.plates)
+        Rp = np.diag([-1.0, 1.0, -1.0])  # plate axes of both plates: x = -X, y = +Y, z = -Z
+        d = np.array([0.0, 0.0, -0.0163])  # surface centre seen from the transducer (plate axes)
+        F_loc, M_loc = Rp.T @ F, Rp.T @ M
+        M_o = M_loc + np.cross(d, F_loc, axis=0)
+        an = c["data"]["analogs"]
+        an[0, 0:3], an[0, 3:6] = F_loc, M_o * 1000.0
+        c["data"]["analogs"] = an
+        fp["USED"]["value"] = np.array([1])
+        fp["TYPE"]["value"] = np.array([2])
+        fp["CORNERS"]["value"] = big[:, :, None]
+        fp["ORIGIN"]["value"] = np.array([[0.0], [0.0], [16.3]])
+        fp["CHANNEL"]["value"] = np.asarray(fp["CHANNEL"]["value"])[:, :1]
+
+    alt = read_c3d_trial(_variant(path, tmp_path / "long_plate.c3d", edit))
+    (sig,) = alt.plates
+    feet = [p[2] for p in sig.periods]
+    assert feet == ["right", "left"], sig.periods
+    (a0, b0, _), (a1, b1, _) = sig.periods
+    assert a0 == pytest.approx(1.081, abs=0.02) and b1 == pytest.approx(2.191, abs=0.02)
+    assert 1.58 <= b0 <= 1.70 and a1 == pytest.approx(b0, abs=0.011)
+    m, t = alt.track.measured, alt.track.times
+    runs = [(t[a], t[b - 1]) for a, b in _runs(m.valid)]
+    assert len(runs) == 2, runs
+    assert runs[0][0] == pytest.approx(1.19, abs=0.03) and runs[1][1] == pytest.approx(2.08, abs=0.03)
+    assert not m.valid[(t > 1.60) & (t < 1.66)].any()  # double support on one plate
+    single = m.valid & (t > 1.2) & (t < 1.55)  # right single support: same as with two plates
+    np.testing.assert_allclose(m.force[0][:, single], trial.track.measured.force[0][:, single], atol=1e-2)
+    np.testing.assert_allclose(m.cop[0][:, single], trial.track.measured.cop[0][:, single], atol=1e-4)
+
+
 # --- landmarks ---------------------------------------------------------------------------
 
 

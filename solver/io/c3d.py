@@ -1213,6 +1213,38 @@ class _FeetResult:
     events: dict[str, Any]
 
 
+def _nearest_runs(dist: np.ndarray, min_len: int) -> list[tuple[int, int, int]]:
+    """Runs [a, b) of frames with the same nearest foot (row of ``dist`` (2, n), NaN unknown);
+    runs shorter than ``min_len`` join their neighbour; -1 when no distance is known at all."""
+    n = dist.shape[1]
+    known = np.isfinite(dist).any(axis=0)
+    if not known.any():
+        return [(0, n, -1)]
+    lab = np.where(known, np.argmin(np.where(np.isfinite(dist), dist, np.inf), axis=0), -1)
+    ki = np.nonzero(known)[0]
+    lab = lab[ki[np.clip(np.searchsorted(ki, np.arange(n)), 0, ki.size - 1)]]  # fill unknown frames
+    edges = np.r_[0, np.nonzero(lab[1:] != lab[:-1])[0] + 1, n]
+    runs = [[int(a), int(b), int(lab[a])] for a, b in zip(edges[:-1], edges[1:])]
+    changed = True
+    while changed and len(runs) > 1:
+        changed = False
+        for i, (a, b, _) in enumerate(runs):
+            if b - a < min_len:
+                j = i - 1 if i > 0 else i + 1
+                runs[j][0], runs[j][1] = min(runs[j][0], a), max(runs[j][1], b)
+                del runs[i]
+                merged = [runs[0]]
+                for r in runs[1:]:
+                    if r[2] == merged[-1][2]:
+                        merged[-1][1] = r[1]
+                    else:
+                        merged.append(r)
+                runs = merged
+                changed = True
+                break
+    return [(a, b, f) for a, b, f in runs]
+
+
 def _feet_and_plates(signals: Sequence[PlateSignal], lm: Mapping[str, np.ndarray], times: np.ndarray,
                      fps: float, analog_rate: float, name: str) -> tuple[_FeetResult, list[PlateSignal]]:
     T = times.size
@@ -1223,36 +1255,43 @@ def _feet_and_plates(signals: Sequence[PlateSignal], lm: Mapping[str, np.ndarray
     unassigned = np.zeros(T, dtype=bool)
     periods_info: list[dict[str, Any]] = []
     plate_foot_frames: list[tuple[PlateSignal, str, np.ndarray]] = []
+    sub_periods: dict[str, list[tuple[int, int, bool, bool]]] = {f: [] for f in FEET}
     for sig in signals:
         periods = []
         for a, b in _loading_periods(sig, analog_rate):
-            t0, t1 = sig.times[a], sig.times[b - 1]
-            fr = (times >= t0 - dt / 2) & (times <= t1 + dt / 2)
-            if not fr.any():
+            t0, t1 = float(sig.times[a]), float(sig.times[b - 1])
+            idx = np.nonzero((times >= t0 - dt / 2) & (times <= t1 + dt / 2))[0]
+            if idx.size == 0:
                 continue
-            # CoP at frame times (nearest analog sample)
-            k = np.clip(np.searchsorted(sig.times, times[fr]), a, b - 1)
+            # the foot nearest to the CoP at each frame (a long plate may take both feet in turn)
+            k = np.clip(np.searchsorted(sig.times, times[idx]), a, b - 1)
             cop = sig.cop[:, k]
-            okc = np.isfinite(cop).all(axis=0)
-            d = {}
-            for foot, s in zip(FEET, SIDES):
-                dist = np.minimum(
-                    _seg_distance(cop, lm[f"heel_{s}"][:, fr], lm[f"toe_{s}"][:, fr]),
-                    _seg_distance(cop, lm[f"ankle_{s}"][:, fr], lm[f"toe_{s}"][:, fr]),
-                )
-                d[foot] = float(np.median(dist[okc])) if okc.any() else np.inf
-            foot = min(d, key=d.get)
-            if d[foot] > 0.25:
-                log.warning("%s: plate %d loaded %.3f-%.3f s by no foot (CoP %.2f m from the nearest)",
-                            name, sig.index, t0, t1, d[foot])
-                foot = "unassigned"
-                unassigned |= fr
-            else:
-                per_foot_frames[foot] |= fr
-                plate_foot_frames.append((sig, foot, fr))
-            periods.append((float(t0), float(t1), foot))
-            periods_info.append({"plate": sig.index, "start": float(t0), "end": float(t1), "foot": foot,
-                                 "cop_to_foot_m": d.get(foot, float("nan"))})
+            dist = np.vstack([
+                np.minimum(_seg_distance(cop, lm[f"heel_{s}"][:, idx], lm[f"toe_{s}"][:, idx]),
+                           _seg_distance(cop, lm[f"ankle_{s}"][:, idx], lm[f"toe_{s}"][:, idx]))
+                for s in SIDES
+            ])
+            for la, lb, i_foot in _nearest_runs(dist, max(int(round(0.03 * fps)), 3)):
+                ts = t0 if la == 0 else float(times[idx[la]] - dt / 2)
+                te = t1 if lb == idx.size else float(times[idx[lb - 1]] + dt / 2)
+                fr = np.zeros(T, dtype=bool)
+                fr[idx[la:lb]] = True
+                dmed = float(np.nanmedian(dist[i_foot, la:lb])) if i_foot >= 0 else float("inf")
+                if not dmed <= 0.25:
+                    log.warning("%s: plate %d loaded %.3f-%.3f s by no foot (CoP %.2f m from the nearest)",
+                                name, sig.index, ts, te, dmed)
+                    foot = "unassigned"
+                    unassigned |= fr
+                else:
+                    foot = FEET[i_foot]
+                    per_foot_frames[foot] |= fr
+                    plate_foot_frames.append((sig, foot, fr))
+                    sub_periods[foot].append((int(idx[la]), int(idx[lb - 1]) + 1, la > 0, lb < idx.size))
+                periods.append((ts, te, foot))
+                # a "split" edge is where the CoP passes from one foot to the other on this plate:
+                # not a foot strike / foot off
+                periods_info.append({"plate": sig.index, "start": ts, "end": te, "foot": foot,
+                                     "cop_to_foot_m": dmed, "start_split": la > 0, "end_split": lb < idx.size})
         assigned.append(PlateSignal(**{**sig.__dict__, "periods": tuple(periods)}))
     # --- per-frame wrenches: force and moment about our origin, box-averaged -------------
     force = np.zeros((2, 3, T))
@@ -1293,9 +1332,9 @@ def _feet_and_plates(signals: Sequence[PlateSignal], lm: Mapping[str, np.ndarray
     plate_events = {foot: ([], []) for foot in FEET}  # (onsets, offsets) in s, foot by foot
     for p in periods_info:
         if p["foot"] in FEET:
-            if p["start"] > times[0] + dt:
+            if p["start"] > times[0] + dt and not p["start_split"]:
                 plate_events[p["foot"]][0].append(p["start"])
-            if p["end"] < times[-1] - dt:
+            if p["end"] < times[-1] - dt and not p["end_split"]:
                 plate_events[p["foot"]][1].append(p["end"])
     offsets = _event_offsets(events, plate_events)
     contact_foot = np.zeros((2, T), dtype=bool)
@@ -1307,8 +1346,17 @@ def _feet_and_plates(signals: Sequence[PlateSignal], lm: Mapping[str, np.ndarray
         plate = loaded_plate[i]
         c = np.zeros(T, dtype=bool)
         for a, b in _runs(kin | plate):
-            seg = slice(a, b)
-            c[seg] = plate[seg] if plate[seg].any() else kin[seg]
+            subs = [x for x in sub_periods[foot] if x[0] < b and x[1] > a]
+            pf = np.nonzero(plate[a:b])[0] + a
+            if not subs or pf.size == 0:
+                c[a:b] = kin[a:b]
+                continue
+            # the plate's own loading edges replace the kinematic strike / off; where the
+            # plate's period ends because the other foot took over the plate, kinematics decide
+            first, last = min(subs), max(subs, key=lambda x: x[1])
+            s0 = a if first[2] else int(pf[0])
+            e0 = b if last[3] else int(pf[-1]) + 1
+            c[s0:e0] = True
         contact_foot[i] = c
     hh = {foot: lm[f"heel_{s}"][2] for foot, s in zip(FEET, SIDES)}
     ht = {foot: np.minimum(lm[f"mtp_{s}"][2], lm[f"toe_{s}"][2]) for foot, s in zip(FEET, SIDES)}
