@@ -189,8 +189,11 @@ def test_other_axes_units_and_floor_give_the_same_trial(path, trial, tmp_path, r
     assert np.nanmax(np.linalg.norm(back - fep, axis=0)) < 3e-3
 
 
-def test_moment_units_and_baseline_offsets_are_handled(path, trial, tmp_path):
+@pytest.mark.parametrize("zero", [None, (1, 10)])
+def test_moment_units_and_baseline_offsets_are_handled(path, trial, tmp_path, zero):
     def edit(c):
+        if zero is not None:
+            c["parameters"]["FORCE_PLATFORM"]["ZERO"]["value"] = np.array(zero)
         a = c["data"]["analogs"]
         for n in range(2):
             a[0, 6 * n + 3: 6 * n + 6] /= 1000.0  # N·mm -> N·m
@@ -204,6 +207,10 @@ def test_moment_units_and_baseline_offsets_are_handled(path, trial, tmp_path):
 
     alt = read_c3d_trial(_variant(path, tmp_path / "nm.c3d", edit))
     for p0, p1 in zip(trial.plates, alt.plates):
+        if zero:
+            assert p1.baseline == "ZERO frames 1-10"
+        else:
+            assert p1.baseline.endswith("unloaded samples"), p1.baseline
         assert np.array_equal(p0.loaded, p1.loaded)
         np.testing.assert_allclose(p1.force, p0.force, atol=1e-3)
         np.testing.assert_allclose(p1.cop[:, p0.loaded], p0.cop[:, p0.loaded], atol=1e-5)

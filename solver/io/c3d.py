@@ -467,6 +467,7 @@ class PlateSignal:
     corners: np.ndarray
     threshold: float
     periods: tuple[tuple[float, float, str], ...] = ()
+    baseline: str = ""  # how the unloaded offsets were found
 
     @property
     def peak_vertical(self) -> float:
@@ -704,7 +705,7 @@ def _plate_signals(raw: _Raw, specs: Sequence[PlateSpec], R: np.ndarray, floor: 
                  raw.path.name, spec.index, spec.type, how, note, float(np.max(force[2], initial=0.0)))
         out.append(PlateSignal(
             index=spec.index, type=spec.type, times=times, force=force, cop=cop, free_moment=free,
-            loaded=loaded, corners=corners, threshold=threshold,
+            loaded=loaded, corners=corners, threshold=threshold, baseline=how,
         ))
     return out
 
@@ -1474,7 +1475,7 @@ def read_c3d_trial(path: str | Path, *, mass: float | None = None, require_plate
         measured, contacts, plates = feet.measured, feet.contacts, tuple(assigned)
         source["plates"] = [
             {"index": s.index, "type": s.type, "peak_vertical_N": s.peak_vertical,
-             "periods": [list(p) for p in s.periods]} for s in plates
+             "periods": [list(p) for p in s.periods], "zero": s.baseline} for s in plates
         ]
         source["gait_events"] = feet.events
         if not any(p[2] in FEET for s in plates for p in s.periods):
