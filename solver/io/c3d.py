@@ -625,14 +625,7 @@ def _baseline(F: np.ndarray, M: np.ndarray, rate: float, rate_ratio: int, zero: 
     if rng <= 0.0:
         return np.zeros(6), "constant signal"
     noise_ok = max(0.01 * rng, 1.0)
-    if zero is not None and len(zero) >= 2 and 1 <= zero[0] <= zero[1] <= nframes:
-        a, b = (zero[0] - 1) * rate_ratio, zero[1] * rate_ratio
-        seg = fz[a:b]
-        lo, hi = float(np.min(fz)), float(np.max(fz))
-        level = float(np.mean(seg))
-        if seg.size and np.std(seg) < noise_ok and min(level - lo, hi - level) < 0.1 * rng:
-            return W[:, a:b].mean(axis=1), f"ZERO frames {zero[0]}-{zero[1]}"
-        log.info("FORCE_PLATFORM:ZERO frames %s are not an unloaded quiet window; using unloaded samples", zero)
+    lo, hi = float(np.min(fz)), float(np.max(fz))
     w = max(min(int(round(0.05 * rate)), N // 4), 2)  # 50 ms blocks
     nw = N // w
     if nw < 2:
@@ -640,9 +633,20 @@ def _baseline(F: np.ndarray, M: np.ndarray, rate: float, rate_ratio: int, zero: 
     blocks = fz[: nw * w].reshape(nw, w)
     level, sd = blocks.mean(axis=1), blocks.std(axis=1)
     quiet = sd < noise_ok
-    lo, hi = float(np.min(fz)), float(np.max(fz))
     near_lo = quiet & (level - lo < 0.1 * rng)
     near_hi = quiet & (hi - level < 0.1 * rng)
+    if zero is not None and len(zero) >= 2 and 1 <= zero[0] <= zero[1] <= nframes:
+        a, b = (zero[0] - 1) * rate_ratio, zero[1] * rate_ratio
+        seg = fz[a:b]
+        if seg.size and np.std(seg) < noise_ok:
+            zl = float(np.mean(seg))
+            at_lo, at_hi = zl - lo < 0.1 * rng, hi - zl < 0.1 * rng
+            # trusted unless the quiet samples say the plate rests at the other end of its range
+            # (someone standing on it during the ZERO frames)
+            if (at_lo and not (near_hi.any() and not near_lo.any())) or (
+                    at_hi and not (near_lo.any() and not near_hi.any())):
+                return W[:, a:b].mean(axis=1), f"ZERO frames {zero[0]}-{zero[1]}"
+        log.info("FORCE_PLATFORM:ZERO frames %s are not an unloaded quiet window; using unloaded samples", zero)
     if near_lo.any() and near_hi.any():
         pick = near_lo if abs(np.median(level[near_lo])) <= abs(np.median(level[near_hi])) else near_hi
     elif near_lo.any() or near_hi.any():
