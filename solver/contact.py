@@ -500,7 +500,17 @@ def _nested(P: np.ndarray, qv: np.ndarray, G: np.ndarray, h: np.ndarray, scale: 
         return inner(0.5 * (z_lo + z_hi))[1]
     res = minimize_scalar(lambda z: inner(z)[0], bounds=(z_lo, z_hi), method="bounded",
                           options={"xatol": 1e-10 * scale, "maxiter": 500})
-    return inner(float(res.x))[1]
+    # fminbound stops at a tolerance relative to |z| (√eps·|z| ≈ 1e-8·c_fz): polish around the
+    # estimate in a shifted variable, where that relative tolerance vanishes
+    z0 = float(res.x)
+    w = 1e-5 * scale
+    lo, hi = max(z_lo, z0 - w) - z0, min(z_hi, z0 + w) - z0
+    if hi > lo:
+        pol = minimize_scalar(lambda u: inner(z0 + u)[0], bounds=(lo, hi), method="bounded",
+                              options={"xatol": 1e-12 * scale, "maxiter": 500})
+        if pol.fun <= res.fun:
+            z0 = z0 + float(pol.x)
+    return inner(z0)[1]
 
 
 def _solve_batch(batch: _QPBatch, method: str) -> tuple[np.ndarray, np.ndarray]:
