@@ -19,8 +19,11 @@ CMU = {"root": "Hips", "chest": "Spine", "neck": "Head", "right_hip": "RightUpLe
        "left_shoulder": "LeftArm", "left_elbow": "LeftForeArm", "left_wrist": "LeftHand"}
 
 
-def write_bvh(motion: Path, character: Path, out: Path, scale: float = 100.0, prefix: str = "") -> None:
+def write_bvh(motion: Path, character: Path, out: Path, scale: float = 100.0, prefix: str = "",
+              lower_back: bool = False) -> None:
     """DeepMimic clip -> BVH with CMU joint names (Y up, DeepMimic axes, ZXY Euler channels).
+
+    ``lower_back``: a CMU-style ``LowerBack`` joint on the root (zero offset) above ``Spine``.
 
     Toes: a fixed ``*ToeBase`` joint at the ankle box's metatarsal point, End Site at the toe
     tip (the same points the DeepMimic reader uses); head and hand End Sites at the head top
@@ -62,6 +65,14 @@ def write_bvh(motion: Path, character: Path, out: Path, scale: float = 100.0, pr
                       + "Zrotation Xrotation Yrotation"])
         order.append(j)
         for k in kids[j]:
+            if lower_back and sk.names[k] == "chest":
+                i2 = "  " * (depth + 1)
+                lines.extend([f"{i2}JOINT {prefix}LowerBack", i2 + "{", f"{i2}  OFFSET 0 0 0",
+                              f"{i2}  CHANNELS 3 Zrotation Xrotation Yrotation"])
+                order.append(None)
+                emit(k, depth + 2)
+                lines.append(i2 + "}")
+                continue
             emit(k, depth + 1)
         nm, i2 = sk.names[j], "  " * (depth + 1)
         if nm.endswith("ankle"):
@@ -139,6 +150,19 @@ def test_axes_units_and_fit(files):
     assert cap.character.segment("thigh_r").length == pytest.approx(0.421546, abs=1e-4)
     low = load_trial([cm], mass=45.0, lower_only=True)
     assert low.character.n == 30 and low.character.total_mass == pytest.approx(45.0)
+
+
+def test_cmu_units_and_lower_back(shared_data, files, tmp_path):
+    """CMU database BVH: lengths in 1/0.45 inch, a LowerBack joint sitting on the root."""
+    d = shared_data / DM
+    p = tmp_path / "cmu.bvh"
+    write_bvh(d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt", p, 0.45 / 0.0254, lower_back=True)
+    tr = bvh_track(p, mass=45.0)
+    assert tr.source["units"] == "cmu"
+    assert tr.source["spine_joints"] == ["LowerBack", "Spine"]
+    ref = bvh_track(files[0], mass=45.0)
+    for k in ("knee_r", "lumbar", "head_top", "toe_l"):
+        assert np.allclose(tr.landmarks[k], ref.landmarks[k], atol=1e-5), k
 
 
 def test_errors(files, tmp_path):

@@ -16,7 +16,8 @@ the joint's OFFSET.
 are ignored): CMU/Mixamo/MotionBuilder styles — ``Hips``; ``RightUpLeg`` / ``RightHip`` /
 ``RThigh`` (hip), ``RightLeg`` / ``RightKnee`` / ``RightShin`` (knee), ``RightFoot`` /
 ``RightAnkle`` (ankle), ``RightToeBase`` / ``RightToe`` (metatarsal heads; its End Site or
-child = toe tip); ``Spine`` (lumbar: the first spine joint), ``Neck``, ``Head`` (its End Site =
+child = toe tip); ``LowerBack`` / ``Spine*`` / ``Chest`` (lumbar: the first spine joint more
+than 3 cm from the hips), ``Neck``, ``Head`` (its End Site =
 head top), ``RightShoulder`` / ``RightCollar`` / ``RightClavicle`` (clavicle), ``RightArm`` /
 ``RightUpArm`` (shoulder), ``RightForeArm`` / ``RightElbow`` (elbow), ``RightHand`` / ``RightWrist``
 (wrist; its End Site or first child = hand tip) — and ``Left*`` / ``L*`` alike. Our own
@@ -36,8 +37,9 @@ The toe landmark is the toe tip moved to the sole the same way.
 **Axes and units.** ``up`` names the BVH up axis (``"y"``, the usual, or ``"z"``). Our X is
 the subject's facing direction (horizontal, perpendicular to the right -> left hip line,
 averaged over the clip), Y left, Z up; ``GroundFrame.R`` maps ours back to the file's axes.
-``units``: ``"auto"`` decides from the leg length (hip -> knee -> ankle of the rest pose:
-0.3-1.5 m), else ``"m"``, ``"cm"``, ``"mm"``, ``"in"`` or metres per unit. The floor (our z = 0)
+``units``: ``"auto"`` takes the first of cm, m, mm, in, cmu (the CMU database's 1/0.45 inch)
+that makes the rest pose's hip -> knee -> ankle length 0.45-1.2 m; else ``"cm"``, ``"m"``,
+``"mm"``, ``"in"``, ``"cmu"`` or metres per unit. The floor (our z = 0)
 is ``floor_height`` (file units, along ``up``) or the 2nd percentile of the sole points'
 heights over the clip. BVH has no subject mass: pass ``mass`` (kg).
 """
@@ -59,7 +61,10 @@ log = logging.getLogger(__name__)
 
 __all__ = ["BvhError", "BvhClip", "read_bvh", "bvh_track", "load_bvh", "UNIT_M"]
 
-UNIT_M = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254}
+#: metres per file unit; "cmu": the CMU mocap database's BVH conversions (ASF units, 1/0.45 inch)
+UNIT_M = {"cm": 0.01, "m": 1.0, "mm": 0.001, "in": 0.0254, "cmu": 0.0254 / 0.45}
+#: plausible hip -> knee -> ankle length (m) for unit detection (children to tall adults)
+LEG_RANGE = (0.45, 1.2)
 
 
 class BvhError(ValueError):
@@ -324,11 +329,13 @@ def bvh_track(
                    + np.linalg.norm(P_rest[roles[f"knee_{s}"], 0] - P_rest[roles[f"ankle_{s}"], 0]) for s in "rl"])
     if isinstance(units, str):
         if units == "auto":
-            cands = [(u, leg * k) for u, k in UNIT_M.items() if 0.3 <= leg * k <= 1.5]
-            if len(cands) != 1:
-                raise BvhError(f"{path}: cannot tell the length unit from the leg length {leg:.4g} "
-                               f"(candidates {[c[0] for c in cands]}); pass units='m'|'cm'|'mm'|'in'")
-            units, scale = cands[0][0], UNIT_M[cands[0][0]]
+            cands = [u for u, k in UNIT_M.items() if LEG_RANGE[0] <= leg * k <= LEG_RANGE[1]]
+            if not cands:
+                raise BvhError(f"{path}: cannot tell the length unit from the leg length {leg:.4g} (no unit of "
+                               f"{sorted(UNIT_M)} makes it {LEG_RANGE[0]}-{LEG_RANGE[1]} m); pass units=")
+            units, scale = cands[0], UNIT_M[cands[0]]  # first in the order cm, m, mm, in, cmu
+            if len(cands) > 1:
+                log.info("%s: leg length %.4g fits units %s: using %s", path, leg, cands, units)
         elif units in UNIT_M:
             scale = UNIT_M[units]
         else:
@@ -388,9 +395,12 @@ def bvh_track(
     # upper body (all or nothing)
     upper: dict[str, np.ndarray] = {}
     try:
-        if not spines:
-            raise KeyError("spine")
-        upper["lumbar"] = P[spines[0]]
+        # lumbar: the first spine joint clearly above the hips (CMU's LowerBack sits on the root)
+        mid_hips = 0.5 * (P[roles["hip_r"]] + P[roles["hip_l"]])
+        above = [j for j in spines if np.median(np.linalg.norm(P[j] - mid_hips, axis=1)) * scale > 0.03]
+        if not above:
+            raise KeyError("spine joint above the hips")
+        upper["lumbar"] = P[above[0]]
         head = roles["head"]
         upper["neck"] = P[head]
         ht = tip(head)

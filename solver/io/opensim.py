@@ -270,7 +270,14 @@ def _worker_main() -> None:  # pragma: no cover - runs in the child process (exe
         known = [k for k, c in enumerate(cols) if c in names]  # the parent reports the others
         idx = [names.index(cols[k]) for k in known]
         values = values[:, known] if values.size else np.zeros((0, 0))
-        if req.get("in_degrees"):
+        deg = req.get("in_degrees")
+        if deg is None:  # the header does not say: rotations beyond 2π can only be degrees
+            rot_cols = [j for j, c_i in enumerate(idx) if rot[c_i]]
+            deg = bool(rot_cols) and float(np.abs(values[:, rot_cols]).max()) > 2 * np.pi
+            notes.append(f"angle unit not stated in the header: {'degrees' if deg else 'radians'} "
+                         "inferred from the values")
+        out["in_degrees"] = bool(deg)
+        if deg:
             for j, c_i in enumerate(idx):
                 if rot[c_i]:
                     values[:, j] = np.radians(values[:, j])
@@ -315,11 +322,11 @@ def _mat33(rot) -> np.ndarray:  # pragma: no cover - child process
     return np.array([[rot.get(i, j) for j in range(3)] for i in range(3)])
 
 
-def _run_worker(model_path: str, columns: Sequence[str], values: np.ndarray, in_degrees: bool) -> dict[str, Any]:
+def _run_worker(model_path: str, columns: Sequence[str], values: np.ndarray, in_degrees: bool | None) -> dict[str, Any]:
     with tempfile.TemporaryDirectory(prefix="motionx-osim-") as d:
         out = os.path.join(d, "result.npz")
         req = {"model": str(Path(model_path).resolve()), "columns": list(columns),
-               "values": np.asarray(values).tolist(), "in_degrees": bool(in_degrees), "out": out}
+               "values": np.asarray(values).tolist(), "in_degrees": in_degrees, "out": out}
         root = str(Path(__file__).resolve().parents[2])
         env = dict(os.environ)
         env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
@@ -393,7 +400,7 @@ def _check_motion(sto: Storage, res: Mapping[str, Any], model_path: str) -> None
         raise OpenSimError(f"model/motion mismatch: {sto.path} lacks the model's coordinates {missing}")
 
 
-def _angles_in_degrees(sto: Storage, in_degrees: bool | None) -> bool:
+def _angles_in_degrees(sto: Storage, in_degrees: bool | None) -> bool | None:
     if in_degrees is not None:
         return bool(in_degrees)
     if sto.in_degrees is not None:
@@ -402,8 +409,9 @@ def _angles_in_degrees(sto: Storage, in_degrees: bool | None) -> bool:
         return True
     if re.search(r"angles are in radians", sto.header_text, re.I):
         return False
-    raise OpenSimError(f"{sto.path}: the header does not say whether angles are in degrees (inDegrees=yes/no); "
-                       "pass in_degrees=True/False")
+    log.warning("%s: the header does not say whether angles are in degrees (inDegrees=yes/no): inferring it "
+                "from the values (pass in_degrees=True/False to decide)", sto.path)
+    return None
 
 
 def opensim_track(
@@ -551,7 +559,7 @@ def opensim_track(
             "motion": str(Path(motion).resolve()),
             "model_name": res.get("model_name"),
             "notes": list(res.get("notes", [])),
-            "angles_in_degrees": deg,
+            "angles_in_degrees": bool(res["in_degrees"]),
             "floor_height_osim_y": floor,
             "body_to_segment": {b: s for b, s in seg_of.items()},
         },

@@ -339,7 +339,9 @@ def extract_cycle(
 ) -> tuple[Capture, np.ndarray]:
     """One gait cycle with the two overlap frames the cyclic constraint needs (SPEC §6).
 
-    The capture is first resampled to ``fps`` (if given). With strikes of the ``start`` foot
+    The capture is first resampled to ``fps`` (if given). The contact schedule is ``contacts``
+    if given, else the capture's own (e.g. from force plates), else :func:`detect_contacts`.
+    With strikes of the ``start`` foot
     at frames s and s + N (the next strike), the cycle is frames s .. s + N + 1 (T = N + 2):
     frames T-1 and T repeat frames 1 and 2 one period later (q_1 = q_{T-1}, q_2 = q_T for the
     non-root coordinates). ``cycle`` picks which complete cycle (0 = the first). A looping
@@ -353,7 +355,7 @@ def extract_cycle(
         raise PreprocessError(f"extract_cycle: start must be 'right_heel_strike' or 'left_heel_strike', not {start!r}")
     cap = resample(capture, fps) if fps is not None else capture
     if contacts is None:
-        contacts = cap.contacts if cap.contacts is not None and fps is None else None
+        contacts = cap.contacts  # e.g. from force plates (resampled with the capture); else detected below
     if cap.source.get("loop") == "wrap":
         return _extract_loop_cycle(cap, start, contacts)
     if contacts is None:
