@@ -34,14 +34,12 @@ def _user_errors() -> tuple[type[Exception], ...]:
     from solver.io.opensim import OpenSimError
     from solver.io.preprocess import PreprocessError
 
-    errs: list[type[Exception]] = [ContactError, GRFFileError, C3DError, FitError, OpenSimError, PreprocessError]
-    try:
-        from solver.io.deepmimic import DeepMimicError
+    from solver.io import TrialError
+    from solver.io.bvh import BvhError
+    from solver.io.deepmimic import DeepMimicError
 
-        errs.append(DeepMimicError)
-    except ImportError:  # pragma: no cover - importer not installed
-        pass
-    return tuple(errs)
+    return (ContactError, GRFFileError, C3DError, FitError, OpenSimError, PreprocessError, TrialError, BvhError,
+            DeepMimicError)
 
 
 def _belt_speed(text: str | None) -> float | str | None:
@@ -83,21 +81,19 @@ def _load(args: argparse.Namespace):
         return load_opensim(args.osim, args.coordinates, mass=args.mass, belt_speed=belt, grf=args.grf,
                             grf_xml=args.external_loads)
     if args.coordinates or args.grf or args.external_loads:
-        raise CliError("--coordinates, --grf and --external-loads go with --osim")
-    if belt is not None:
-        raise CliError("--belt-speed applies to OpenSim treadmill trials (--osim)")
+        raise CliError("--coordinates, --grf and --external-loads go with --osim (with --input, list the files)")
     if kinds[0] == "c3d":
+        if belt is not None:
+            raise CliError("--belt-speed applies to OpenSim treadmill trials")
         _exists(args.c3d, "--c3d")
         from solver.io.c3d import load_c3d
 
         return load_c3d(args.c3d, mass=args.mass)
     for p in args.input:
         _exists(p, "--input")
-    try:
-        from solver.io import load_trial
-    except ImportError:
-        raise CliError("--input needs solver.io.load_trial, which this installation lacks") from None
-    return load_trial(list(args.input), mass=args.mass)
+    from solver.io import load_trial
+
+    return load_trial(list(args.input), mass=args.mass, belt_speed=belt)
 
 
 def cmd_grf(args: argparse.Namespace) -> int:
@@ -114,7 +110,10 @@ def cmd_grf(args: argparse.Namespace) -> int:
         tr = estimate_capture(cap, cutoff_hz=args.cutoff or None, contacts=args.contacts, method=args.method,
                               cyclic=True if args.cyclic else None)
     except errors as e:
-        raise CliError(str(e)) from None
+        msg = str(e)
+        if ("double support" in msg or "never" in msg) and args.belt_speed is None and not args.c3d:
+            msg += " (on a treadmill the stance foot moves with the belt: pass --belt-speed auto or the speed)"
+        raise CliError(msg) from None
     t2 = time.perf_counter()
     est = tr.estimate
     gr = to_input_frame(from_estimate(est, tr.times), cap.frame)

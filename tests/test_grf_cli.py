@@ -1,0 +1,146 @@
+"""``motionx grf`` / ``motionx grf-compare``: the CSV contract, units of the input, errors."""
+
+import csv
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+COLUMNS = ["time", "side", "fx", "fy", "fz", "cop_x", "cop_y", "cop_z", "tz"]
+
+
+def motionx(*args: str) -> subprocess.CompletedProcess:
+    exe = shutil.which("motionx") or str(Path(sys.executable).with_name("motionx"))
+    return subprocess.run([exe, *map(str, args)], capture_output=True, text=True, timeout=300)
+
+
+def read_rows(path: Path) -> tuple[list[str], list[dict]]:
+    with open(path, newline="") as f:
+        r = csv.reader(f)
+        header = next(r)
+        return header, [dict(zip(header, row)) for row in r]
+
+
+def per_foot(rows: list[dict], col: str) -> dict[str, np.ndarray]:
+    return {s: np.array([float(r[col]) for r in rows if r["side"] == s]) for s in ("right", "left")}
+
+
+def check_contract(path: Path) -> list[dict]:
+    header, rows = read_rows(path)
+    assert header == COLUMNS
+    times = [r["time"] for r in rows]
+    assert len(rows) == 2 * len(set(times))  # both feet at every frame, right then left
+    assert [r["side"] for r in rows[:4]] == ["right", "left", "right", "left"]
+    for r in rows:
+        assert all(np.isfinite(float(r[c])) for c in ("time", "fx", "fy", "fz", "tz"))
+    return rows
+
+
+@pytest.fixture(scope="module")
+def treadmill(shared_data):
+    return shared_data / "opensim_gait2354_subject01_treadmill"
+
+
+def test_treadmill_estimate_is_written_in_opensim_axes_and_compares_with_the_plates(tmp_path, treadmill):
+    out = tmp_path / "est.csv"
+    r = motionx("grf", "--osim", treadmill / "subject01.osim", "--coordinates", treadmill / "subject01_walk1_ik.mot",
+                "--belt-speed", "auto", "--grf", treadmill / "subject01_walk1_grf.mot",
+                "--external-loads", treadmill / "subject01_walk1_grf.xml", "--out", out)
+    assert r.returncode == 0, r.stderr
+    info = json.loads(r.stdout)
+    assert info["contacts_from"] == "plates" and info["rows"] == 2 * 209
+    rows = check_contract(out)
+    t = np.array(sorted({float(r["time"]) for r in rows}))
+    assert t[0] == pytest.approx(0.5 + 1 / 60, abs=1e-4) and t[-1] == pytest.approx(4.0 - 1 / 60, abs=1e-4)
+    # OpenSim ground: Y is up. Total vertical force ~ body weight on average (72.6 kg).
+    fy = per_foot(rows, "fy")
+    assert np.mean(fy["right"] + fy["left"]) == pytest.approx(72.6 * 9.81, rel=0.05)
+    # CoPs on the treadmill's surface (floor y = -0.0075 m from the plates), in the treadmill's frame:
+    # they stay on the belt (x within ~1 m) instead of travelling 4 m with the overground-equivalent body
+    for side in ("right", "left"):
+        loaded = [r for r in rows if r["side"] == side and float(r["fy"]) > 100]
+        assert np.allclose([float(r["cop_y"]) for r in loaded], -0.0075, atol=1e-9)
+        x = np.array([float(r["cop_x"]) for r in loaded])
+        assert np.ptp(x) < 1.0
+    # right foot on the right: OpenSim Z points to the subject's right
+    assert np.nanmedian(per_foot(rows, "cop_z")["right"]) > np.nanmedian(per_foot(rows, "cop_z")["left"])
+
+    png, js = tmp_path / "cmp.png", tmp_path / "cmp.json"
+    r = motionx("grf-compare", "--estimate", out, "--grf", treadmill / "subject01_walk1_grf.mot",
+                "--external-loads", treadmill / "subject01_walk1_grf.xml", "--plot", png, "--json", js)
+    assert r.returncode == 0, r.stderr
+    assert "rel. RMS" in r.stdout and "double support" in r.stdout
+    for comp in ("fx", "fy", "fz", "tz", "cop"):
+        assert f"\n{comp} " in r.stdout
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    metrics = json.loads(js.read_text())
+    assert metrics["all"]["n_frames"] == 209
+    assert metrics["all"]["rows"]["fz"]["rel_rms"] < 0.125  # tests/test_contact.py ACCURACY
+
+
+def test_c3d_estimate_is_in_the_lab_frame_in_millimetres(tmp_path, shared_data):
+    c3d = shared_data / "btk_pig_flatfoot_full" / "PiG_Motion-FlatFoot-Full.c3d"
+    out = tmp_path / "est.csv"
+    r = motionx("grf", "--c3d", c3d, "--out", out)
+    assert r.returncode == 0, r.stderr
+    info = json.loads(r.stdout)
+    assert info["length_unit_m"] == 0.001
+    rows = check_contract(out)
+    # lab Z up: vertical force in fz; CoP on the floor (z = 0 mm) and in millimetres: the walk crosses
+    # the lab over metres, i.e. thousands of units
+    fz = per_foot(rows, "fz")
+    assert np.mean(fz["right"] + fz["left"]) == pytest.approx(47.5 * 9.81, rel=0.1)
+    cz = np.concatenate(list(per_foot(rows, "cop_z").values()))
+    assert np.allclose(cz[np.isfinite(cz)], 0.0, atol=1e-6)
+    cx = np.concatenate(list(per_foot(rows, "cop_x").values()))
+    assert np.nanmax(cx) - np.nanmin(cx) > 2000
+    r = motionx("grf-compare", "--estimate", out, "--c3d", c3d)
+    assert r.returncode == 0, r.stderr
+    cop_rms = float(next(line for line in r.stdout.splitlines() if line.startswith("cop ")).split()[2])
+    assert cop_rms < 6.8  # cm, tests/test_contact.py ACCURACY
+
+
+@pytest.mark.parametrize("args, message", [
+    (["grf", "--osim", "{T}/subject01.osim", "--out", "x.csv"], "--coordinates"),
+    (["grf", "--c3d", "/no/such.c3d", "--out", "x.csv"], "file not found"),
+    (["grf", "--osim", "{T}/subject01.osim", "--coordinates", "{T}/subject01_walk1_ik.mot",
+      "--c3d", "x.c3d", "--out", "x.csv"], "exactly one input"),
+    (["grf", "--osim", "{T}/subject01.osim", "--coordinates", "{T}/subject01_walk1_ik.mot",
+      "--belt-speed", "fast", "--out", "x.csv"], "--belt-speed"),
+    (["grf-compare", "--estimate", "{T}/subject01_walk1_grf.mot"], "--grf GRF.mot"),
+    (["grf-compare", "--estimate", "{T}/subject01_walk1_grf.mot", "--grf", "{T}/subject01_walk1_grf.mot"],
+     "missing columns"),
+])
+def test_bad_arguments_give_one_line_and_a_nonzero_status(tmp_path, treadmill, args, message):
+    r = motionx(*[a.replace("{T}", str(treadmill)) for a in args])
+    assert r.returncode != 0
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and message in lines[0], r.stderr
+
+
+def test_bad_motion_data_is_refused_clearly(tmp_path, treadmill):
+    """A NaN coordinate, a motion of another model, a treadmill walk without the belt speed."""
+    src = (treadmill / "subject01_walk1_ik.mot").read_text().split("\n")
+    i = src.index("endheader")
+    col = src[i + 1].split("\t").index("knee_angle_r")
+    row = src[i + 20].split("\t")
+    row[col] = "nan"
+    src[i + 20] = "\t".join(row)
+    bad = tmp_path / "nan.mot"
+    bad.write_text("\n".join(src))
+    model = treadmill / "subject01.osim"
+    r = motionx("grf", "--osim", model, "--coordinates", bad, "--belt-speed", "auto", "--out", tmp_path / "x.csv")
+    assert r.returncode != 0 and "knee_angle_r" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    other = treadmill.parent / "opensim_loadedwalking_subject05" / \
+        "loadedwalking_subject05_noload_free_trial03_ik_solution.mot"
+    r = motionx("grf", "--osim", model, "--coordinates", other, "--out", tmp_path / "x.csv")
+    assert r.returncode != 0 and "mismatch" in r.stderr
+    # on a treadmill the stance foot slides with the belt: no kinematic contact, no double support
+    r = motionx("grf", "--osim", model, "--coordinates", treadmill / "subject01_walk1_ik.mot", "--out",
+                tmp_path / "x.csv")
+    assert r.returncode != 0 and "double support" in r.stderr and "--belt-speed" in r.stderr
+    assert not (tmp_path / "x.csv").exists()
