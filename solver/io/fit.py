@@ -377,6 +377,9 @@ def fit_track(
             tip[s] = _median_local(F[s], origin[s], lm[tname], f"{tname} on {s}")
     if not full_geometry:  # lower-body data: Winter's HAT ellipsoid above the hips
         tip["pelvis"] = np.array([0.0, 0.0, 2 * 0.18 * height])
+    elif np.linalg.norm(tip["pelvis"]) < 0.02:  # lumbar landmark on the hips: capture_full's pelvis
+        log.info("fit_track: lumbar landmark within 2 cm of the mid-hips; pelvis length 0.10 H")
+        tip["pelvis"] = np.array([0.0, 0.0, 0.10 * height])
     # landmark -> (segment, point in segment coordinates): what IK matches
     attach: dict[str, tuple[str, np.ndarray]] = {}
     for s in segs:
@@ -385,7 +388,7 @@ def fit_track(
             attach.setdefault(o_name, (s, np.zeros(3)))
     for s in segs:
         t_name = SEGMENT_LANDMARKS[s][1]
-        if t_name is not None and not t_name.startswith("@") and t_name in lm and (s != "pelvis" or full_geometry):
+        if t_name is not None and not t_name.startswith("@") and t_name in lm and s != "pelvis":
             attach.setdefault(t_name, (s, tip[s]))
     for n, seg in EXTRA_LANDMARKS.items():
         if n in lm and seg in F:
@@ -445,6 +448,8 @@ def fit_track(
     t_ik = time.perf_counter()
     kept = {x.name for x in ch.segments}
     attach = {n: a for n, a in attach.items() if a[0] in kept}
+    if "abdomen" in offset and "abdomen" not in kept:  # the lumbar joint is a point of the pelvis
+        attach["lumbar"] = ("pelvis", offset["abdomen"])
     q, ik_report = _solve_ik(ch, times, lm, F, origin, ori, attach, orientation_weight)
     t_done = time.perf_counter()
     ch, widened = _widen_limits(ch, q)
