@@ -452,26 +452,36 @@ def _solve_qp(P: np.ndarray, qv: np.ndarray, G: np.ndarray, h: np.ndarray) -> np
         return None
 
 
+def _bounds(batch: _QPBatch, i: int) -> tuple[np.ndarray, np.ndarray]:
+    """0 ≤ y_fz ≤ c_fz as rows (G, h) — kept hard when relaxing (nothing when c_fz ≤ 0: no split exists)."""
+    if batch.c[i, 5] <= 0.0:
+        return np.zeros((0, 6)), np.zeros(0)
+    G = np.zeros((2, 6))
+    G[0, 5], G[1, 5] = -1.0, 1.0
+    return G, np.array([0.0, batch.c[i, 5]])
+
+
 def _relaxation(batch: _QPBatch, i: int) -> np.ndarray | None:
-    """Smallest least-squares relaxation s (N·m-weighted) of the rows making frame i feasible."""
+    """Smallest least-squares relaxation s (rows weighted to N·m) of the polygon and friction rows
+    making frame i feasible, the vertical-force bounds kept."""
     import quadprog
 
     G, h, w = batch.G[i], batch.h[i], batch.row_weight[i]
+    Gb, hb = _bounds(batch, i)
     m = G.shape[0]
-    # variables (y, s): min ‖w∘s‖² + δ (yᵀPy + 2qᵀy)  s.t.  G y − s ≤ h
+    # variables (y, s): min ‖w∘s‖² + δ (yᵀPy + 2qᵀy)  s.t.  G y − s ≤ h,  Gb y ≤ hb
     P = batch.P[i]
     delta = 1e-8 / max(np.trace(P), 1e-300)
     big = np.zeros((6 + m, 6 + m))
     big[:6, :6] = delta * P
     big[6:, 6:] = np.diag(w**2)
     qq = np.concatenate([delta * batch.q[i], np.zeros(m)])
-    A = np.hstack([G, -np.eye(m)])
+    A = np.vstack([np.hstack([G, -np.eye(m)]), np.hstack([Gb, np.zeros((len(hb), m))])])
     try:
-        sol = quadprog.solve_qp(2.0 * big, -2.0 * qq, -A.T, -h, 0)[0]
+        sol = quadprog.solve_qp(2.0 * big, -2.0 * qq, -A.T, -np.concatenate([h, hb]), 0)[0]
     except ValueError:
         return None
-    s = np.maximum(G @ sol[:6] - h, 0.0)
-    return s
+    return np.maximum(G @ sol[:6] - h, 0.0)
 
 
 def _nested(P: np.ndarray, qv: np.ndarray, G: np.ndarray, h: np.ndarray, scale: float) -> np.ndarray | None:
@@ -540,11 +550,13 @@ def _solve_batch(batch: _QPBatch, method: str) -> tuple[np.ndarray, np.ndarray]:
             if s is None:
                 log.warning("contact QP: relaxation failed at double-support frame %d", i)
                 continue
-            h_rel = batch.h[i] + s + 1e-7 * scale[i]
+            Gb, hb = _bounds(batch, i)
+            G_rel = np.vstack([batch.G[i], Gb])
+            h_rel = np.concatenate([batch.h[i] + s + 1e-7 * scale[i], hb])
             if method == "qp":
-                sol = _solve_qp(batch.P[i], batch.q[i], batch.G[i], h_rel)
+                sol = _solve_qp(batch.P[i], batch.q[i], G_rel, h_rel)
             else:
-                sol = _nested(batch.P[i], batch.q[i], batch.G[i], h_rel, scale[i])
+                sol = _nested(batch.P[i], batch.q[i], G_rel, h_rel, scale[i])
             st = Status.RELAXED
             if sol is None:
                 log.warning("contact QP: relaxed problem failed at double-support frame %d", i)

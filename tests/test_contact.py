@@ -238,6 +238,8 @@ def test_infeasible_frames_are_relaxed_and_reported(ch):
     assert np.all(np.isfinite(est.wrenches[:, :, rel]))
     assert np.allclose(est.wrenches[0][:, rel] + est.wrenches[1][:, rel], est.total[:, rel], atol=1e-9)
     assert np.all(np.max(est.cop_violation[:, rel], axis=0) > 1e-3)  # reported, in metres
+    up = rel & (est.total[5] > 0)  # the vertical-force bounds are never relaxed
+    assert np.all(est.wrenches[0][5, up] >= -1e-6) and np.all(est.wrenches[0][5, up] <= est.total[5, up] + 1e-6)
     assert est.summary()["status_relaxed"] == rel.sum()
 
 
@@ -338,6 +340,8 @@ def test_real_trials_satisfy_the_estimation_equations(trials):
         assert np.all(np.isin(est.status[ds], (Status.OPTIMAL, Status.RELAXED))), name
         rel = est.status == Status.RELAXED  # c's CoP outside both feet: reported, never hidden
         assert np.all(np.max(est.cop_violation[:, rel], axis=0) > 0), name
+        fz = est.wrenches[:, 5][:, ds]
+        assert np.all(fz >= -1e-6), name  # 0 ≤ x_fz ≤ c_fz on every double-support frame
 
 
 def test_qp_and_nested_agree_on_every_double_support_frame_of_the_shared_trials(trials):
