@@ -376,3 +376,40 @@ def test_accuracy_against_force_plates(trials, name):
         row = table.row(comp.removeprefix("ds_"))
         value = row.rms if row.component == "cop" else row.rel_rms
         assert value < limit, (name, comp, value)
+
+
+def test_effort_over_the_synthesis_coordinates_is_the_reduced_characters_effort():
+    """Counting only HalfBoy's coordinates on the capture skeleton = estimating on HalfBoy (locked at 0)."""
+    full, half = C.capture_lower(H_SUBJ, M_SUBJ), C.halfboy(H_SUBJ, M_SUBJ)
+    q_full, fps = _swaying_motion(full, T=41)
+    keep = [full.index(c) for c in half.coordinate_names]
+    q_full[[i for i in range(full.n) if i not in keep]] = 0.0  # superfluous coordinates locked at 0
+    fc = np.ones((2, 41), bool)
+    a = estimate_contact_wrenches(full, q_full, fps, fc, effort_coordinates=half.coordinate_names)
+    b = estimate_contact_wrenches(half, q_full[keep], fps, fc)
+    ok = a.defined
+    assert np.allclose(a.total[:, ok], b.total[:, ok], atol=1e-8)
+    assert np.allclose(a.wrenches[:, :, ok], b.wrenches[:, :, ok], atol=1e-6)
+    c = estimate_contact_wrenches(full, q_full, fps, fc)  # every coordinate counts: another split
+    assert np.max(np.abs(c.wrenches[:, :, ok] - a.wrenches[:, :, ok])) > 1.0
+    with pytest.raises(ContactError, match="unknown coordinates"):
+        estimate_contact_wrenches(full, q_full, fps, fc, effort_coordinates=["elbow"])
+
+
+def test_ground_reactions_round_trip_through_a_treadmill_frame():
+    from solver.capture import GroundFrame
+    from solver.grf_compare import GroundReactions, from_input_frame, to_input_frame
+
+    rng = np.random.default_rng(2)
+    T = 7
+    gr = GroundReactions(np.arange(T) / 60, rng.normal(size=(2, 3, T)), rng.normal(size=(2, 3, T)),
+                         rng.normal(size=(2, T)))
+    frame = GroundFrame(R=np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]]), offset=[0, -0.0075, 0], unit_m=0.001,
+                        velocity=[1.1, 0, 0])
+    out = to_input_frame(gr, frame)
+    # OpenSim-like axes: our z (up) is the input's y; a CoP at rest on the belt moves back with it
+    assert np.allclose(out.force[:, 1], gr.force[:, 2])
+    assert np.allclose(out.cop[:, 0], (gr.cop[:, 0] - 1.1 * gr.times) / 0.001)
+    back = from_input_frame(out, frame)
+    assert np.allclose(back.force, gr.force) and np.allclose(back.cop, gr.cop)
+    assert np.array_equal(back.free_moment, gr.free_moment)
