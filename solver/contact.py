@@ -388,7 +388,9 @@ def _qp_batch(
         Dm[:, 3, 3] = Dm[:, 4, 4] = Dm[:, 5, 5] = half[0]
         D.append(Dm)
     M = np.einsum("nki,nkj->nij", D[0], D[0]) + np.einsum("nki,nkj->nij", D[1], D[1])
-    eps = regularization * np.trace(H, axis1=1, axis2=2) / np.trace(M, axis1=1, axis2=2)
+    tr_h = np.trace(H, axis1=1, axis2=2)
+    # no joint between the feet and the root (tr H = 0): the tie-breaker alone decides
+    eps = regularization * np.where(tr_h > 0, tr_h, 1.0) / np.trace(M, axis1=1, axis2=2)
     ML = np.einsum("nki,nkj->nij", D[1], D[1])
     P = H + eps[:, None, None] * M
     qv = g - eps[:, None] * np.einsum("nij,nj->ni", ML, cr)
