@@ -138,11 +138,14 @@ def _run(db: Database, job_id: str, attempt: int, token: str, settings: Settings
 
     t0 = time.monotonic()
     deadline = t0 + settings.job_time_limit_s
-    seq = {"n": 0}
+    seq = {"n": 0, "solves": 0}
 
     def record(phase: str, **kw: Any) -> None:
+        if phase == "extrapolate":
+            seq["solves"] += 1
         with db.write() as s:
-            store.append_progress(s, job_id=job_id, attempt=attempt, seq=seq["n"], phase=phase, **kw)
+            store.append_progress(s, job_id=job_id, attempt=attempt, seq=seq["n"], phase=phase,
+                                  solves=seq["solves"], **kw)
         seq["n"] += 1
 
     if kind == "capture":
@@ -159,7 +162,7 @@ def _run(db: Database, job_id: str, attempt: int, token: str, settings: Settings
 
             res = make_tutor(motion, character=character, fps=fps)
             record("tutor", wall_time=time.monotonic() - t0, lam=0.0, lam_reached=0.0, environment={},
-                   iterations=int((res.stats or {}).get("iterations", 0)), accepted=res.status == "succeeded",
+                   iterations=_tutor_iterations(res.stats), accepted=res.status == "succeeded",
                    status=f"tutor {res.status}")
             if res.status != "succeeded" or res.motion is None:
                 return "failed", f"tutor: {res.message or res.status}", {}
@@ -197,6 +200,15 @@ def _run(db: Database, job_id: str, attempt: int, token: str, settings: Settings
     if status not in ("succeeded", "impasse", "canceled", "failed"):
         status, message = "failed", f"unexpected extrapolation status {result.status!r}: {result.message}"
     return status, message, dict(lam_reached=result.lam_reached, steps=len(result.steps), solves=result.solves)
+
+
+def _tutor_iterations(stats: Any) -> int:
+    """Solver iterations of the tutor pipeline (simplification + correction attempts)."""
+    stats = stats or {}
+    n = (stats.get("simplify") or {}).get("iterations") or 0
+    for a in (stats.get("correct") or {}).get("attempts") or []:
+        n += a.get("iterations") or 0
+    return int(n)
 
 
 def validation_report(motion) -> dict | None:

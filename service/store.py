@@ -383,6 +383,7 @@ def append_progress(
     iterations: int,
     accepted: bool,
     status: str,
+    solves: int | None = None,
 ) -> None:
     stmt = insert_for(session, ProgressRow).values(
         job_id=job_id, attempt=attempt, seq=seq, phase=phase, wall_time=float(wall_time), lam=float(lam),
@@ -392,8 +393,7 @@ def append_progress(
     session.execute(stmt)
     session.execute(
         update(JobRow).where(JobRow.id == job_id, JobRow.attempts == attempt)
-        .values(lam_reached=float(lam_reached), solves=seq + 1 if phase == "extrapolate" else JobRow.solves,
-                updated_at=now())
+        .values(lam_reached=float(lam_reached), solves=JobRow.solves if solves is None else solves, updated_at=now())
     )
 
 

@@ -120,3 +120,15 @@ def api(tmp_path_factory):
     yield a
     a.close()
     a.proc.stop()
+
+
+@pytest.fixture(scope="session")
+def tutor_motion_json(shared_data) -> str:
+    from svc_util import tutor_json
+
+    return tutor_json(shared_data)
+
+
+def repeat_count(default: int) -> int:
+    """MOTIONX_RELIABILITY_REPEAT: repetitions of each crash/restart loop (20+ to trust it)."""
+    return max(1, int(os.environ.get("MOTIONX_RELIABILITY_REPEAT", default)))

@@ -19,3 +19,64 @@ def halfboy_motion(T: int = 12, *, capture: bool = True, seed: int = 0):
     q = 0.05 * rng.standard_normal((ch.n, T))
     return Motion(character=ch, fps=15.0, q=q, reference_name="halfboy",
                   provenance={"step": "capture"} if capture else {})
+
+
+TERMINAL = ("succeeded", "failed", "canceled", "impasse")
+
+#: a cheap but real job (~1 s): 3 λ steps from the DeepMimic tutor
+CHEAP = {"target": {"friction": 0.7}, "control": {"delta0": 0.5}}
+#: a longer one (~3-4 s, 12 λ steps), so a process can be killed in the middle of it
+KILLABLE = {"target": {"slope_deg": 6.0, "friction": 0.6},
+            "control": {"method": "adaptive", "delta0": 0.01, "eps": 0.001}}
+
+
+def wait_job(client, job_id: str, *, timeout: float, until=None, interval: float = 0.05) -> dict:
+    """Poll GET /jobs/{id} until ``until(job)`` (default: a terminal status); fails at the deadline."""
+    import time
+
+    until = until or (lambda j: j["status"] in TERMINAL)
+    deadline = time.monotonic() + timeout
+    while True:
+        r = client.get(f"/jobs/{job_id}")
+        assert r.status_code == 200, r.text
+        job = r.json()
+        if until(job):
+            return job
+        if time.monotonic() > deadline:
+            raise AssertionError(f"job {job_id} not done after {timeout:g} s: {job['status']} {job['message']!r} "
+                                 f"attempts={job['attempts']} steps={job['steps']}")
+        time.sleep(interval)
+
+
+def job_motions(client, job_id: str, page: int = 5) -> list[dict]:
+    """Every λ optimum of a job (all pages) as motion files, with step and λ."""
+    out, url = [], f"/jobs/{job_id}/motions?limit={page}"
+    while url:
+        body = client.get(url).json()
+        for m in body["items"]:
+            f = client.get(m["links"]["motion_file"]).json()
+            out.append({"step": m["step"], "lam": m["lam"], "id": m["id"], "frames": f["frames"],
+                        "wrenches": f.get("wrenches", {}).get("feet"), "contacts": f.get("contacts", {}).get("active")})
+        url = body["next"]
+    return out
+
+
+def same_motions(a: list[dict], b: list[dict]) -> bool:
+    key = ("step", "lam", "frames", "wrenches", "contacts")
+    return [tuple(m[k] for k in key) for m in a] == [tuple(m[k] for k in key) for m in b]
+
+
+def deepmimic_files(shared_data):
+    d = shared_data / "deepmimic_humanoid3d_walk"
+    return [("files", (p.name, p.read_bytes())) for p in (d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt")]
+
+
+def tutor_json(shared_data) -> str:
+    """The tutor of the DeepMimic walk, made by the pipeline (solver.pipeline.make_tutor)."""
+    from solver.io import load_trial
+    from solver.pipeline import capture_motion, make_tutor
+
+    d = shared_data / "deepmimic_humanoid3d_walk"
+    res = make_tutor(capture_motion(load_trial([d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt"])))
+    assert res.status == "succeeded", res.message
+    return res.motion.to_json()

@@ -1,0 +1,248 @@
+"""End to end with real components: Redis (our own, AOF), Celery worker processes,
+PostgreSQL (our own database), the API under uvicorn — all over loopback HTTP.
+
+Proven here:
+- a job submitted over HTTP runs on a Celery worker and its motions come back over HTTP,
+  identical to the local runner's (same tutor, same λ optima, bit for bit);
+- kill a worker's pool process mid-job, and separately the whole worker: the job still
+  finishes, exactly once in effect (attempts = 2, one set of motions, no duplicate step,
+  identical to an uninterrupted run);
+- restart Redis (gracefully, and as a crash) with jobs queued: none lost;
+- cancel, Server-Sent Events.
+
+Each crash/restart loop runs MOTIONX_RELIABILITY_REPEAT times (default 2; e.g.
+``MOTIONX_RELIABILITY_REPEAT=20 python -m pytest tests/service -k reliability``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import secrets
+import signal
+import time
+
+import httpx
+import pytest
+from conftest import repeat_count
+from svc_util import CHEAP, KILLABLE, deepmimic_files, job_motions, same_motions, wait_job
+
+from service.db import get_database
+from service.models import JobRow, MotionRow
+from service.topology import Stack, create_postgres_database, drop_postgres_database, wait_worker_ready
+
+REPEAT = repeat_count(2)
+# Short timeouts so a killed worker's job comes back within seconds (the production defaults
+# are 1 h / 2 h): the job time limit stays well above the test jobs (1-4 s).
+STACK_ENV = {
+    "MOTIONX_JOB_LEASE_S": "3",
+    "MOTIONX_JOB_TIME_LIMIT_S": "12",
+    "MOTIONX_VISIBILITY_TIMEOUT_S": "18",
+    "MOTIONX_UNACKED_RESTORE_INTERVAL_S": "1",
+    "MOTIONX_UNACKED_RESTORE_THROTTLE": "1",
+    "MOTIONX_SWEEP_INTERVAL_S": "3600",  # no re-dispatch by the API: Redis alone must keep the jobs
+    "MOTIONX_VALIDATE_STEPS": "true",
+}
+
+
+@pytest.fixture(scope="module")
+def stack(tmp_path_factory, pg_admin, redis_binary):
+    name = f"motionx_celery_test_{secrets.token_hex(4)}"
+    url = create_postgres_database(pg_admin, name, exist_ok=False)
+    st = Stack(data_dir=tmp_path_factory.mktemp("stack"), workers=2, database_url=url, extra_env=STACK_ENV)
+    try:
+        st.start()
+        yield st
+    finally:
+        st.stop()
+        for (pid, u), db in list(__import__("service.db", fromlist=["_ENGINES"])._ENGINES.items()):
+            if u == url:
+                db.dispose()
+        drop_postgres_database(pg_admin, name)
+
+
+@pytest.fixture(scope="module")
+def client(stack):
+    with httpx.Client(base_url=stack.base_url, headers={"X-API-Key": stack.api_keys}, timeout=30) as c:
+        yield c
+
+
+@pytest.fixture(scope="module")
+def tutor_id(client, tutor_motion_json) -> str:
+    r = client.post("/motions", content=tutor_motion_json, headers={"content-type": "application/json"})
+    assert r.status_code == 201 and r.json()["kind"] == "motion"
+    return r.json()["id"]
+
+
+@pytest.fixture(scope="module")
+def killable_reference(client, tutor_id) -> list[dict]:
+    """The λ optima of an uninterrupted KILLABLE job: what every interrupted run must equal."""
+    job = client.post(f"/motions/{tutor_id}/extrapolate", json=KILLABLE).json()
+    done = wait_job(client, job["id"], timeout=120)
+    assert done["status"] == "succeeded" and done["attempts"] == 1, done
+    ref = job_motions(client, job["id"])
+    assert len(ref) == done["steps"] >= 8
+    return ref
+
+
+def _job_row(stack, job_id) -> JobRow:
+    with get_database(stack.database_url).read() as s:
+        return s.get(JobRow, job_id)
+
+
+def _assert_exactly_once(stack, client, job_id, reference) -> dict:
+    job = client.get(f"/jobs/{job_id}").json()
+    assert job["status"] == "succeeded", job
+    got = job_motions(client, job_id)
+    assert [m["step"] for m in got] == list(range(len(got)))  # no duplicate, no gap
+    assert same_motions(got, reference)
+    with get_database(stack.database_url).read() as s:  # and in SQL itself: one row per (job, step)
+        rows = s.query(MotionRow).filter(MotionRow.job_id == job_id).all()
+    assert sorted(r.step for r in rows) == list(range(len(reference)))
+    return job
+
+
+def _running_with_steps(n):
+    return lambda j: j["status"] in ("succeeded", "failed", "canceled", "impasse") or (
+        j["status"] == "running" and j["steps"] >= n)
+
+
+# --- e2e ------------------------------------------------------------------------------------
+
+
+def test_celery_job_over_http_matches_local_runner(stack, client, api, shared_data):
+    """Raw capture -> tutor -> extrapolation on a Celery worker; the same request on the
+    embedded local runner (SQLite) gives the same tutor and the same λ optima, exactly."""
+    results = {}
+    for name, c in (("celery", client), ("local", api.a)):
+        up = c.post("/motions", files=deepmimic_files(shared_data))
+        assert up.status_code == 201 and up.json()["kind"] == "capture"
+        r = c.post(f"/motions/{up.json()['id']}/extrapolate", json=CHEAP)
+        assert r.status_code == 202 and r.headers["location"] == f"/jobs/{r.json()['id']}"
+        results[name] = (r.json()["id"], c)
+    jobs = {name: wait_job(c, jid, timeout=180) for name, (jid, c) in results.items()}
+    for name, job in jobs.items():
+        assert job["status"] == "succeeded", job
+        assert job["runner"] == name and job["attempts"] == 1 and job["lam_reached"] == 1.0
+        phases = [p["phase"] for p in job["progress"]]
+        assert phases[0] == "tutor" and phases.count("extrapolate") == job["solves"] >= 2
+        assert job["progress"][-1]["lam_reached"] == 1.0
+        assert job["tutor_motion_id"] and job["links"]["tutor"] == f"/motions/{job['tutor_motion_id']}"
+    tutors = [c.get(f"/motions/{jobs[n]['tutor_motion_id']}", params={"format": "motion"}).json()
+              for n, (_, c) in results.items()]
+    assert tutors[0]["frames"] == tutors[1]["frames"] and tutors[0]["wrenches"] == tutors[1]["wrenches"]
+    celery_motions = job_motions(client, jobs["celery"]["id"], page=2)  # several pages
+    local_motions = job_motions(api.a, jobs["local"]["id"])
+    assert len(celery_motions) == jobs["celery"]["steps"] >= 2
+    assert same_motions(celery_motions, local_motions)
+    last = celery_motions[-1]["id"], [m for m in local_motions][-1]["id"]
+    clips = [client.get(f"/motions/{last[0]}").content, api.a.get(f"/motions/{last[1]}").content]
+    assert clips[0] == clips[1] and json.loads(clips[0])["format"] == "motionx.clip"
+    rep = client.get(f"/motions/{last[0]}/validation").json()
+    assert rep["plausible"] is True and "mujoco_replay" in rep
+
+
+def test_events_stream_until_the_end(client, tutor_id):
+    job = client.post(f"/motions/{tutor_id}/extrapolate", json=CHEAP).json()
+    events = []
+    with client.stream("GET", f"/jobs/{job['id']}/events", timeout=60) as r:
+        assert r.headers["content-type"].startswith("text/event-stream")
+        ev = None
+        for line in r.iter_lines():
+            if line.startswith("event: "):
+                ev = line[7:]
+            elif line.startswith("data: "):
+                events.append((ev, json.loads(line[6:])))
+                if ev == "end":
+                    break
+    kinds = [e for e, _ in events]
+    assert kinds[-1] == "end" and events[-1][1]["status"] == "succeeded"
+    final = client.get(f"/jobs/{job['id']}").json()
+    assert kinds.count("motion") == final["steps"] and kinds.count("progress") == final["solves"]
+    assert [d["step"] for e, d in events if e == "motion"] == list(range(final["steps"]))
+
+
+def test_cancel_running_job(stack, client, tutor_id):
+    job = client.post(f"/motions/{tutor_id}/extrapolate", json=KILLABLE).json()
+    wait_job(client, job["id"], timeout=60, until=_running_with_steps(2))
+    r = client.post(f"/jobs/{job['id']}/cancel")
+    assert r.status_code == 202
+    done = wait_job(client, job["id"], timeout=60)
+    assert done["status"] == "canceled" and done["lam_reached"] < 1.0
+    assert len(job_motions(client, job["id"])) == done["steps"] >= 2
+    assert client.post(f"/jobs/{job['id']}/cancel").status_code == 409
+
+
+# --- crashes --------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("i", range(REPEAT))
+def test_reliability_kill_pool_process_mid_job(stack, client, tutor_id, killable_reference, i):
+    """SIGKILL the pool process running the job: Celery requeues it (acks_late +
+    reject_on_worker_lost); a new attempt takes over and the job ends exactly once."""
+    job = client.post(f"/motions/{tutor_id}/extrapolate", json=KILLABLE).json()
+    j = wait_job(client, job["id"], timeout=60, until=_running_with_steps(2))
+    assert j["status"] == "running", "the job must still be running when its process is killed"
+    pid = int(_job_row(stack, job["id"]).lease_owner.split(":")[1])
+    assert pid not in {w.pid for w in stack.worker_procs}  # a pool child, not the worker itself
+    os.kill(pid, signal.SIGKILL)
+    done = wait_job(client, job["id"], timeout=90)
+    assert done["attempts"] == 2, done
+    _assert_exactly_once(stack, client, job["id"], killable_reference)
+
+
+@pytest.mark.parametrize("i", range(REPEAT))
+def test_reliability_kill_whole_worker_mid_job(stack, client, tutor_id, killable_reference, i):
+    """SIGKILL the whole worker (main process and pool): the unacknowledged job waits in
+    Redis until the visibility timeout, then another worker runs it; exactly once."""
+    job = client.post(f"/motions/{tutor_id}/extrapolate", json=KILLABLE).json()
+    j = wait_job(client, job["id"], timeout=60, until=_running_with_steps(2))
+    assert j["status"] == "running"
+    pid = int(_job_row(stack, job["id"]).lease_owner.split(":")[1])
+    victim = next(w for w in stack.worker_procs if w.alive() and os.getpgid(pid) == w.pid)
+    victim.kill()
+    stack.worker_procs.remove(victim)
+    t0 = time.monotonic()
+    wait_worker_ready(stack.add_worker(), timeout=60)  # keep two workers for what follows
+    done = wait_job(client, job["id"], timeout=int(STACK_ENV["MOTIONX_VISIBILITY_TIMEOUT_S"]) + 90)
+    assert done["attempts"] == 2, done
+    assert time.monotonic() - t0 >= 0.5 * int(STACK_ENV["MOTIONX_VISIBILITY_TIMEOUT_S"]) - 5
+    _assert_exactly_once(stack, client, job["id"], killable_reference)
+
+
+@pytest.mark.parametrize("i", range(REPEAT))
+def test_reliability_redis_restart_with_jobs_queued(stack, client, tutor_id, i):
+    """Jobs queued in Redis survive a Redis restart thanks to AOF — a graceful restart on
+    even rounds, a crash (SIGKILL after the 1 s fsync window) on odd ones."""
+    for w in stack.worker_procs:  # nobody consumes: the jobs stay queued in Redis
+        w.stop()
+    stack.worker_procs.clear()
+    n = 4
+    ids = [client.post(f"/motions/{tutor_id}/extrapolate", json=CHEAP).json()["id"] for _ in range(n)]
+    with stack.redis.client() as r:
+        assert r.llen("motionx") == n
+    if i % 2:
+        time.sleep(1.5)  # appendfsync everysec
+    stack.redis.restart(crash=bool(i % 2))
+    with stack.redis.client() as r:
+        assert r.llen("motionx") == n, "queued jobs lost in the Redis restart"
+    for _ in range(2):
+        stack.add_worker()
+    for jid in ids:
+        done = wait_job(client, jid, timeout=120)
+        assert done["status"] == "succeeded" and done["attempts"] == 1, done
+    for w in stack.worker_procs:
+        wait_worker_ready(w, timeout=60)
+
+
+def test_reliability_redis_restart_during_a_running_job(stack, client, tutor_id, killable_reference):
+    """Redis goes away while a worker runs a job: the worker reconnects, the job finishes
+    once (a redelivery, if any, finds it done)."""
+    job = client.post(f"/motions/{tutor_id}/extrapolate", json=KILLABLE).json()
+    wait_job(client, job["id"], timeout=60, until=_running_with_steps(2))
+    stack.redis.restart()
+    wait_job(client, job["id"], timeout=90)
+    _assert_exactly_once(stack, client, job["id"], killable_reference)
+    # the queue still works afterwards
+    again = client.post(f"/motions/{tutor_id}/extrapolate", json=CHEAP).json()
+    assert wait_job(client, again["id"], timeout=90)["status"] == "succeeded"
