@@ -7,10 +7,16 @@ a test can consume it (crocoddyl's CallbackLogger / mujoco's IterLog habit).
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Mapping, Sequence
 
+import numpy as np
+
+from solver import spatial as sp
 from solver.motion import Motion
+from solver.spacetime import Environment, SolveResult, SpacetimeProblem
+from solver.transforms import curve, slope
 
 
 @dataclass(frozen=True)
@@ -108,3 +114,239 @@ class ExtrapolationResult:
 ProgressCallback = Callable[[ProgressRecord], None]
 StepCallback = Callable[[StepResult], None]
 CancelCheck = Callable[[], bool]
+
+
+# --- homotopy: the problem at λ -------------------------------------------------------------
+
+
+def environment_at(base: Environment, target: Target, lam: float) -> tuple[Environment, dict[str, float]]:
+    """Environment of the homotopy at λ: gravity magnitude and friction interpolated
+    linearly, gravity direction rotated by R_y(λ·slope) (SPEC: R_y(-λθ) with θ = -slope)."""
+    g0 = np.asarray(base.gravity, dtype=float)
+    gmag0 = float(np.linalg.norm(g0))
+    if gmag0 <= 0:
+        raise ValueError("the tutor's gravity is zero: nothing to extrapolate from")
+    gmag = gmag0 if target.gravity is None else gmag0 + lam * (target.gravity - gmag0)
+    theta = lam * math.radians(target.slope_deg)
+    g = sp.rotation_about([0.0, 1.0, 0.0], theta) @ (g0 / gmag0 * gmag)
+    mu = base.friction if target.friction is None else base.friction + lam * (target.friction - base.friction)
+    env = Environment(tuple(float(v) for v in g), float(mu))  # type: ignore[arg-type]
+    values = {"slope_deg": lam * target.slope_deg, "curve_deg": lam * target.curve_deg,
+              "friction": float(mu), "gravity": float(gmag)}
+    return env, values
+
+
+def guide_at(tutor_q: np.ndarray, target: Target, lam: float) -> np.ndarray:
+    """Guide of the homotopy at λ: Ψ(Φ(Q_tut, λ·curve), λ·slope) — bend the path, then tilt."""
+    q = curve(tutor_q, lam * math.radians(target.curve_deg)) if target.curve_deg else np.array(tutor_q)
+    return slope(q, lam * math.radians(target.slope_deg)) if target.slope_deg else q
+
+
+@dataclass
+class _State:
+    lam: float
+    res: SolveResult
+
+
+def _is_tutor(motion: Motion) -> None:
+    if motion.wrenches is None or motion.contacts is None:
+        raise ValueError("extrapolation needs a tutor: a plausible motion with contact wrenches and a contact schedule "
+                         "(run the tutor pipeline first)")
+
+
+def _motion(tutor: Motion, lam: float, target: Target, env: Environment, values: Mapping[str, float],
+            res: SolveResult, control: StepControl, step: int) -> Motion:
+    from solver.plausibility import report
+
+    prov = {
+        "step": "extrapolate",
+        "source": tutor.provenance.get("source"),
+        "frame": tutor.provenance.get("frame"),
+        "lambda": float(lam),
+        "environment": env.to_dict(),
+        "environment_values": dict(values),
+        "target": {"slope_deg": target.slope_deg, "curve_deg": target.curve_deg, "friction": target.friction,
+                   "gravity": target.gravity},
+        "continuation": {"method": control.method, "step": step},
+        "solver": {"name": "ipopt", "status": res.status, "iterations": res.iterations,
+                   "time_s": round(res.wall_time, 6), "marker_rms_to_guide_mm": 1e3 * res.marker_rms},
+    }
+    m = Motion(tutor.character, tutor.fps, res.q, contacts=tutor.contacts, wrenches=res.wrenches, provenance=prov)
+    return m.evolve(report=report(m))
+
+
+def _predict(history: list[_State], lam_try: float, secant: bool) -> tuple[np.ndarray, np.ndarray]:
+    last = history[-1].res
+    if not secant or len(history) < 2:
+        return last.q, last.wrenches
+    a, b = history[-2], history[-1]
+    s = (lam_try - b.lam) / (b.lam - a.lam)
+    return b.res.q + s * (b.res.q - a.res.q), b.res.wrenches + s * (b.res.wrenches - a.res.wrenches)
+
+
+class _Walk:
+    """One walk along the homotopy; holds the records, the accepted steps and the counters."""
+
+    def __init__(self, tutor: Motion, target: Target, control: StepControl, prob: SpacetimeProblem,
+                 on_progress: ProgressCallback | None, on_step: StepCallback | None,
+                 should_cancel: CancelCheck | None) -> None:
+        self.tutor, self.target, self.control, self.prob = tutor, target, control, prob
+        self.on_progress, self.on_step, self.should_cancel = on_progress, on_step, should_cancel
+        self.env0 = Environment.from_dict(tutor.provenance.get("environment"))
+        self.t0 = time.perf_counter()
+        self.records: list[ProgressRecord] = []
+        self.steps: list[StepResult] = []
+        self.solves = 0
+
+    def record(self, lam: float, values: Mapping[str, float], res: SolveResult | None, accepted: bool, status: str,
+               reached: float) -> None:
+        rec = ProgressRecord(time.perf_counter() - self.t0, float(lam), dict(values),
+                             -1 if res is None else res.iterations, accepted, status, float(reached))
+        self.records.append(rec)
+        if self.on_progress:
+            self.on_progress(rec)
+
+    def accept(self, lam: float, env: Environment, values: Mapping[str, float], res: SolveResult) -> bool:
+        m = _motion(self.tutor, lam, self.target, env, values, res, self.control, len(self.steps))
+        if not m.report["plausible"]:
+            return False
+        sr = StepResult(len(self.steps), float(lam), m, {"iterations": res.iterations, "solve_s": res.wall_time,
+                                                          "status": res.status, "marker_rms_mm": 1e3 * res.marker_rms})
+        self.steps.append(sr)
+        if self.on_step:
+            self.on_step(sr)
+        return True
+
+    def finish(self, status: str, lam: float, message: str = "") -> ExtrapolationResult:
+        return ExtrapolationResult(status, float(lam), tuple(self.steps), tuple(self.records), self.solves,
+                                   time.perf_counter() - self.t0, message)
+
+    def solve(self, lam: float, init: tuple[np.ndarray, np.ndarray], warm_from: SolveResult | None,
+              max_iter: int, guide: np.ndarray | None = None) -> tuple[SolveResult | None, bool, str, Environment, dict]:
+        env, values = environment_at(self.env0, self.target, lam)
+        if guide is None:
+            guide = guide_at(self.tutor.q, self.target, lam)
+        warm = warm_from is not None and warm_from.lam_x is not None
+        try:
+            res = self.prob.solve(guide, env=env, init_q=init[0], init_wrenches=init[1], max_iter=max_iter,
+                                  lam_x0=warm_from.lam_x if warm else None,
+                                  lam_g0=warm_from.lam_g if warm else None, warm=warm)
+        except RuntimeError as e:  # a numerical failure inside the solver is a status, not a crash
+            self.solves += 1
+            return None, False, f"error: {e}", env, values
+        self.solves += 1
+        ok = res.success and bool(np.all(np.isfinite(res.q)))
+        return res, ok, res.status, env, values
+
+    def base(self) -> _State | None:
+        """The base problem (λ = 0): guide = tutor, started from the tutor."""
+        tut = self.tutor
+        res, ok, status, env, values = self.solve(0.0, (tut.q, tut.wrenches), None,
+                                                  max(self.control.max_iter, 500), guide=tut.q)
+        ok = ok and self.accept(0.0, env, values, res)  # type: ignore[arg-type]
+        self.record(0.0, values, res, ok, status if res is not None or not ok else status, 0.0)
+        return _State(0.0, res) if ok else None  # type: ignore[arg-type]
+
+    def run(self, history: list[_State], lam_end: float) -> ExtrapolationResult:
+        c = self.control
+        adaptive = c.method == "adaptive"
+        lam, delta, fail_cap = history[-1].lam, c.delta0, math.inf
+        target_iter = 12
+        while lam < lam_end - 1e-12:
+            if self.should_cancel is not None and self.should_cancel():
+                return self.finish("canceled", lam, "canceled")
+            if self.solves >= c.max_solves:
+                return self.finish("impasse", lam, f"solve budget exhausted ({c.max_solves} solves)")
+            delta = min(delta, lam_end - lam)
+            lam_try = lam_end if lam_end - (lam + delta) < 1e-9 else lam + delta
+            init = _predict(history, lam_try, secant=adaptive)
+            # the thesis's baseline restarts from the previous optimum (primal only);
+            # the adaptive controller also warm-starts the multipliers
+            res, ok, status, env, values = self.solve(lam_try, init, history[-1].res if adaptive else None,
+                                                      c.max_iter)
+            if ok and self.accept(lam_try, env, values, res):  # type: ignore[arg-type]
+                self.record(lam_try, values, res, True, status, lam_try)
+                lam = lam_try
+                history = (history + [_State(lam, res)])[-3:]  # type: ignore[arg-type]
+                if adaptive:
+                    it = max(res.iterations, 1)  # type: ignore[union-attr]
+                    factor = (2.0 if it <= target_iter // 2 else 1.5 if it <= target_iter
+                              else 1.0 if it <= 2 * target_iter else 0.6)
+                    fail_cap *= 1.25  # forget old failures gradually
+                    delta = min(delta * factor, 0.9 * fail_cap)
+                else:
+                    delta *= 2.0
+            else:
+                self.record(lam_try, values, res, False, status if not ok else "implausible", lam)
+                if adaptive:
+                    fail_cap = delta
+                delta /= 2.0
+                if delta < c.eps:
+                    return self.finish("impasse", lam,
+                                       f"impasse: no step of at least ε = {c.eps} converges from λ = {lam:.4f}")
+        return self.finish("succeeded", lam)
+
+
+def extrapolate(
+    tutor: Motion,
+    target: Target,
+    control: StepControl = StepControl(),
+    *,
+    on_progress: ProgressCallback | None = None,
+    on_step: StepCallback | None = None,
+    should_cancel: CancelCheck | None = None,
+    problem: SpacetimeProblem | None = None,
+    lam_end: float = 1.0,
+    start: tuple[float, Motion] | None = None,
+) -> ExtrapolationResult:
+    """Walk the homotopy from the base problem (λ = 0, solved by the tutor) to the target.
+
+    Every accepted λ is a plausible motion (``on_step``); every solve, accepted or not, is a
+    progress record (``on_progress``). An impasse (Δ < ε) and a cancellation are results.
+    ``start=(λ0, optimum)`` continues the same homotopy from a stored optimum instead of
+    solving the base problem; ``lam_end`` stops the walk early.
+    """
+    from solver.pipeline import problem_for
+
+    _is_tutor(tutor)
+    if not 0.0 < lam_end <= 1.0:
+        raise ValueError("lam_end must be in (0, 1]")
+    prob = problem or problem_for(tutor.character, tutor.T, tutor.fps, tutor.contacts)
+    walk = _Walk(tutor, target, control, prob, on_progress, on_step, should_cancel)
+    if start is not None:
+        lam0, m0 = start
+        if not 0.0 <= lam0 < lam_end:
+            raise ValueError("the start λ must lie in [0, lam_end)")
+        stored = SolveResult(True, "stored", 0, 0.0, m0.q, m0.wrenches, math.nan, math.nan,
+                             None, None, 0.0)  # type: ignore[arg-type]
+        return walk.run([_State(lam0, stored)], lam_end)
+    base = walk.base()
+    if base is None:
+        return walk.finish("failed", 0.0, "the base problem did not converge to a plausible motion")
+    return walk.run([base], lam_end)
+
+
+def motion_at(
+    tutor: Motion,
+    target: Target,
+    lam: float,
+    steps: Sequence[StepResult],
+    control: StepControl = StepControl(),
+    *,
+    exact: bool = False,
+) -> Motion:
+    """A motion for any λ in [0, λ_reached]: the nearest stored optimum, or (``exact``) the
+    optimum at λ itself, walked on the same homotopy from the stored optimum just below."""
+    if not steps:
+        raise ValueError("no stored optimum")
+    reached = max(s.lam for s in steps)
+    if not 0.0 <= lam <= reached + 1e-12:
+        raise ValueError(f"λ = {lam} is outside [0, {reached}] (the range reached)")
+    nearest = min(steps, key=lambda s: abs(s.lam - lam))
+    if not exact or abs(nearest.lam - lam) < 1e-12:
+        return nearest.motion
+    below = max((s for s in steps if s.lam <= lam), key=lambda s: s.lam)
+    res = extrapolate(tutor, target, control, start=(below.lam, below.motion), lam_end=lam)
+    if res.status != "succeeded":
+        raise RuntimeError(f"could not reach λ = {lam} from the stored λ = {below.lam}: {res.message}")
+    return res.steps[-1].motion

@@ -70,6 +70,7 @@ DEFAULT_IPOPT = {
     "ipopt.constr_viol_tol": 1e-9,
     "ipopt.acceptable_iter": 0,  # never stop on the looser "acceptable" criterion
     "ipopt.linear_solver": "mumps",
+    "ipopt.mumps_pivot_order": 2,  # AMF: the least fill-in on these banded KKT systems (measured)
     "error_on_fail": False,
 }
 SUCCESS_STATUSES = ("Solve_Succeeded",)
@@ -100,6 +101,11 @@ class Weights:
     #: length): in double support only their sum is constrained, so without it the split
     #: is a flat direction of the NLP and IPOPT's tail convergence crawls.
     wrench: float = 1e-4
+    #: [beyond] weak prior toward the guide's joint coordinates (not the root): one marker per
+    #: segment leaves some rotations unobserved (a head turning about its own axis moves no
+    #: marker; axial hip/shoulder rotation with a straight knee/elbow hardly does). Scaled so
+    #: that 0.1 rad weighs like 1 mm of marker distance.
+    coordinates: float = 1.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -152,19 +158,22 @@ class FrameFunctions:
 
         # objective: wts = (weight of marker term, weight of singularity term)
         gm = ca.SX.sym("gm", 3 * self.n_markers)
-        wts = ca.SX.sym("wts", 2)
-        cost = wts[0] * ca.sumsqr(mk - gm)
+        wts = ca.SX.sym("wts", 3)
+        gq = ca.SX.sym("gq", n)
+        cost = wts[0] * ca.sumsqr(mk - gm) + wts[2] * ca.sumsqr(q[6:] - gq[6:])
         sing = list(ch.singular_dofs)
         if sing:
             cost += wts[1] * sum((1 - ca.cos(2 * q[i])) / 2 for i in sing)
-        self.cost = ca.Function("cost", [q, gm, wts], [cost])
+        self.cost = ca.Function("cost", [q, gm, gq, wts], [cost])
         self.n_sing = len(sing)
 
         self.has_contacts = P > 0 and len(ch.feet) == 2
         if self.has_contacts:
             self._contact_functions(q, pose, pts)
             self._eom_function()
-        self.hessians = {name: _lagrangian_hessian(fn, self.hess_args[name]) for name, fn in self.functions().items()}
+        # the EOM are linear in the wrenches: their Hessian only involves the three frames' q
+        hess_vars = dict(self.hess_args, eom=3)
+        self.hessians = {name: _lagrangian_hessian(fn, hess_vars[name]) for name, fn in self.functions().items()}
         self.jacobians = {name: _jacobian(fn, self.hess_args[name]) for name, fn in self.functions().items()}
         self.build_time = time.perf_counter() - t0
 
@@ -380,7 +389,8 @@ class SpacetimeProblem:
         nm3 = 3 * ff.n_markers
         self._p_layout = {}
         off = 0
-        for name, size in (("gm", nm3 * Tn), ("g", 3), ("mu", 1), ("wts", 3), ("ref", 4 * Tn), ("anchor", 3 * Tn)):
+        for name, size in (("gm", nm3 * Tn), ("gq", n * Tn), ("g", 3), ("mu", 1), ("wts", 4), ("ref", 4 * Tn),
+                           ("anchor", 3 * Tn)):
             self._p_layout[name] = (off, size)
             off += size
         p = ca.MX.sym("p", off)
@@ -391,6 +401,7 @@ class SpacetimeProblem:
             return ca.reshape(v, *shape) if shape else v
 
         GM = par("gm", (nm3, Tn))
+        GQ = par("gq", (n, Tn))
         grav, mu, wts = par("g"), par("mu"), par("wts")
         REF, ANCHOR = par("ref", (4, Tn)), par("anchor", (3, Tn))
         Q = ca.reshape(x[q_index.ravel(order="F").tolist()], n, Tn)
@@ -398,9 +409,10 @@ class SpacetimeProblem:
         terms: list[_Terms] = []
         # objective
         cost_terms = _Terms("cost", 1, q_index, 1)
-        fcost = ff.cost.map(Tn)(Q, GM, ca.repmat(wts[:2], 1, Tn))
+        cw = ca.vertcat(wts[0], wts[1], wts[3])
+        fcost = ff.cost.map(Tn)(Q, GM, GQ, ca.repmat(cw, 1, Tn))
         objective = ca.sum2(fcost)
-        self._cost_map = (cost_terms, [GM, ca.repmat(wts[:2], 1, Tn)])
+        self._cost_map = (cost_terms, [GM, GQ, ca.repmat(cw, 1, Tn)])
         xw = x[self.nq_vars:]
         if self.nx > self.nq_vars:
             objective = objective + wts[2] * ca.sumsqr(xw)
@@ -484,7 +496,8 @@ class SpacetimeProblem:
         self._terms = terms
         self._jac, self._hess = self._build_derivatives(x, p, Q, g)
         self._nlp = {"x": x, "p": p, "f": objective, "g": g}
-        self._fg = ca.Function("fg", [x, p], [objective, g, ca.sum2(ff.cost.map(Tn)(Q, GM, ca.repmat(ca.vertcat(1.0, 0.0), 1, Tn)))])
+        self._fg = ca.Function("fg", [x, p], [objective, g, ca.sum2(ff.cost.map(Tn)(Q, GM, GQ, ca.repmat(
+            ca.vertcat(1.0, 0.0, 0.0), 1, Tn)))])
         self._base_options = dict(DEFAULT_IPOPT)
         if ipopt_options:
             self._base_options.update(ipopt_options)
@@ -539,7 +552,10 @@ class SpacetimeProblem:
         return out
 
     def _mapped(self, fn: ca.Function, ncalls: int) -> ca.Function:
-        return fn.map(ncalls, "thread", MAP_THREADS) if ncalls > 1 else fn
+        # threads pay off only for the heavy per-frame functions (EOM derivatives)
+        if ncalls > 1 and fn.n_instructions() > 20000 * MAP_THREADS:
+            return fn.map(ncalls, "thread", MAP_THREADS)
+        return fn.map(ncalls) if ncalls > 1 else fn
 
     def _build_derivatives(self, x: ca.MX, p: ca.MX, Q: ca.MX, g: ca.MX) -> tuple[ca.Function, ca.Function]:
         """jac_g(x, p) = (g, ∂g/∂x) and hess_lag(x, p, lam_f, lam_g) = triu ∇²(lam_f f + lam_g·g),
@@ -712,16 +728,19 @@ class SpacetimeProblem:
                     lbx[idx[5]] = 0.0  # f_z >= 0
         return lbx, ubx
 
-    def parameters(self, guide_markers: np.ndarray, env: Environment, weights: Weights, ref: np.ndarray,
-                   anchor: np.ndarray) -> np.ndarray:
+    def parameters(self, guide_markers: np.ndarray, guide_q: np.ndarray, env: Environment, weights: Weights,
+                   ref: np.ndarray, anchor: np.ndarray) -> np.ndarray:
         wdir = weights.direction / (self.n_markers * self.T * MARKER_SCALE**2)
         wsing = weights.singularity / (max(self.ff.n_sing, 1) * self.T * MARKER_SCALE**2)
         wwr = weights.wrench / max(len(self.eom_frames), 1)
+        # per marker and frame, (1 mm / 1 cm)² = 0.01 units for 1 mm; per coordinate, w (0.1 rad)² = 0.01
+        wq = weights.coordinates / (max(self.n - 6, 1) * self.T)
         return np.concatenate([
             np.asarray(guide_markers, dtype=float).ravel(order="F"),
+            np.asarray(guide_q, dtype=float).ravel(order="F"),
             np.asarray(env.gravity, dtype=float),
             [float(env.friction)],
-            [wdir, wsing, wwr],
+            [wdir, wsing, wwr, wq],
             ref.ravel(order="F"),
             anchor.ravel(order="F"),
         ])
@@ -759,9 +778,10 @@ class SpacetimeProblem:
         q0 = np.asarray(init_q, dtype=float)
         if q0.shape != (self.n, self.T) or not np.all(np.isfinite(q0)):
             raise ValueError(f"initial motion must be finite with shape ({self.n}, {self.T})")
+        gq = q0 if guide_q is None else guide_q  # coordinates prior: the guide's, else the start's
         ref = self.ref_points(q0) if self.dynamics else np.zeros((4, self.T))
         anchor = self.anchor_points(q0)
-        p = self.parameters(guide_markers, env, weights, ref, anchor)
+        p = self.parameters(guide_markers, gq, env, weights, ref, anchor)
         x0 = np.concatenate([self.pack_q(q0), self.pack_wrenches(init_wrenches, ref)])
         lbx, ubx = self.bounds(locks)
         x0 = np.clip(x0, lbx, ubx)

@@ -351,8 +351,17 @@ def extract_cycle(
     (cyclically), otherwise at the strike (the loop's closure error then falls inside the
     cycle). Returns the cycle's Capture (its ``contacts`` set) and its (P, T) contacts.
     """
-    if start not in ("right_heel_strike", "left_heel_strike"):
-        raise PreprocessError(f"extract_cycle: start must be 'right_heel_strike' or 'left_heel_strike', not {start!r}")
+    if start == "auto":
+        errors = []
+        for st in ("right_heel_strike", "left_heel_strike", "best_loop"):
+            try:
+                return extract_cycle(capture, fps, start=st, contacts=contacts, cycle=cycle)
+            except PreprocessError as e:
+                errors.append(str(e))
+        raise PreprocessError("extract_cycle: no gait cycle found: " + " | ".join(errors))
+    if start not in ("right_heel_strike", "left_heel_strike", "best_loop"):
+        raise PreprocessError("extract_cycle: start must be 'right_heel_strike', 'left_heel_strike', 'best_loop' "
+                              f"or 'auto', not {start!r}")
     cap = resample(capture, fps) if fps is not None else capture
     if contacts is None:
         contacts = cap.contacts  # e.g. from force plates (resampled with the capture); else detected below
@@ -370,6 +379,8 @@ def extract_cycle(
     for k, side in enumerate(("right", "left")):
         if not feet[k].any():
             raise PreprocessError(f"extract_cycle: the {side} foot is never on the ground in this clip")
+    if start == "best_loop":
+        return _best_loop_cycle(cap, contacts, feet)
     k = 0 if start.startswith("right") else 1
     d = np.diff(feet[k].astype(int))
     strikes = np.where(d == 1)[0] + 1
@@ -403,6 +414,58 @@ def extract_cycle(
     src["cycle"] = {"start": start, "index": cycle, "frames": [int(s0), int(s1 + 1)],
                     "t_start": float(cap.times[s0]), "period_s": float(cap.times[s1] - cap.times[s0]),
                     "overlap_frames": 2}
+    out = Capture(character=cap.character, q=cap.q[:, sl], times=cap.times[sl], frame=cap.frame, source=src,
+                  contacts=cc, measured=meas)
+    return out, cc
+
+
+#: plausible walking cycle durations (s) searched by the best-loop cycle
+LOOP_PERIOD_S = (0.7, 2.0)
+
+
+def _best_loop_cycle(cap: Capture, contacts: np.ndarray, feet: np.ndarray) -> tuple[Capture, np.ndarray]:
+    """A cycle for trials shorter than two strikes of one foot: the period N and start s whose
+    frames (s, s+1) best match (s+N, s+N+1) — joint coordinates, root height, pitch and roll,
+    and the contact schedule (which must repeat exactly) — as in motion-graph loop detection.
+    The cycle must contain double support and both feet's stances."""
+    T, fps = cap.T, cap.fps
+    lo = max(4, int(round(LOOP_PERIOD_S[0] * fps)))
+    hi = min(T - 2, int(round(LOOP_PERIOD_S[1] * fps)))
+    if hi < lo:
+        raise PreprocessError(f"extract_cycle: {T} frames ({cap.times[-1] - cap.times[0]:.2f} s) are too few for "
+                              f"a gait cycle of at least {LOOP_PERIOD_S[0]} s plus two overlap frames")
+    periodic = np.zeros(cap.character.n, dtype=bool)
+    periodic[6:] = True
+    periodic[[2, 4, 5]] = True
+    qp = cap.q[periodic]
+    scale = np.maximum(np.std(qp, axis=1, keepdims=True), 1e-3)
+    qn = qp / scale
+    best = None
+    for N in range(lo, hi + 1):
+        for s0 in range(0, T - N - 1):
+            if not np.array_equal(contacts[:, s0 : s0 + 2], contacts[:, s0 + N : s0 + N + 2]):
+                continue
+            fc = feet[:, s0 : s0 + N]
+            if not (np.any(fc[0] & fc[1]) and fc[0].any() and fc[1].any() and (~fc[0]).any() and (~fc[1]).any()):
+                continue
+            err = float(np.sum((qn[:, s0 : s0 + 2] - qn[:, s0 + N : s0 + N + 2]) ** 2))
+            if best is None or err < best[0]:
+                best = (err, s0, N)
+    if best is None:
+        raise PreprocessError("extract_cycle: no loop of a walking period closes in this clip (the contact schedule "
+                              "never repeats with double support and both stances inside)")
+    err, s0, N = best
+    sl = slice(s0, s0 + N + 2)
+    cc = contacts[:, sl]
+    m = cap.measured
+    meas = None
+    if m is not None:
+        meas = MeasuredGRF(force=m.force[..., sl], cop=m.cop[..., sl], free_moment=m.free_moment[..., sl],
+                           valid=m.valid[sl], source=m.source)
+    src = dict(cap.source)
+    src["cycle"] = {"start": "best_loop", "index": 0, "frames": [int(s0), int(s0 + N + 1)],
+                    "t_start": float(cap.times[s0]), "period_s": float(N / fps), "overlap_frames": 2,
+                    "loop_mismatch_rms_std": float(np.sqrt(err / (2 * qn.shape[0])))}
     out = Capture(character=cap.character, q=cap.q[:, sl], times=cap.times[sl], frame=cap.frame, source=src,
                   contacts=cc, measured=meas)
     return out, cc

@@ -1,0 +1,291 @@
+"""The method's steps as plain functions: capture → simplify → estimate → correct (the tutor).
+
+    capture_motion(capture) -> Motion                 a raw capture as a motion (step "capture")
+    motion_capture(motion) -> Capture                 and back
+    synthesis_character(capture_character, "halfboy" | "fullbody") -> (synthesis, capture-side)
+    simplify(...), correct(...)                       the two spacetime problems of SPEC Table 5.2/5.3
+    make_tutor(capture | capture motion, character=..., fps=...) -> TutorResult
+
+A solver failure is a status (``TutorResult.status == "failed"``) with the last iterate kept
+apart in ``last_iterate`` — never returned as the tutor.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+import numpy as np
+
+from solver.capture import Capture, GroundFrame
+from solver.character import FULL_SUPERFLUOUS, LOWER_SUPERFLUOUS, Character, merge_segments
+from solver.kinematics import markers
+from solver.motion import Motion
+from solver.plausibility import report
+from solver.spacetime import Environment, SolveResult, SpacetimeProblem, Weights
+
+log = logging.getLogger(__name__)
+
+SYNTHESIS = ("halfboy", "fullbody")
+UPPER_ROOT_SEGMENTS = ("abdomen",)  # merging it lumps trunk, head and arms into the pelvis
+
+
+class PipelineError(ValueError):
+    """The input cannot go through the pipeline (the message says why)."""
+
+
+@dataclass(frozen=True, eq=False)
+class TutorResult:
+    status: str  # "succeeded" | "failed"
+    motion: Motion | None
+    message: str = ""
+    stats: Mapping[str, Any] = field(default_factory=dict)
+    simplified: Motion | None = None
+    last_iterate: Mapping[str, Any] | None = None  # failed solves only: kept apart, not a solution
+
+
+def jsonable(x: Any) -> Any:
+    """Numpy-free, finite JSON data (non-finite floats become None)."""
+    if isinstance(x, Mapping):
+        return {str(k): jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return jsonable(x.tolist())
+    if isinstance(x, (np.floating, float)):
+        return float(x) if math.isfinite(float(x)) else None
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, (np.bool_,)):
+        return bool(x)
+    return x
+
+
+def _shifted_frame(frame: GroundFrame, h: float) -> GroundFrame:
+    """The input frame of a motion lowered by h: p_input = (R (p + h e_z − v t) + offset) / unit."""
+    return GroundFrame(R=frame.R, offset=frame.offset + frame.R @ np.array([0.0, 0.0, h]), unit_m=frame.unit_m,
+                       velocity=frame.velocity, axes=frame.axes)
+
+
+def capture_motion(capture: Capture) -> Motion:
+    """A raw capture as a motion file (step "capture"): kinematics only, no wrenches."""
+    fps = capture.fps
+    dt = np.diff(capture.times)
+    if np.max(np.abs(dt - 1.0 / fps)) > 0.05 / fps:
+        raise PipelineError("capture times are not uniformly sampled; resample first")
+    return Motion(
+        character=capture.character,
+        fps=fps,
+        q=capture.q,
+        contacts=capture.contacts,
+        provenance=jsonable({
+            "step": "capture",
+            "source": capture.source,
+            "frame": capture.frame.to_dict(),
+            "t0": float(capture.times[0]),
+            "lambda": None,
+        }),
+    )
+
+
+def motion_capture(motion: Motion) -> Capture:
+    """Inverse of :func:`capture_motion`."""
+    prov = motion.provenance
+    t0 = float(prov.get("t0") or 0.0)
+    return Capture(
+        character=motion.character,
+        q=motion.q,
+        times=t0 + motion.times,
+        frame=GroundFrame.from_dict(prov.get("frame")),
+        source=prov.get("source") or {},
+        contacts=motion.contacts,
+    )
+
+
+def synthesis_character(capture_character: Character, kind: str) -> tuple[Character, Character]:
+    """(synthesis character, capture character it is simplified from), same segments/markers."""
+    names = {s.name for s in capture_character.segments}
+    if kind == "halfboy":
+        cap = capture_character
+        if "abdomen" in names:
+            cap = merge_segments(capture_character, UPPER_ROOT_SEGMENTS, name=f"{capture_character.name}-lower")
+        locked = [c for c in LOWER_SUPERFLUOUS if c in cap.coordinate_names]
+        syn = cap.reduce(locked, name="halfboy")
+        return syn, cap
+    if kind == "fullbody":
+        if "abdomen" not in names:
+            raise PipelineError("a full-body tutor needs a whole-body capture (this one has no upper body)")
+        locked = [c for c in FULL_SUPERFLUOUS if c in capture_character.coordinate_names]
+        return capture_character.reduce(locked, name="fullbody"), capture_character
+    raise PipelineError(f"unknown synthesis character {kind!r}; use one of {SYNTHESIS}")
+
+
+def _select(src: Character, q: np.ndarray, dst: Character) -> np.ndarray:
+    return np.stack([q[src.index(nm)] for nm in dst.coordinate_names])
+
+
+def simplify(capture_character: Character, q_capture: np.ndarray, synthesis: Character, fps: float,
+             *, weights: Weights = Weights(), max_iter: int = 500) -> SolveResult:
+    """SPEC 5.30 / Table 5.2: the synthesis character's motion closest to the capture's markers
+    (superfluous coordinates locked at 0 = removed), cyclic, no forces."""
+    T = q_capture.shape[1]
+    problem = problem_for(synthesis, T, fps, None, dynamics=False)
+    gm = markers(capture_character, q_capture).reshape(-1, T)
+    init = _select(capture_character, q_capture, synthesis)
+    return problem.solve(None, guide_markers=gm, init_q=init, weights=weights, max_iter=max_iter)
+
+
+def correct(synthesis: Character, q_sim: np.ndarray, contacts: np.ndarray, fps: float, *,
+            init_wrenches: np.ndarray | None, env: Environment = Environment(),
+            weights: Weights = Weights(), max_iter: int = 1000) -> SolveResult:
+    """Table 5.3: physically plausible motion closest to the simplified one (the tutor)."""
+    problem = problem_for(synthesis, q_sim.shape[1], fps, contacts)
+    return problem.solve(q_sim, init_q=q_sim, init_wrenches=init_wrenches, env=env, weights=weights,
+                         max_iter=max_iter)
+
+
+_PROBLEMS: dict[tuple, SpacetimeProblem] = {}
+_MAX_CACHED = 8
+
+
+def problem_for(character: Character, T: int, fps: float, contacts: np.ndarray | None, *,
+                dynamics: bool = True, cyclic: bool = True) -> SpacetimeProblem:
+    """Build (or reuse) the NLP of a structure: built once, re-solved with new parameters."""
+    key = (id(character), T, float(fps), None if contacts is None else np.asarray(contacts, bool).tobytes(),
+           dynamics, cyclic)
+    prob = _PROBLEMS.get(key)
+    if prob is None or prob.character is not character:
+        prob = SpacetimeProblem(character, T, fps, contacts, dynamics=dynamics, cyclic=cyclic)
+        if len(_PROBLEMS) >= _MAX_CACHED:
+            _PROBLEMS.pop(next(iter(_PROBLEMS)))
+        _PROBLEMS[key] = prob
+    return prob
+
+
+def estimate_wrenches(character: Character, q: np.ndarray, fps: float, contacts: np.ndarray,
+                      gravity=(0.0, 0.0, -9.81)) -> tuple[np.ndarray, dict]:
+    """EFC (SPEC §5) on the simplified motion: initial contact wrenches for the correction."""
+    from solver.contact import estimate_contact_wrenches
+
+    B = np.zeros((2, q.shape[1]), dtype=bool)
+    for j, c in enumerate(character.contacts):
+        B[0 if c.side == "right" else 1] |= contacts[j]
+    est = estimate_contact_wrenches(character, q, fps, B, gravity=gravity)
+    w = np.nan_to_num(np.asarray(est.wrenches), nan=0.0)
+    # frames 0 and T-1 repeat T-2 and 1 in a cycle with two overlap frames
+    w[:, :, 0] = w[:, :, -2]
+    w[:, :, -1] = w[:, :, 1]
+    return w, est.summary()
+
+
+def contact_plane_calibration(character: Character, q: np.ndarray, contacts: np.ndarray) -> tuple[np.ndarray, float]:
+    """Lower the motion so the active contact points rest on z = 0 (median over stance).
+
+    The model's contact points sit inside the foot box (SPEC §2), above the sole, so a
+    capture whose soles touch the floor has them hovering; without this the correction
+    would pull the whole body down. Returns the shifted motion and the shift (m).
+    """
+    from solver.kinematics import contact_points
+
+    cp = contact_points(character, q)
+    z = cp[:, 2, :][np.asarray(contacts, dtype=bool)]
+    if z.size == 0:
+        return q, 0.0
+    h = float(np.median(z))
+    out = np.array(q, copy=True)
+    out[2] -= h
+    return out, h
+
+
+def make_tutor(
+    source: Capture | Motion,
+    *,
+    character: str = "halfboy",
+    fps: float = 15.0,
+    cycle: int = 0,
+    start: str = "auto",
+    max_iter: int = 1000,
+) -> TutorResult:
+    """import → cycle → simplify → estimate → correct. ``source`` is a Capture, or a motion of
+    step "capture" (e.g. stored by the service)."""
+    from solver.io.preprocess import extract_cycle
+
+    t_start = time.perf_counter()
+    capture = motion_capture(source) if isinstance(source, Motion) else source
+    if not (math.isfinite(fps) and fps > 0):
+        raise PipelineError(f"fps must be positive, got {fps}")
+    syn, cap_char = synthesis_character(capture.character, character)
+    stats: dict[str, Any] = {}
+    t = time.perf_counter()
+    cyc, contacts = extract_cycle(capture, fps, start=start, cycle=cycle)
+    contacts = np.array(contacts, dtype=bool)
+    contacts[:, -2:] = contacts[:, :2]  # the overlap frames repeat frames 1-2
+    stats["cycle_s"] = time.perf_counter() - t
+    q_cap = _select(capture.character, cyc.q, cap_char)
+    q_cap, shift = contact_plane_calibration(cap_char, q_cap, contacts)
+    stats["contact_plane_shift_mm"] = 1e3 * shift
+
+    t = time.perf_counter()
+    simp = simplify(cap_char, q_cap, syn, fps)
+    stats["simplify"] = {"status": simp.status, "iterations": simp.iterations, "time_s": time.perf_counter() - t,
+                         "marker_rms_mm": 1e3 * simp.marker_rms}
+    if not simp.success:
+        return TutorResult("failed", None, f"simplification did not converge ({simp.status})", jsonable(stats),
+                           last_iterate={"q": simp.q})
+    q_sim = simp.q
+
+    t = time.perf_counter()
+    try:
+        w0, est_summary = estimate_wrenches(syn, q_sim, fps, contacts)
+    except ValueError as e:  # an estimation failure only costs the initial guess
+        log.warning("contact estimation failed (%s); correcting from zero wrenches", e)
+        w0, est_summary = None, {"error": str(e)}
+    stats["estimate"] = {"time_s": time.perf_counter() - t, **est_summary}
+
+    t = time.perf_counter()
+    env = Environment()
+    attempts = []
+    res = correct(syn, q_sim, contacts, fps, init_wrenches=w0, env=env, max_iter=max_iter)
+    attempts.append({"init": "estimated wrenches", "status": res.status, "iterations": res.iterations,
+                     "time_s": res.wall_time})
+    if not res.success:
+        res2 = correct(syn, q_sim, contacts, fps, init_wrenches=None, env=env, max_iter=max_iter)
+        attempts.append({"init": "zero wrenches", "status": res2.status, "iterations": res2.iterations,
+                         "time_s": res2.wall_time})
+        res = res2 if res2.success else res
+    stats["correct"] = {"time_s": time.perf_counter() - t, "attempts": attempts,
+                        "problem": {"variables": res.stats.get("n_variables"),
+                                    "constraints": res.stats.get("n_constraints"),
+                                    "build_s": res.stats.get("build_time")}}
+    stats["total_s"] = time.perf_counter() - t_start
+    src_prov = {"format": capture.source.get("format"), "files": capture.source.get("files"),
+                "subject": capture.source.get("subject"), "cycle": capture.source.get("cycle") or cyc.source.get("cycle")}
+    simplified = Motion(syn, fps, q_sim, contacts=contacts, provenance=jsonable({
+        "step": "simplify", "source": src_prov, "lambda": None}))
+    if not res.success:
+        return TutorResult("failed", None, f"correction did not converge ({res.status})", jsonable(stats),
+                           simplified=simplified, last_iterate={"q": res.q, "wrenches": res.wrenches})
+    # marker distance between the tutor and the capture (lower segments for HalfBoy)
+    mk_cap = markers(cap_char, q_cap)
+    mk_tut = markers(syn, res.q)
+    dist = np.linalg.norm(mk_tut - mk_cap, axis=1)
+    stats["marker_distance_to_capture_mm"] = {"mean": 1e3 * float(dist.mean()), "max": 1e3 * float(dist.max())}
+    stats["marker_distance_to_simplified_mm"] = 1e3 * res.marker_rms
+    tutor = Motion(
+        syn, fps, res.q, contacts=contacts, wrenches=res.wrenches,
+        provenance=jsonable({
+            "step": "tutor",
+            "source": src_prov,
+            "frame": _shifted_frame(capture.frame, stats.get("contact_plane_shift_mm", 0.0) / 1e3).to_dict(),
+            "lambda": 0.0,
+            "environment": env.to_dict(),
+            "solver": {"name": "ipopt", "status": res.status, "iterations": res.iterations,
+                       "time_s": res.wall_time},
+            "pipeline": stats,
+        }),
+    )
+    tutor = tutor.evolve(report=report(tutor))
+    return TutorResult("succeeded", tutor, "", jsonable(stats), simplified=simplified)

@@ -1,0 +1,173 @@
+"""Plausibility report of a motion (SPEC §9): how well it satisfies the constraints of §6.
+
+Residuals are measured at the interior frames (where central differences define q̈):
+the root residual is h0(q, q̇, q̈, g) minus the sum of the contact wrenches — zero for a
+physically plausible motion. Moments are reported about the root (pelvis) position of
+each frame, so they do not depend on where the world origin is.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any, Mapping
+
+import numpy as np
+
+from solver.character import Character
+from solver.dynamics import rnea
+from solver.kinematics import contact_points, finite_differences, segment_frames
+from solver.motion import FEET, Motion
+
+
+@dataclass(frozen=True)
+class Tolerances:
+    residual: float = 1e-6  # root residual force / body weight, moment / (weight × leg length)
+    slip_mm: float = 1.0
+    penetration_mm: float = 1.0
+    contact_height_mm: float = 1.0
+    friction: float = 1e-4  # cone excess, negative normal force, wrench in the air / body weight
+    cop_mm: float = 1.0
+
+
+def environment_of(motion: Motion) -> dict:
+    env = dict(motion.provenance.get("environment") or {})
+    env.setdefault("gravity", [0.0, 0.0, -9.81])
+    env.setdefault("friction", 1.0)
+    return env
+
+
+def leg_length(character: Character) -> float:
+    if not character.contacts:
+        return 1.0
+    return float(max(0.3, -contact_points(character, np.zeros(character.n))[:, 2].min()))
+
+
+def root_residual(motion: Motion, gravity: Any) -> np.ndarray:
+    """(6, T-2): h0 − Σ wrenches at the interior frames, moment about the root position."""
+    q = motion.q
+    qd, qdd = finite_differences(q, motion.dt)
+    h0 = rnea(motion.character, q[:, 1:-1], qd, qdd, np.asarray(gravity, dtype=float)).h0
+    if motion.wrenches is not None:
+        h0 = h0 - motion.wrenches[:, :, 1:-1].sum(axis=0)
+    return about_root(h0, q[:, 1:-1])
+
+
+def about_root(wrench: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Re-express world wrenches (moment about the origin; force) about the root position."""
+    out = wrench.copy()
+    out[:3] = wrench[:3] - np.cross(q[:3].T, wrench[3:].T).T
+    return out
+
+
+def report(motion: Motion, tol: Tolerances = Tolerances()) -> dict:
+    ch = motion.character
+    env = environment_of(motion)
+    g = np.asarray(env["gravity"], dtype=float)
+    mu = float(env["friction"])
+    weight = ch.total_mass * float(np.linalg.norm(g)) if np.linalg.norm(g) > 0 else ch.total_mass * 9.81
+    leg = leg_length(ch)
+    res = root_residual(motion, g)
+    out: dict[str, Any] = {
+        "character": ch.name,
+        "frames": motion.T,
+        "fps": motion.fps,
+        "body_weight_N": weight,
+        "leg_length_m": leg,
+        "environment": {"gravity": g.tolist(), "friction": mu},
+        "has_wrenches": motion.wrenches is not None,
+        "has_contacts": motion.contacts is not None,
+        "root_residual": {
+            "max_force_N": float(np.abs(res[3:]).max()),
+            "max_moment_Nm": float(np.abs(res[:3]).max()),
+            "rms_force_N": float(np.sqrt((res[3:] ** 2).sum(axis=0).mean())),
+            "max_force_rel_weight": float(np.abs(res[3:]).max() / weight),
+            "max_moment_rel_weight_leg": float(np.abs(res[:3]).max() / (weight * leg)),
+            "about": "root position of each frame",
+            "frames": "interior (central differences)",
+        },
+        "tolerances": asdict(tol),
+    }
+    checks = {
+        "root_force": out["root_residual"]["max_force_rel_weight"] <= tol.residual,
+        "root_moment": out["root_residual"]["max_moment_rel_weight_leg"] <= tol.residual,
+    }
+    problems = []
+    if motion.wrenches is None:
+        problems.append("no contact wrenches: the ground reaction is unknown")
+        checks["wrenches"] = False
+    if motion.contacts is not None and ch.contacts:
+        kin = _contact_checks(motion, mu, weight)
+        out.update(kin)
+        checks["slip"] = kin["slip_mm"] <= tol.slip_mm
+        checks["penetration"] = kin["penetration_mm"] <= tol.penetration_mm
+        checks["contact_height"] = kin["contact_height_error_mm"] <= tol.contact_height_mm
+        if motion.wrenches is not None:
+            checks["friction"] = kin["friction_cone_excess_N"] <= tol.friction * weight
+            checks["normal_force"] = kin["min_normal_force_N"] >= -tol.friction * weight
+            checks["air_wrench"] = kin["max_wrench_in_air"] <= tol.friction * weight
+            checks["cop"] = kin["cop_outside_mm"] <= tol.cop_mm
+    else:
+        problems.append("no contact schedule")
+        checks["contacts"] = False
+    failed = [k for k, v in checks.items() if not v]
+    out["checks"] = checks
+    out["problems"] = problems + [f"{k} out of tolerance" for k in failed if k not in ("wrenches", "contacts")]
+    out["plausible"] = not failed
+    return out
+
+
+def _contact_checks(motion: Motion, mu: float, weight: float) -> dict:
+    ch = motion.character
+    A = motion.contacts
+    cp = contact_points(ch, motion.q)  # (P, 3, T)
+    T = motion.T
+    z = cp[:, 2, :]
+    active_err = float(np.abs(z[A]).max()) if A.any() else 0.0
+    penetration = float(max(0.0, -z.min()))
+    slip = 0.0
+    both = A[:, :-1] & A[:, 1:]
+    if both.any():
+        d = np.linalg.norm(cp[:, :2, 1:] - cp[:, :2, :-1], axis=1)
+        slip = float(d[both].max())
+    out = {
+        "contact_height_error_mm": 1e3 * active_err,
+        "penetration_mm": 1e3 * penetration,
+        "slip_mm": 1e3 * slip,
+    }
+    if motion.wrenches is None:
+        return out
+    B = motion.foot_contact()
+    W = motion.wrenches
+    excess, min_fz, air, cop_out = 0.0, np.inf, 0.0, 0.0
+    rots, poss = segment_frames(ch, motion.q)
+    seg_index = {s.name: i for i, s in enumerate(ch.segments)}
+    cops = np.full((2, 3, T), np.nan)
+    for k, side in enumerate(FEET):
+        foot = ch.foot(side)
+        si = seg_index[foot.segment]
+        for t in range(1, T - 1):
+            n0, f = W[k, :3, t], W[k, 3:, t]
+            if not B[k, t]:
+                air = max(air, float(np.abs(W[k, :, t]).max()))
+                continue
+            min_fz = min(min_fz, float(f[2]))
+            excess = max(excess, float(np.hypot(f[0], f[1]) - mu * f[2]))
+            if f[2] > 1e-6 * weight:
+                u = np.array([-n0[1] / f[2], n0[0] / f[2], 0.0])
+                cops[k, :, t] = u
+                local = rots[si, :, :, t].T @ (u - poss[si, :, t]) - foot.center
+                cop_out = max(cop_out, float(np.max(np.abs(local) - foot.half)))
+    return {
+        **out,
+        "friction_cone_excess_N": max(excess, 0.0),
+        "min_normal_force_N": float(min_fz) if np.isfinite(min_fz) else 0.0,
+        "max_wrench_in_air": air,
+        "cop_outside_mm": 1e3 * max(cop_out, 0.0),
+    }
+
+
+def summary(rep: Mapping[str, Any]) -> str:
+    r = rep["root_residual"]
+    return (f"plausible={rep['plausible']} root residual {r['max_force_N']:.2e} N / {r['max_moment_Nm']:.2e} N·m "
+            f"(rel {r['max_force_rel_weight']:.1e}), slip {rep.get('slip_mm', float('nan')):.3f} mm, "
+            f"penetration {rep.get('penetration_mm', float('nan')):.3f} mm")
