@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: venv test bench clean
+.PHONY: venv test bench clean reliability stack
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -19,6 +19,12 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) -m bench.run --out bench/results.json
+
+reliability: $(STAMP)
+	MOTIONX_RELIABILITY_REPEAT=$${MOTIONX_RELIABILITY_REPEAT:-20} $(PY) -m pytest -q tests/service -k reliability
+
+stack: $(STAMP)
+	$(VENV)/bin/motionx stack --workers $${WORKERS:-2}
 
 clean:
 	rm -rf $(VENV) .pytest_cache .hypothesis

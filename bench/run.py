@@ -17,7 +17,7 @@ import time
 from datetime import datetime, timezone
 from pathlib import Path
 
-SECTIONS = ["dynamics", "grf"]
+SECTIONS = ["dynamics", "grf", "service"]
 
 
 def main() -> int:

@@ -15,6 +15,7 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.openapi.utils import get_openapi
 
 from service import problems
+from service.cache import BytesLRU
 from service.config import Settings, get_settings
 from service.db import get_database, upgrade
 from service.middleware import BodyLimitMiddleware
@@ -45,10 +46,7 @@ async def _sweeper(app: FastAPI, interval: float) -> None:
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
-    if settings is not None:
-        app_settings = settings
-    else:
-        app_settings = get_settings()
+    app_settings = settings if settings is not None else get_settings()
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):
@@ -77,8 +75,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         },
     )
     app.state.settings = app_settings
-    if settings is not None:
-        app.dependency_overrides[get_settings] = lambda: settings
+    app.state.owner_cache = {}
+    app.state.export_cache = BytesLRU()
     problems.install(app)
     app.add_middleware(BodyLimitMiddleware, max_bytes=app_settings.max_body_bytes)
 

@@ -53,9 +53,9 @@ class MotionRow(Base):
     lam: Mapped[float | None] = mapped_column(Float, nullable=True)
     parent_id: Mapped[str | None] = mapped_column(String(40), nullable=True)
     tutor_key: Mapped[str | None] = mapped_column(String(100), nullable=True)
-    data: Mapped[bytes] = mapped_column(LargeBinary)  # zlib-compressed motion file v1 (JSON)
+    data: Mapped[bytes] = mapped_column(LargeBinary, deferred=True)  # zlib-compressed motion file v1 (JSON)
     sha256: Mapped[str] = mapped_column(String(64))  # of the uncompressed JSON
-    validation: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
+    validation: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True, deferred=True)
     plausible: Mapped[bool | None] = mapped_column(Boolean, nullable=True)
     created_at: Mapped[float] = mapped_column(Float)
 

@@ -13,9 +13,9 @@ from fastapi.responses import JSONResponse, StreamingResponse
 from sqlalchemy.exc import IntegrityError
 
 from service import store
-from service.config import Settings, get_settings
+from service.config import Settings
 from service.db import Database
-from service.deps import get_db, get_owner, get_runner
+from service.deps import app_settings, get_db, get_owner, get_runner
 from service.models import TERMINAL
 from service.problems import Problem, not_found
 from service.runners import Runner
@@ -60,7 +60,7 @@ def extrapolate(
     owner: str = Depends(get_owner),
     db: Database = Depends(get_db),
     runner: Runner = Depends(get_runner),
-    settings: Settings = Depends(get_settings),
+    settings: Settings = Depends(app_settings),
 ) -> JSONResponse:
     from solver.continuation import StepControl, Target
 
@@ -105,7 +105,7 @@ def list_jobs(
     limit: int | None = Query(None, ge=1, le=1000),
     owner: str = Depends(get_owner),
     db: Database = Depends(get_db),
-    settings: Settings = Depends(get_settings),
+    settings: Settings = Depends(app_settings),
 ) -> dict:
     limit = limit or settings.page_size
     with db.read() as s:
@@ -129,7 +129,7 @@ def job_motions(
     limit: int | None = Query(None, ge=1, le=1000),
     owner: str = Depends(get_owner),
     db: Database = Depends(get_db),
-    settings: Settings = Depends(get_settings),
+    settings: Settings = Depends(app_settings),
 ) -> JSONResponse:
     limit = limit or settings.page_size
     with db.read() as s:
@@ -173,7 +173,7 @@ async def job_events(
     request: Request,
     owner: str = Depends(get_owner),
     db: Database = Depends(get_db),
-    settings: Settings = Depends(get_settings),
+    settings: Settings = Depends(app_settings),
 ) -> StreamingResponse:
     def snapshot(after_seq: int, after_step: int, attempt: int):
         with db.read() as s:

@@ -11,9 +11,9 @@ from fastapi.responses import JSONResponse, Response
 from starlette.datastructures import UploadFile
 
 from service import store
-from service.config import Settings, get_settings
+from service.config import Settings
 from service.db import Database
-from service.deps import get_db, get_owner
+from service.deps import app_settings, get_db, get_owner
 from service.problems import Problem, not_found
 from service.schemas import MotionOut, MotionPage
 from service.uploads import (
@@ -124,7 +124,7 @@ def list_motions(
     limit: int | None = Query(None, ge=1, le=1000),
     owner: str = Depends(get_owner),
     db: Database = Depends(get_db),
-    settings: Settings = Depends(get_settings),
+    settings: Settings = Depends(app_settings),
 ) -> dict:
     limit = limit or settings.page_size
     with db.read() as s:
@@ -168,15 +168,21 @@ def get_motion(
     owner: str = Depends(get_owner),
     db: Database = Depends(get_db),
 ) -> Response:
+    options = {k: _option(v) for k, v in request.query_params.items() if k != "format"}
+    if format == "motion" and options:
+        raise Problem(422, f"format=motion takes no options, got {sorted(options)}")
+    cache = request.app.state.export_cache
     with db.read() as s:
         row = store.get_motion(s, motion_id=motion_id, owner=owner)
         if row is None:
             raise not_found("motion", motion_id)
+        key = (row.sha256, format, tuple(sorted((k, repr(v)) for k, v in options.items())))
+        hit = cache.get(key)
+        if hit is not None:
+            return Response(hit[0], media_type=hit[1])
         data = store.motion_json(row)
-    options = {k: _option(v) for k, v in request.query_params.items() if k != "format"}
     if format == "motion":
-        if options:
-            raise Problem(422, f"format=motion takes no options, got {sorted(options)}")
+        cache.put(key, data, "application/json")
         return Response(data, media_type="application/json")
     try:
         from solver.export import ExportError, export_motion, media_type
@@ -194,7 +200,9 @@ def get_motion(
         raise Problem(501, f"format {format!r} is not available in this build ({e})") from None
     except ExportError as e:
         raise Problem(422, str(e)) from None
-    return Response(out, media_type=mt)
+    body = out.encode("utf-8") if isinstance(out, str) else out
+    cache.put(key, body, mt)
+    return Response(body, media_type=mt)
 
 
 @router.get(
