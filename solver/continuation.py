@@ -64,6 +64,11 @@ class StepControl:
 
     method: str = "adaptive"
     delta0: float = 0.05
+    predictor: str = "secant"  # adaptive: "secant" (from the last two optima) or "previous"
+    #: adaptive: warm-start IPOPT's multipliers too — "always", "never", or "small" (only
+    #: when the step does not grow: interior-point warm starts pay off when the active set
+    #: barely changes and cost iterations after large steps; measured, see docs)
+    warm_multipliers: str = "small"
     max_iter: int = 200  # k: solver iterations allowed per step
     eps: float = 0.005  # smallest step before declaring an impasse
     max_solves: int = 400
@@ -71,6 +76,10 @@ class StepControl:
     def __post_init__(self) -> None:
         if self.method not in ("adaptive", "thesis"):
             raise ValueError("method must be 'adaptive' or 'thesis'")
+        if self.predictor not in ("secant", "previous"):
+            raise ValueError("predictor must be 'secant' or 'previous'")
+        if self.warm_multipliers not in ("always", "never", "small"):
+            raise ValueError("warm_multipliers must be 'always', 'never' or 'small'")
         if not (0 < self.eps <= self.delta0 <= 1):
             raise ValueError("need 0 < eps <= delta0 <= 1")
         if self.max_iter < 1 or self.max_solves < 1:
@@ -250,8 +259,10 @@ class _Walk:
     def run(self, history: list[_State], lam_end: float) -> ExtrapolationResult:
         c = self.control
         adaptive = c.method == "adaptive"
-        lam, delta, fail_cap = history[-1].lam, c.delta0, math.inf
-        target_iter = 12
+        lam, delta = history[-1].lam, c.delta0
+        cap = math.inf  # adaptive: stay below recently failed step sizes
+        last_step = 0.0  # size of the last accepted step
+        iters: list[int] = []  # adaptive: iterations of accepted steps (the difficulty history)
         while lam < lam_end - 1e-12:
             if self.should_cancel is not None and self.should_cancel():
                 return self.finish("canceled", lam, "canceled")
@@ -259,27 +270,33 @@ class _Walk:
                 return self.finish("impasse", lam, f"solve budget exhausted ({c.max_solves} solves)")
             delta = min(delta, lam_end - lam)
             lam_try = lam_end if lam_end - (lam + delta) < 1e-9 else lam + delta
-            init = _predict(history, lam_try, secant=adaptive)
+            init = _predict(history, lam_try, secant=adaptive and c.predictor == "secant")
             # the thesis's baseline restarts from the previous optimum (primal only);
-            # the adaptive controller also warm-starts the multipliers
-            res, ok, status, env, values = self.solve(lam_try, init, history[-1].res if adaptive else None,
-                                                      c.max_iter)
+            # the adaptive controller may also warm-start the multipliers
+            growing = delta > last_step * (1 + 1e-9)
+            use_warm = adaptive and (c.warm_multipliers == "always" or (c.warm_multipliers == "small" and not growing))
+            warm_from = history[-1].res if use_warm else None
+            res, ok, status, env, values = self.solve(lam_try, init, warm_from, c.max_iter)
             if ok and self.accept(lam_try, env, values, res):  # type: ignore[arg-type]
                 self.record(lam_try, values, res, True, status, lam_try)
+                step = lam_try - lam
+                last_step = step
                 lam = lam_try
                 history = (history + [_State(lam, res)])[-3:]  # type: ignore[arg-type]
                 if adaptive:
                     it = max(res.iterations, 1)  # type: ignore[union-attr]
-                    factor = (2.0 if it <= target_iter // 2 else 1.5 if it <= target_iter
-                              else 1.0 if it <= 2 * target_iter else 0.6)
-                    fail_cap *= 1.25  # forget old failures gradually
-                    delta = min(delta * factor, 0.9 * fail_cap)
+                    ref = float(np.median(iters)) if iters else it
+                    iters.append(it)
+                    # easy step (no harder than usual): double; harder: grow less or shrink
+                    factor = 2.0 if it <= 1.5 * ref else 1.25 if it <= 3 * ref else 0.75
+                    delta = min(step * factor, cap)
+                    cap *= 1.5  # forget old failures gradually
                 else:
-                    delta *= 2.0
+                    delta = 2.0 * delta
             else:
                 self.record(lam_try, values, res, False, status if not ok else "implausible", lam)
                 if adaptive:
-                    fail_cap = delta
+                    cap = 0.9 * delta  # do not retry this size right after success (the thesis does)
                 delta /= 2.0
                 if delta < c.eps:
                     return self.finish("impasse", lam,
