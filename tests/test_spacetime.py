@@ -1,0 +1,210 @@
+"""Spacetime optimization: the tutor pipeline on real trials, and the NLP's own contracts."""
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from mjcf.validate import validate
+from solver import character as C
+from solver.kinematics import contact_points, markers
+from solver.motion import Motion, validate_schema
+from solver.pipeline import make_tutor, problem_for, synthesis_character
+from solver.spacetime import Environment, SpacetimeProblem
+
+DM = "deepmimic_humanoid3d_walk"
+
+
+@pytest.fixture(scope="module")
+def deepmimic_capture(shared_data):
+    from solver.io import load_trial
+
+    d = shared_data / DM
+    return load_trial([d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt"])
+
+
+@pytest.fixture(scope="module")
+def c3d_capture(shared_data):
+    from solver.io import load_trial
+
+    return load_trial([shared_data / "btk_pig_flatfoot_full" / "PiG_Motion-FlatFoot-Full.c3d"])
+
+
+@pytest.fixture(scope="module")
+def halfboy_tutor(deepmimic_capture):
+    res = make_tutor(deepmimic_capture, character="halfboy", fps=15)
+    assert res.status == "succeeded", res.message
+    return res
+
+
+def _assert_plausible(motion: Motion) -> dict:
+    rep = validate(motion)
+    w = rep["body_weight_N"]
+    assert rep["root_residual"]["max_force_N"] <= 1e-6 * w, rep["root_residual"]
+    assert rep["root_residual"]["max_moment_Nm"] <= 1e-6 * w * rep["leg_length_m"]
+    mj = rep["mujoco_replay"]
+    assert mj["max_force_rel_weight"] <= 1e-6 and mj["max_moment_rel_weight_leg"] <= 1e-6
+    assert mj["agreement_force_rel_weight"] <= 1e-6 and mj["agreement_moment_rel_weight_leg"] <= 1e-6
+    assert rep["slip_mm"] < 1e-3 and rep["penetration_mm"] < 1e-3 and rep["contact_height_error_mm"] < 1e-3
+    assert rep["cop_outside_mm"] < 1e-3
+    assert rep["plausible"], rep["problems"]
+    return rep
+
+
+def test_halfboy_tutor_from_deepmimic_is_plausible(halfboy_tutor):
+    tut = halfboy_tutor.motion
+    assert tut.character.n == 16 and tut.fps == 15
+    _assert_plausible(tut)
+    # the thesis calls ~3 mm per marker imperceptible: we stay within about a centimetre
+    assert halfboy_tutor.stats["marker_distance_to_capture_mm"]["mean"] < 12.0
+    # the total ground reaction carries the body: mean vertical force over the cycle ≈ weight
+    fz = tut.wrenches[:, 5, 1:-1].sum(axis=0)
+    assert np.mean(fz) == pytest.approx(tut.character.weight, rel=0.05)
+
+
+def test_tutor_is_cyclic_and_keeps_the_contact_schedule(halfboy_tutor):
+    tut = halfboy_tutor.motion
+    q, T = tut.q, tut.T
+    assert np.allclose(q[6:, T - 2 :], q[6:, :2], atol=1e-12)  # joints repeat (eliminated)
+    assert np.allclose(q[[2, 4, 5]][:, T - 2 :], q[[2, 4, 5]][:, :2], atol=1e-12)  # height, pitch, roll
+    assert np.allclose(tut.contacts[:, T - 2 :], tut.contacts[:, :2])
+    cp = contact_points(tut.character, q)
+    assert np.abs(cp[:, 2, :][tut.contacts]).max() < 1e-8  # active points on the ground
+    assert cp[:, 2, :][~tut.contacts].min() > -1e-8  # inactive points above it
+    B = tut.foot_contact()
+    assert np.all(tut.wrenches[0][:, ~B[0]] == 0) and np.all(tut.wrenches[1][:, ~B[1]] == 0)
+
+
+def test_motion_file_v1_round_trip_and_schema(halfboy_tutor, tmp_path):
+    tut = halfboy_tutor.motion
+    path = tmp_path / "tutor.json"
+    tut.save(path)
+    import json
+
+    validate_schema(json.loads(path.read_text()))
+    back = Motion.load(path)
+    assert np.array_equal(back.q, tut.q) and np.array_equal(back.wrenches, tut.wrenches)
+    assert back.coordinate_names == tut.coordinate_names
+    assert back.provenance["step"] == "tutor" and back.provenance["environment"]["friction"] == 1.0
+
+
+def test_tutors_from_c3d_halfboy_and_fullbody(c3d_capture):
+    for kind, fps, n in (("halfboy", 15, 16), ("fullbody", 30, 43)):
+        res = make_tutor(c3d_capture, character=kind, fps=fps)
+        assert res.status == "succeeded", res.message
+        assert res.motion.character.n == n
+        _assert_plausible(res.motion)
+
+
+def test_simplify_removes_superfluous_coordinates_close_to_the_capture(c3d_capture):
+    syn, cap = synthesis_character(c3d_capture.character, "fullbody")
+    assert cap.n == 63 and syn.n == 43
+    assert not set(C.FULL_SUPERFLUOUS) & set(syn.coordinate_names)
+    res = make_tutor(c3d_capture, character="halfboy", fps=15)
+    assert res.stats["simplify"]["marker_rms_mm"] < 15.0
+
+
+def test_base_problem_returns_the_tutor(halfboy_tutor):
+    """A plausible motion used as its own guide is the optimum (marker distance ~0)."""
+    tut = halfboy_tutor.motion
+    prob = problem_for(tut.character, tut.T, tut.fps, tut.contacts)
+    res = prob.solve(tut.q, init_q=tut.q, init_wrenches=tut.wrenches)
+    assert res.success
+    assert res.marker_rms < 1e-3  # < 1 mm (only the weak priors move it)
+
+
+def test_solver_failure_is_a_status_not_a_solution(halfboy_tutor, deepmimic_capture):
+    """A solve that cannot finish is reported as such; the pipeline keeps its last iterate apart."""
+    tut = halfboy_tutor.motion
+    prob = problem_for(tut.character, tut.T, tut.fps, tut.contacts)
+    tilted = Environment((-9.81 * np.sin(0.4), 0.0, -9.81 * np.cos(0.4)))
+    res = prob.solve(tut.q, init_q=tut.q, init_wrenches=tut.wrenches, env=tilted, max_iter=3)
+    assert not res.success and res.status == "Maximum_Iterations_Exceeded"
+    failed = make_tutor(deepmimic_capture, character="halfboy", fps=15, max_iter=3)
+    assert failed.status == "failed" and failed.motion is None
+    assert "correction did not converge" in failed.message
+    assert failed.last_iterate is not None and failed.last_iterate["q"].shape == tut.q.shape
+
+
+def test_structured_derivatives_equal_automatic_ones():
+    """The Hessian and Jacobian assembled from per-frame derivatives equal CasADi's own."""
+    ch = C.halfboy()
+    T = 7
+    A = np.zeros((4, T), dtype=bool)
+    A[0, :4] = A[1, :5] = True
+    A[2, 3:] = A[3, 2:] = True
+    A[:, -2:] = A[:, :2]
+    prob = SpacetimeProblem(ch, T, 15.0, A)
+    x = prob._nlp["x"]
+    p = prob._nlp["p"]
+    lam_f = ca.MX.sym("lf")
+    lam_g = ca.MX.sym("lg", prob.ng)
+    L = lam_f * prob._nlp["f"] + ca.dot(lam_g, prob._nlp["g"])
+    auto_h = ca.Function("h", [x, p, lam_f, lam_g], [ca.triu(ca.hessian(L, x)[0])])
+    auto_j = ca.Function("j", [x, p], [ca.jacobian(prob._nlp["g"], x)])
+    rng = np.random.default_rng(0)
+    q = rng.uniform(-0.3, 0.3, (ch.n, T))
+    q[0] = np.linspace(0, 0.5, T)
+    q[2] = 0.5
+    from solver.spacetime import Weights
+
+    pv = prob.parameters(prob.guide_markers(q + 0.01), q, Environment(), Weights(), prob.ref_points(q),
+                         prob.anchor_points(q))
+    xv = rng.normal(0, 0.3, prob.nx)
+    lg = rng.normal(size=prob.ng)
+    H1 = np.asarray(ca.densify(prob._hess(xv, pv, 0.7, lg)))
+    H2 = np.asarray(ca.densify(auto_h(xv, pv, 0.7, lg)))
+    J1 = np.asarray(ca.densify(prob._jac(xv, pv)[1]))
+    J2 = np.asarray(ca.densify(auto_j(xv, pv)))
+    assert np.allclose(H1, H2, rtol=1e-9, atol=1e-9 * np.abs(H2).max())
+    assert np.allclose(J1, J2, rtol=1e-9, atol=1e-9 * np.abs(J2).max())
+
+
+def test_contact_equations_are_independent(halfboy_tutor):
+    """SPEC §10: no redundant contact or cyclic equations — the equality Jacobian has full row rank."""
+    tut = halfboy_tutor.motion
+    prob = problem_for(tut.character, tut.T, tut.fps, tut.contacts)
+    ref = prob.ref_points(tut.q)
+    xv = np.concatenate([prob.pack_q(tut.q), prob.pack_wrenches(tut.wrenches, ref)])
+    from solver.spacetime import Weights
+
+    pv = prob.parameters(prob.guide_markers(tut.q), tut.q, Environment(), Weights(), ref, prob.anchor_points(tut.q))
+    J = np.asarray(ca.densify(prob._jac(xv, pv)[1]))
+    eq = prob._lbg == prob._ubg
+    s = np.linalg.svd(J[eq], compute_uv=False)
+    assert s.min() > 1e-6 * s.max(), f"rank-deficient equality Jacobian: σ_min/σ_max = {s.min() / s.max():.1e}"
+
+
+def test_bad_inputs_are_refused_clearly(halfboy_tutor):
+    tut = halfboy_tutor.motion
+    prob = problem_for(tut.character, tut.T, tut.fps, tut.contacts)
+    with pytest.raises(ValueError, match="guide must be"):
+        prob.solve(tut.q[:, :-1])
+    bad = tut.q.copy()
+    bad[3, 2] = np.nan
+    with pytest.raises(ValueError, match="finite"):
+        prob.solve(tut.q, init_q=bad)
+    A = tut.contacts.copy()
+    A[0, -1] = not A[0, 1]
+    with pytest.raises(ValueError, match="repeat frames 1-2"):
+        SpacetimeProblem(tut.character, tut.T, tut.fps, A)
+    with pytest.raises(ValueError, match="contact schedule must be"):
+        SpacetimeProblem(tut.character, tut.T, tut.fps, A[:, :-1])
+
+
+def test_tutor_needs_an_upper_body_for_fullbody(shared_data):
+    from solver.pipeline import PipelineError
+
+    with pytest.raises(PipelineError, match="whole-body capture"):
+        synthesis_character(C.capture_lower(), "fullbody")
+    with pytest.raises(PipelineError, match="unknown synthesis character"):
+        synthesis_character(C.capture_full(), "robot")
+
+
+def test_markers_of_tutor_follow_the_capture_markers(halfboy_tutor, deepmimic_capture):
+    """Every segment-tip marker stays within a few centimetres of the capture at every frame."""
+    tut = halfboy_tutor.motion
+    syn, cap = synthesis_character(deepmimic_capture.character, "halfboy")
+    assert [s.name for s in syn.segments] == [s.name for s in cap.segments]
+    mk = markers(tut.character, tut.q)
+    assert mk.shape[0] == len([s for s in syn.segments if s.length > 0])
+    assert np.isfinite(mk).all()
