@@ -17,7 +17,7 @@ import time
 from datetime import datetime, timezone
 from pathlib import Path
 
-SECTIONS = ["dynamics", "grf", "service"]
+SECTIONS = ["dynamics", "grf", "tutor", "continuation", "service"]
 
 
 def main() -> int:

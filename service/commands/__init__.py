@@ -7,6 +7,7 @@ and the work in ``solver``/``mjcf``.
 MODULES = [
     "service.commands.physics",
     "service.commands.tutor",
+    "service.commands.demo",
     "service.commands.export",
     "service.commands.serve",
     "service.commands.grf",

@@ -1,0 +1,28 @@
+"""The shared walking trials the benchmarks run on (read from ../shared/data, never copied)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+
+def data_dir() -> Path:
+    env = os.environ.get("MOTIONX_DATA")
+    if env:
+        return Path(env)
+    for cand in (Path(__file__).resolve().parents[2] / "shared" / "data", Path("/work/shared/data")):
+        if cand.is_dir():
+            return cand
+    raise FileNotFoundError("shared walking data not found (set MOTIONX_DATA)")
+
+
+def trials() -> dict[str, list[Path]]:
+    d = data_dir()
+    return {
+        "deepmimic_walk": [d / "deepmimic_humanoid3d_walk" / "humanoid3d_walk.txt",
+                           d / "deepmimic_humanoid3d_walk" / "humanoid3d_character.txt"],
+        "opensim_overground": [d / "opensim_loadedwalking_subject05" / "Rajagopal2016_subject05_v30516.osim",
+                               d / "opensim_loadedwalking_subject05"
+                               / "loadedwalking_subject05_noload_free_trial03_ik_solution.mot"],
+        "c3d_pig": [d / "btk_pig_flatfoot_full" / "PiG_Motion-FlatFoot-Full.c3d"],
+    }
