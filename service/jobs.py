@@ -18,6 +18,8 @@ import time
 import uuid
 from typing import Any
 
+from sqlalchemy.exc import DBAPIError
+
 from service import store
 from service.config import Settings
 from service.db import Database, get_database
@@ -115,6 +117,8 @@ def execute_job(job_id: str, settings: Settings) -> str:
     with Heartbeat(db, job_id, token, settings.job_lease_s) as hb:
         try:
             status, message, extra = _run(db, job_id, claim.attempt, token, settings, hb)
+        except DBAPIError:  # the store itself is unreachable: not the job's fault, let the runner retry it
+            raise
         except Exception as e:  # the job boundary: a failure becomes a status, never a crash
             log.exception("job %s failed", job_id)
             status, message, extra = "failed", f"{type(e).__name__}: {e}", {}

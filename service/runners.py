@@ -56,6 +56,7 @@ class LocalRunner:
         self._pool: ProcessPoolExecutor | None = None
         self._inflight: dict[str, Future] = {}
         self._broken = False
+        self._recovery_pending = False
 
     def _new_pool(self) -> ProcessPoolExecutor:
         # spawn: the API process has threads (event loop, DB pool); forking it is unsafe
@@ -80,29 +81,52 @@ class LocalRunner:
                 log.warning("local pool unusable; job %s waits for the next sweep", job_id)
                 return False
             self._inflight[job_id] = fut
-        fut.add_done_callback(lambda f, j=job_id: self._done(j, f))
+            pool = self._pool
+        fut.add_done_callback(lambda f, j=job_id, p=pool: self._done(j, f, p))
         _mark_dispatched(self.db, job_id)
         return True
 
-    def _done(self, job_id: str, fut: Future) -> None:
+    def _done(self, job_id: str, fut: Future, pool: ProcessPoolExecutor | None) -> None:
         with self._lock:
             if self._inflight.get(job_id) is fut:
                 del self._inflight[job_id]
+            current = pool is self._pool
         exc = fut.exception() if not fut.cancelled() else None
-        if isinstance(exc, BrokenProcessPool):
+        if isinstance(exc, BrokenProcessPool) and current:
             log.warning("local pool broken (a job process died) while running %s", job_id)
             self._broken = True
-        elif exc is not None:
+            self._recover_soon()
+        elif exc is not None:  # e.g. the database was unreachable: the sweep resubmits it
             log.error("job %s raised in the pool: %r", job_id, exc)
 
+    def _recover_soon(self, delay: float = 0.5) -> None:
+        """Replace a broken pool without waiting for the next sweep (once per breakage)."""
+        with self._lock:
+            if self._recovery_pending or self._pool is None:
+                return
+            self._recovery_pending = True
+
+        def run() -> None:
+            try:
+                self.recover()
+            except Exception:  # the periodic sweep tries again
+                log.warning("pool recovery failed", exc_info=True)
+            finally:
+                self._recovery_pending = False
+
+        t = threading.Timer(delay, run)
+        t.daemon = True
+        t.start()
+
     def recover(self, *, all_unfinished: bool = False) -> list[str]:
-        if self._broken:
-            with self._lock:
+        old = None
+        with self._lock:
+            if self._broken and self._pool is not None:
                 old, self._pool, self._broken = self._pool, self._new_pool(), False
                 self._inflight.clear()
-            if old is not None:
-                old.shutdown(wait=False, cancel_futures=True)
-            all_unfinished = True
+                all_unfinished = True
+        if old is not None:
+            old.shutdown(wait=False, cancel_futures=True)
         big = 1e18
         with self.db.read() as s:
             ids = store.stranded_jobs(

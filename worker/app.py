@@ -12,11 +12,16 @@ Start a worker with ``motionx worker`` (it calls :func:`create_celery` and
 from __future__ import annotations
 
 from celery import Celery
+from sqlalchemy.exc import DBAPIError
 
 from service.config import Settings
 from service.jobs import execute_job
 
 TASK_NAME = "motionx.run_job"
+
+#: the job's own failures are job statuses; an unreachable database is retried with backoff
+RETRY_ON_DB_ERRORS = dict(autoretry_for=(DBAPIError,), retry_backoff=2, retry_backoff_max=60, max_retries=None,
+                          retry_jitter=True)
 
 
 def celery_config(settings: Settings) -> dict:
@@ -57,7 +62,7 @@ def create_celery(settings: Settings) -> Celery:
     app = Celery("motionx", set_as_current=False)
     app.conf.update(celery_config(settings))
 
-    @app.task(name=TASK_NAME, acks_late=True, reject_on_worker_lost=True)
+    @app.task(name=TASK_NAME, acks_late=True, reject_on_worker_lost=True, **RETRY_ON_DB_ERRORS)
     def run_job(job_id: str) -> str:
         return execute_job(job_id, settings)
 

@@ -68,6 +68,12 @@ def cmd_worker(args: argparse.Namespace) -> int:
     settings = _settings(broker_url=args.broker_url, database_url=args.database_url,
                          worker_concurrency=args.concurrency)
     app = create_celery(settings)
+    # import the pipeline once in the worker's main process: every pool process forked from
+    # it (also the one replacing a killed child) starts warm, with the same code
+    import mjcf.validate  # noqa: F401
+    import solver.continuation  # noqa: F401
+    import solver.pipeline  # noqa: F401
+
     argv = [
         "worker", f"--loglevel={args.loglevel}", "-Q", settings.celery_queue,
         f"--concurrency={settings.worker_concurrency}", f"--hostname={args.hostname or f'motionx-{os.getpid()}@%h'}",

@@ -246,3 +246,25 @@ def test_reliability_redis_restart_during_a_running_job(stack, client, tutor_id,
     # the queue still works afterwards
     again = client.post(f"/motions/{tutor_id}/extrapolate", json=CHEAP).json()
     assert wait_job(client, again["id"], timeout=90)["status"] == "succeeded"
+
+
+def test_broker_down_at_submission_loses_nothing(tmp_path, redis_binary, tutor_motion_json):
+    """Redis is down when the job is created: the API still answers 202 (the job is in SQL,
+    queued, undispatched); once Redis is back, the API's sweep dispatches it. (SQLite here.)"""
+    st = Stack(data_dir=tmp_path, workers=1, extra_env={**STACK_ENV, "MOTIONX_SWEEP_INTERVAL_S": "1"})
+    st.start()
+    try:
+        with httpx.Client(base_url=st.base_url, headers={"X-API-Key": st.api_keys}, timeout=30) as c:
+            mid = c.post("/motions", content=tutor_motion_json, headers={"content-type": "application/json"}).json()["id"]
+            st.redis.stop()
+            r = c.post(f"/motions/{mid}/extrapolate", json=CHEAP)
+            assert r.status_code == 202 and r.json()["status"] == "queued"
+            h = c.get("/health").json()
+            assert h["status"] == "degraded" and h["broker"].startswith("unreachable")
+            with get_database(st.database_url).read() as s:
+                assert s.get(JobRow, r.json()["id"]).dispatched_at is None
+            st.redis.start()
+            done = wait_job(c, r.json()["id"], timeout=120)
+            assert (done["status"], done["attempts"]) == ("succeeded", 1), done
+    finally:
+        st.stop()
