@@ -94,8 +94,10 @@ def test_gait_events_loaded_walk(loaded):
 def test_treadmill_belt_shift(treadmill, shared_data):
     cap = treadmill
     ch = cap.character
-    assert ch.name == "capture-lower" and ch.n == 30  # gait2354 has no arms: HAT in the pelvis
+    # gait2354 has no arms: its torso body (head, arms, trunk) rides on the lumbar joint as the abdomen
+    assert ch.name == "capture-full" and ch.n == 63
     assert ch.total_mass == pytest.approx(72.6, abs=0.01)
+    assert ch.segment("abdomen").mass == pytest.approx(33.068, abs=0.01)  # the model's torso body
     assert cap.source["fit"]["landmark_error_mm"]["mean"] < 2.0
     v = cap.source["belt_speed_m_s"]
     assert 1.0 < v < 1.2  # README: ~1.07 from markers; the IK kinematics' stance feet say ~1.13
@@ -117,6 +119,60 @@ def test_treadmill_belt_shift(treadmill, shared_data):
     assert np.ptp(back[:, 0]) < 0.1
     # floor: the plate surface (COP y = -0.0075 m) is our z = 0
     assert cap.frame.offset[1] == pytest.approx(-0.0075)
+
+
+def _opensim_com(model, motion, frame, times):
+    """Whole-body centre of mass (our frame) from the bodies OpenSim itself places (child process)."""
+    from solver.io.opensim import _run_worker
+
+    sto = read_mot(motion)
+    res = _run_worker(str(model), sto.labels, sto.data, sto.in_degrees)
+    m = np.asarray(res["body_mass"])
+    c = np.einsum("tbij,bj->tbi", res["R"], np.asarray(res["body_com"])) + res["P"]
+    return frame.point_from_input(np.einsum("b,tbi->ti", m, c) / m.sum(), times).T  # (3, T)
+
+
+def _capture_com(cap):
+    ch = cap.character
+    m = np.array([s.mass for s in ch.segments])
+    c = points_world(ch, cap.q, [(s.name, s.com) for s in ch.segments])
+    return np.einsum("s,sit->it", m, c) / m.sum()
+
+
+def test_armless_model_keeps_the_trunk_on_the_lumbar_joint(treadmill, shared_data):
+    """gait2354 (no arms): the capture's mass distribution is the model's, moving as OpenSim moves it.
+
+    Independent reference: the whole-body centre of mass of the bodies OpenSim places at every frame
+    (the trunk, 46 % of the mass, included). Lumping the torso into the pelvis (rolling and pitching
+    with it, the lumbar motion dropped) puts it centimetres off.
+    """
+    cap, d = treadmill, shared_data / TM
+    ref = _opensim_com(d / "subject01.osim", d / "subject01_walk1_ik.mot", cap.frame, cap.times)
+    err = np.linalg.norm(_capture_com(cap) - ref, axis=0)
+    assert err.max() < 0.002, err.max()  # metres
+    # the lumbar joint moves: the trunk is not rigid with the pelvis
+    ch, q = cap.character, cap.q
+    lumbar = q[[ch.index(f"lumbar_{k}") for k in ("flexion", "bending", "rotation")]]
+    assert np.ptp(lumbar, axis=1).max() > np.radians(5)
+    assert cap.source["fit"]["orientation_error_deg"]["abdomen"]["max"] < 1.0
+    # canonical upper body: placeholders rigid with the torso (negligible mass, no motion of their own)
+    for seg in ("thorax", "head", "upper_arm_r", "hand_l"):
+        assert 0 < ch.segment(seg).mass < 1e-4
+    for name in ("thorax_flexion", "neck_flexion", "shoulder_flexion_r", "elbow_flexion_l"):
+        assert np.ptp(q[ch.index(name)]) < np.radians(1.0)
+
+
+def test_armless_capture_feeds_both_synthesis_characters_and_mujoco(treadmill):
+    from mjcf.builder import compile_model
+    from solver.pipeline import synthesis_character
+
+    ch = treadmill.character
+    half, cap_lower = synthesis_character(ch, "halfboy")
+    assert half.n == 16 and "abdomen" not in {s.name for s in cap_lower.segments}
+    assert cap_lower.total_mass == pytest.approx(ch.total_mass)  # trunk lumped into the pelvis
+    full, _ = synthesis_character(ch, "fullbody")
+    assert full.n == 43
+    assert compile_model(ch).nbody > 1  # placeholder masses are valid moving bodies for MuJoCo
 
 
 def test_treadmill_grf_and_gait_events(treadmill):

@@ -39,7 +39,9 @@ calcn_s + talus_s           foot_s  (talus: ankle landmark; calcn: heel, orienta
 toes_s                      toes_s
 torso                       abdomen + thorax + head (mass split by Winter's ratios
                             0.139 : 0.196 : 0.081 [: clavicles 0.010 each]) — or, without
-                            arms in the model, lumped into the pelvis (capture-lower)
+                            arms in the model (gait2354: the torso body is head, arms and
+                            trunk), the abdomen alone, with the body's own mass, centre of
+                            mass and inertia (see below)
 humerus_s                   upper_arm_s
 radius_s + ulna_s           forearm_s
 hand_s                      hand_s
@@ -53,8 +55,15 @@ found from the data: *heel* = the calcn origin moved down along the calcn's vert
 sole, *toe* = the toes origin moved forward along the toes' x by twice the toes' centre of
 mass abscissa (the far end of the toes, the COM being mid-length) and down to the sole; the
 sole lies ``sole`` below the calcn origin, ``sole`` = the calcn origin's height above the
-floor at mid-stance (2nd percentile over the trial). Without arms/head in the model the
-upper body is absent (capture-lower). With arms, the torso carries neck (on the torso's
+floor at mid-stance (2nd percentile over the trial). Without a torso body the upper body
+is absent (capture-lower). A torso body without arms (gait2354) gives a ``capture-full``
+skeleton whose abdomen *is* the torso, driven by the lumbar coordinates: the canonical
+upper-body landmarks (neck, head top, sternum, shoulders, elbows, wrists, hands: the neutral
+pose of ``capture_full`` for the subject's height) ride rigidly on the torso from the lumbar
+joint, and the thorax, head, clavicle and arm segments are placeholders of negligible mass
+(``PLACEHOLDER_MASS_FRACTION`` of the subject each, taken from the torso: MuJoCo refuses
+massless moving bodies). The trunk thus keeps its real motion and mass distribution;
+``lower_only=True`` lumps it into the pelvis (``merge_segments``). With arms, the torso carries neck (on the torso's
 vertical through the shoulder centres, 6 % of body height above them), head top (13 %
 above the neck) and sternum (between the shoulders, 4 % of height forward and 8 % down):
 they are rigidly attached to the torso, so they only set the neck/head lengths of the
@@ -364,9 +373,16 @@ _SEGMENT_RULES: list[tuple[str, str]] = [
 ]
 #: which body gives the segment's orientation
 _ORIENTING = {"pelvis": "pelvis", "thigh": "femur", "shank": "tibia", "foot": "calcn", "toes": "toes",
-              "upper_arm": "humerus", "forearm": "radius", "hand": "hand"}
+              "upper_arm": "humerus", "forearm": "radius", "hand": "hand", "abdomen": "torso"}
 #: torso mass split (Winter) when the capture skeleton has an upper body
 _TORSO_SPLIT = {"abdomen": 0.139, "thorax": 0.196, "head": 0.081, "clavicle_r": 0.010, "clavicle_l": 0.010}
+#: canonical upper-body segments an arm-less model (gait2354: one torso body for head, arms and
+#: trunk) does not have: rigid with its torso in the data, they exist for the topology only
+_ARMLESS_PLACEHOLDERS = ("thorax", "head") + tuple(
+    f"{s}_{side}" for side in "rl" for s in ("clavicle", "upper_arm", "forearm", "hand"))
+#: mass of such a placeholder segment, as a fraction of the subject's mass: negligible (the
+#: torso body keeps its own mass distribution), yet not zero — MuJoCo refuses massless moving bodies
+PLACEHOLDER_MASS_FRACTION = 1e-6
 
 
 def _segment_of(body: str) -> str | None:
@@ -455,10 +471,13 @@ def opensim_track(
         if need not in bi:
             raise OpenSimError(f"{model}: body {need!r} not found; the importer needs a gait-model leg "
                                f"(pelvis, femur, tibia, talus, calcn, toes per side); bodies: {names}")
-    has_arms = all(f"{b}_{s}" in bi for b in ("humerus", "ulna", "radius", "hand") for s in "rl") and "torso" in bi
-    if not has_arms:  # head, arms and trunk ride with the pelvis (capture-lower)
-        seg_of = {b: ("pelvis" if s == "torso" or (s or "").startswith(("upper_arm", "forearm", "hand")) else s)
-                  for b, s in seg_of.items()}
+    has_torso = "torso" in bi
+    has_arms = has_torso and all(f"{b}_{s}" in bi for b in ("humerus", "ulna", "radius", "hand") for s in "rl")
+    arm = ("upper_arm", "forearm", "hand")
+    if not has_torso:  # no trunk body: anything above the hips rides with the pelvis (capture-lower)
+        seg_of = {b: ("pelvis" if (s or "").startswith(arm) else s) for b, s in seg_of.items()}
+    elif not has_arms:  # the torso body is head, arms and trunk (gait2354): the abdomen carries it whole
+        seg_of = {b: ("abdomen" if s == "torso" or (s or "").startswith(arm) else s) for b, s in seg_of.items()}
     Rb = res["R"]  # (T, B, 3, 3) OpenSim ground
     Pb = res["P"]  # (T, B, 3)
     JC = res["JC"]  # (T, J, 3)
@@ -534,6 +553,17 @@ def opensim_track(
         lm["sternum"] = P_ours(sh_mid + 0.04 * h_est * fwd_t - 0.08 * h_est * up_t)
         for seg in ("abdomen", "thorax", "head", "clavicle_r", "clavicle_l"):
             ori[seg] = _to_ours_R(R_t)
+    elif has_torso:
+        # no arms in the model: the canonical upper body (capture_full's neutral pose for the
+        # subject's height) rides rigidly on the torso from the lumbar joint; its segments other
+        # than the abdomen are placeholders (see _ARMLESS_PLACEHOLDERS)
+        height = height or _height_from_legs(lm)
+        R_t = Rb[:, bi["torso"]]
+        lumbar = joint_centre("torso")
+        for name, v in _neutral_upper_body(height).items():
+            lm[name] = P_ours(lumbar + np.einsum("tij,j->ti", R_t, C_OSIM.T @ v))
+        for seg in ("abdomen",) + _ARMLESS_PLACEHOLDERS:
+            ori[seg] = _to_ours_R(R_t)
     seg_mass: dict[str, float] = {}
     for b, m in body_mass.items():
         seg = seg_of[b]
@@ -544,6 +574,11 @@ def opensim_track(
                 seg_mass[k] = seg_mass.get(k, 0.0) + m * w / sum(_TORSO_SPLIT.values())
             continue
         seg_mass[seg] = seg_mass.get(seg, 0.0) + m
+    if has_torso and not has_arms:
+        eps = PLACEHOLDER_MASS_FRACTION * total
+        for seg in _ARMLESS_PLACEHOLDERS:
+            seg_mass[seg] = eps
+        seg_mass["abdomen"] -= eps * len(_ARMLESS_PLACEHOLDERS)  # the total stays the model's
     frame = GroundFrame(R=C_OSIM.T, offset=off, unit_m=1.0, axes="OpenSim ground: x forward, y up, z right")
     if mass is not None and abs(mass - total) > 0.01 * total:
         log.warning("subject mass %.2f kg given, the OpenSim model weighs %.2f kg: using the model's segment masses "
@@ -568,6 +603,30 @@ def opensim_track(
     if belt_speed is not None:
         track = _belt_shift(track, belt_speed, grf, grf_xml)
     return track
+
+
+def _neutral_upper_body(height: float) -> dict[str, np.ndarray]:
+    """Upper-body landmarks of ``capture_full(height)`` in its neutral pose, relative to the
+    lumbar joint, our axes: where an arm-less model's torso carries them."""
+    from solver.character import capture_full
+    from solver.kinematics import points_world
+
+    ch = capture_full(height)
+    pts = {"lumbar": ("abdomen", np.zeros(3)), "neck": ("head", np.zeros(3)),
+           "head_top": ("head", ch.segment("head").marker)}
+    for side in "rl":
+        pts[f"shoulder_{side}"] = (f"upper_arm_{side}", np.zeros(3))
+        pts[f"elbow_{side}"] = (f"forearm_{side}", np.zeros(3))
+        pts[f"wrist_{side}"] = (f"hand_{side}", np.zeros(3))
+        pts[f"hand_{side}"] = (f"hand_{side}", ch.segment(f"hand_{side}").marker)
+    xyz = points_world(ch, np.zeros(ch.n), list(pts.values()))
+    out = {k: np.asarray(xyz[i], dtype=float).reshape(3) for i, k in enumerate(pts)}
+    lumbar = out.pop("lumbar")
+    out = {k: v - lumbar for k, v in out.items()}
+    # sternum: as for models with arms, 4 % H forward of and 8 % H below the shoulders' mid-point
+    sh = 0.5 * (out["shoulder_r"] + out["shoulder_l"])
+    out["sternum"] = sh + height * np.array([0.04, 0.0, -0.08])
+    return out
 
 
 def _height_from_legs(lm: Mapping[str, np.ndarray]) -> float:
@@ -628,7 +687,8 @@ def _with_segment_inertias(track: SkeletonTrack, res, seg_of, off) -> SkeletonTr
         for m, c, Ic in parts:
             d = c - com
             inertia += Ic + m * (float(d @ d) * np.eye(3) - np.outer(d, d))
-        k = float(track.mass) / float(sum(res["body_mass"]))  # a subject mass given: scaled inertias
+        # the segment's mass over its bodies' (a subject mass given, placeholders): inertia scaled alike
+        k = float((track.segment_masses or {}).get(seg, M)) / M
         out[seg] = {"com": C_OSIM @ (com - o_body), "inertia": k * (C_OSIM @ inertia @ C_OSIM.T)}
     src = dict(track.source)
     src["segment_inertias"] = out
