@@ -65,10 +65,16 @@ class StepControl:
     method: str = "adaptive"
     delta0: float = 0.05
     predictor: str = "secant"  # adaptive: "secant" (from the last two optima) or "previous"
-    #: adaptive: warm-start IPOPT's multipliers too — "always", "never", or "small" (only
-    #: when the step does not grow: interior-point warm starts pay off when the active set
-    #: barely changes and cost iterations after large steps; measured, see docs)
+    growth: float = 4.0  # adaptive: step growth after an easy step (no more iterations than usual)
+    #: adaptive: warm-start IPOPT's multipliers too — "small" (only when the step does not
+    #: grow: interior-point warm starts pay off when the active set barely changes and cost
+    #: iterations after large steps), "always", "never", or "fallback" (a warm attempt with
+    #: ``warm_budget`` iterations, then a cold restart at the same λ). Measured: docs/continuation.md
     warm_multipliers: str = "small"
+    warm_budget: int = 12  # IPOPT iterations allowed to a warm attempt before the cold restart
+    #: adaptive: initial barrier parameter for restarts (monotone strategy); None keeps IPOPT's
+    #: adaptive strategy, which measured fewer iterations here
+    restart_mu: float | None = None
     max_iter: int = 200  # k: solver iterations allowed per step
     eps: float = 0.005  # smallest step before declaring an impasse
     max_solves: int = 400
@@ -78,8 +84,8 @@ class StepControl:
             raise ValueError("method must be 'adaptive' or 'thesis'")
         if self.predictor not in ("secant", "previous"):
             raise ValueError("predictor must be 'secant' or 'previous'")
-        if self.warm_multipliers not in ("always", "never", "small"):
-            raise ValueError("warm_multipliers must be 'always', 'never' or 'small'")
+        if self.warm_multipliers not in ("fallback", "always", "never", "small"):
+            raise ValueError("warm_multipliers must be 'fallback', 'always', 'never' or 'small'")
         if not (0 < self.eps <= self.delta0 <= 1):
             raise ValueError("need 0 < eps <= delta0 <= 1")
         if self.max_iter < 1 or self.max_solves < 1:
@@ -231,15 +237,21 @@ class _Walk:
                                    time.perf_counter() - self.t0, message)
 
     def solve(self, lam: float, init: tuple[np.ndarray, np.ndarray], warm_from: SolveResult | None,
-              max_iter: int, guide: np.ndarray | None = None) -> tuple[SolveResult | None, bool, str, Environment, dict]:
+              max_iter: int, guide: np.ndarray | None = None,
+              restart_mu: float | None = None) -> tuple[SolveResult | None, bool, str, Environment, dict]:
         env, values = environment_at(self.env0, self.target, lam)
         if guide is None:
             guide = guide_at(self.tutor.q, self.target, lam)
         warm = warm_from is not None and warm_from.lam_x is not None
+        opts = None
+        if restart_mu is not None:  # mu_init only acts with the monotone barrier strategy
+            opts = {"ipopt.mu_strategy": "monotone", "ipopt.mu_init": restart_mu}
+            if not warm:
+                opts.update({"ipopt.bound_push": 1e-6, "ipopt.bound_frac": 1e-6})
         try:
             res = self.prob.solve(guide, env=env, init_q=init[0], init_wrenches=init[1], max_iter=max_iter,
                                   lam_x0=warm_from.lam_x if warm else None,
-                                  lam_g0=warm_from.lam_g if warm else None, warm=warm)
+                                  lam_g0=warm_from.lam_g if warm else None, warm=warm, ipopt_options=opts)
         except RuntimeError as e:  # a numerical failure inside the solver is a status, not a crash
             self.solves += 1
             return None, False, f"error: {e}", env, values
@@ -274,9 +286,19 @@ class _Walk:
             # the thesis's baseline restarts from the previous optimum (primal only);
             # the adaptive controller may also warm-start the multipliers
             growing = delta > last_step * (1 + 1e-9)
-            use_warm = adaptive and (c.warm_multipliers == "always" or (c.warm_multipliers == "small" and not growing))
-            warm_from = history[-1].res if use_warm else None
-            res, ok, status, env, values = self.solve(lam_try, init, warm_from, c.max_iter)
+            mode = c.warm_multipliers if adaptive else "never"
+            if mode == "fallback":
+                res, ok, status, env, values = self.solve(lam_try, init, history[-1].res,
+                                                          min(c.warm_budget, c.max_iter), restart_mu=c.restart_mu)
+                if not ok:  # cold restart at the same λ (the warm attempt is recorded as rejected)
+                    self.record(lam_try, values, res, False, f"warm attempt: {status}", lam)
+                    res, ok, status, env, values = self.solve(lam_try, init, None, c.max_iter,
+                                                              restart_mu=c.restart_mu)
+            else:
+                use_warm = mode == "always" or (mode == "small" and not growing)
+                warm_from = history[-1].res if use_warm else None
+                res, ok, status, env, values = self.solve(lam_try, init, warm_from, c.max_iter,
+                                                          restart_mu=c.restart_mu if adaptive else None)
             if ok and self.accept(lam_try, env, values, res):  # type: ignore[arg-type]
                 self.record(lam_try, values, res, True, status, lam_try)
                 step = lam_try - lam
@@ -287,8 +309,9 @@ class _Walk:
                     it = max(res.iterations, 1)  # type: ignore[union-attr]
                     ref = float(np.median(iters)) if iters else it
                     iters.append(it)
-                    # easy step (no harder than usual): double; harder: grow less or shrink
-                    factor = 2.0 if it <= 1.5 * ref else 1.25 if it <= 3 * ref else 0.75
+                    # easy step (no harder than usual): quadruple; harder: grow less or shrink
+                    factor = (c.growth if it <= 1.25 * ref else 2.0 if it <= 2 * ref
+                              else 1.0 if it <= 3 * ref else 0.5)
                     delta = min(step * factor, cap)
                     cap *= 1.5  # forget old failures gradually
                 else:
