@@ -1,0 +1,74 @@
+"""Markdown tables from bench/results.json (``python -m bench.report``) for the docs."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+
+def tutor_table(res: dict) -> str:
+    rows = ["| trial | character | frames | variables / constraints | build (frame fns + NLP) | simplify | correct (IPOPT its) "
+            "| marker distance to capture (mean / max) | root residual / weight |",
+            "|---|---|---|---|---|---|---|---|---|"]
+    for key, r in res.items():
+        trial, kind = key.split("/")
+        if r.get("status") != "succeeded":
+            rows.append(f"| {trial} | {kind} | – | – | – | – | {r.get('status')} | – | – |")
+            continue
+        d = r["marker_distance_to_capture_mm"]
+        rows.append(
+            f"| {trial} | {kind} | {r['frames']} | {r['variables']} / {r['constraints']} | "
+            f"{r['build_frame_functions_s']:.2f} + {r['build_nlp_s']:.2f} s | {r['simplify_s']:.2f} s | "
+            f"{r['correct_s']:.2f} s ({r['correct_iterations']}) | {d['mean']:.1f} / {d['max']:.0f} mm | "
+            f"{r['root_residual_rel_weight']:.0e} |")
+    return "\n".join(rows)
+
+
+def continuation_table(res: dict) -> str:
+    rows = ["| trial | target | Algorithm 3 (thesis): status, λ, solves, time | adaptive: status, λ, solves, time |",
+            "|---|---|---|---|"]
+    for trial, targets in res.items():
+        for tgt, r in targets.items():
+            cells = []
+            for m in ("thesis", "adaptive"):
+                v = r[m]
+                pl = "" if v["all_plausible"] else " (implausible step!)"
+                cells.append(f"{v['status']}, {v['lambda_reached']:.3f}, {v['solves']}, {v['time_s']:.1f} s{pl}")
+            rows.append(f"| {trial} | {tgt} | {cells[0]} | {cells[1]} |")
+    return "\n".join(rows)
+
+
+FILL = {"tutor": ("docs/spacetime.md", tutor_table), "continuation": ("docs/continuation.md", continuation_table)}
+
+
+def fill(sec: dict) -> None:
+    """Rewrite the ``<!-- bench:NAME -->`` … ``<!-- /bench:NAME -->`` blocks of the docs."""
+    import re
+
+    for name, (doc, fn) in FILL.items():
+        if name not in sec:
+            continue
+        p = Path(doc)
+        text = p.read_text()
+        block = f"<!-- bench:{name} -->\n{fn(sec[name]['results'])}\n<!-- /bench:{name} -->"
+        text = re.sub(rf"<!-- bench:{name} -->.*?<!-- /bench:{name} -->", lambda _: block, text, flags=re.S)
+        p.write_text(text)
+
+
+def main() -> int:
+    args = [a for a in sys.argv[1:] if not a.startswith("--")]
+    path = Path(args[0] if args else "bench/results.json")
+    sec = json.loads(path.read_text())["sections"]
+    if "--fill" in sys.argv:
+        fill(sec)
+        return 0
+    if "tutor" in sec:
+        print("### Tutor\n\n" + tutor_table(sec["tutor"]["results"]) + "\n")
+    if "continuation" in sec:
+        print("### Continuation\n\n" + continuation_table(sec["continuation"]["results"]) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
