@@ -3,7 +3,19 @@
 from __future__ import annotations
 
 import os
+import time
 from pathlib import Path
+from typing import Callable
+
+
+def best_time(fn: Callable[[], object], repeat: int) -> float:
+    """The best of ``repeat`` wall-clock timings of ``fn()`` (s)."""
+    best = float("inf")
+    for _ in range(repeat):
+        t = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t)
+    return best
 
 
 def data_dir() -> Path:

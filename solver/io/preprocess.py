@@ -405,18 +405,23 @@ def extract_cycle(
     if not fc[1 - k].any():
         raise PreprocessError(f"extract_cycle: the {'left' if k == 0 else 'right'} foot never touches the ground "
                               "during the cycle")
+    cycle_info = {"start": start, "index": cycle, "frames": [int(s0), int(s1 + 1)],
+                  "t_start": float(cap.times[s0]), "period_s": float(cap.times[s1] - cap.times[s0]),
+                  "overlap_frames": 2}
+    return _cycle_capture(cap, sl, cc, cycle_info), cc
+
+
+def _cycle_capture(cap: Capture, sl: slice, contacts: np.ndarray, cycle_info: dict) -> Capture:
+    """The frames ``sl`` of a capture (plates included) with the cycle recorded in its source."""
     m = cap.measured
     meas = None
     if m is not None:
         meas = MeasuredGRF(force=m.force[..., sl], cop=m.cop[..., sl], free_moment=m.free_moment[..., sl],
                            valid=m.valid[sl], source=m.source)
     src = dict(cap.source)
-    src["cycle"] = {"start": start, "index": cycle, "frames": [int(s0), int(s1 + 1)],
-                    "t_start": float(cap.times[s0]), "period_s": float(cap.times[s1] - cap.times[s0]),
-                    "overlap_frames": 2}
-    out = Capture(character=cap.character, q=cap.q[:, sl], times=cap.times[sl], frame=cap.frame, source=src,
-                  contacts=cc, measured=meas)
-    return out, cc
+    src["cycle"] = cycle_info
+    return Capture(character=cap.character, q=cap.q[:, sl], times=cap.times[sl], frame=cap.frame, source=src,
+                   contacts=contacts, measured=meas)
 
 
 #: plausible walking cycle durations (s) searched by the best-loop cycle
@@ -457,18 +462,10 @@ def _best_loop_cycle(cap: Capture, contacts: np.ndarray, feet: np.ndarray) -> tu
     err, s0, N = best
     sl = slice(s0, s0 + N + 2)
     cc = contacts[:, sl]
-    m = cap.measured
-    meas = None
-    if m is not None:
-        meas = MeasuredGRF(force=m.force[..., sl], cop=m.cop[..., sl], free_moment=m.free_moment[..., sl],
-                           valid=m.valid[sl], source=m.source)
-    src = dict(cap.source)
-    src["cycle"] = {"start": "best_loop", "index": 0, "frames": [int(s0), int(s0 + N + 1)],
-                    "t_start": float(cap.times[s0]), "period_s": float(N / fps), "overlap_frames": 2,
-                    "loop_mismatch_rms_std": float(np.sqrt(err / (2 * qn.shape[0])))}
-    out = Capture(character=cap.character, q=cap.q[:, sl], times=cap.times[sl], frame=cap.frame, source=src,
-                  contacts=cc, measured=meas)
-    return out, cc
+    cycle_info = {"start": "best_loop", "index": 0, "frames": [int(s0), int(s0 + N + 1)],
+                  "t_start": float(cap.times[s0]), "period_s": float(N / fps), "overlap_frames": 2,
+                  "loop_mismatch_rms_std": float(np.sqrt(err / (2 * qn.shape[0])))}
+    return _cycle_capture(cap, sl, cc, cycle_info), cc
 
 
 def _extract_loop_cycle(cap: Capture, start: str, contacts: np.ndarray | None) -> tuple[Capture, np.ndarray]:
