@@ -53,6 +53,34 @@ and friction rows that makes the problem feasible, then the least-effort split u
 relaxed rows. ``cop_violation`` reports how far (m) each CoP ends up outside its
 polygon. Nothing is silently clipped and no frame raises.
 
+Temporal prior (``smoothing_hz``, **[beyond]**; off by default here, on in
+:func:`estimate_capture`). The per-frame criterion knows nothing of time: a foot's load may
+jump between frames and the trailing foot keeps load up to the frame it leaves the ground. With
+``smoothing_hz = f_s`` every run of consecutive double-support frames is solved as one convex
+QP, the frames' effort plus
+
+    κ² Σ_k Δ_kᵀ W_k Δ_k,   κ = fps / (2π f_s),
+
+Δ_k the change of the right-foot wrench between consecutive frames (both about their
+mid-point) and W_k the effort's own metric (the per-frame Hessians there), the wrenches of the
+neighbouring single-support frames (c under the stance foot, 0 under the swing foot) as
+boundary values, each frame's constraint rows unchanged. Without constraints this is exactly a
+zero-phase first-order low-pass at f_s of the per-frame optimum (Euler-Lagrange: x − τ² ẍ =
+x*, τ = 1/2πf_s), so f_s = the kinematics' cut-off adds no frequency the filtered motion does
+not have; the boundary values make each foot's load continuous at touch-down and lift-off
+(ground reactions have no jump there). Runs are block tridiagonal: their unconstrained optima
+come from one banded solve, runs with active rows (and cyclic runs wrapping the clip's end)
+are one dense QP each (quadprog). Single-support frames are untouched; the per-frame QP and
+the nested form remain the reference (they agree to 1e-3 N / N·m).
+
+CoP projection (``project_cop``, **[beyond]**; off by default here, on in
+:func:`estimate_capture`). In single support the thesis lets the foot take c, wherever c's
+centre of pressure falls; inverse dynamics of noisy kinematics puts it outside the foot at
+some frames (centimetres ahead of the toes at the end of a stance, before the other heel's
+impact reaches the filtered accelerations). The ground can only push inside the contact
+polygon: such a frame gets the nearest CoP in the polygon, with c's force and c's free moment
+(status ``PROJECTED``); the moment it cannot explain stays in ``total − Σ wrenches``.
+
 Accelerations are central differences (SPEC 3.7-3.8), undefined at the first and last
 frames of a non-cyclic motion (status ``UNDEFINED``, NaN). With ``cyclic=True`` the last
 frame must close the cycle (the first pose one period later, root advanced): differences
@@ -63,13 +91,14 @@ from __future__ import annotations
 
 import logging
 import math
+import weakref
 from dataclasses import dataclass, field
 from enum import IntEnum
 from typing import Any, Sequence
 
 import numpy as np
 
-from solver.character import Character, CharacterError
+from solver.character import Character, CharacterError, merge_segments
 from solver.dynamics import DEFAULT_GRAVITY, rnea
 from solver.kinematics import forward_kinematics
 
@@ -101,6 +130,7 @@ class Status(IntEnum):
     RELAXED = 3  # double support, infeasible: least relaxation, then least effort
     FLIGHT = 4  # no foot on the ground: zero wrenches (c unexplained)
     FAILED = 5  # the QP solver failed: NaN
+    PROJECTED = 6  # single support, c's CoP outside the foot: CoP moved into the polygon (project_cop)
 
 
 def _frozen(a: Any, dtype: Any = float) -> np.ndarray:
@@ -146,6 +176,7 @@ class ContactEstimate:
     fps: float
     method: str
     cyclic: bool = False
+    smoothing_hz: float | None = None
     cop: np.ndarray = field(init=False)
     free_moment: np.ndarray = field(init=False)
 
@@ -168,7 +199,7 @@ class ContactEstimate:
 
     @property
     def defined(self) -> np.ndarray:
-        return np.isin(self.status, (Status.SINGLE, Status.OPTIMAL, Status.RELAXED, Status.FLIGHT))
+        return np.isin(self.status, (Status.SINGLE, Status.PROJECTED, Status.OPTIMAL, Status.RELAXED, Status.FLIGHT))
 
     @property
     def double_support(self) -> np.ndarray:
@@ -178,6 +209,7 @@ class ContactEstimate:
         return {
             "frames": self.T,
             "method": self.method,
+            "smoothing_hz": self.smoothing_hz,
             **{f"support_{s.name.lower()}": int(np.sum(self.support == s)) for s in Support},
             **{f"status_{s.name.lower()}": int(np.sum(self.status == s)) for s in Status},
             "max_cop_violation_m": float(np.nanmax(self.cop_violation)) if np.any(self.defined) else None,
@@ -300,16 +332,43 @@ class _Pose:
         return _Pose(self.rot[idx], self.pos[idx])
 
 
+_LEGS: "weakref.WeakKeyDictionary[Character, tuple[Character, np.ndarray]]" = weakref.WeakKeyDictionary()
+
+
+def _legs(character: Character) -> tuple[Character, np.ndarray]:
+    """The character reduced to the feet and the segments they hang from (what the estimator
+    needs the pose of: joint screws of the feet's ancestors, foot boxes, root), and the indices of
+    its coordinates (= bodies) in the full character. Cached per character."""
+    hit = _LEGS.get(character)
+    if hit is not None:
+        return hit
+    by_name = {s.name: s for s in character.segments}
+    keep: set[str] = set()
+    for side in FEET:
+        name: str | None = character.foot(side).segment
+        while name is not None and name not in keep:
+            keep.add(name)
+            name = by_name[name].parent
+    drop = [s.name for s in character.segments if s.name not in keep and s.parent in keep]
+    legs = merge_segments(character, drop, name=f"{character.name}-feet") if drop else character
+    kept = np.array([character.index(c) for c in legs.coordinate_names], dtype=int)
+    _LEGS[character] = (legs, kept)
+    return legs, kept
+
+
 def _dense_pose(character: Character, q: np.ndarray) -> _Pose:
-    pose = forward_kinematics(character, q)
+    """Pose of the bodies the estimator uses (the feet and their ancestors; NaN for the others):
+    forward kinematics of the character reduced to them (the rest of the body does not move them)."""
+    legs, kept = _legs(character)
+    pose = forward_kinematics(legs, q[kept])
     N, n = q.shape[1], character.n
-    rot = np.empty((N, n, 3, 3))
-    pos = np.empty((N, n, 3))
-    for k in range(n):
+    rot = np.full((N, n, 3, 3), np.nan)
+    pos = np.full((N, n, 3), np.nan)
+    for j, k in enumerate(kept):
         for i in range(3):
-            pos[:, k, i] = pose.pos[k][i]
-            for j in range(3):
-                rot[:, k, i, j] = pose.rot[k][i][j]
+            pos[:, k, i] = pose.pos[j][i]
+            for c in range(3):
+                rot[:, k, i, c] = pose.rot[j][i][c]
     return _Pose(rot, pos)
 
 
@@ -525,11 +584,13 @@ def _nested(P: np.ndarray, qv: np.ndarray, G: np.ndarray, h: np.ndarray, scale: 
     return inner(z0)[1]
 
 
-def _solve_batch(batch: _QPBatch, method: str) -> tuple[np.ndarray, np.ndarray]:
-    """Solve every frame: (y (N, 6) about r, status (N,))."""
+def _solve_batch(batch: _QPBatch, method: str) -> tuple[np.ndarray, np.ndarray, list]:
+    """Solve every frame: (y (N, 6) about r, status (N,), the constraint rows (G, h) each frame's
+    solution satisfies — the relaxed rows for a relaxed frame, None for a failed one)."""
     N = batch.P.shape[0]
     y = np.full((N, 6), np.nan)
     status = np.full(N, Status.FAILED, dtype=np.int8)
+    rows: list = [(batch.G[i], batch.h[i]) for i in range(N)]
     scale = np.maximum(np.abs(batch.c[:, 5]), 1.0)
     tol = FEASIBILITY_TOL * scale
     todo = np.arange(N)
@@ -551,6 +612,7 @@ def _solve_batch(batch: _QPBatch, method: str) -> tuple[np.ndarray, np.ndarray]:
             s = _relaxation(batch, i)
             if s is None:
                 log.warning("contact QP: relaxation failed at double-support frame %d", i)
+                rows[i] = None
                 continue
             Gb, hb = _bounds(batch, i)
             G_rel = np.vstack([batch.G[i], Gb])
@@ -560,12 +622,293 @@ def _solve_batch(batch: _QPBatch, method: str) -> tuple[np.ndarray, np.ndarray]:
             else:
                 sol = _nested(batch.P[i], batch.q[i], G_rel, h_rel, scale[i])
             st = Status.RELAXED
+            rows[i] = (G_rel, h_rel)
             if sol is None:
                 log.warning("contact QP: relaxed problem failed at double-support frame %d", i)
+                rows[i] = None
                 continue
         y[i] = sol
         status[i] = st
-    return y, status
+    for i in np.flatnonzero(status == Status.FAILED):
+        rows[i] = None
+    return y, status, rows
+
+
+# --- temporal prior on the double-support split ---------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class _Timeline:
+    """What the temporal prior needs about every defined frame (positions in ``frames``)."""
+
+    r: np.ndarray  # (N, 3) reference point of every frame (between the feet, on the ground)
+    y_known: np.ndarray  # (N, 6) right-foot wrench about r where it is known (single support, flight)
+    period: int | None  # cyclic: P (frame P is frame 0 one period later), else None
+    wrap: np.ndarray  # (6, 6) wrench about r at frame 0 -> the same wrench seen at frame P
+
+
+def _timeline(character: Character, pose: _Pose, w_right: np.ndarray, cyclic: bool) -> _Timeline:
+    """Reference points of every frame, the known right-foot wrenches about them, the cyclic link."""
+    centres = [_foot_frames(character, pose, side)[1] for side in FEET]
+    r = 0.5 * (centres[0] + centres[1])
+    r[:, 2] = 0.0
+    yk = np.asarray(w_right, dtype=float).T.copy()  # (N, 6) about the origin
+    yk[:, :3] -= np.cross(r, yk[:, 3:])
+    N = r.shape[0]
+    wrap = np.eye(6)
+    period = None
+    if cyclic:
+        period = N - 1
+        b = character.model.seg_body[character.segments[0].name]
+        rel = pose.rot[period, b] @ pose.rot[0, b].T  # rotation of the whole body over one period
+        wrap[:3, :3] = wrap[3:, 3:] = rel
+    return _Timeline(r=r, y_known=yk, period=period, wrap=wrap)
+
+
+def _runs(is_ds: np.ndarray, period: int | None) -> list[list[int]]:
+    """Maximal runs of consecutive double-support positions; cyclic runs may wrap P−1 -> 0."""
+    n = period if period is not None else len(is_ds)
+    ds = [k for k in range(n) if is_ds[k]]
+    if not ds:
+        return []
+    if period is not None and len(ds) == n:
+        return [list(range(n))]  # a ring: double support throughout
+    in_ds = set(ds)
+
+    def pred(k: int) -> int | None:
+        return k - 1 if k > 0 else (n - 1 if period is not None else None)
+
+    out = []
+    for k in ds:
+        if pred(k) in in_ds:
+            continue
+        run = [k]
+        while True:
+            nxt = run[-1] + 1 if run[-1] + 1 < n else (0 if period is not None else None)
+            if nxt is None or nxt not in in_ds or nxt == k:
+                break
+            run.append(nxt)
+        out.append(run)
+    return out
+
+
+def _shift_T(d: np.ndarray) -> np.ndarray:
+    """(K, 6, 6) transposes of the matrices taking wrenches about a point a to about a − d."""
+    S = np.zeros(d.shape[:-1] + (6, 6))
+    S[..., 0, 0] = S[..., 1, 1] = S[..., 2, 2] = S[..., 3, 3] = S[..., 4, 4] = S[..., 5, 5] = 1.0
+    S[..., 3:, :3] = -_skew(d)  # (m' = m + d × f)ᵀ: the skew block transposed
+    return S
+
+
+def _smooth_split(batch: _QPBatch, y: np.ndarray, rows: list, ds: np.ndarray, line: _Timeline,
+                  kappa: float) -> np.ndarray:
+    """Every run of consecutive double-support frames as one convex QP (see the module doc):
+
+        Σ_k [y_kᵀ P_k y_k + 2 q_kᵀ y_k] + κ² Σ_k Δ_kᵀ W_k Δ_k,   Δ_k = change of the right-foot
+        wrench from frame k to k+1 (both about their mid-point), W_k = the effort metric P there,
+
+    with the neighbouring single-support frames' known wrenches (c or 0) as boundary values,
+    under every frame's own constraint rows. κ = fps / (2π f_s): a zero-phase first-order
+    low-pass at f_s of the per-frame optimum, in the effort metric, that respects the
+    constraints and the boundaries. Returns y (N_ds, 6) about each frame's r."""
+    import quadprog
+
+    out = y.copy()
+    P = line.period
+    n_pos = P if P is not None else line.r.shape[0]
+    where = np.full(line.r.shape[0], -1)
+    where[ds] = np.arange(len(ds))  # position -> row of the batch (-1: not double support)
+    runs = [run for run in _runs(where >= 0, P) if all(rows[where[pos]] is not None for pos in run)]
+    if not runs:
+        return out
+    # every pair (a -> b) of consecutive frames touching a run; "wrapped": b is frame 0 seen as frame P
+    pa, pb, wr, rid, la, lb = [], [], [], [], [], []
+    for r_i, run in enumerate(runs):
+        loc = {pos: j for j, pos in enumerate(run)}
+        prv = run[0] - 1 if run[0] > 0 else (n_pos - 1 if P is not None else None)
+        if prv is not None and prv not in loc:
+            pa.append(prv), pb.append(run[0]), wr.append(P is not None and run[0] == 0), rid.append(r_i)
+            la.append(-1), lb.append(0)
+        for j, pos in enumerate(run):
+            nxt = pos + 1 if pos + 1 < n_pos else (0 if P is not None else None)
+            if nxt is None:
+                continue
+            pa.append(pos), pb.append(nxt), wr.append(P is not None and nxt == 0), rid.append(r_i)
+            la.append(j), lb.append(loc.get(nxt, -1))
+    pa, pb, wr, rid, la, lb = (np.array(v) for v in (pa, pb, wr, rid, la, lb))
+    b_phys = np.where(wr, P if P is not None else 0, pb)
+    d = 0.5 * (line.r[pa] - line.r[b_phys])  # r_a − R with R the pair's mid-point; r_b − R = −d
+    K = len(pa)
+    # metric: mean of the double-support sides' effort Hessians, moved to R (A⁻ᵀ P A⁻¹, A⁻¹ shifts by −offset)
+    W = np.zeros((K, 6, 6))
+    cnt = np.zeros(K)
+    for side, off in ((pa, d), (b_phys, -d)):
+        has = where[side] >= 0
+        X = _shift_T(-off[has])
+        W[has] += np.einsum("kij,kjl,kml->kim", X, batch.P[where[side[has]]], X)
+        cnt[has] += 1
+    W *= (kappa * kappa) / cnt[:, None, None]
+    Ca = -np.swapaxes(_shift_T(d), 1, 2)  # Δ = C_a y_a + C_b y_b, both sides moved to R
+    Ab = np.swapaxes(_shift_T(-d), 1, 2)
+    Cb = Ab.copy()
+    Cb[wr] = Ab[wr] @ line.wrap  # the variable is frame 0's wrench, seen one period later
+    # known sides (single support, flight) enter Δ as constants
+    dk = np.where((la < 0)[:, None], np.einsum("kij,kj->ki", Ca, np.nan_to_num(line.y_known[pa])), 0.0)
+    dk += np.where((lb < 0)[:, None], np.einsum("kij,kj->ki", Ab, np.nan_to_num(line.y_known[b_phys])), 0.0)
+    CaW = np.einsum("kji,kjl->kil", Ca, W)
+    CbW = np.einsum("kji,kjl->kil", Cb, W)
+    Kaa, Kab, Kbb = CaW @ Ca, CaW @ Cb, CbW @ Cb
+    # the objective is block tridiagonal in the batch's row order (runs do not interact) except where
+    # a cyclic run wraps P−1 -> 0: diagonal blocks D, blocks O above, linear term g
+    Nds = len(ds)
+    ga, gb = np.where(la >= 0, where[pa], -1), np.where(lb >= 0, where[pb], -1)  # variables (frame 0, not P)
+    va, vb = ga >= 0, gb >= 0
+    D = batch.P.copy()
+    g = batch.q.copy()
+    O = np.zeros((max(Nds - 1, 0), 6, 6))
+    np.add.at(D, ga[va], Kaa[va])
+    np.add.at(D, gb[vb], Kbb[vb])
+    np.add.at(g, ga[va], np.einsum("kij,kj->ki", CaW[va], dk[va]))
+    np.add.at(g, gb[vb], np.einsum("kij,kj->ki", CbW[vb], dk[vb]))
+    link = va & vb & ~wr  # consecutive rows: gb = ga + 1
+    np.add.at(O, ga[link], Kab[link])
+    tol = FEASIBILITY_TOL * np.maximum(np.abs(batch.c[:, 5]), 1.0)
+    dense = []
+    # unconstrained optimum of every run at once (block tridiagonal: one banded solve); a run whose
+    # optimum breaks one of its frames' rows, or that wraps a cycle, is solved as one dense QP
+    wrapped = {int(rid[k]) for k in np.flatnonzero(va & vb & wr)}
+    flat = [r_i for r_i in range(len(runs)) if r_i not in wrapped]
+    if flat:
+        sub = np.sort(np.concatenate([where[np.array(runs[r_i])] for r_i in flat]))
+        Osub = np.where((np.diff(sub) == 1)[:, None, None], O[sub[:-1]], 0.0) if len(sub) > 1 else O[:0]
+        x = np.full_like(out, np.nan)
+        x[sub] = _solve_block_tridiagonal(D[sub], Osub, -g[sub])
+        dense = sorted(wrapped)
+        for r_i in flat:
+            rows_i = where[np.array(runs[r_i])]
+            if any(np.any(rows[i][0] @ x[i] > rows[i][1] + tol[i]) for i in rows_i):
+                dense.append(r_i)
+            else:
+                out[rows_i] = x[rows_i]
+    for r_i in dense:
+        # this run's QP as one dense problem (quadprog): active rows, or a cyclic run wrapping P−1 -> 0
+        run = runs[r_i]
+        rows_i = where[np.array(run)]
+        sel = np.flatnonzero((rid == r_i) & va & vb & wr)
+        m = len(run)
+        B = np.zeros((m, m, 6, 6))
+        ar = np.arange(m)
+        B[ar, ar] = D[rows_i]
+        nb = np.flatnonzero(np.diff(rows_i) == 1)
+        B[nb, nb + 1] = O[rows_i[nb]]
+        B[nb + 1, nb] = np.swapaxes(O[rows_i[nb]], 1, 2)
+        for k in sel:
+            B[la[k], lb[k]] += Kab[k]
+            B[lb[k], la[k]] += Kab[k].T
+        big = B.transpose(0, 2, 1, 3).reshape(6 * m, 6 * m)
+        big = 0.5 * (big + big.T)
+        rhs = g[rows_i].reshape(-1)
+        Gs = [rows[i] for i in rows_i]
+        G = np.zeros((sum(len(h_) for _, h_ in Gs), 6 * m))
+        h = np.concatenate([h_ for _, h_ in Gs])
+        r0 = 0
+        for j, (G_, h_) in enumerate(Gs):
+            G[r0:r0 + len(h_), 6 * j:6 * j + 6] = G_
+            r0 += len(h_)
+        tol_r = np.repeat(tol[rows_i], [len(h_) for _, h_ in Gs])
+        x = -np.linalg.solve(big, rhs)
+        if np.any(G @ x > h + tol_r):
+            try:
+                x = quadprog.solve_qp(2.0 * big, -2.0 * rhs, -G.T, -h, 0)[0]
+            except ValueError:
+                log.warning("contact QP: the temporal prior failed on %d double-support frames; per-frame "
+                            "solutions kept", m)
+                continue
+        out[rows_i] = x.reshape(m, 6)
+    if P is not None and where[P] >= 0 and where[0] >= 0:  # frame P is frame 0 one period later
+        out[where[P]] = line.wrap @ out[where[0]]
+    return out
+
+
+def _solve_block_tridiagonal(D: np.ndarray, O: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """x with the symmetric block-tridiagonal system (diagonal blocks D (N, 6, 6), blocks O (N−1, 6, 6)
+    above the diagonal) times x = rhs (N, 6): one banded solve."""
+    from scipy.linalg import solve_banded
+
+    N, b = D.shape[0], D.shape[1]
+    n = N * b
+    u = 2 * b - 1
+    ab = np.zeros((2 * u + 1, n))
+    blk = np.arange(N)[:, None, None] * b
+    i = np.arange(b)[None, :, None]
+    j = np.arange(b)[None, None, :]
+    rows, cols = (blk + i).repeat(b, 2), (blk + j).repeat(b, 1)
+    ab[u + rows - cols, cols] = D
+    if N > 1:
+        r_up, c_up = rows[:-1], cols[:-1] + b
+        ab[u + r_up - c_up, c_up] = O
+        ab[u + c_up - r_up, r_up] = O  # the transposed blocks below the diagonal: (c, r) <- O[r, c]
+    return solve_banded((u, u), ab, rhs.reshape(-1), check_finite=False).reshape(N, b)
+
+
+def _project_points(p: np.ndarray, G: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """Nearest points of the convex polygons {x : G x <= h} (N, m, 2), (N, m) to the points p (N, 2).
+
+    Exact: the nearest point is p itself, its projection onto one edge line, or a vertex (two
+    edge lines meeting); every candidate is tried and the nearest feasible one kept."""
+    N, m, _ = G.shape
+    g2 = np.einsum("nmi,nmi->nm", G, G)
+    ok = g2 > 1e-18
+    cands = [p[:, None, :]]
+    step = np.where(ok, (np.einsum("nmi,ni->nm", G, p) - h) / np.where(ok, g2, 1.0), np.nan)
+    cands.append(p[:, None, :] - step[..., None] * G)  # onto each edge line
+    i, j = np.triu_indices(m, 1)
+    M = np.stack([G[:, i], G[:, j]], axis=-2)  # (N, pairs, 2, 2)
+    det = M[..., 0, 0] * M[..., 1, 1] - M[..., 0, 1] * M[..., 1, 0]
+    good = np.abs(det) > 1e-12 * np.sqrt(g2[:, i] * g2[:, j] + 1e-300)
+    d = np.where(good, det, 1.0)
+    hi, hj = h[:, i], h[:, j]
+    vx = (hi * M[..., 1, 1] - hj * M[..., 0, 1]) / d
+    vy = (M[..., 0, 0] * hj - M[..., 1, 0] * hi) / d
+    cands.append(np.where(good[..., None], np.stack([vx, vy], -1), np.nan))  # vertices
+    C = np.concatenate(cands, axis=1)  # (N, K, 2)
+    slack = np.einsum("nmi,nki->nkm", G, C) - h[:, None, :]
+    tol = 1e-9 * (1.0 + np.abs(h)).max(axis=1)
+    feasible = np.all(slack <= tol[:, None, None], axis=2) & np.all(np.isfinite(C), axis=2)
+    dist = np.where(feasible, np.sum((C - p[:, None, :]) ** 2, axis=2), np.inf)
+    best = np.argmin(dist, axis=1)
+    out = C[np.arange(N), best]
+    return np.where(np.isfinite(dist[np.arange(N), best])[:, None], out, p)
+
+
+def _project_cop(w: np.ndarray, character: Character, pose: _Pose, side: str,
+                 penetration: float) -> tuple[np.ndarray, np.ndarray]:
+    """Single-support wrenches (6, N) about the origin whose CoP lies outside the foot's contact
+    polygon: the CoP moved to the nearest point of the polygon (same force, same free moment).
+    Returns the wrenches and which frames moved."""
+    out = np.array(w, dtype=float, copy=True)
+    N = out.shape[1]
+    moved = np.zeros(N, dtype=bool)
+    cop, tz = cop_and_free_moment(out)
+    rot, ctr, half = _foot_frames(character, pose, side)
+    z_low = ctr[:, 2] - np.abs(rot[:, 2, :]) @ half
+    z_plane = np.maximum(0.0, z_low + penetration)
+    E = np.swapaxes(rot, 1, 2)  # (N, 3, 3) rows: box axes in world
+    A = E[:, :, :2]  # the polygon: |A p + b| <= half, p the CoP on the foot's plane
+    b = np.einsum("nkj,nj->nk", E, np.stack([np.zeros(N), np.zeros(N), z_plane], -1) - ctr)
+    p = np.nan_to_num(cop[:2].T)
+    excess = np.abs(np.einsum("nkj,nj->nk", A, p) + b) - half
+    todo = np.flatnonzero(np.isfinite(cop[0]) & np.any(excess > 1e-12, axis=1))
+    if len(todo):
+        G = np.concatenate([A[todo], -A[todo]], axis=1)
+        h = np.concatenate([half - b[todo], half + b[todo]], axis=1)
+        pt = _project_points(p[todo], G, h)
+        f = out[3:, todo]
+        pt3 = np.stack([pt[:, 0], pt[:, 1], np.zeros(len(todo))])
+        out[:3, todo] = np.cross(pt3, f, axis=0)
+        out[2, todo] += tz[todo]
+        moved[todo] = True
+    return out, moved
 
 
 def _cop_violation(wrenches: np.ndarray, character: Character, pose: _Pose, penetration: float) -> np.ndarray:
@@ -600,13 +943,17 @@ def estimate_contact_wrenches(
     penetration: float = DEFAULT_PENETRATION,
     regularization: float = DEFAULT_REGULARIZATION,
     effort_coordinates: Sequence[str] | None = None,
+    smoothing_hz: float | None = None,
+    project_cop: bool = False,
 ) -> ContactEstimate:
     """Ground reaction wrench of each foot at every frame, from kinematics alone.
 
     ``q`` (n, T) the motion (our world frame: Z up, ground z = 0), ``fps`` its rate,
     ``foot_contact`` (2, T) bool (right, left) the contact schedule. See the module
     docstring for the method; ``method`` is ``"qp"`` (default) or ``"nested"`` (the
-    thesis's reference form, slow).
+    thesis's reference form, slow). ``smoothing_hz`` (qp only): the temporal prior on the
+    double-support split, as a cut-off frequency (None: one QP per frame, the thesis).
+    ``project_cop``: single-support CoPs outside the foot's polygon moved into it.
     """
     if method not in METHODS:
         raise ContactError(f"unknown method {method!r}; use one of {METHODS}")
@@ -616,6 +963,13 @@ def estimate_contact_wrenches(
         raise ContactError(f"penetration must be >= 0, got {penetration!r}")
     if not (math.isfinite(regularization) and regularization > 0):
         raise ContactError(f"regularization must be > 0 (it makes the QP strictly convex), got {regularization!r}")
+    if smoothing_hz is not None:
+        if not (isinstance(smoothing_hz, (int, float, np.floating)) and math.isfinite(smoothing_hz)
+                and smoothing_hz > 0):
+            raise ContactError(f"smoothing_hz must be a positive frequency (Hz) or None, got {smoothing_hz!r}")
+        if method != "qp":
+            raise ContactError("smoothing_hz goes with method='qp' (the nested form is the thesis's per-frame "
+                               "reference)")
     q, fc, g = _check_inputs(character, q, fps, foot_contact, gravity)
     T = q.shape[1]
     effort = None
@@ -648,10 +1002,20 @@ def estimate_contact_wrenches(
     st[right | left] = Status.SINGLE
     ds = np.flatnonzero(sup == Support.DOUBLE)
     pose = _dense_pose(character, qf)
+    w_right_exact = w[0].copy()  # c or 0: the boundary values of the temporal prior (dynamics-consistent)
+    if project_cop:
+        for s, mask in ((0, right), (1, left)):
+            k = np.flatnonzero(mask)
+            if len(k):
+                w[s][:, k], moved = _project_cop(w[s][:, k], character, pose.take(k), FEET[s], penetration)
+                st[k[moved]] = Status.PROJECTED
     if len(ds):
         batch = _qp_batch(character, pose.take(ds), tau0[:, ds], h0[:, ds], friction=friction,
                           penetration=penetration, regularization=regularization, effort=effort)
-        y, st_ds = _solve_batch(batch, method)
+        y, st_ds, rows = _solve_batch(batch, method)
+        if smoothing_hz is not None:
+            y = _smooth_split(batch, y, rows, ds, _timeline(character, pose, w_right_exact, cyclic),
+                              float(fps) / (2.0 * math.pi * float(smoothing_hz)))
         # back to moments about the origin: m_O = m_r + r × f
         y_o = y.copy()
         y_o[:, :3] += np.cross(batch.r, y[:, 3:])
@@ -669,7 +1033,8 @@ def estimate_contact_wrenches(
     if n_rel:
         log.info("contact estimation: %d of %d double-support frames infeasible, relaxed", n_rel, len(ds))
     return ContactEstimate(wrenches=wrenches, total=total, support=support, status=status,
-                           cop_violation=viol, fps=float(fps), method=method, cyclic=bool(cyclic))
+                           cop_violation=viol, fps=float(fps), method=method, cyclic=bool(cyclic),
+                           smoothing_hz=None if smoothing_hz is None else float(smoothing_hz))
 
 
 # --- trials: filter, schedule, estimate -----------------------------------------------------
@@ -741,11 +1106,19 @@ def estimate_capture(
     cutoff_hz: float | None = DEFAULT_CUTOFF_HZ,
     contacts: str | np.ndarray = "auto",
     cyclic: bool | None = None,
+    smoothing_hz: float | str | None = "cutoff",
+    project_cop: bool = True,
     **options: Any,
 ) -> TrialEstimate:
     """Filter a capture's kinematics, get its contact schedule, estimate its ground reactions.
 
     ``cutoff_hz``: low-pass cut-off (6 Hz, the same for every trial; ``None`` = no filter).
+    ``smoothing_hz``: the temporal prior on the double-support split
+    (:func:`estimate_contact_wrenches`); ``"cutoff"`` (default) = the kinematics' own
+    cut-off — the split gets no frequency the filtered kinematics do not have — with
+    ``method="qp"``, none with the nested reference form or without a filter; ``None`` = one
+    QP per frame (the thesis). ``project_cop``: single-support CoPs outside the foot's
+    contact polygon moved into it (default; ``False``: the foot takes c exactly, the thesis).
     ``contacts``: ``"kinematics"`` (:func:`solver.io.preprocess.detect_contacts` on the
     filtered motion), ``"plates"`` (force-plate loading, kinematics where the plates are
     incomplete; needs ``capture.measured``), ``"auto"`` (the importer's schedule when it has
@@ -789,6 +1162,11 @@ def estimate_capture(
         how, sched = "given", np.asarray(contacts, dtype=bool)
     if sched.shape != (len(ch.contacts), capture.T):
         raise ContactError(f"contact schedule must have shape ({len(ch.contacts)}, T={capture.T}), got {sched.shape}")
-    est = estimate_contact_wrenches(ch, qf, fps, foot_schedule(sched, ch), cyclic=cyclic, **options)
+    if isinstance(smoothing_hz, str):
+        if smoothing_hz != "cutoff":
+            raise ContactError(f"smoothing_hz must be a frequency (Hz), 'cutoff' or None, got {smoothing_hz!r}")
+        smoothing_hz = cutoff_hz if options.get("method", "qp") == "qp" else None
+    est = estimate_contact_wrenches(ch, qf, fps, foot_schedule(sched, ch), cyclic=cyclic, smoothing_hz=smoothing_hz,
+                                    project_cop=project_cop, **options)
     return TrialEstimate(estimate=est, times=np.asarray(capture.times, dtype=float), q=qf, contacts=sched,
                          contacts_from=how, cutoff_hz=cutoff_hz)

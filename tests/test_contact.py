@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+import quadprog
 from scipy.optimize import minimize
 
 from solver import character as C
@@ -10,8 +11,10 @@ from solver.contact import (
     Status,
     Support,
     _dense_pose,
+    _derivatives,
     _qp_batch,
     _screws,
+    _skew,
     cop_and_free_moment,
     estimate_capture,
     estimate_contact_wrenches,
@@ -92,9 +95,19 @@ def test_qp_objective_is_the_sum_of_squared_joint_forces_from_rnea(ch):
         assert np.allclose(np.diff(f_qp), np.diff(f_id), rtol=1e-9, atol=1e-6)
 
 
-def test_screws_from_the_dense_pose_are_the_kinematics_joint_screws(ch):
+@pytest.mark.parametrize("make", [C.capture_lower, C.capture_full])
+def test_screws_from_the_dense_pose_are_the_kinematics_joint_screws(make):
+    """The estimator poses only the feet and their ancestors (the rest cannot move them): exactly
+    the full forward kinematics there, NaN elsewhere (never used)."""
+    ch = make(H_SUBJ, M_SUBJ)
     q = np.random.default_rng(3).uniform(-0.5, 0.5, (ch.n, 5))
-    assert np.allclose(_screws(ch, _dense_pose(ch, q)), np.moveaxis(joint_screws(ch, q), -1, 0), atol=1e-14)
+    ours, ref = _screws(ch, _dense_pose(ch, q)), np.moveaxis(joint_screws(ch, q), -1, 0)
+    model = ch.model
+    used = sorted(set().union(*(model.ancestors(model.seg_body[ch.foot(s).segment]) for s in ("right", "left"))))
+    used = sorted(set(used) | {model.seg_body[ch.foot(s).segment] for s in ("right", "left")})
+    assert np.allclose(ours[:, used], ref[:, used], atol=1e-14)
+    assert np.isnan(np.delete(ours, used, axis=1)).all()
+    assert len(used) == 24  # root 6 + hips, knees, ankles 3 each: toes (and the upper body) are not posed
 
 
 # --- equations that must hold -----------------------------------------------------------------
@@ -302,6 +315,166 @@ def test_cop_of_a_known_wrench():
     assert np.allclose(cop[:, 0], p) and tz[0] == pytest.approx(2.0)
 
 
+# --- temporal prior on the split (smoothing_hz) ------------------------------------------------
+
+
+def _effort_quadratic(ch, q, fps, t, c):
+    """Joint effort of frame t as a function of the right-foot wrench x (about the origin), the left
+    taking c − x: (H, b) with E(x) = xᵀHx + 2bᵀx + const, read off RNEA evaluations."""
+    dt = 1 / fps
+    qt, qd, qdd = q[:, t], (q[:, t + 1] - q[:, t - 1]) / (2 * dt), (q[:, t + 1] - 2 * q[:, t] + q[:, t - 1]) / dt**2
+    feet = [ch.model.seg_body[ch.foot(s).segment] for s in ("right", "left")]
+
+    def E(x):
+        tau = np.asarray(rnea(ch, qt, qd, qdd, fext={feet[0]: x, feet[1]: c - x}).tau)[6:]
+        return float(tau @ tau)
+
+    s, e, I = 100.0, E(np.zeros(6)), np.eye(6)
+    ep, em = [E(s * I[i]) for i in range(6)], [E(-s * I[i]) for i in range(6)]
+    H = np.diag([(ep[i] + em[i] - 2 * e) / (2 * s * s) for i in range(6)])
+    b = np.array([(ep[i] - em[i]) / (4 * s) for i in range(6)])
+    for i in range(6):
+        for j in range(i + 1, 6):
+            H[i, j] = H[j, i] = (E(s * (I[i] + I[j])) - e - 2 * s * (b[i] + b[j]) - s * s * (H[i, i] + H[j, j])) / (2 * s * s)
+    return H, b
+
+
+def test_temporal_prior_is_the_stated_convex_problem(ch):
+    """Independent reference: the run's objective rebuilt from RNEA (the effort of each frame and, as
+    metric of the frame-to-frame changes, its quadratic part), κ = fps / 2πf_s, the next single-support
+    frame's right-foot wrench (0: the right foot swings) as boundary value, the frames' constraint rows;
+    solved by quadprog as one dense QP. Constraints are active on this run (the unconstrained optimum
+    leaves the polygons): the estimator must find the same optimum."""
+    q, fps = _swaying_motion(ch)
+    fc = _walk_schedule(q.shape[1])
+    f_s = 6.0
+    est = estimate_contact_wrenches(ch, q, fps, fc, friction=None, regularization=1e-15, smoothing_hz=f_s)
+    run = np.arange(1, 40)  # frames 1..39: double support, frame 40 the right foot's first swing frame
+    assert np.all(est.support[run] == Support.DOUBLE) and est.support[40] == Support.LEFT
+    assert np.all(est.status[run] == Status.OPTIMAL)
+    quads = [_effort_quadratic(ch, q, fps, t, est.total[:, t]) for t in run]
+    m, k2 = len(run), (fps / (2 * np.pi * f_s)) ** 2
+    big, lin = np.zeros((6 * m, 6 * m)), np.zeros(6 * m)
+    for j, (H, b) in enumerate(quads):
+        big[6 * j:6 * j + 6, 6 * j:6 * j + 6] += H
+        lin[6 * j:6 * j + 6] += b
+    for j in range(m - 1):
+        D = np.zeros((6, 6 * m))
+        D[:, 6 * j:6 * j + 6], D[:, 6 * j + 6:6 * j + 12] = -np.eye(6), np.eye(6)
+        big += k2 * D.T @ (0.5 * (quads[j][0] + quads[j + 1][0])) @ D
+    big[-6:, -6:] += k2 * quads[-1][0]  # towards the right foot's 0 at frame 40
+    # the frames' constraint rows (CoP in each polygon), for wrenches about the origin
+    frames, qd, qdd = _derivatives(q, 1 / fps, False)
+    res = rnea(ch, q[:, frames], qd, qdd)
+    batch = _qp_batch(ch, _dense_pose(ch, q[:, frames]), np.asarray(res.tau), np.asarray(res.h0), friction=None,
+                      penetration=0.01, regularization=1e-15)
+    G = np.zeros((0, 6 * m))
+    h = np.zeros(0)
+    for j, t in enumerate(run):
+        to_r = np.eye(6)
+        to_r[:3, 3:] = -_skew(batch.r[t - 1])  # moment about r: m − r × f
+        Gj = np.zeros((batch.G.shape[1], 6 * m))
+        Gj[:, 6 * j:6 * j + 6] = batch.G[t - 1] @ to_r
+        G, h = np.vstack([G, Gj]), np.concatenate([h, batch.h[t - 1]])
+    free = -np.linalg.solve(big, lin)
+    assert np.max(G @ free - h) > 1.0  # N·m: the constraints matter on this run
+    ref = quadprog.solve_qp(big + big.T, -2 * lin, -G.T, -h, 0)[0].reshape(m, 6)
+    assert np.allclose(est.wrenches[0][:, run].T, ref, atol=1e-6 * np.abs(ref).max())
+    per_frame = estimate_contact_wrenches(ch, q, fps, fc, friction=None, regularization=1e-15)
+    assert np.abs(per_frame.wrenches[0][:, run] - est.wrenches[0][:, run]).max() > 10.0  # it does change the split
+
+
+def test_temporal_prior_keeps_the_equations_and_tends_to_the_per_frame_qp(ch, sway):
+    q, fps, fc, per_frame = sway
+    est = estimate_contact_wrenches(ch, q, fps, fc, smoothing_hz=6.0)
+    ds = est.double_support
+    assert np.allclose(est.wrenches[0][:, ds] + est.wrenches[1][:, ds], est.total[:, ds], atol=1e-9)
+    opt = ds & (est.status == Status.OPTIMAL)
+    assert np.all(est.cop_violation[:, opt] < 1e-7)
+    ss = est.defined & ~ds
+    assert np.array_equal(est.wrenches[:, :, ss], per_frame.wrenches[:, :, ss])  # single support untouched
+    # κ -> 0 (cut-off far above the sampling rate): the per-frame optimum
+    fast = estimate_contact_wrenches(ch, q, fps, fc, smoothing_hz=1e7)
+    assert np.max(np.abs(fast.wrenches[:, :, ds] - per_frame.wrenches[:, :, ds])) < 1e-3
+    # continuity at lift-off and touch-down: the jumps to the neighbouring single-support frames shrink
+    def jumps(e):
+        edge = np.flatnonzero(np.diff(ds.astype(int)) != 0)
+        edge = edge[(edge > 0) & (edge < len(ds) - 2)]
+        return np.abs(np.diff(e.force[:, 2], axis=1)[:, edge]).sum()
+    assert jumps(est) < 0.8 * jumps(per_frame)
+
+
+def test_temporal_prior_on_one_cycle_is_the_middle_of_three(ch):
+    """A cyclic clip's runs wrap around the closing frame: one period with smoothing gives what the
+    middle period of three consecutive periods gives."""
+    T, fps = 41, 40.0
+
+    def motion(t):
+        q = np.zeros((ch.n, len(t)))
+        q[ch.index("root_tz")] = _sole_height(ch) + 0.01 * np.sin(2 * np.pi * t)
+        q[ch.index("root_tx")] = 0.5 * t + 0.02 * np.sin(2 * np.pi * t)
+        q[ch.index("hip_flexion_r")] = 0.2 * np.sin(2 * np.pi * t)
+        q[ch.index("hip_flexion_l")] = -0.2 * np.sin(2 * np.pi * t)
+        return q
+    fc1 = np.ones((2, T), bool)
+    fc1[0, 5:12] = False
+    fc1[1, 25:32] = False  # double support 32..40 and 0..4 wraps the cycle
+    one = estimate_contact_wrenches(ch, motion(np.arange(T) / fps), fps, fc1, cyclic=True, smoothing_hz=6.0)
+    fc3 = np.concatenate([fc1[:, :-1]] * 3 + [fc1[:, :1]], axis=1)
+    three = estimate_contact_wrenches(ch, motion(np.arange(3 * (T - 1) + 1) / fps), fps, fc3, smoothing_hz=6.0)
+    mid = slice(T - 1, 2 * (T - 1) + 1)
+    assert np.allclose(one.wrenches[:, 3:], three.wrenches[:, 3:, mid], atol=1e-6)
+    assert np.allclose(one.free_moment, three.free_moment[:, mid], atol=1e-6)
+    per_frame = estimate_contact_wrenches(ch, motion(np.arange(T) / fps), fps, fc1, cyclic=True)
+    assert np.max(np.abs(one.wrenches[:, 3:] - per_frame.wrenches[:, 3:])) > 10.0
+
+
+def test_temporal_prior_options_are_checked(ch, sway):
+    q, fps, fc, _ = sway
+    for bad in (0.0, -3.0, float("nan")):
+        with pytest.raises(ContactError, match="smoothing_hz"):
+            estimate_contact_wrenches(ch, q, fps, fc, smoothing_hz=bad)
+    with pytest.raises(ContactError, match="method='qp'"):
+        estimate_contact_wrenches(ch, q, fps, fc, method="nested", smoothing_hz=6.0)
+
+
+# --- single-support CoP kept in the foot (project_cop) -------------------------------------------
+
+
+def test_single_support_cop_outside_the_foot_goes_to_the_nearest_point_of_its_polygon(ch, sway):
+    """The sway keeps both feet on the ground while the schedule lifts one: c's CoP lies between the
+    feet, outside the stance foot. Reference: brute force over a 0.5 mm grid of the foot box's section
+    by its contact plane (no grid point nearer to c's CoP than the projected CoP, itself in the polygon)."""
+    q, fps, fc, exact = sway
+    est = estimate_contact_wrenches(ch, q, fps, fc, project_cop=True)
+    moved = np.flatnonzero(est.status == Status.PROJECTED)
+    assert len(moved) > 10
+    assert np.all(np.isin(est.support[moved], (Support.RIGHT, Support.LEFT)))
+    same = est.defined & (est.status != Status.PROJECTED)
+    assert np.array_equal(est.wrenches[:, :, same], exact.wrenches[:, :, same])
+    c_cop, c_tz = cop_and_free_moment(est.total[:, moved])
+    from solver.kinematics import segment_frames
+
+    seg_of = {s.name: i for i, s in enumerate(ch.segments)}
+    for j, t in enumerate(moved[::4]):
+        s = 0 if est.support[t] == Support.RIGHT else 1
+        box = ch.foot(("right", "left")[s])
+        R, P = segment_frames(ch, q[:, t])
+        rot, ctr = R[seg_of[box.segment]], P[seg_of[box.segment]] + R[seg_of[box.segment]] @ box.center
+        plane = max(0.0, ctr[2] - np.abs(rot[2]) @ box.half + 0.01)
+        gx, gy = np.meshgrid(np.arange(ctr[0] - 0.2, ctr[0] + 0.2, 5e-4), np.arange(ctr[1] - 0.1, ctr[1] + 0.1, 5e-4))
+        pts = np.stack([gx.ravel(), gy.ravel(), np.full(gx.size, plane)], 1)
+        inside = np.all(np.abs((pts - ctr) @ rot) <= box.half, axis=1)
+        k = np.flatnonzero(moved == t)[0]
+        target = c_cop[:2, k]
+        nearest_on_grid = np.linalg.norm(pts[inside, :2] - target, axis=1).min()
+        got = np.linalg.norm(est.cop[s, :2, t] - target)
+        assert nearest_on_grid - 5e-4 < got <= nearest_on_grid + 1e-9, t  # no point of the polygon is closer
+        assert np.allclose(est.force[s][:, t], est.total[3:, t])
+        assert est.free_moment[s, t] == pytest.approx(c_tz[k], abs=1e-7)
+        assert est.cop_violation[s, t] < 1e-9
+
+
 # --- the shared trials (real kinematics, measured force plates) -------------------------------
 
 
@@ -328,9 +501,20 @@ def test_real_trials_satisfy_the_estimation_equations(trials):
     for name, (cap, tr) in trials.items():
         est = tr.estimate
         assert tr.contacts_from in ("plates", "importer"), name
+        assert est.smoothing_hz == 6.0  # the trial estimator's defaults: temporal prior at the cut-off ...
         ss = est.defined & (est.support != Support.DOUBLE) & (est.support != Support.FLIGHT)
-        foot = np.where(est.support[ss] == Support.RIGHT, 0, 1)
-        assert np.array_equal(est.wrenches[foot, :, np.flatnonzero(ss)], est.total[:, ss].T), name
+        foot = np.where(est.support == Support.RIGHT, 0, 1)
+        exact = ss & (est.status == Status.SINGLE)
+        assert np.array_equal(est.wrenches[foot[exact], :, np.flatnonzero(exact)], est.total[:, exact].T), name
+        # ... and single-support CoPs kept in the foot: same force and free moment as c, CoP moved
+        proj = ss & (est.status == Status.PROJECTED)
+        assert 0 < proj.sum() < ss.sum(), name
+        k = np.flatnonzero(proj)
+        c_cop, c_tz = cop_and_free_moment(est.total[:, proj])
+        assert np.allclose(est.wrenches[foot[k], 3:, k], est.total[3:, proj].T, atol=1e-9), name
+        assert np.allclose(est.free_moment[foot[k], k], c_tz, atol=1e-7), name
+        assert np.all(est.cop_violation[foot[k], k] < 1e-9), name
+        assert np.all(np.linalg.norm(est.cop[foot[k], :2, k] - c_cop[:2].T, axis=1) > 0), name
         ds = est.double_support
         assert ds.sum() >= 9, name
         assert np.allclose(est.wrenches[0][:, ds] + est.wrenches[1][:, ds], est.total[:, ds], atol=1e-8), name
@@ -347,7 +531,7 @@ def test_real_trials_satisfy_the_estimation_equations(trials):
 def test_qp_and_nested_agree_on_every_double_support_frame_of_the_shared_trials(trials):
     for name, (cap, tr) in trials.items():
         fc = foot_schedule(tr.contacts, cap.character)
-        a = tr.estimate
+        a = estimate_contact_wrenches(cap.character, tr.q, cap.fps, fc, method="qp")  # one QP per frame
         b = estimate_contact_wrenches(cap.character, tr.q, cap.fps, fc, method="nested")
         ds = a.double_support
         assert np.array_equal(a.status, b.status), name
@@ -355,12 +539,12 @@ def test_qp_and_nested_agree_on_every_double_support_frame_of_the_shared_trials(
 
 
 # measured on the shared trials (docs/grf.md) with ~25 % margin: relative RMS (SPEC 4.33) of the
-# force components over every frame with complete plates and over double support only, CoP RMS in cm.
+# force components and free moment over every frame with complete plates and over double support
+# only, CoP RMS in cm (estimate_capture's defaults: temporal prior at the 6 Hz cut-off, CoPs in the feet).
 ACCURACY = {
-    "overground": {"fz": 0.10, "fx": 0.095, "fy": 0.42, "cop": 5.2, "ds_fz": 0.20},
-    "c3d": {"fz": 0.115, "fx": 0.125, "fy": 0.25, "cop": 6.8, "ds_fz": 0.28},
-    # torso lumped into the pelvis by the importer (arm-less model): see docs/grf.md
-    "treadmill": {"fz": 0.125, "fx": 0.13, "fy": 0.65, "cop": 21.0, "ds_fz": 0.20},
+    "overground": {"fz": 0.10, "fx": 0.09, "fy": 0.46, "tz": 0.45, "cop": 4.3, "ds_fz": 0.19},
+    "treadmill": {"fz": 0.05, "fx": 0.075, "fy": 0.105, "tz": 0.42, "cop": 4.5, "ds_fz": 0.085},
+    "c3d": {"fz": 0.105, "fx": 0.125, "fy": 0.21, "tz": 0.55, "cop": 4.8, "ds_fz": 0.23},
 }
 
 

@@ -103,12 +103,16 @@ def cmd_grf(args: argparse.Namespace) -> int:
     errors = _user_errors()
     if args.cutoff is not None and args.cutoff < 0:
         raise CliError(f"--cutoff must be >= 0 Hz (0 = no filter), got {args.cutoff}")
+    if args.smoothing is not None and not (math.isfinite(args.smoothing) and args.smoothing >= 0):
+        raise CliError(f"--smoothing must be >= 0 Hz (0 = one QP per frame), got {args.smoothing}")
+    smoothing = "cutoff" if args.smoothing is None else (args.smoothing or None)
     t0 = time.perf_counter()
     try:
         cap = _load(args)
         t1 = time.perf_counter()
         tr = estimate_capture(cap, cutoff_hz=args.cutoff or None, contacts=args.contacts, method=args.method,
-                              cyclic=True if args.cyclic else None)
+                              cyclic=True if args.cyclic else None, smoothing_hz=smoothing,
+                              project_cop=not args.exact_single_support)
     except errors as e:
         msg = str(e)
         if ("double support" in msg or "never" in msg) and args.belt_speed is None and not args.c3d:
@@ -218,6 +222,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help=f"low-pass cut-off before differentiation (default {DEFAULT_CUTOFF_HZ:g} Hz; 0 = none)")
     s.add_argument("--method", choices=METHODS, default="qp",
                    help="qp: one 6-variable QP per double-support frame; nested: the thesis's form (slow)")
+    s.add_argument("--smoothing", type=float, default=None, metavar="HZ",
+                   help="temporal prior on the double-support split, as a cut-off (default: the --cutoff; "
+                        "0 = one QP per frame, the thesis; qp method only)")
+    s.add_argument("--exact-single-support", action="store_true",
+                   help="the foot takes the total wrench exactly even when its CoP falls outside the foot "
+                        "(the thesis); default: that CoP is moved to the nearest point of the foot")
     s.add_argument("--cyclic", action="store_true",
                    help="the clip is one cycle whose last frame closes it (auto for DeepMimic loops)")
     s.add_argument("--out", required=True, metavar="EST.csv", help="output CSV")
