@@ -19,6 +19,7 @@ def health(db: Database = Depends(get_db), runner: Runner = Depends(get_runner))
         database = "ok"
     except Exception as e:
         database = f"unreachable: {type(e).__name__}"
-    broker = runner.health() if runner.name == "celery" else None
-    ok = database == "ok" and (broker in (None, "ok")) and runner.health() == "ok"
+    state = runner.health()  # the LocalRunner's pool, or the broker for Celery
+    broker = state if runner.name == "celery" else None
+    ok = database == "ok" and state == "ok"
     return Health(status="ok" if ok else "degraded", database=database, runner=runner.name, broker=broker)
