@@ -25,7 +25,7 @@ TERMINAL = ("succeeded", "failed", "canceled", "impasse")
 
 #: a cheap but real job (~1 s): 3 λ steps from the DeepMimic tutor
 CHEAP = {"target": {"friction": 0.7}, "control": {"delta0": 0.5}}
-#: a longer one (~3-4 s, 12 λ steps), so a process can be killed in the middle of it
+#: a longer one (~3-4 s), so a process can be killed in the middle of it
 KILLABLE = {"target": {"slope_deg": 6.0, "friction": 0.6},  # Algorithm 3 from 0.01: 8 λ steps
             "control": {"method": "thesis", "delta0": 0.01, "eps": 0.001}}
 
