@@ -850,13 +850,17 @@ def character_from_dict(d: Mapping) -> Character:
     )
 
 
-def merge_segments(ch: Character, names: Iterable[str], name: str | None = None) -> Character:
+def merge_segments(ch: Character, names: Iterable[str], name: str | None = None,
+                   pose: Mapping[str, float] | None = None) -> Character:
     """Remove segments (and their descendants' coordinates), lumping their mass into the parent.
 
-    The removed segments are frozen in their q = 0 pose relative to the parent they are
-    merged into (exact rigid-body inertia composition). Used to turn a whole-body capture
-    into a lower-body one whose pelvis carries head, arms and trunk.
+    The removed segments are frozen relative to the parent they are merged into, in the
+    posture given by ``pose`` (coordinate name -> value; missing coordinates at 0), with an
+    exact rigid-body inertia composition. Used to turn a whole-body capture into a
+    lower-body one whose pelvis carries head, arms and trunk (in the subject's mean
+    posture over the cycle).
     """
+    pose = dict(pose or {})
     names = set(names)
     by_name = {s.name: s for s in ch.segments}
     unknown = names - set(by_name)
@@ -876,7 +880,14 @@ def merge_segments(ch: Character, names: Iterable[str], name: str | None = None)
             rel[s.name] = (s.name, np.eye(3), np.zeros(3))
             continue
         anc, r, p = rel[s.parent]  # type: ignore[index]
-        rel[s.name] = (anc, r @ s.orientation, p + r @ s.offset)
+        r, p = r @ s.orientation, p + r @ s.offset
+        for d in s.dofs:  # the frozen joint values, applied in order like the joints themselves
+            v = float(pose.get(d.name, 0.0))
+            if d.kind == "hinge":
+                r = r @ sp.rotation_about(d.axis, v)
+            else:
+                p = p + r @ (d.axis * v)
+        rel[s.name] = (anc, r, p)
     extra: dict[str, list] = {}
     for s in ch.segments:
         if s.name in removed:

@@ -105,13 +105,19 @@ def motion_capture(motion: Motion) -> Capture:
     )
 
 
-def synthesis_character(capture_character: Character, kind: str) -> tuple[Character, Character]:
-    """(synthesis character, capture character it is simplified from), same segments/markers."""
+def synthesis_character(capture_character: Character, kind: str,
+                        pose: Mapping[str, float] | None = None) -> tuple[Character, Character]:
+    """(synthesis character, capture character it is simplified from), same segments/markers.
+
+    For HalfBoy the upper body is merged into the pelvis in ``pose`` (e.g. the subject's
+    mean posture over the cycle: a walker leaning forward keeps the trunk's mass forward).
+    """
     names = {s.name for s in capture_character.segments}
     if kind == "halfboy":
         cap = capture_character
         if "abdomen" in names:
-            cap = merge_segments(capture_character, UPPER_ROOT_SEGMENTS, name=f"{capture_character.name}-lower")
+            cap = merge_segments(capture_character, UPPER_ROOT_SEGMENTS, name=f"{capture_character.name}-lower",
+                                 pose=pose)
         locked = [c for c in LOWER_SUPERFLUOUS if c in cap.coordinate_names]
         syn = cap.reduce(locked, name="halfboy")
         return syn, cap
@@ -217,10 +223,11 @@ def make_tutor(
     capture = motion_capture(source) if isinstance(source, Motion) else source
     if not (math.isfinite(fps) and fps > 0):
         raise PipelineError(f"fps must be positive, got {fps}")
-    syn, cap_char = synthesis_character(capture.character, character)
     stats: dict[str, Any] = {}
     t = time.perf_counter()
     cyc, contacts = extract_cycle(capture, fps, start=start, cycle=cycle)
+    mean_pose = dict(zip(capture.character.coordinate_names, np.mean(cyc.q[:, :-2], axis=1)))
+    syn, cap_char = synthesis_character(capture.character, character, pose=mean_pose)
     contacts = np.array(contacts, dtype=bool)
     contacts[:, -2:] = contacts[:, :2]  # the overlap frames repeat frames 1-2
     stats["cycle_s"] = time.perf_counter() - t

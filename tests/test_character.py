@@ -98,3 +98,26 @@ def test_singular_dofs_are_the_middle_of_each_ball_joint():
     ch = C.capture_lower()
     names = [ch.coordinate_names[i] for i in ch.singular_dofs]
     assert "hip_adduction_r" in names and "knee_adduction_l" in names and "root_ry" in names
+
+
+def test_merge_in_a_posture_keeps_the_whole_body_com():
+    """Merging the upper body in the posture it has keeps the whole-body centre of mass."""
+    from solver.kinematics import segment_frames
+
+    ch = C.capture_full()
+    pose = {"lumbar_flexion": 0.35, "thorax_flexion": 0.1, "shoulder_flexion_r": 0.4, "elbow_flexion_l": 0.8}
+    q = np.zeros(ch.n)
+    for k, v in pose.items():
+        q[ch.index(k)] = v
+
+    def com(character, qv):
+        rots, poss = segment_frames(character, qv)
+        total = sum(s.mass * (poss[i] + rots[i] @ s.com) for i, s in enumerate(character.segments))
+        return total / character.total_mass
+
+    merged = C.merge_segments(ch, ["abdomen"], pose=pose)
+    q_low = np.array([q[ch.index(nm)] for nm in merged.coordinate_names])
+    assert merged.total_mass == pytest.approx(ch.total_mass)
+    assert np.allclose(com(merged, q_low), com(ch, q), atol=1e-12)
+    flat = C.merge_segments(ch, ["abdomen"])
+    assert not np.allclose(com(flat, q_low), com(ch, q), atol=1e-3)  # the posture matters
