@@ -88,7 +88,7 @@ class Settings(BaseSettings):
         return v or None
 
     @model_validator(mode="after")
-    def _timeouts(self) -> "Settings":
+    def _timeouts(self) -> Settings:
         if self.visibility_timeout_s <= self.hard_time_limit_s:
             raise ValueError(
                 f"visibility_timeout_s ({self.visibility_timeout_s}) must exceed the longest job "

@@ -12,15 +12,15 @@ from __future__ import annotations
 
 import os
 import threading
+from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterator
 
 from sqlalchemy import Engine, create_engine, event
 from sqlalchemy.engine import make_url
 from sqlalchemy.orm import Session, sessionmaker
 
-_ENGINES: dict[tuple[int, str], "Database"] = {}
+_ENGINES: dict[tuple[int, str], Database] = {}
 _LOCK = threading.Lock()
 
 

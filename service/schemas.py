@@ -38,7 +38,7 @@ class TargetIn(Strict):
     gravity: float | None = Field(None, gt=0.0, le=100.0, description="target gravity magnitude (m/s²)")
 
     @model_validator(mode="after")
-    def _not_identity(self) -> "TargetIn":
+    def _not_identity(self) -> TargetIn:
         if self.slope_deg == 0 and self.curve_deg == 0 and self.friction is None and self.gravity is None:
             raise ValueError("the target changes nothing: give slope_deg, curve_deg, friction and/or gravity")
         return self
@@ -54,7 +54,7 @@ class StepControlIn(Strict):
     max_solves: int = Field(_SC.max_solves, ge=1, le=100_000)
 
     @model_validator(mode="after")
-    def _eps(self) -> "StepControlIn":
+    def _eps(self) -> StepControlIn:
         if self.eps > self.delta0:
             raise ValueError("eps must not exceed delta0")
         return self

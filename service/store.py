@@ -15,8 +15,9 @@ import secrets
 import time
 import uuid
 import zlib
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, Callable, Literal, Sequence
+from typing import Any, Literal
 
 from sqlalchemy import Select, delete, func, or_, select, update
 from sqlalchemy.orm import Session

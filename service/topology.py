@@ -45,7 +45,7 @@ def wait_until(pred, timeout: float, what: str, interval: float = 0.1):
             v = pred()
             if v:
                 return v
-        except Exception as e:  # noqa: BLE001 - retried until the deadline
+        except Exception as e:  # retried until the deadline
             last_exc = e
         time.sleep(interval)
     raise TopologyError(f"timed out after {timeout:g} s waiting for {what}" + (f" ({last_exc})" if last_exc else ""))
@@ -74,7 +74,7 @@ class RedisServer:
     def url(self) -> str:
         return f"redis://127.0.0.1:{self.port}/0"
 
-    def start(self, timeout: float = 15.0) -> "RedisServer":
+    def start(self, timeout: float = 15.0) -> RedisServer:
         exe = shutil.which(self.binary)
         if exe is None:
             raise TopologyError("redis-server not found (apt-get install redis-server)")
@@ -186,7 +186,7 @@ class Proc:
     proc: subprocess.Popen | None = field(default=None, repr=False)
     _log: IO | None = field(default=None, repr=False)
 
-    def start(self) -> "Proc":
+    def start(self) -> Proc:
         self.log_path.parent.mkdir(parents=True, exist_ok=True)
         self._log = open(self.log_path, "ab")
         self.proc = subprocess.Popen(self.args, env=self.env, stdout=self._log, stderr=subprocess.STDOUT,
@@ -313,7 +313,7 @@ class Stack:
         return service_env(database_url=self.database_url, broker_url=self.redis.url, api_keys=self.api_keys,
                            data_dir=self.data_dir, extra=self.extra_env)
 
-    def start(self, timeout: float = 90.0) -> "Stack":
+    def start(self, timeout: float = 90.0) -> Stack:
         from service.db import upgrade
 
         self.data_dir.mkdir(parents=True, exist_ok=True)

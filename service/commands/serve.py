@@ -71,7 +71,7 @@ def cmd_worker(args: argparse.Namespace) -> int:
     # import the pipeline once in the worker's main process: every pool process forked from
     # it (also the one replacing a killed child) starts warm, with the same code
     import mjcf.validate  # noqa: F401
-    import solver.continuation  # noqa: F401
+    import solver.continuation
     import solver.pipeline  # noqa: F401
 
     argv = [

@@ -15,7 +15,6 @@ from pathlib import Path
 
 import httpx
 import pytest
-
 from svc_util import KEY_A, KEY_B
 
 from service.topology import (
@@ -38,7 +37,7 @@ def _pg_available() -> str | None:
         with psycopg.connect(PG_ADMIN, connect_timeout=3) as c:
             c.execute("SELECT 1")
         return None
-    except Exception as e:  # noqa: BLE001
+    except Exception as e:
         return str(e)
 
 

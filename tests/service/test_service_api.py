@@ -9,7 +9,6 @@ import httpx
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-
 from svc_util import KEY_A, halfboy_motion
 
 PROBLEM = "application/problem+json"

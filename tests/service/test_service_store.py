@@ -9,11 +9,11 @@ import time
 import pytest
 from sqlalchemy import func, select, text
 from sqlalchemy.exc import IntegrityError
+from svc_util import halfboy_motion
 
 from service import store
 from service.db import current_revision, get_database, upgrade
 from service.models import JobRow, MotionRow
-from svc_util import halfboy_motion
 
 
 @pytest.fixture(params=["sqlite", "postgresql"])
@@ -217,7 +217,7 @@ def test_concurrent_step_upserts_never_duplicate(db):
             for step in range(3):
                 with db.write() as s:
                     store.save_step(s, job_id=job_id, owner=own, step=step, lam=step / 3, motion=halfboy_motion(seed=i))
-        except Exception as e:  # noqa: BLE001
+        except Exception as e:
             errors.append(e)
 
     threads = [threading.Thread(target=write, args=(i,)) for i in range(6)]
