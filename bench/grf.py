@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bench.trials import best_time
 from solver.contact import Status, estimate_capture, estimate_contact_wrenches, foot_schedule, lowpass_kinematics
 
 
@@ -24,15 +25,6 @@ def _data() -> Path:
     from tests.conftest import SHARED_DATA
 
     return SHARED_DATA
-
-
-def _best(fn, repeat: int) -> float:
-    best = float("inf")
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t)
-    return best
 
 
 def _trials() -> dict:
@@ -69,12 +61,12 @@ def run() -> dict:
         ch, fps = cap.character, cap.fps
         fc = foot_schedule(tr.contacts, ch)
         res: dict = {"character": ch.name, "coordinates": ch.n, "frames": cap.T, "import_s": round(t_import, 3)}
-        res["filter_ms"] = 1e3 * _best(lambda: lowpass_kinematics(ch, cap.q, fps), 5)
+        res["filter_ms"] = 1e3 * best_time(lambda: lowpass_kinematics(ch, cap.q, fps), 5)
         opts = {"smoothing_hz": tr.estimate.smoothing_hz, "project_cop": True}  # estimate_capture's defaults
-        t1 = _best(lambda: estimate_contact_wrenches(ch, tr.q, fps, fc, **opts), 7)
+        t1 = best_time(lambda: estimate_contact_wrenches(ch, tr.q, fps, fc, **opts), 7)
         res["estimate_ms"] = 1e3 * t1
         res["frames_per_s"] = cap.T / t1
-        t0 = _best(lambda: estimate_contact_wrenches(ch, tr.q, fps, fc), 7)
+        t0 = best_time(lambda: estimate_contact_wrenches(ch, tr.q, fps, fc), 7)
         res["per_frame_estimate_ms"] = 1e3 * t0
         res["per_frame_frames_per_s"] = cap.T / t0
         est = estimate_contact_wrenches(ch, tr.q, fps, fc, **opts)
@@ -84,11 +76,11 @@ def run() -> dict:
         res["projected_frames"] = int(np.sum(est.status == Status.PROJECTED))
         reps = max(1, int(np.ceil(20000 / cap.T)))
         ql, fl = _tile(tr.q, fc, reps)
-        tl = _best(lambda: estimate_contact_wrenches(ch, ql, fps, fl, **opts), 3)
+        tl = best_time(lambda: estimate_contact_wrenches(ch, ql, fps, fl, **opts), 3)
         res["long_frames"] = int(ql.shape[1])
         res["long_frames_per_s"] = ql.shape[1] / tl
-        res["per_frame_long_frames_per_s"] = ql.shape[1] / _best(lambda: estimate_contact_wrenches(ch, ql, fps, fl), 3)
-        res["pipeline_frames_per_s"] = cap.T / _best(lambda: estimate_capture(cap, contacts="kinematics"), 5)
+        res["per_frame_long_frames_per_s"] = ql.shape[1] / best_time(lambda: estimate_contact_wrenches(ch, ql, fps, fl), 3)
+        res["pipeline_frames_per_s"] = cap.T / best_time(lambda: estimate_capture(cap, contacts="kinematics"), 5)
         # the thesis's nested form, on a slice with double support
         ds = np.flatnonzero(est.double_support)
         a, b = max(ds[0] - 1, 0), min(ds[0] + 40, cap.T)

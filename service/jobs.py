@@ -10,7 +10,6 @@ rewrites the same rows). It never raises for a solver failure: that is a job sta
 from __future__ import annotations
 
 import logging
-import math
 import os
 import socket
 import threading
@@ -132,6 +131,7 @@ def execute_job(job_id: str, settings: Settings) -> str:
 
 def _run(db: Database, job_id: str, attempt: int, token: str, settings: Settings, hb: Heartbeat):
     from solver.continuation import StepControl, Target, extrapolate
+    from solver.pipeline import jsonable
 
     with db.read() as s:
         job = store.get_job(s, job_id=job_id, owner=None)
@@ -184,7 +184,7 @@ def _run(db: Database, job_id: str, attempt: int, token: str, settings: Settings
 
     def on_progress(rec) -> None:
         record("extrapolate", wall_time=rec.wall_time, lam=rec.lam, lam_reached=rec.lam_reached,
-               environment=_jsonable(dict(rec.environment)),
+               environment=jsonable(dict(rec.environment)),
                iterations=rec.iterations, accepted=rec.accepted, status=rec.status)
 
     def on_step(step) -> None:
@@ -219,29 +219,11 @@ def validation_report(motion) -> dict | None:
     """The plausibility report (MuJoCo replay included) of one λ optimum, or an error note."""
     try:
         from mjcf.validate import validate
+        from solver.pipeline import jsonable
     except ImportError:
         return None
     try:
-        return _jsonable(validate(motion))
+        return jsonable(validate(motion))
     except Exception as e:  # a failing check must not fail the job: the report says so
         log.warning("validation failed", exc_info=True)
         return {"plausible": False, "error": f"{type(e).__name__}: {e}"}
-
-
-def _jsonable(x: Any) -> Any:
-    import numpy as np
-
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    if isinstance(x, (np.bool_, bool)):
-        return bool(x)
-    if isinstance(x, (np.integer, int)):
-        return int(x)
-    if isinstance(x, (np.floating, float)):
-        v = float(x)
-        return v if math.isfinite(v) else None
-    return x

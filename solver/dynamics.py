@@ -14,7 +14,6 @@ import weakref
 from dataclasses import dataclass
 from typing import Any, Mapping
 
-import numpy as np
 
 from solver import spatial as sp
 from solver.character import Character, Model

@@ -50,7 +50,7 @@ import logging
 import math
 import time
 from dataclasses import replace
-from typing import Any, Mapping
+from typing import Mapping
 
 import numpy as np
 

@@ -28,7 +28,6 @@ overground(-equivalent) kinematics: on a treadmill, shift the root by the belt s
 from __future__ import annotations
 
 import logging
-from typing import Any, Mapping
 
 import numpy as np
 
