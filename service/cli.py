@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import math
 import sys
 
 log = logging.getLogger("motionx")
@@ -12,6 +13,21 @@ log = logging.getLogger("motionx")
 
 class CliError(Exception):
     """A user-facing error: printed as one line, exit status 2."""
+
+
+def parse_belt_speed(text: str | None) -> float | str | None:
+    """``--belt-speed``: None, "auto", or a finite speed in m/s."""
+    if text is None:
+        return None
+    if text == "auto":
+        return "auto"
+    try:
+        v = float(text)
+    except ValueError:
+        raise CliError(f"--belt-speed must be 'auto' or a speed in m/s, got {text!r}") from None
+    if not math.isfinite(v):
+        raise CliError(f"--belt-speed must be finite, got {text!r}")
+    return v
 
 
 def reference_character(name: str):

@@ -101,10 +101,10 @@ import numpy as np
 from solver.character import Character, CharacterError, merge_segments
 from solver.dynamics import DEFAULT_GRAVITY, rnea
 from solver.kinematics import forward_kinematics
+from solver.motion import FEET, foot_schedule_of
 
 log = logging.getLogger(__name__)
 
-FEET = ("right", "left")
 METHODS = ("qp", "nested")
 DEFAULT_PENETRATION = 0.01  # m, SPEC §2
 DEFAULT_FRICTION = 1.0  # SPEC Table 5.1
@@ -1082,10 +1082,7 @@ def foot_schedule(contacts: np.ndarray, character: Character) -> np.ndarray:
     if c.ndim != 2 or c.shape[0] != len(character.contacts):
         raise ContactError(f"contact schedule must have one row per contact point "
                            f"({len(character.contacts)}), got shape {c.shape}")
-    out = np.zeros((2, c.shape[1]), dtype=bool)
-    for i, p in enumerate(character.contacts):
-        out[FEET.index(p.side)] |= c[i]
-    return out
+    return foot_schedule_of(character, c)
 
 
 @dataclass(frozen=True, eq=False)

@@ -265,7 +265,7 @@ class _Walk:
         res, ok, status, env, values = self.solve(0.0, (tut.q, tut.wrenches), None,
                                                   max(self.control.max_iter, 500), guide=tut.q)
         ok = ok and self.accept(0.0, env, values, res)  # type: ignore[arg-type]
-        self.record(0.0, values, res, ok, status if res is not None or not ok else status, 0.0)
+        self.record(0.0, values, res, ok, status, 0.0)
         return _State(0.0, res) if ok else None  # type: ignore[arg-type]
 
     def run(self, history: list[_State], lam_end: float) -> ExtrapolationResult:

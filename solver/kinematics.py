@@ -112,6 +112,14 @@ def segment_frames(character: Character, q: np.ndarray) -> tuple[np.ndarray, np.
     return rots, poss
 
 
+def standing_leg_length(character: Character) -> float:
+    """Height of the root above the lowest contact point at q = 0 (at least 0.3 m; 1 m if the
+    character has no contact points): the length scale of moments and residuals."""
+    if not character.contacts:
+        return 1.0
+    return float(max(0.3, -contact_points(character, np.zeros(character.n))[:, 2].min()))
+
+
 def finite_differences(Q: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """Central differences (SPEC 3.7-3.8) at interior frames 2..T-1: (q̇, q̈), shape (n, T-2)."""
     Q = np.asarray(Q, dtype=float)

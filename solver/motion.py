@@ -36,6 +36,16 @@ class MotionError(ValueError):
     """A motion (or motion file) is malformed; the message names the problem."""
 
 
+def foot_schedule_of(character: Character, contacts: np.ndarray) -> np.ndarray:
+    """SPEC matrix B from A: (P, T) contact points -> (2, T) feet (right, left), a foot
+    being in contact when any of its points is."""
+    c = np.asarray(contacts, dtype=bool)
+    out = np.zeros((2, c.shape[1]), dtype=bool)
+    for i, p in enumerate(character.contacts):
+        out[FEET.index(p.side)] |= c[i]
+    return out
+
+
 def _frozen(a: np.ndarray) -> np.ndarray:
     a = np.array(a, copy=True)
     a.setflags(write=False)
@@ -115,10 +125,7 @@ class Motion:
         """B (SPEC 5.4): (2, T) bool, a foot is in contact when any of its points is."""
         if self.contacts is None:
             raise MotionError("motion has no contact schedule")
-        out = np.zeros((2, self.T), dtype=bool)
-        for i, c in enumerate(self.character.contacts):
-            out[FEET.index(c.side)] |= self.contacts[i]
-        return out
+        return foot_schedule_of(self.character, self.contacts)
 
     def evolve(self, **changes: Any) -> "Motion":
         """A new motion with some fields replaced (motions are immutable)."""

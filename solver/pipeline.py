@@ -23,7 +23,7 @@ import numpy as np
 from solver.capture import Capture, GroundFrame
 from solver.character import FULL_SUPERFLUOUS, LOWER_SUPERFLUOUS, Character, merge_segments
 from solver.kinematics import markers
-from solver.motion import Motion
+from solver.motion import Motion, foot_schedule_of
 from solver.plausibility import report
 from solver.spacetime import Environment, SolveResult, SpacetimeProblem, Weights
 
@@ -176,9 +176,7 @@ def estimate_wrenches(character: Character, q: np.ndarray, fps: float, contacts:
     """EFC (SPEC §5) on the simplified motion: initial contact wrenches for the correction."""
     from solver.contact import estimate_contact_wrenches
 
-    B = np.zeros((2, q.shape[1]), dtype=bool)
-    for j, c in enumerate(character.contacts):
-        B[0 if c.side == "right" else 1] |= contacts[j]
+    B = foot_schedule_of(character, contacts)
     est = estimate_contact_wrenches(character, q, fps, B, gravity=gravity)
     w = np.nan_to_num(np.asarray(est.wrenches), nan=0.0)
     # frames 0 and T-1 repeat T-2 and 1 in a cycle with two overlap frames

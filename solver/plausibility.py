@@ -13,9 +13,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from solver.character import Character
 from solver.dynamics import rnea
-from solver.kinematics import contact_points, finite_differences, segment_frames
+from solver.kinematics import contact_points, finite_differences, segment_frames, standing_leg_length
 from solver.motion import FEET, Motion
 
 
@@ -34,12 +33,6 @@ def environment_of(motion: Motion) -> dict:
     env.setdefault("gravity", [0.0, 0.0, -9.81])
     env.setdefault("friction", 1.0)
     return env
-
-
-def leg_length(character: Character) -> float:
-    if not character.contacts:
-        return 1.0
-    return float(max(0.3, -contact_points(character, np.zeros(character.n))[:, 2].min()))
 
 
 def root_residual(motion: Motion, gravity: Any) -> np.ndarray:
@@ -65,7 +58,7 @@ def report(motion: Motion, tol: Tolerances = Tolerances()) -> dict:
     g = np.asarray(env["gravity"], dtype=float)
     mu = float(env["friction"])
     weight = ch.total_mass * float(np.linalg.norm(g)) if np.linalg.norm(g) > 0 else ch.total_mass * 9.81
-    leg = leg_length(ch)
+    leg = standing_leg_length(ch)
     res = root_residual(motion, g)
     out: dict[str, Any] = {
         "character": ch.name,

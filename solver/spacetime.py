@@ -53,7 +53,8 @@ import scipy.sparse as sps
 from solver import spatial as sp
 from solver.character import Character
 from solver.dynamics import casadi_functions
-from solver.kinematics import contact_points, forward_kinematics, marker_points, markers, point_world
+from solver.kinematics import contact_points, forward_kinematics, marker_points, markers, point_world, standing_leg_length
+from solver.motion import FEET, foot_schedule_of
 
 log = logging.getLogger(__name__)
 
@@ -74,7 +75,6 @@ DEFAULT_IPOPT = {
     "error_on_fail": False,
 }
 SUCCESS_STATUSES = ("Solve_Succeeded",)
-FEET = ("right", "left")
 
 
 @dataclass(frozen=True)
@@ -144,7 +144,7 @@ class FrameFunctions:
         P = len(ch.contacts)
         self.P = P
         self.weight_scale = ch.total_mass * 9.81
-        self.length_scale = _leg_length(ch)
+        self.length_scale = standing_leg_length(ch)
         self.moment_scale = self.weight_scale * self.length_scale
 
         q = ca.SX.sym("q", n)
@@ -282,13 +282,6 @@ def _jacobian(fn: ca.Function, n_var_inputs: int) -> ca.Function:
     ins = [ca.SX.sym(fn.name_in(i), fn.sparsity_in(i)) for i in range(fn.n_in())]
     out = fn(*ins)
     return ca.Function(f"jac_{fn.name()}", ins, [ca.jacobian(out, ca.vertcat(*ins[:n_var_inputs]))])
-
-
-def _leg_length(ch: Character) -> float:
-    if not ch.contacts:
-        return 1.0
-    cp = contact_points(ch, np.zeros(ch.n))
-    return float(max(0.3, -cp[:, 2].min()))
 
 
 _FRAME_CACHE: "weakref.WeakKeyDictionary[Character, FrameFunctions]" = weakref.WeakKeyDictionary()
@@ -646,12 +639,9 @@ class SpacetimeProblem:
 
     # --- public API ------------------------------------------------------------------------------
     def foot_contact(self) -> np.ndarray:
-        B = np.zeros((2, self.T), dtype=bool)
         if self.contacts is None:
-            return B
-        for j, c in enumerate(self.character.contacts):
-            B[FEET.index(c.side)] |= self.contacts[j]
-        return B
+            return np.zeros((2, self.T), dtype=bool)
+        return foot_schedule_of(self.character, self.contacts)
 
     def guide_markers(self, guide_q: np.ndarray) -> np.ndarray:
         mk = markers(self.character, np.asarray(guide_q, dtype=float))  # (nm, 3, T)

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from service.cli import CliError
+from service.cli import CliError, parse_belt_speed
 
 log = logging.getLogger("motionx")
 
@@ -42,20 +42,6 @@ def _user_errors() -> tuple[type[Exception], ...]:
             DeepMimicError)
 
 
-def _belt_speed(text: str | None) -> float | str | None:
-    if text is None:
-        return None
-    if text == "auto":
-        return "auto"
-    try:
-        v = float(text)
-    except ValueError:
-        raise CliError(f"--belt-speed must be 'auto' or a speed in m/s, got {text!r}") from None
-    if not math.isfinite(v):
-        raise CliError(f"--belt-speed must be finite, got {text!r}")
-    return v
-
-
 def _exists(path: str | None, flag: str) -> None:
     if path is not None and not Path(path).is_file():
         raise CliError(f"{flag}: file not found: {path}")
@@ -68,7 +54,7 @@ def _load(args: argparse.Namespace):
         raise CliError("give exactly one input: --osim MODEL --coordinates IK.mot, --c3d FILE or --input FILE...")
     if args.mass is not None and not (math.isfinite(args.mass) and args.mass > 0):
         raise CliError(f"--mass must be a positive number of kg, got {args.mass}")
-    belt = _belt_speed(args.belt_speed)
+    belt = parse_belt_speed(args.belt_speed)
     if kinds[0] == "osim":
         if not args.coordinates:
             raise CliError("--osim needs --coordinates IK.mot (the model's coordinates over time)")

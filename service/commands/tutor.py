@@ -10,7 +10,7 @@ import sys
 import time
 from pathlib import Path
 
-from service.cli import CliError
+from service.cli import CliError, parse_belt_speed
 
 
 def _load_motion(path: str):
@@ -40,7 +40,7 @@ def cmd_tutor(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     try:
-        capture = load_trial(args.inputs, mass=args.mass, belt_speed=args.belt_speed)
+        capture = load_trial(args.inputs, mass=args.mass, belt_speed=parse_belt_speed(args.belt_speed))
     except (ValueError, FileNotFoundError) as e:
         raise CliError(f"cannot import {' '.join(args.inputs)}: {e}") from None
     t_import = time.perf_counter() - t0
