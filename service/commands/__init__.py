@@ -11,4 +11,5 @@ MODULES = [
     "service.commands.export",
     "service.commands.serve",
     "service.commands.grf",
+    "service.commands.plot",
 ]

@@ -8,6 +8,7 @@ import json
 import math
 import sys
 import time
+from dataclasses import asdict
 from pathlib import Path
 
 from service.cli import CliError, parse_belt_speed
@@ -114,64 +115,15 @@ def write_progress_csv(records, path: Path) -> None:
 
 
 def plot_progress(records, target, path: Path) -> None:
-    """λ (and the environment value) against compute time, like the thesis's Figs. 5.21/5.23/5.28."""
-    import matplotlib
+    """λ (and the environment value) against compute time, like the thesis's Figs. 5.21/5.23/5.28
+    (``service.plots.progress_png``, the plot the API serves at ``/jobs/{id}/plots/progress.png``)."""
+    from service.plots import progress_png
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    t = [r.wall_time for r in records]
-    reached = [r.lam_reached for r in records]
-    fig, ax = plt.subplots(figsize=(7, 4))
-    ax.step(t, reached, where="post", color="tab:blue", label="λ reached")
-    acc = [r for r in records if r.accepted]
-    rej = [r for r in records if not r.accepted]
-    ax.plot([r.wall_time for r in acc], [r.lam for r in acc], "o", color="tab:blue", ms=4, label="accepted λ")
-    if rej:
-        ax.plot([r.wall_time for r in rej], [r.lam for r in rej], "x", color="tab:red", ms=5, label="rejected λ")
-    ax.set_xlabel("compute time (s)")
-    ax.set_ylabel("λ")
-    ax.set_ylim(-0.02, 1.05)
-    ax.grid(alpha=0.3)
-    key, label = _main_parameter(target)
-    if key:
-        ax2 = ax.twinx()
-        vals = [r.environment.get(key) for r in acc]
-        ax2.plot([r.wall_time for r in acc], vals, "s--", color="tab:orange", ms=3, alpha=0.7, label=label)
-        ax2.set_ylabel(label, color="tab:orange")
-    ax.legend(loc="lower right", fontsize=8)
-    ax.set_title(f"continuation toward {_describe(target)}")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-
-
-def _main_parameter(target) -> tuple[str | None, str]:
-    if target.slope_deg:
-        return "slope_deg", "slope (°)"
-    if target.curve_deg:
-        return "curve_deg", "curve (°)"
-    if target.gravity is not None:
-        return "gravity", "|g| (m/s²)"
-    if target.friction is not None:
-        return "friction", "μ"
-    return None, ""
-
-
-def _describe(target) -> str:
-    parts = []
-    if target.slope_deg:
-        parts.append(f"slope {target.slope_deg:g}°")
-    if target.curve_deg:
-        parts.append(f"curve {target.curve_deg:g}°")
-    if target.friction is not None:
-        parts.append(f"μ={target.friction:g}")
-    if target.gravity is not None:
-        parts.append(f"|g|={target.gravity:g} m/s²")
-    return ", ".join(parts) or "the base problem"
+    path.write_bytes(progress_png([asdict(r) for r in records], asdict(target)))
 
 
 def cmd_extrapolate(args: argparse.Namespace) -> int:
+    from service.commands.plot import write_motion_plots
     from solver.continuation import StepControl, Target, extrapolate
 
     tutor = _load_motion(args.tutor)
@@ -214,7 +166,8 @@ def cmd_extrapolate(args: argparse.Namespace) -> int:
                  "root_residual_rel_weight": rep["root_residual"]["max_force_rel_weight"],
                  "mujoco_root_residual_rel_weight": rep["mujoco_replay"]["max_force_rel_weight"],
                  "mujoco_agreement_rel_weight": rep["mujoco_replay"]["agreement_force_rel_weight"],
-                 "environment": last.motion.provenance.get("environment_values")}
+                 "environment": last.motion.provenance.get("environment_values"),
+                 "plots": list(write_motion_plots(last.motion, out).values())}
     summary = {
         "status": res.status,
         "lambda_reached": res.lam_reached,

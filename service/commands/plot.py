@@ -1,0 +1,61 @@
+"""``motionx plot``: a motion's ground reaction forces and root residuals as PNG files."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+from service.cli import CliError
+
+KINDS = ("grf", "residuals")
+
+
+def write_motion_plots(motion, out: Path, kinds=KINDS) -> dict[str, str]:
+    """Renders every kind first (:class:`service.plots.PlotError` when the motion cannot be
+    plotted: nothing is written), then writes ``<kind>.png`` into ``out`` (created if needed);
+    returns {kind: file name}."""
+    from service.plots import grf_png, residuals_png
+
+    render = {"grf": grf_png, "residuals": residuals_png}
+    images = {kind: render[kind](motion) for kind in kinds}
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        for kind, data in images.items():
+            (out / f"{kind}.png").write_bytes(data)
+    except OSError as e:
+        raise CliError(f"cannot write into {out}: {e.strerror or e}") from None
+    return {kind: f"{kind}.png" for kind in images}
+
+
+def cmd_plot(args: argparse.Namespace) -> int:
+    from service.plots import PlotError
+    from solver.motion import Motion, MotionError
+
+    try:
+        motion = Motion.load(args.motion)
+    except MotionError as e:
+        raise CliError(str(e)) from None
+    kinds = KINDS if args.kind == "all" else (args.kind,)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise CliError(f"--out {out} exists and is not a directory")
+    t0 = time.perf_counter()
+    try:
+        files = write_motion_plots(motion, out, kinds)
+    except PlotError as e:
+        raise CliError(f"{args.motion}: {e}") from None
+    print(json.dumps({"out": str(out), "files": list(files.values()), "frames": motion.T, "fps": motion.fps,
+                      "character": motion.character.name, "seconds": round(time.perf_counter() - t0, 3)}))
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    s = sub.add_parser("plot", help="plot a motion file: ground reaction forces and root residuals (PNG)")
+    s.add_argument("motion", help="motion file v1 (JSON) with contact wrenches (a tutor or a λ optimum)")
+    s.add_argument("--kind", choices=[*KINDS, "all"], default="all",
+                   help="grf: forces per foot with the contact phases; residuals: root residual per frame, "
+                        "ours and MuJoCo's replay (default: all)")
+    s.add_argument("--out", required=True, help="output directory (grf.png, residuals.png)")
+    s.set_defaults(func=cmd_plot)

@@ -1,0 +1,368 @@
+"""Plots as PNG bytes (matplotlib, Agg canvas): the continuation's progress curve, the
+ground reaction forces per foot, and the root residual of the equations of motion.
+
+Presentation only: the numbers come from ``solver``/``mjcf`` (``solver.export.ground_reactions``,
+``solver.plausibility.root_residual``, ``mjcf.validate.mujoco_residual``). Used by the API
+(``service/routes/plots.py``) and the command line (``motionx plot``, ``motionx extrapolate``).
+
+matplotlib is imported inside the functions, so importing this module stays cheap; figures
+are built on their own ``FigureCanvasAgg`` (no pyplot, no global state), so rendering from
+several threads of the API at once is safe.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+DPI = 110
+#: environment values a target can change: key, axis label, colour
+ENVIRONMENT = (
+    ("slope_deg", "slope (°)", "tab:orange"),
+    ("curve_deg", "curve (°)", "tab:green"),
+    ("gravity", "|g| (m/s²)", "tab:purple"),
+    ("friction", "friction μ", "tab:brown"),
+)
+TARGET_KEYS = tuple(k for k, _, _ in ENVIRONMENT)
+#: the display floor of the log-scale residual plot (a residual of exactly 0 is drawn there)
+RESIDUAL_FLOOR = 1e-18
+
+
+class PlotError(ValueError):
+    """The input cannot be plotted; the message says why (HTTP 422, CLI exit 2)."""
+
+
+# --- matplotlib plumbing ---------------------------------------------------------------------
+
+
+def _figure(width: float, height: float):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(width, height), dpi=DPI)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _png(fig) -> bytes:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=DPI)
+    return buf.getvalue()
+
+
+# --- progress curve ------------------------------------------------------------------------
+
+
+def _number(v: Any, where: str) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise PlotError(f"{where} must be a number, got {v!r}")
+    if not math.isfinite(v):
+        raise PlotError(f"{where} must be finite, got {v!r}")
+    return float(v)
+
+
+def _records(progress: Any) -> list[dict]:
+    """Checks the progress records (the API's ``progress`` points, or the CLI's
+    ``ProgressRecord`` as dicts) and returns them as plain dicts."""
+    if isinstance(progress, (str, bytes)) or not isinstance(progress, Sequence):
+        raise PlotError(f"progress must be a list of records, got {type(progress).__name__}")
+    out = []
+    for i, r in enumerate(progress):
+        if not isinstance(r, Mapping):
+            raise PlotError(f"progress[{i}] must be a record (mapping), got {type(r).__name__}")
+        missing = [k for k in ("wall_time", "lam", "lam_reached", "accepted") if k not in r]
+        if missing:
+            raise PlotError(f"progress[{i}] lacks {missing}")
+        phase = r.get("phase", "extrapolate")
+        if phase not in ("tutor", "extrapolate"):
+            raise PlotError(f"progress[{i}].phase must be 'tutor' or 'extrapolate', got {phase!r}")
+        if not isinstance(r["accepted"], bool):
+            raise PlotError(f"progress[{i}].accepted must be true or false, got {r['accepted']!r}")
+        env = r.get("environment") or {}
+        if not isinstance(env, Mapping):
+            raise PlotError(f"progress[{i}].environment must be a mapping, got {type(env).__name__}")
+        rec = {
+            "phase": phase,
+            "wall_time": _number(r["wall_time"], f"progress[{i}].wall_time"),
+            "lam": _number(r["lam"], f"progress[{i}].lam"),
+            "lam_reached": _number(r["lam_reached"], f"progress[{i}].lam_reached"),
+            "accepted": r["accepted"],
+            "iterations": int(_number(r.get("iterations", 0), f"progress[{i}].iterations")),
+            "environment": {k: _number(env[k], f"progress[{i}].environment.{k}")
+                            for k in TARGET_KEYS if env.get(k) is not None},
+        }
+        out.append(rec)
+    return out
+
+
+def _target(target: Any) -> dict[str, float | None]:
+    if target is None:
+        return {}
+    if not isinstance(target, Mapping):
+        raise PlotError(f"target must be a mapping (slope_deg, curve_deg, friction, gravity), "
+                        f"got {type(target).__name__}")
+    unknown = sorted(set(target) - set(TARGET_KEYS))
+    if unknown:
+        raise PlotError(f"unknown target keys {unknown}; known: {list(TARGET_KEYS)}")
+    return {k: (None if target.get(k) is None else _number(target[k], f"target.{k}")) for k in TARGET_KEYS}
+
+
+def changed_parameters(target: Mapping[str, float | None]) -> list[str]:
+    """The environment keys a target changes, in display order."""
+    out = []
+    for k in TARGET_KEYS:
+        v = target.get(k)
+        if v is not None and (k in ("friction", "gravity") or v != 0):
+            out.append(k)
+    return out
+
+
+def describe_target(target: Mapping[str, float | None] | None) -> str:
+    """'slope 11.25°, μ=0.7' — the target in words (also used in titles)."""
+    t = _target(target)
+    words = {"slope_deg": "slope {:g}°", "curve_deg": "curve {:g}°", "friction": "μ={:g}", "gravity": "|g|={:g} m/s²"}
+    return ", ".join(words[k].format(t[k]) for k in changed_parameters(t)) or "the base problem"
+
+
+def progress_png(progress: list[dict], target: dict | None) -> bytes:
+    """The continuation's progress curve as PNG: λ tried (accepted ●, rejected ✕) and λ
+    reached against wall time, and on extra axes the environment value reached (slope,
+    curve, gravity, friction — those the target changes; without a target, those that vary).
+
+    ``progress`` are records with ``wall_time`` (s since the start of the extrapolation),
+    ``lam``, ``lam_reached``, ``accepted``, ``environment`` and optionally ``phase``
+    ('tutor' or 'extrapolate') and ``iterations``: the API's job ``progress`` points, or
+    ``dataclasses.asdict(solver.continuation.ProgressRecord)``. Records of the tutor phase
+    are summed up in the title (their time origin is the job's start). An empty list gives
+    a "no progress yet" figure.
+    """
+    recs = _records(progress)
+    tgt = _target(target)
+    tutor = [r for r in recs if r["phase"] == "tutor"]
+    ext = [r for r in recs if r["phase"] == "extrapolate"]
+    keys = changed_parameters(tgt) if target is not None else [
+        k for k in TARGET_KEYS if len({r["environment"].get(k) for r in ext if r["accepted"]} - {None}) > 1]
+    fig = _figure(7.0 + 0.7 * max(0, len(keys) - 1), 4.0)
+    ax = fig.add_subplot()
+    title = f"continuation toward {describe_target(tgt)}" if target is not None else "continuation"
+    if tutor:
+        t = tutor[-1]
+        title += f"\n(tutor made first: {t['wall_time']:.1f} s, {t['iterations']} iterations)"
+    ax.set_title(title, fontsize=10)
+    ax.set_xlabel("wall time of the extrapolation (s)")
+    ax.set_ylabel("λ")
+    ax.set_ylim(-0.02, 1.05)
+    ax.grid(alpha=0.3)
+    if not ext:
+        ax.set_xlim(0, 1)
+        ax.text(0.5, 0.5, "no progress yet", ha="center", va="center", transform=ax.transAxes, fontsize=12,
+                color="0.4")
+        fig.tight_layout()
+        return _png(fig)
+    t = [r["wall_time"] for r in ext]
+    acc = [r for r in ext if r["accepted"]]
+    rej = [r for r in ext if not r["accepted"]]
+    handles = ax.step([0.0, *t], [0.0] + [r["lam_reached"] for r in ext], where="post", color="tab:blue",
+                      label="λ reached")
+    handles += ax.plot([r["wall_time"] for r in acc], [r["lam"] for r in acc], "o", color="tab:blue", ms=4,
+                       label=f"accepted λ ({len(acc)})")
+    if rej:
+        handles += ax.plot([r["wall_time"] for r in rej], [r["lam"] for r in rej], "x", color="tab:red", ms=6,
+                           label=f"rejected λ ({len(rej)})")
+    labels = {k: (lab, col) for k, lab, col in ENVIRONMENT}
+    for i, k in enumerate(keys):
+        pts = [(r["wall_time"], r["environment"][k]) for r in acc if k in r["environment"]]
+        if not pts:
+            continue
+        ax2 = ax.twinx()
+        if i:
+            ax2.spines["right"].set_position(("axes", 1.0 + 0.14 * i))
+        lab, col = labels[k]
+        handles += ax2.step(*zip(*pts), where="post", color=col, ls="--", alpha=0.8, label=f"{lab} reached")
+        ax2.plot(*zip(*pts), "s", color=col, ms=3, alpha=0.8)
+        ax2.set_ylabel(lab, color=col)
+        ax2.tick_params(axis="y", colors=col)
+    ax.set_xlim(0.0, max(t) * 1.03)
+    ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=min(len(handles), 5),
+              fontsize=8, frameon=False)
+    fig.tight_layout()
+    return _png(fig)
+
+
+# --- motions -------------------------------------------------------------------------------
+
+
+def _motion_with_wrenches(motion: Any):
+    from solver.motion import Motion
+
+    if not isinstance(motion, Motion):
+        raise PlotError(f"expected a motion (solver.motion.Motion), got {type(motion).__name__}")
+    if motion.wrenches is None:
+        raise PlotError("motion has no contact wrenches (a raw capture: make its tutor first)")
+    return motion
+
+
+def body_weight(motion) -> float:
+    """Body weight (N) in the motion's own environment (its gravity), as the plausibility
+    report counts it."""
+    from solver.plausibility import environment_of
+
+    g = float(np.linalg.norm(np.asarray(environment_of(motion)["gravity"], dtype=float)))
+    return motion.character.total_mass * (g if g > 0 else 9.81)
+
+
+def _subtitle(motion) -> str:
+    prov = motion.provenance or {}
+    parts = [f"{motion.character.name}, {motion.T} frames at {motion.fps:g} fps"]
+    if prov.get("lambda") is not None:
+        parts.append(f"λ = {float(prov['lambda']):.4g}")
+    env = prov.get("environment_values") or {}
+    for k, lab, _ in ENVIRONMENT:
+        if k in ("slope_deg", "curve_deg") and env.get(k):
+            parts.append(f"{lab.split(' ')[0]} {float(env[k]):.3g}°")
+    return ", ".join(parts)
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """(first, last) frame of each run of True."""
+    out, start = [], None
+    for i, v in enumerate(mask):
+        if v and start is None:
+            start = i
+        if not v and start is not None:
+            out.append((start, i - 1))
+            start = None
+    if start is not None:
+        out.append((start, len(mask) - 1))
+    return out
+
+
+def grf_png(motion) -> bytes:
+    """Ground reaction forces per foot as PNG: fx, fy, fz (N, world frame, Z up) against
+    time, the foot's contact phases shaded, the body weight for scale.
+
+    The forces are those of ``solver.export.ground_reactions`` (the motion's foot
+    wrenches). A motion without contact wrenches raises :class:`PlotError`.
+    """
+    from solver.export import ExportError, ground_reactions
+    from solver.motion import FEET
+
+    motion = _motion_with_wrenches(motion)
+    try:
+        gr = ground_reactions(motion)
+    except ExportError as e:
+        raise PlotError(str(e)) from None
+    contact = motion.foot_contact() if motion.contacts is not None else gr.loaded
+    t = motion.times
+    weight = body_weight(motion)
+    fig = _figure(7.5, 5.2)
+    axes = fig.subplots(2, 1, sharex=True)
+    fmin = min(0.0, float(gr.force.min()))
+    fmax = max(weight, float(gr.force.max()))
+    pad = 0.06 * (fmax - fmin)
+    for k, (ax, side) in enumerate(zip(axes, FEET)):
+        for i, (a, b) in enumerate(_runs(contact[k])):
+            ax.axvspan(t[a] - 0.5 * motion.dt, t[b] + 0.5 * motion.dt, color="0.85", lw=0,
+                       label=None if i else "contact")
+        for j, (name, col) in enumerate(zip(("fx", "fy", "fz"), ("tab:red", "tab:green", "tab:blue"))):
+            ax.plot(t, gr.force[k, :, j], "-o", ms=2.5, color=col, label=name)
+        ax.axhline(weight, color="0.3", ls=":", lw=1, label=f"body weight ({weight:.0f} N)")
+        ax.axhline(0.0, color="0.5", lw=0.6)
+        ax.set_ylim(fmin - pad, fmax + pad)
+        ax.set_ylabel(f"{side} foot force (N)")
+        ax.grid(alpha=0.3)
+        ax.legend(loc="upper right", fontsize=7, ncol=5)
+    axes[-1].set_xlabel("time (s)")
+    axes[-1].set_xlim(t[0] - 0.5 * motion.dt, t[-1] + 0.5 * motion.dt)
+    fig.suptitle(f"ground reaction forces (world frame, Z up)\n{_subtitle(motion)}", fontsize=10)
+    fig.tight_layout()
+    return _png(fig)
+
+
+@dataclass(frozen=True, eq=False)
+class ResidualSeries:
+    """Per interior frame (central differences), the root residual of the equations of
+    motion: h0(q, q̇, q̈, g) − Σ contact wrenches, moment about the root position.
+
+    ``ours`` from our RNEA (``solver.plausibility.root_residual``), ``mujoco`` from MuJoCo's
+    ``mj_inverse`` replay (``mjcf.validate.mujoco_residual``), both (6, T-2) as (moment; force).
+    ``*_force_rel`` is the largest force component / body weight per frame, ``*_moment_rel``
+    the largest moment component / (body weight × leg length): their maxima over the
+    frames are the plausibility report's ``max_force_rel_weight`` and
+    ``max_moment_rel_weight_leg``.
+    """
+
+    time: np.ndarray  # (T-2,) s
+    ours: np.ndarray
+    mujoco: np.ndarray
+    weight_N: float
+    leg_m: float
+
+    @property
+    def ours_force_rel(self) -> np.ndarray:
+        return np.abs(self.ours[3:]).max(axis=0) / self.weight_N
+
+    @property
+    def ours_moment_rel(self) -> np.ndarray:
+        return np.abs(self.ours[:3]).max(axis=0) / (self.weight_N * self.leg_m)
+
+    @property
+    def mujoco_force_rel(self) -> np.ndarray:
+        return np.abs(self.mujoco[3:]).max(axis=0) / self.weight_N
+
+    @property
+    def mujoco_moment_rel(self) -> np.ndarray:
+        return np.abs(self.mujoco[:3]).max(axis=0) / (self.weight_N * self.leg_m)
+
+
+def residual_series(motion) -> ResidualSeries:
+    """The per-frame root residuals that :func:`residuals_png` draws (ours and MuJoCo's)."""
+    from mjcf.validate import mujoco_residual
+    from solver.kinematics import standing_leg_length
+    from solver.plausibility import environment_of, root_residual
+
+    motion = _motion_with_wrenches(motion)
+    ours = root_residual(motion, environment_of(motion)["gravity"])
+    mj = mujoco_residual(motion)
+    return ResidualSeries(time=motion.times[1:-1], ours=ours, mujoco=mj, weight_N=body_weight(motion),
+                          leg_m=standing_leg_length(motion.character))
+
+
+def residuals_png(motion, tolerance: float = 1e-6) -> bytes:
+    """The root residual per frame as PNG (log scale): force / body weight and moment /
+    (body weight × leg length), ours and MuJoCo's replay, with the plausibility tolerance.
+    A motion without contact wrenches raises :class:`PlotError`."""
+    tol = _number(tolerance, "tolerance")
+    if tol <= 0:
+        raise PlotError(f"tolerance must be positive, got {tolerance!r}")
+    s = residual_series(motion)
+    fig = _figure(7.5, 5.2)
+    axes = fig.subplots(2, 1, sharex=True)
+    rows = [
+        (s.ours_force_rel, s.mujoco_force_rel, "force / body weight", "N", s.weight_N),
+        (s.ours_moment_rel, s.mujoco_moment_rel, "moment / (weight × leg)", "N·m", s.weight_N * s.leg_m),
+    ]
+    top = max(10 * tol, 10 * float(max(s.ours_force_rel.max(), s.mujoco_force_rel.max(), s.ours_moment_rel.max(),
+                                       s.mujoco_moment_rel.max())))
+    for ax, (ours, mj, label, unit, scale) in zip(axes, rows):
+        ax.semilogy(s.time, np.maximum(ours, RESIDUAL_FLOOR), "o-", ms=3, color="tab:blue", label="ours (RNEA)")
+        ax.semilogy(s.time, np.maximum(mj, RESIDUAL_FLOOR), "s--", ms=3, color="tab:orange",
+                    label="MuJoCo replay (mj_inverse)")
+        ax.axhline(tol, color="tab:red", ls=":", lw=1.2, label=f"plausibility tolerance {tol:g}")
+        ax.set_ylim(top=top)
+        ax.set_title(f"max: ours {ours.max() * scale:.2g} {unit}, MuJoCo {mj.max() * scale:.2g} {unit}",
+                     fontsize=8, loc="left")
+        ax.set_ylabel(f"root {label}", fontsize=9)
+        ax.grid(alpha=0.3, which="major")
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=8, frameon=False)
+    axes[-1].set_xlabel("time (s), interior frames")
+    fig.suptitle(f"root residual of the equations of motion: h0 − Σ contact wrenches\n{_subtitle(motion)}",
+                 fontsize=10)
+    fig.tight_layout(rect=(0, 0.05, 1, 1))
+    return _png(fig)

@@ -1,0 +1,227 @@
+"""service.plots (progress, GRF, residual PNGs) and `motionx plot` / `motionx extrapolate`'s plots,
+on a real tutor (the pipeline's, from the DeepMimic walk) and a real continuation."""
+
+from __future__ import annotations
+
+import io
+import json
+import shutil
+import subprocess
+import sys
+import time
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from service.plots import PlotError, grf_png, progress_png, residual_series, residuals_png
+from solver.motion import Motion
+from solver.plausibility import report
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def assert_png(data: bytes, min_size=(500, 300)) -> np.ndarray:
+    """A valid, decodable, plausibly sized PNG with something drawn on it; returns the pixels."""
+    assert data[:8] == PNG_SIGNATURE
+    img = Image.open(io.BytesIO(data))
+    img.load()
+    assert img.format == "PNG"
+    w, h = img.size
+    assert min_size[0] <= w <= 3000 and min_size[1] <= h <= 3000, img.size
+    px = np.asarray(img.convert("RGB"), dtype=float)
+    assert px.std() > 10.0  # not blank
+    assert (px.min(axis=2) < 200).mean() > 0.01  # more than a frame: at least 1 % of the pixels are ink
+    return px
+
+
+def motionx(*args, timeout: int = 300) -> subprocess.CompletedProcess:
+    exe = shutil.which("motionx") or str(Path(sys.executable).with_name("motionx"))
+    return subprocess.run([exe, *map(str, args)], check=False, capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.fixture(scope="module")
+def tutor(shared_data) -> Motion:
+    from solver.io import load_trial
+    from solver.pipeline import capture_motion, make_tutor
+
+    d = shared_data / "deepmimic_humanoid3d_walk"
+    res = make_tutor(capture_motion(load_trial([d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt"])))
+    assert res.status == "succeeded", res.message
+    return res.motion
+
+
+@pytest.fixture(scope="module")
+def continuation(tutor):
+    """A real, cheap continuation (friction 1 -> 0.7 and 4° uphill, Δ0 = 0.5)."""
+    from solver.continuation import StepControl, Target, extrapolate
+
+    target = Target(slope_deg=4.0, friction=0.7)
+    res = extrapolate(tutor, target, StepControl(delta0=0.5))
+    assert res.status == "succeeded" and res.steps
+    return target, res
+
+
+@pytest.fixture(scope="module")
+def tutor_file(tutor, tmp_path_factory) -> Path:
+    p = tmp_path_factory.mktemp("plots") / "tutor.json"
+    tutor.save(p)
+    return p
+
+
+# --- progress ----------------------------------------------------------------------------
+
+
+def test_progress_png_from_the_continuations_records(continuation):
+    target, res = continuation
+    recs = [asdict(r) for r in res.records]
+    px = assert_png(progress_png(recs, asdict(target)))
+    # two environment axes (slope and friction change): wider than a one-parameter figure
+    one = assert_png(progress_png(recs, {"friction": 0.7}))
+    assert px.shape[1] > one.shape[1]
+
+
+def test_progress_png_takes_the_api_points(continuation):
+    """The job's ``progress`` as the API serves it: a tutor-phase point, rejected attempts,
+    the target as the job's spec (JSON: missing keys, nulls)."""
+    _, res = continuation
+    pts = [{"seq": 0, "phase": "tutor", "wall_time": 1.7, "lam": 0.0, "lam_reached": 0.0, "environment": {},
+            "iterations": 41, "accepted": True, "status": "tutor succeeded"}]
+    for i, r in enumerate(res.records, 1):
+        d = asdict(r)
+        pts.append({**d, "seq": i, "phase": "extrapolate"})
+    pts.insert(2, {**pts[2], "accepted": False, "lam": 0.9, "status": "Maximum_Iterations_Exceeded"})
+    assert_png(progress_png(pts, {"slope_deg": 4.0, "curve_deg": 0.0, "friction": 0.7, "gravity": None}))
+    assert_png(progress_png(pts, None))  # no target: the environment values that vary are drawn
+
+
+def test_progress_png_without_points_says_so():
+    assert_png(progress_png([], {"slope_deg": 5.0}))
+    assert_png(progress_png([{"phase": "tutor", "wall_time": 2.0, "lam": 0.0, "lam_reached": 0.0,
+                              "environment": {}, "iterations": 30, "accepted": True}], {"curve_deg": 90}))
+
+
+GOOD = {"wall_time": 0.1, "lam": 0.0, "lam_reached": 0.0, "accepted": True, "environment": {"slope_deg": 0.0}}
+
+
+@pytest.mark.parametrize("progress, target, needle", [
+    ("not a list", None, "list of records"),
+    ([1.0], None, "progress[0] must be a record"),
+    ([{"lam": 0.1}], None, "lacks ['wall_time', 'lam_reached', 'accepted']"),
+    ([GOOD, {**GOOD, "wall_time": float("nan")}], None, "progress[1].wall_time must be finite"),
+    ([{**GOOD, "lam": "0.5"}], None, "progress[0].lam must be a number"),
+    ([{**GOOD, "accepted": 1}], None, "progress[0].accepted must be true or false"),
+    ([{**GOOD, "phase": "warmup"}], None, "progress[0].phase"),
+    ([{**GOOD, "environment": [1, 2]}], None, "environment must be a mapping"),
+    ([{**GOOD, "environment": {"slope_deg": float("inf")}}], None, "environment.slope_deg must be finite"),
+    ([GOOD], {"slope": 5}, "unknown target keys ['slope']"),
+    ([GOOD], [5.0], "target must be a mapping"),
+    ([GOOD], {"gravity": float("nan")}, "target.gravity must be finite"),
+])
+def test_progress_png_rejects_bad_input(progress, target, needle):
+    with pytest.raises(PlotError) as e:
+        progress_png(progress, target)
+    assert needle in str(e.value)
+
+
+# --- ground reactions ----------------------------------------------------------------------
+
+
+def test_grf_png_of_a_tutor_and_of_a_lambda_optimum(tutor, continuation):
+    assert_png(grf_png(tutor))
+    assert_png(grf_png(continuation[1].steps[-1].motion))
+
+
+def test_grf_and_residuals_refuse_a_motion_without_wrenches(tutor):
+    raw = tutor.evolve(wrenches=None, report=None)
+    for f in (grf_png, residuals_png, residual_series):
+        with pytest.raises(PlotError, match="motion has no contact wrenches"):
+            f(raw)
+        with pytest.raises(PlotError, match="expected a motion"):
+            f({"frames": []})
+
+
+# --- residuals -----------------------------------------------------------------------------
+
+
+def test_residual_series_of_plausible_motions_is_below_tolerance_and_is_the_reports(tutor, continuation):
+    for m in (tutor, continuation[1].steps[-1].motion):
+        s = residual_series(m)
+        assert s.time.shape == (m.T - 2,) and s.ours.shape == s.mujoco.shape == (6, m.T - 2)
+        assert s.ours_force_rel.max() < 1e-6 and s.ours_moment_rel.max() < 1e-6
+        assert s.mujoco_force_rel.max() < 1e-6 and s.mujoco_moment_rel.max() < 1e-6
+        assert np.abs(s.mujoco - s.ours)[3:].max() < 1e-9 * s.weight_N  # MuJoCo agrees, frame by frame
+        rep = report(m)  # the series' maxima are the plausibility report's numbers
+        assert s.ours_force_rel.max() == pytest.approx(rep["root_residual"]["max_force_rel_weight"], rel=1e-12)
+        assert s.ours_moment_rel.max() == pytest.approx(rep["root_residual"]["max_moment_rel_weight_leg"],
+                                                        rel=1e-12)
+        assert s.weight_N == pytest.approx(rep["body_weight_N"]) and s.leg_m == pytest.approx(rep["leg_length_m"])
+
+
+def test_residual_series_sees_missing_ground_reaction(tutor):
+    """10 % less ground reaction: the residual force per frame is exactly the 10 % taken away."""
+    base, weak = residual_series(tutor), residual_series(tutor.evolve(wrenches=0.9 * tutor.wrenches))
+    missing = 0.1 * tutor.wrenches[:, 3:, 1:-1].sum(axis=0)
+    np.testing.assert_allclose(weak.ours[3:] - base.ours[3:], missing, atol=1e-8)
+    np.testing.assert_allclose(weak.mujoco[3:], weak.ours[3:], atol=1e-8)
+    assert weak.ours_force_rel.min() > 1e-3
+
+
+def test_residuals_png(tutor, continuation):
+    assert_png(residuals_png(tutor))
+    assert_png(residuals_png(continuation[1].steps[-1].motion.evolve(wrenches=0.9 * tutor.wrenches)))
+    with pytest.raises(PlotError, match="tolerance must be positive"):
+        residuals_png(tutor, tolerance=0.0)
+
+
+def test_each_plot_takes_well_under_a_second(tutor, continuation):
+    target, res = continuation
+    recs = [asdict(r) for r in res.records]
+    grf_png(tutor)  # warm: matplotlib's import and font cache are paid once per process
+    for f, arg in ((grf_png, tutor), (residuals_png, tutor), (lambda r: progress_png(r, asdict(target)), recs)):
+        t = time.perf_counter()
+        f(arg)
+        assert time.perf_counter() - t < 1.0
+
+
+# --- command line --------------------------------------------------------------------------
+
+
+def test_motionx_plot_writes_the_pngs(tutor_file, tmp_path):
+    r = motionx("plot", tutor_file, "--out", tmp_path / "all")
+    assert r.returncode == 0, r.stderr
+    info = json.loads(r.stdout)
+    assert info["files"] == ["grf.png", "residuals.png"] and info["frames"] == Motion.load(tutor_file).T
+    for name in info["files"]:
+        assert_png((tmp_path / "all" / name).read_bytes())
+    r = motionx("plot", tutor_file, "--kind", "grf", "--out", tmp_path / "grf")
+    assert r.returncode == 0, r.stderr
+    assert sorted(p.name for p in (tmp_path / "grf").iterdir()) == ["grf.png"]
+
+
+def test_motionx_plot_refuses_bad_input(tutor, tutor_file, tmp_path):
+    tutor.evolve(wrenches=None, report=None).save(tmp_path / "raw.json")
+    r = motionx("plot", tmp_path / "raw.json", "--out", tmp_path / "out")
+    assert r.returncode == 2 and "motion has no contact wrenches" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and not (tmp_path / "out").exists()
+    r = motionx("plot", tmp_path / "missing.json", "--out", tmp_path / "out")
+    assert r.returncode == 2 and "not found" in r.stderr
+    r = motionx("plot", tutor_file, "--out", tutor_file)
+    assert r.returncode == 2 and "not a directory" in r.stderr
+    r = motionx("plot", tutor_file, "--kind", "cop", "--out", tmp_path / "out")
+    assert r.returncode == 2 and "invalid choice" in r.stderr
+
+
+def test_motionx_extrapolate_writes_the_final_motions_plots(tutor_file, tmp_path):
+    out = tmp_path / "ex"
+    r = motionx("extrapolate", tutor_file, "--friction", "0.7", "--delta0", "0.5", "--out", out, "--quiet")
+    assert r.returncode == 0, r.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "succeeded" and summary["final"]["plots"] == ["grf.png", "residuals.png"]
+    for name in ("progress.png", "grf.png", "residuals.png"):
+        assert_png((out / name).read_bytes())
+    # the residual plot is of the last λ motion, which is plausible
+    last = Motion.load(out / summary["final"]["file"])
+    assert last.provenance["lambda"] == 1.0 and residual_series(last).ours_force_rel.max() < 1e-6
