@@ -3,6 +3,8 @@ PYTHON ?= python3
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
+WEB    := service/web
+WEB_STAMP := $(WEB)/node_modules/.installed
 
 .PHONY: venv test bench demo clean reliability stack
 
@@ -12,12 +14,18 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet -e ".[test]"
 	touch $(STAMP)
 
-venv: $(STAMP)
+# three.js for the web page (served locally by the API); skipped with a note when npm is missing
+$(WEB_STAMP): $(WEB)/package.json $(WEB)/package-lock.json
+	@if command -v npm >/dev/null 2>&1; then \
+	  cd $(WEB) && npm ci --no-audit --no-fund --loglevel=error && touch node_modules/.installed; \
+	else echo "npm not found: the web page's 3D preview is disabled (install Node.js and npm)"; fi
 
-test: $(STAMP)
+venv: $(STAMP) $(WEB_STAMP)
+
+test: $(STAMP) $(WEB_STAMP)
 	$(PY) -m pytest -q $(PYTEST_ARGS)
 
-demo: $(STAMP)
+demo: $(STAMP) $(WEB_STAMP)
 	$(VENV)/bin/motionx demo --out out/demo
 
 bench: $(STAMP)
@@ -26,8 +34,8 @@ bench: $(STAMP)
 reliability: $(STAMP)
 	MOTIONX_RELIABILITY_REPEAT=$${MOTIONX_RELIABILITY_REPEAT:-20} $(PY) -m pytest -q tests/service -k reliability
 
-stack: $(STAMP)
+stack: $(STAMP) $(WEB_STAMP)
 	$(VENV)/bin/motionx stack --workers $${WORKERS:-2}
 
 clean:
-	rm -rf $(VENV) .pytest_cache .hypothesis
+	rm -rf $(VENV) $(WEB)/node_modules .pytest_cache .hypothesis
