@@ -31,6 +31,7 @@ from solver.export import (
 from solver.export import bvh as B
 from solver.export import clip as CL
 from solver.export import gltf as G
+from solver.export import reimport as RI
 from solver.motion import Motion
 
 with warnings.catch_warnings():  # bvhio imports PyGLM the way PyGLM plans to deprecate
@@ -346,7 +347,7 @@ def test_gltf_animation_reproduces_forward_kinematics(case, kind):
     motion, _, rot, pos = case
     ch = motion.character
     S = len(ch.segments)
-    data = G.to_glb(motion) if kind == "glb" else G.to_gltf(motion)
+    data = G.to_glb(motion) if kind == "glb" else G.to_gltf(motion, binary=False)
     g, blob = load_gltf(data)
     assert g.asset.version == "2.0"
     world, times = animated_world(g, blob)
@@ -596,9 +597,24 @@ def test_cli_export_writes_files_independent_readers_load(tmp_path):
     world, _ = animated_world(g, blob)
     np.testing.assert_allclose(world[: len(pos), :, :3, 3], pos @ Y_UP.T, atol=1e-5)
 
-    r = motionx("export", str(src), "--format", "gltf", "--out", str(tmp_path / "m.gltf"))
+    r = motionx("export", str(src), "--format", "gltf", "--out", str(tmp_path / "g.glb"))  # gltf = binary
     assert r.returncode == 0, r.stderr
-    load_gltf((tmp_path / "m.gltf").read_text())
+    assert json.loads(r.stdout)["media_type"] == "model/gltf-binary"
+    assert (tmp_path / "g.glb").read_bytes() == (tmp_path / "m.glb").read_bytes()
+
+    r = motionx("export", str(src), "--format", "gltf", "--embedded", "--out", str(tmp_path / "m.gltf"))
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["media_type"] == "model/gltf+json"
+    g, blob = load_gltf((tmp_path / "m.gltf").read_text())
+    world, _ = animated_world(g, blob)
+    np.testing.assert_allclose(world[: len(pos), :, :3, 3], pos @ Y_UP.T, atol=1e-5)
+    for bad, needle in ((["--format", "gltf", "--out", str(tmp_path / "x.gltf")], "--embedded"),
+                        (["--format", "gltf", "--embedded", "--out", str(tmp_path / "x.glb")], ".gltf"),
+                        (["--format", "bvh", "--embedded", "--out", str(tmp_path / "x.bvh")], "--embedded"),
+                        (["--format", "gltf", "--out", "-"], "stdout")):
+        r = motionx("export", str(src), *bad)
+        assert r.returncode == 2 and needle in r.stderr, (bad, r.stderr)
+    assert not (tmp_path / "x.gltf").exists() and not (tmp_path / "x.glb").exists()
 
     r = motionx("export", str(src), "--format", "bvh", "--units", "m", "--out", str(tmp_path / "m.bvh"))
     assert r.returncode == 0, r.stderr
@@ -611,3 +627,233 @@ def test_cli_export_writes_files_independent_readers_load(tmp_path):
     assert r.returncode == 2 and "not found" in r.stderr
     r = motionx("export", str(src), "--format", "fbx", "--out", str(tmp_path / "x.fbx"))
     assert r.returncode == 2
+
+
+# --- glTF is the binary GLB; the embedded JSON on request -------------------------------------
+
+
+def test_gltf_format_is_the_binary_glb_and_binary_false_the_embedded_json():
+    from solver.export import media_type
+
+    motion, _ = smooth_motion(C.halfboy(), T=6)
+    glb = export_motion(motion, "gltf")
+    assert isinstance(glb, bytes) and glb[:4] == b"glTF" and glb == export_motion(motion, "glb")
+    assert media_type("gltf") == media_type("glb") == "model/gltf-binary"
+    text = export_motion(motion, "gltf", binary=False)
+    assert isinstance(text, str) and json.loads(text)["asset"]["version"] == "2.0"
+    assert media_type("gltf", binary=False) == "model/gltf+json"
+    assert media_type("gltf", binary=True) == "model/gltf-binary"
+    with pytest.raises(ExportError, match="binary"):
+        export_motion(motion, "gltf", binary="no")
+    with pytest.raises(ExportError, match="unknown option"):
+        export_motion(motion, "glb", binary=False)  # glb is always binary
+
+
+# --- re-import: real walks and the synthetic cases ---------------------------------------------
+
+
+def walk_motion(shared_data: Path, kind: str) -> Motion:
+    """A real walk: the shared DeepMimic capture (subject-fitted capture-full skeleton, 30 fps,
+    39 frames), or its coordinates on the HalfBoy / full body made from that skeleton."""
+    from solver.io import load_trial
+    from solver.pipeline import capture_motion, synthesis_character
+
+    d = shared_data / "deepmimic_humanoid3d_walk"
+    cap = capture_motion(load_trial([d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt"]))
+    if kind == "capture-full":
+        return cap
+    syn, _ = synthesis_character(cap.character, kind)
+    q = np.stack([cap.q[cap.character.index(n)] for n in syn.coordinate_names])
+    return Motion(syn, cap.fps, q, provenance={"step": "capture"})
+
+
+@pytest.fixture(scope="module", params=["halfboy", "fullbody", "capture-full"])
+def walk(request, shared_data):
+    return walk_motion(shared_data, request.param)
+
+
+#: format, options, reader options, tolerance on q (rad and m): what each file keeps
+ROUND_TRIPS = {
+    "glb": ("gltf", {}, {}, 1e-5),  # float32
+    "gltf-embedded": ("gltf", {"binary": False}, {}, 1e-5),
+    "clip": ("json", {}, {}, 1e-5),  # 6 decimals
+    "clip-y-up": ("json", {"y_up": True}, {}, 1e-5),
+    "bvh": ("bvh", {}, {}, 1e-6),  # 6 decimals of degrees and cm
+    "bvh-m-ZXY": ("bvh", {"units": "m", "rotation_order": "ZXY"}, {"units": "m"}, 1e-5),
+}
+
+
+@pytest.mark.parametrize("how", sorted(ROUND_TRIPS))
+def test_round_trip_of_a_real_walk_gives_back_q(walk, how):
+    fmt, options, read_options, tol = ROUND_TRIPS[how]
+    data = export_motion(walk, fmt, **options)
+    back = RI.motion_from_file(data, walk.character, **read_options)
+    assert back.source == {"json": "clip"}.get(fmt, fmt)
+    assert back.q.shape == walk.q.shape
+    err = np.abs(back.q - walk.q).max()
+    assert err < tol, (how, err, walk.character.coordinate_names[int(np.abs(back.q - walk.q).max(axis=1).argmax())])
+    assert back.fps == pytest.approx(walk.fps, rel=1e-12)
+    assert back.rotation_residual < 1e-6 and back.translation_residual < 1e-6
+    m = back.motion()
+    assert isinstance(m, Motion) and m.T == walk.T
+
+
+@pytest.mark.parametrize("how", ["glb", "clip", "bvh"])
+def test_round_trip_of_the_synthetic_cases(case, how):
+    """Random motions over the whole joint range, the root yaw crossing ±180° (angles come back
+    continuous, not wrapped). Near gimbal lock (shoulders reach 90° of adduction) the outer
+    angles of a 3-hinge chain are ill-conditioned: the file's rounding is amplified by
+    1/cos(middle angle), hence the looser bound on q; the pose itself is exact."""
+    motion, _, _, pos = case
+    fmt, options, read_options, tol = ROUND_TRIPS[how]
+    back = RI.motion_from_file(export_motion(motion, fmt, **options), motion.character, **read_options)
+    assert np.abs(back.q - motion.q).max() < 500 * tol
+    yaw = motion.character.index("root_rz")
+    assert np.abs(back.q[yaw] - motion.q[yaw]).max() < tol and motion.q[yaw].max() > math.pi
+    _, pos_back = K.segment_frames(motion.character, back.q)
+    np.testing.assert_allclose(pos_back.transpose(0, 2, 1), pos, atol=1e-5)
+
+
+def test_files_for_another_character_are_refused(shared_data):
+    hb = C.halfboy()
+    subject = walk_motion(shared_data, "halfboy").character
+    motion, _ = smooth_motion(hb, T=12)
+    for fmt in ("gltf", "json", "bvh"):
+        data = export_motion(motion, fmt)
+        tag = r"\(exported for 'halfboy'\) " if fmt != "bvh" else ""
+        with pytest.raises(RI.ReimportError, match=tag + r"does not match character 'fullbody': missing segments"):
+            RI.motion_from_file(data, C.fullbody())
+        # same names, another body: the DeepMimic subject's HalfBoy
+        with pytest.raises(RI.ReimportError, match=r"segment '\w+' has its joint .* m from the character's"):
+            RI.motion_from_file(data, subject)
+    # same skeleton, but 3 hinges at the knees: a HalfBoy knee cannot take these rotations
+    lower = C.capture_lower()
+    motion, _ = smooth_motion(lower, T=12)
+    for fmt in ("gltf", "json", "bvh"):
+        with pytest.raises(RI.ReimportError, match=r"segment '(shank|foot|toes)_[rl]' .* cannot take the file's "
+                                                   r"rotations \(off by .* at frame \d+\); .* another character"):
+            RI.motion_from_file(export_motion(motion, fmt), hb)
+    # and the other way round a HalfBoy motion is a valid capture-lower motion (extra hinges at 0)
+    motion, _ = smooth_motion(hb, T=12)
+    back = RI.motion_from_gltf(export_motion(motion, "gltf"), lower)
+    sel = [lower.index(n) for n in hb.coordinate_names]
+    assert np.abs(back.q[sel] - motion.q).max() < 1e-5
+    assert np.abs(np.delete(back.q, sel, axis=0)).max() < 1e-5
+    # rest orientations: glTF and the clip carry them (BVH does not: with 3 hinges any rotation fits)
+    from dataclasses import replace
+
+    tl = tilted()
+    tl = replace(tl, segments=(replace(tl.segments[0], offset=np.zeros(3)),) + tl.segments[1:])
+    motion, _ = smooth_motion(tl, T=8)
+    for fmt in ("gltf", "json"):
+        with pytest.raises(RI.ReimportError, match="segment 'pelvis' has a rest orientation"):
+            RI.motion_from_file(export_motion(motion, fmt), lower)
+
+
+def test_broken_files_are_refused_clearly():
+    motion, _ = smooth_motion(C.halfboy(), T=6)
+    ch = motion.character
+    glb = export_motion(motion, "gltf")
+    with pytest.raises(RI.ReimportError, match="truncated GLB"):
+        RI.motion_from_gltf(glb[: len(glb) // 2], ch)
+    with pytest.raises(RI.ReimportError, match="neither a GLB"):
+        RI.motion_from_gltf(b"glTX" + glb[4:], ch)
+    doc = json.loads(export_motion(motion, "gltf", binary=False))
+    doc["buffers"][0]["uri"] = "walk.bin"
+    with pytest.raises(RI.ReimportError, match="external file"):
+        RI.motion_from_gltf(doc, ch)
+    bvh = export_motion(motion, "bvh")
+    with pytest.raises(RI.ReimportError, match="values for 6 frames"):
+        RI.motion_from_bvh(bvh.rsplit("\n", 2)[0], ch)
+    with pytest.raises(RI.ReimportError, match="expected 'HIERARCHY'"):
+        RI.motion_from_bvh("HIERARCHI" + bvh[9:], ch)
+    with pytest.raises(RI.ReimportError, match="unrecognised"):
+        RI.motion_from_file(b"\x00\x01binary", ch)
+    with pytest.raises(ExportError, match="not a motionx clip"):
+        RI.motion_from_clip({"format": "other"}, ch)
+    with pytest.raises(RI.ReimportError, match="rot_tol"):
+        RI.motion_from_gltf(glb, ch, rot_tol=0)
+
+
+def test_decompose_hinges_any_axes_continuity_and_limits():
+    from scipy.spatial.transform import Rotation
+
+    from solver.export import _axis_rotations
+
+    rng = np.random.default_rng(4)
+    T = 200
+    t = np.linspace(0, 1, T)
+    for axes in (
+        [np.array([0, 0, 1.0]), np.array([0, 1.0, 0]), np.array([1.0, 0, 0])],  # Tait-Bryan (our root)
+        [np.array([0, 0, 1.0]), np.array([1.0, 0, 0]), np.array([0, 0, 1.0])],  # proper Euler
+        list(Rotation.random(3, random_state=2).apply(np.eye(3)[[0, 1, 2]] + 0.3 * rng.normal(size=(3, 3)))),
+        [np.array([0.3, -1.0, 0.2])],
+        [np.array([0, 1.0, 0]), np.array([0.6, 0, 0.8])],
+    ):
+        axes = [a / np.linalg.norm(a) for a in axes]
+        k = len(axes)
+        theta = np.stack([0.9 * np.sin(2 * np.pi * (i + 1) * t + i) + (2.5 * t if i == 0 else 0.0)
+                          for i in range(k)], axis=1)  # the first angle leaves (-π, π]
+        M = np.broadcast_to(np.eye(3), (T, 3, 3)).copy()
+        for i, a in enumerate(axes):
+            M = M @ _axis_rotations(a, theta[:, i])
+        got, res = RI.decompose_hinges(M, axes, -1.4 * np.ones(k), np.r_[10.0, 1.4 * np.ones(k - 1)])
+        got = np.stack([RI._continuous(got[:, i], -1.4 if i else -10.0, 10.0 if i == 0 else 1.4)
+                        for i in range(k)], axis=1)
+        np.testing.assert_allclose(got, theta, atol=1e-9)
+        assert res.max() < 1e-12
+    with pytest.raises(RI.ReimportError, match="parallel"):
+        RI.decompose_hinges(np.eye(3)[None], [np.array([1.0, 0, 0]), np.array([-1.0, 0, 0])])
+
+
+# --- independent readers: seconds, unit quaternions, root channel, Y up ------------------------
+
+
+def test_real_walk_glb_and_bvh_conventions_read_independently(walk, tmp_path):
+    ch = walk.character
+    names = [s.name for s in ch.segments]
+    g, blob = load_gltf(export_motion(walk, "gltf"))
+    anim = g.animations[0]
+    paths = {(c.target.node, c.target.path): anim.samplers[c.sampler] for c in anim.channels}
+    # key times in seconds: k / fps, the last one (T - 1) / fps
+    times = read_accessor(g, blob, anim.samplers[0].input)[:, 0]
+    assert len(times) == walk.T and times[0] == 0.0
+    assert times[-1] == pytest.approx((walk.T - 1) / walk.fps, rel=1e-6)
+    np.testing.assert_allclose(np.diff(times), 1.0 / walk.fps, rtol=1e-5)
+    # one rotation channel of unit quaternions per hinged segment, and the root's translation
+    hinged = {i for i, s in enumerate(ch.segments) if any(d.kind == "hinge" for d in s.dofs)}
+    assert {n for n, p in paths if p == "rotation"} == hinged
+    assert {n for n, p in paths if p == "translation"} == {0} and g.nodes[0].name == names[0]
+    for (n, p), smp in paths.items():
+        out = read_accessor(g, blob, smp.output)
+        if p == "rotation":
+            np.testing.assert_allclose(np.linalg.norm(out.astype(float), axis=1), 1.0, atol=1e-6)
+    root = read_accessor(g, blob, paths[(0, "translation")].output)
+    _, pos = K.segment_frames(ch, walk.q)
+    np.testing.assert_allclose(root, pos[0].T @ Y_UP.T, atol=1e-6)  # the walk's root, Y up
+    # Y up: in the rest skeleton (node transforms) the legs hang along -Y, the pelvis above the feet
+    rest = {}
+    for i, n in enumerate(g.nodes[: len(names)]):
+        m = node_matrix(n.translation, n.rotation)
+        p = ch.segments[i].parent
+        rest[n.name] = m if p is None else rest[p] @ m
+    for side in "rl":
+        hip, knee, ankle = (rest[f"{s}_{side}"][:3, 3] for s in ("thigh", "shank", "foot"))
+        for a, b in ((hip, knee), (knee, ankle)):
+            d = (b - a) / np.linalg.norm(b - a)
+            np.testing.assert_allclose(d, [0.0, -1.0, 0.0], atol=1e-9)
+    # BVH (bvhio): frame time 1 / fps, the root's position channels, Y up at rest
+    path = tmp_path / "walk.bvh"
+    path.write_text(export_motion(walk, "bvh"))
+    raw = bvhio.readAsBvh(str(path))
+    assert raw.FrameCount == walk.T and raw.FrameTime == pytest.approx(1.0 / walk.fps, rel=1e-12)
+    assert [c for c in raw.Root.Channels if c.endswith("position")] == ["Xposition", "Yposition", "Zposition"]
+    hier = bvhio.readAsHierarchy(str(path))
+    joints = {j.Name: j for j, _, _ in hier.layout()}
+    hier.loadRestPose(recursive=True)
+    for side in "rl":
+        hip, knee, ankle = (np.array(joints[f"{s}_{side}"].PositionWorld, dtype=float)
+                            for s in ("thigh", "shank", "foot"))
+        for a, b in ((hip, knee), (knee, ankle)):
+            np.testing.assert_allclose((b - a) / np.linalg.norm(b - a), [0.0, -1.0, 0.0], atol=1e-6)
+        assert np.linalg.norm(ankle - hip) > 40.0  # cm

@@ -1,4 +1,5 @@
-"""``motionx export``: write a motion file as a JSON clip, glTF 2.0 (.gltf / .glb) or BVH."""
+"""``motionx export``: write a motion file as a JSON clip, glTF 2.0 (.glb, or .gltf with
+``--embedded``) or BVH."""
 
 from __future__ import annotations
 
@@ -13,10 +14,10 @@ CHOICES = ("json", "gltf", "glb", "bvh")
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    from solver.export import ExportError, export_motion
+    from solver.export import ExportError, export_motion, media_type
     from solver.motion import Motion, MotionError
 
-    fmt = args.format
+    fmt = "gltf" if args.format == "glb" else args.format  # glb: an alias of the binary glTF
     options: dict = {}
     if args.units is not None:
         if fmt != "bvh":
@@ -24,8 +25,20 @@ def cmd_export(args: argparse.Namespace) -> int:
         options["units"] = args.units
     if args.y_up and fmt == "json":
         options["y_up"] = True  # glTF and BVH are always Y-up: the flag changes nothing for them
-    if args.out == "-" and fmt == "glb":
-        raise CliError("--out - (stdout) is only for text formats; give a .glb file name")
+    suffix = Path(args.out).suffix.lower() if args.out != "-" else ""
+    if args.embedded:
+        if args.format != "gltf":
+            raise CliError("--embedded applies to --format gltf only (the .gltf JSON with its buffer embedded)")
+        if suffix == ".glb":
+            raise CliError("--embedded writes the .gltf JSON; name the file .gltf, or drop --embedded for a .glb")
+        options["binary"] = False
+    elif fmt == "gltf":
+        if suffix == ".gltf":
+            raise CliError("--format gltf writes the binary .glb; add --embedded for a .gltf JSON file, "
+                           "or name the file .glb")
+        if args.out == "-":
+            raise CliError("--out - (stdout) is only for text formats; give a .glb file name "
+                           "(or --embedded for the .gltf JSON)")
     try:
         motion = Motion.load(args.motion)
         data = export_motion(motion, fmt, **options)
@@ -42,17 +55,20 @@ def cmd_export(args: argparse.Namespace) -> int:
             out.write_text(data)
     except OSError as e:
         raise CliError(f"cannot write {out}: {e.strerror or e}") from None
-    print(json.dumps({"out": str(out), "format": fmt, "frames": motion.T, "fps": motion.fps,
+    print(json.dumps({"out": str(out), "format": args.format, "media_type": media_type(fmt, **options),
+                      "frames": motion.T, "fps": motion.fps,
                       "character": motion.character.name, "bytes": out.stat().st_size}))
     return 0
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    s = sub.add_parser("export", help="export a motion file as a JSON clip, glTF 2.0 or BVH")
+    s = sub.add_parser("export", help="export a motion file as a JSON clip, glTF 2.0 (.glb) or BVH")
     s.add_argument("motion", help="motion file (motionx motion v1, JSON)")
     s.add_argument("--format", required=True, choices=CHOICES,
-                   help="json: motionx clip; gltf: glTF JSON with embedded buffer; glb: binary glTF; bvh")
+                   help="json: motionx clip; gltf (alias glb): binary glTF 2.0 (.glb); bvh")
     s.add_argument("--out", required=True, help="output file (- for stdout, text formats only)")
+    s.add_argument("--embedded", action="store_true",
+                   help="with --format gltf: the .gltf JSON with its buffer embedded (base64) instead of the .glb")
     s.add_argument("--y-up", action="store_true",
                    help="JSON clip in Y-up axes (x left, y up, z forward); glTF and BVH are always Y-up")
     s.add_argument("--units", choices=("cm", "m"), default=None, help="BVH length unit (default cm)")

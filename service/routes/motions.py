@@ -155,7 +155,11 @@ def _option(v: str) -> Any:
 
 @router.get(
     "/motions/{motion_id}",
-    summary="a motion: JSON clip (default), glTF, GLB, BVH, or the motion file v1 (format=motion)",
+    summary="a motion: JSON clip (default), glTF 2.0 binary (gltf = glb), BVH, or the motion file v1 "
+            "(format=motion)",
+    description="Other query parameters are the exporter's options (docs/export.md), e.g. `y_up=true`, "
+                "`decimals=3` (json), `units=m` (bvh), `meshes=false` (gltf, glb), `binary=false` (gltf: "
+                "the .gltf JSON with its buffer embedded, model/gltf+json, instead of the binary .glb).",
     responses={200: {"content": {"application/json": {}, "model/gltf+json": {}, "model/gltf-binary": {},
                                  "text/plain": {}}},
                404: {"description": "no such motion for this key"}, 501: {"description": "exporter not available"}},
@@ -163,8 +167,9 @@ def _option(v: str) -> Any:
 def get_motion(
     motion_id: str,
     request: Request,
-    format: Literal["json", "gltf", "glb", "bvh", "motion"] = Query("json", description="output format; other "
-                                                                   "query parameters are the exporter's options"),
+    format: Literal["json", "gltf", "glb", "bvh", "motion"] = Query(
+        "json", description="output format (gltf and glb: binary glTF 2.0); other query parameters are the "
+                            "exporter's options"),
     owner: str = Depends(get_owner),
     db: Database = Depends(get_db),
 ) -> Response:
@@ -195,7 +200,7 @@ def get_motion(
     motion = motion_from_dict(json.loads(data))
     try:
         out = export_motion(motion, format, **options)
-        mt = media_type(format)
+        mt = media_type(format, **options)
     except ImportError as e:
         raise Problem(501, f"format {format!r} is not available in this build ({e})") from None
     except ExportError as e:

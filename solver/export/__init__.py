@@ -4,8 +4,9 @@ Formats (see ``docs/export.md``):
 
 - ``json``: the motionx clip (:func:`solver.export.clip.to_clip_json`), a compact
   game-oriented clip with a published JSON Schema (``clip.schema.json``);
-- ``gltf`` / ``glb``: glTF 2.0 skinned character and animation
-  (:func:`solver.export.gltf.to_gltf`, :func:`solver.export.gltf.to_glb`);
+- ``gltf`` (alias ``glb``): glTF 2.0 skinned character and animation, binary ``.glb`` by
+  default (:func:`solver.export.gltf.to_gltf`; ``binary=False`` gives the ``.gltf`` JSON
+  with its buffer embedded);
 - ``bvh``: Biovision hierarchy (:func:`solver.export.bvh.to_bvh`).
 
 This module holds what the formats share: the local transform of every segment relative
@@ -233,7 +234,7 @@ def ground_reactions(motion: Motion, min_load: float | None = None) -> GroundRea
 #: format name -> (module, function, media type)
 FORMATS: dict[str, tuple[str, str, str]] = {
     "json": ("solver.export.clip", "to_clip_json", "application/json"),
-    "gltf": ("solver.export.gltf", "to_gltf", "model/gltf+json"),
+    "gltf": ("solver.export.gltf", "to_gltf", "model/gltf-binary"),  # binary=False: model/gltf+json
     "glb": ("solver.export.gltf", "to_glb", "model/gltf-binary"),
     "bvh": ("solver.export.bvh", "to_bvh", "text/plain"),
 }
@@ -249,8 +250,17 @@ def _exporter(fmt: str):
     return getattr(importlib.import_module(module), func)
 
 
-def media_type(fmt: str) -> str:
+#: (format, option, value) -> media type when that option changes the result's type
+_MEDIA_BY_OPTION: dict[tuple[str, str, Any], str] = {("gltf", "binary", False): "model/gltf+json"}
+
+
+def media_type(fmt: str, **options: Any) -> str:
+    """The media type of ``export_motion(motion, fmt, **options)`` (``gltf`` with
+    ``binary=False`` is ``model/gltf+json``, otherwise ``model/gltf-binary``)."""
     _exporter(fmt)
+    for (f, key, value), mt in _MEDIA_BY_OPTION.items():
+        if f == fmt and key in options and options[key] is value:
+            return mt
     return FORMATS[fmt][2]
 
 
@@ -261,7 +271,8 @@ def export_options(fmt: str) -> tuple[str, ...]:
 
 
 def export_motion(motion: Motion, fmt: str, **options: Any) -> str | bytes:
-    """Export ``motion`` as ``fmt`` (json, gltf, glb, bvh): text for text formats, bytes for glb.
+    """Export ``motion`` as ``fmt`` (json, gltf, glb, bvh): text for text formats, bytes for
+    binary glTF (``gltf`` by default, ``glb``).
 
     Unknown options are refused with an :class:`ExportError` naming the accepted ones.
     """

@@ -1,5 +1,5 @@
-"""glTF 2.0 export: a skinned, animated character (``.glb`` binary or ``.gltf`` with an
-embedded base64 buffer).
+"""glTF 2.0 export: a skinned, animated character (``.glb`` binary, the default, or ``.gltf``
+with an embedded base64 buffer: ``to_gltf(motion, binary=False)``).
 
 - one node per segment, node i = segment i (``character.segments`` order), holding the
   segment's rest transform (translation = rest offset, rotation = rest orientation);
@@ -272,8 +272,16 @@ def to_glb(motion: Motion, *, meshes: bool = True) -> bytes:
     ])
 
 
-def to_gltf(motion: Motion, *, meshes: bool = True) -> str:
+def to_gltf_embedded(motion: Motion, *, meshes: bool = True) -> str:
     """glTF JSON (.gltf) with the buffer embedded as a base64 data URI."""
     doc, data = _document(motion, meshes)
     doc["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64.b64encode(data).decode("ascii")
     return json.dumps(doc, allow_nan=False, separators=(",", ":"))
+
+
+def to_gltf(motion: Motion, *, meshes: bool = True, binary: bool = True) -> bytes | str:
+    """glTF 2.0 of ``motion``: the binary ``.glb`` (bytes, the default, as :func:`to_glb`), or
+    with ``binary=False`` the ``.gltf`` JSON text with its buffer embedded (:func:`to_gltf_embedded`)."""
+    if not isinstance(binary, bool):
+        raise ExportError(f"binary must be a boolean, got {binary!r}")
+    return to_glb(motion, meshes=meshes) if binary else to_gltf_embedded(motion, meshes=meshes)

@@ -90,6 +90,30 @@ def test_clip_is_the_default_format(api, motion_id):
         assert api.a.get(f"/motions/{motion_id}", params={"format": fmt}).status_code == 200, fmt
 
 
+def test_gltf_is_the_binary_glb_and_reimports_to_the_uploaded_motion(api):
+    from solver.export.reimport import motion_from_bvh, motion_from_clip, motion_from_gltf
+
+    m = halfboy_motion(seed=9)
+    mid = upload(api.a, m.to_dict()).json()["id"]
+    r = api.a.get(f"/motions/{mid}", params={"format": "gltf"})
+    assert r.status_code == 200 and r.headers["content-type"] == "model/gltf-binary"
+    assert r.content[:4] == b"glTF"
+    glb = api.a.get(f"/motions/{mid}", params={"format": "glb"})  # the alias
+    assert glb.headers["content-type"] == "model/gltf-binary" and glb.content == r.content
+    back = motion_from_gltf(r.content, m.character)
+    assert abs(back.q - m.q).max() < 1e-5 and back.fps == m.fps
+    r = api.a.get(f"/motions/{mid}", params={"format": "gltf", "binary": "false"})  # the embedded .gltf JSON
+    assert r.status_code == 200 and r.headers["content-type"].startswith("model/gltf+json")
+    assert abs(motion_from_gltf(r.text, m.character).q - m.q).max() < 1e-5
+    r = api.a.get(f"/motions/{mid}", params={"format": "gltf", "meshes": "false"})
+    assert r.headers["content-type"] == "model/gltf-binary" and len(r.content) < len(glb.content)
+    assert abs(motion_from_clip(api.a.get(f"/motions/{mid}").json(), m.character).q - m.q).max() < 1e-5
+    bvh = api.a.get(f"/motions/{mid}", params={"format": "bvh"})
+    assert abs(motion_from_bvh(bvh.text, m.character).q - m.q).max() < 1e-6
+    assert_problem(api.a.get(f"/motions/{mid}", params={"format": "glb", "binary": "false"}), 422, "binary")
+    assert_problem(api.a.get(f"/motions/{mid}", params={"format": "gltf", "binary": "maybe"}), 422, "binary")
+
+
 # --- bad uploads: a clear 422 naming the problem, nothing stored --------------------------
 
 

@@ -1,0 +1,749 @@
+"""Re-import: our own exports (JSON clip, glTF 2.0 ``.glb``/``.gltf``, BVH) back to a motion's
+generalized coordinates for a given character.
+
+Every format stores, per frame and segment, the *local* transform parent <- segment
+(``solver.export.local_transforms``: ``orientation · R(axis₁, q₁) · R(axis₂, q₂) · …`` and
+``offset`` + slides). Reading a file back is therefore, per segment and frame:
+
+1. express the file's local rotation R and translation t in our Z-up axes
+   (``Y_UPᵀ R Y_UP``, ``Y_UPᵀ t`` for glTF, BVH and Y-up clips) and in the file's units;
+2. decompose M = orientationᵀ · R into the segment's hinge sequence
+   R(a₁, θ₁) R(a₂, θ₂) … about its fixed axes: closed form for 1, 2 and 3 hinges about any
+   axes where consecutive axes are not parallel (Paden-Kahan subproblems; a 3-hinge chain
+   has two solutions, the one in the joint limits, then the one nearest the previous frame,
+   is kept), then two Gauss-Newton steps on the rotation error (least squares, for files
+   that are not exactly representable: float32, rounded decimals);
+3. solve the slides (root translation) by least squares from the translation;
+4. make each angle continuous in time (a hinge angle is only known modulo 2π) and shift
+   the whole trajectory by a multiple of 2π into the joint's limits, else to start in (-π, π].
+
+The skeleton in the file (segment names, parents, rest offsets, rest rotations where the
+format has them) must be the character's, and every frame's rotations and translations
+must be reproduced by the character's joints to ``rot_tol`` (rad) / ``len_tol`` (m):
+otherwise the file is for another character and a :class:`ReimportError` says where.
+
+``motion_from_clip``, ``motion_from_gltf``, ``motion_from_bvh`` and ``motion_from_file``
+(which recognises the format) return a :class:`Reimported` (``q`` (n, T), ``fps``, the
+largest residuals, and ``.motion()`` to get a :class:`~solver.motion.Motion`).
+"""
+
+from __future__ import annotations
+
+import base64
+import itertools
+import json
+import math
+import re
+import struct
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from solver.character import Character
+from solver.export import Y_UP, ExportError, _axis_rotations
+from solver.motion import Motion
+
+__all__ = [
+    "LEN_TOL",
+    "ROT_TOL",
+    "ReimportError",
+    "Reimported",
+    "decompose_hinges",
+    "motion_from_bvh",
+    "motion_from_clip",
+    "motion_from_file",
+    "motion_from_gltf",
+    "quaternion_to_matrix",
+]
+
+#: default tolerances: largest rotation (rad) and translation / offset (m) mismatch accepted
+ROT_TOL = 5e-3
+LEN_TOL = 2e-3
+
+
+class ReimportError(ExportError):
+    """A file cannot be read back, or it does not match the character."""
+
+
+@dataclass(frozen=True, eq=False)
+class Reimported:
+    """A motion read back from a file.
+
+    ``q`` (n, T): the character's generalized coordinates (``character.coordinate_names``
+    order), ``fps`` the frame rate; ``rotation_residual`` (rad) and ``translation_residual``
+    (m): the largest mismatch between the file's local transforms and the character's joints
+    at ``q`` (0 up to the file's precision); ``source`` the format read.
+    """
+
+    character: Character
+    fps: float
+    q: np.ndarray
+    rotation_residual: float
+    translation_residual: float
+    source: str
+
+    @property
+    def T(self) -> int:
+        return int(self.q.shape[1])
+
+    def motion(self, **fields: Any) -> Motion:
+        """The :class:`Motion` (kinematics only; ``fields`` are passed on, e.g. provenance)."""
+        return Motion(character=self.character, fps=self.fps, q=self.q, **fields)
+
+
+# --- rotation helpers ------------------------------------------------------------------------
+
+
+def quaternion_to_matrix(quat: np.ndarray) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) of quaternions (..., 4) in (x, y, z, w) order (normalised first)."""
+    qv = np.asarray(quat, dtype=float)
+    n = np.linalg.norm(qv, axis=-1, keepdims=True)
+    if np.any(n < 1e-6) or not np.all(np.isfinite(qv)):
+        raise ReimportError("a rotation quaternion is zero or not finite")
+    x, y, z, w = np.moveaxis(qv / n, -1, 0)
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+    ], -2)
+
+
+def _skew(a: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+
+
+def _angle(E: np.ndarray) -> np.ndarray:
+    """Rotation angle (rad) of each (..., 3, 3) rotation matrix, accurate near 0 and π."""
+    v = np.stack([E[..., 2, 1] - E[..., 1, 2], E[..., 0, 2] - E[..., 2, 0], E[..., 1, 0] - E[..., 0, 1]], -1)
+    return np.arctan2(0.5 * np.linalg.norm(v, axis=-1), 0.5 * (np.trace(E, axis1=-2, axis2=-1) - 1.0))
+
+
+def _about(axis: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Paden-Kahan subproblem 1: the angle θ that best rotates ``p`` onto ``q`` about ``axis``
+    (R(axis, θ) p ∥ q in the plane normal to the axis). ``p``, ``q``: (T, 3) or (3,)."""
+    p = np.broadcast_to(p, np.shape(q)) if np.ndim(p) < np.ndim(q) else p
+    pp = p - np.multiply.outer(p @ axis, axis)
+    qq = q - np.multiply.outer(q @ axis, axis)
+    return np.arctan2(np.einsum("...i,...i->...", np.cross(pp, qq), np.broadcast_to(axis, pp.shape)),
+                      np.einsum("...i,...i->...", pp, qq))
+
+
+def _single(axis: np.ndarray, M: np.ndarray) -> np.ndarray:
+    """The angle θ maximising tr(R(axis, θ)ᵀ M), i.e. the rotation about ``axis`` nearest M (T, 3, 3)."""
+    K = _skew(axis)
+    b = np.einsum("ij,tij->t", K, M)
+    c = np.einsum("i,tij,j->t", axis, M, axis) - np.trace(M, axis1=1, axis2=2)
+    return np.arctan2(b, -c)
+
+
+def _wrap(x: np.ndarray) -> np.ndarray:
+    return (np.asarray(x) + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def _limit_violation(theta: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """Distance of each angle (..., k) to its joint interval, the angle taken modulo 2π."""
+    out = np.full(theta.shape, np.inf)
+    for shift in (-2.0 * np.pi, 0.0, 2.0 * np.pi):
+        t = _wrap(theta) + shift
+        out = np.minimum(out, np.maximum(lower - t, 0.0) + np.maximum(t - upper, 0.0))
+    return out
+
+
+def _product(axes: list[np.ndarray], theta: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+    """R(a₁, θ₁) R(a₂, θ₂) … (T, 3, 3) and the prefix products before each factor."""
+    T = theta.shape[0]
+    R = np.broadcast_to(np.eye(3), (T, 3, 3)).copy()
+    prefixes = []
+    for i, a in enumerate(axes):
+        prefixes.append(R)
+        R = R @ _axis_rotations(a, theta[:, i])
+    return R, prefixes
+
+
+def decompose_hinges(M: np.ndarray, axes: list[np.ndarray], lower: np.ndarray | None = None,
+                     upper: np.ndarray | None = None, *, polish: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """Angles θ (T, k) with R(a₁, θ₁) … R(a_k, θ_k) ≈ M (T, 3, 3) and the residual angle (T,) per frame.
+
+    Closed form for k ≤ 3 hinges (any axes, consecutive axes not parallel), then ``polish``
+    Gauss-Newton steps on the rotation error. Of the two solutions of a 3-hinge chain, frame
+    0 takes the one in the limits (``lower``/``upper``, default unbounded; then the smaller
+    angles) and every later frame the one nearest the previous frame's.
+    """
+    M = np.asarray(M, dtype=float)
+    T, k = M.shape[0], len(axes)
+    axes = [np.asarray(a, dtype=float) / np.linalg.norm(a) for a in axes]
+    lower = np.full(k, -np.inf) if lower is None else np.asarray(lower, dtype=float)
+    upper = np.full(k, np.inf) if upper is None else np.asarray(upper, dtype=float)
+    if k > 3:
+        raise ReimportError(f"cannot decompose a chain of {k} hinges (at most 3)")
+    for a, b in itertools.pairwise(axes):
+        if np.linalg.norm(np.cross(a, b)) < 1e-6:
+            raise ReimportError("cannot decompose a hinge chain with two consecutive parallel axes")
+    if k == 0:
+        return np.zeros((T, 0)), _angle(M)
+    if k == 1:
+        theta = _single(axes[0], M)[:, None]
+    elif k == 2:
+        a1, a2 = axes
+        t1 = _about(a1, a2, M @ a2)
+        rest = np.swapaxes(_axis_rotations(a1, t1), 1, 2) @ M
+        theta = np.stack([t1, _single(a2, rest)], axis=1)
+    else:
+        a1, a2, a3 = axes
+        q = M @ a3  # = R1 R2 a3: find c = R2 a3 = R1ᵀ q (subproblem 2), then θ3
+        u = float(a1 @ a2)
+        w = np.cross(a1, a2)
+        d1, d2 = q @ a1, float(a2 @ a3)
+        alpha = (d1 - u * d2) / (1.0 - u * u)
+        beta = (d2 - u * d1) / (1.0 - u * u)
+        g2 = (1.0 - alpha**2 - beta**2 - 2.0 * alpha * beta * u) / float(w @ w)
+        gamma = np.sqrt(np.maximum(g2, 0.0))
+        cands = []
+        for sign in (1.0, -1.0):
+            c = np.outer(alpha, a1) + np.outer(beta, a2) + np.outer(sign * gamma, w)
+            t2 = _about(a2, a3, c)
+            t1 = _about(a1, c, q)
+            R12 = _axis_rotations(a1, t1) @ _axis_rotations(a2, t2)
+            t3 = _single(a3, np.swapaxes(R12, 1, 2) @ M)
+            cands.append(np.stack([t1, t2, t3], axis=1))
+        cand = np.stack(cands)  # (2, T, 3)
+        pick = np.empty(T, dtype=int)
+        cost0 = _limit_violation(cand[:, 0], lower, upper).sum(axis=1) + 1e-6 * np.sum(_wrap(cand[:, 0]) ** 2, axis=1)
+        pick[0] = int(np.argmin(cost0))
+        prev = cand[pick[0], 0]
+        for t in range(1, T):
+            d = np.sum(_wrap(cand[:, t] - prev) ** 2, axis=1)
+            pick[t] = int(np.argmin(d))
+            prev = cand[pick[t], t]
+        theta = cand[pick, np.arange(T)]
+    for _ in range(polish):  # Gauss-Newton on the left rotation error M Rᵀ ≈ I + [e]×
+        R, prefixes = _product(axes, theta)
+        E = M @ np.swapaxes(R, 1, 2)
+        e = 0.5 * np.stack([E[:, 2, 1] - E[:, 1, 2], E[:, 0, 2] - E[:, 2, 0], E[:, 1, 0] - E[:, 0, 1]], -1)
+        J = np.stack([P @ a for P, a in zip(prefixes, axes)], axis=-1)  # (T, 3, k)
+        JtJ = np.swapaxes(J, 1, 2) @ J + 1e-12 * np.eye(k)
+        theta = theta + np.linalg.solve(JtJ, np.einsum("tik,ti->tk", J, e)[..., None])[..., 0]
+    R, _ = _product(axes, theta)
+    return theta, _angle(M @ np.swapaxes(R, 1, 2))
+
+
+def _continuous(theta: np.ndarray, lower: float, upper: float) -> np.ndarray:
+    """Unwrap one angle trajectory (T,) and shift it by 2πk into [lower, upper] as far as
+    possible; among equally good shifts, the one starting nearest 0."""
+    th = np.unwrap(theta)
+    th = th - 2.0 * np.pi * np.round(th[0] / (2.0 * np.pi))  # starts in [-π, π]
+    best, best_cost = th, None
+    for k in range(-3, 4):
+        cand = th + 2.0 * np.pi * k
+        viol = float(np.sum(np.maximum(lower - cand, 0.0) + np.maximum(cand - upper, 0.0)))
+        cost = (round(viol, 9), abs(float(cand[0])))
+        if best_cost is None or cost < best_cost:
+            best, best_cost = cand, cost
+    return best
+
+
+# --- from local transforms to q ----------------------------------------------------------------
+
+
+def _coordinates(character: Character, rot: np.ndarray, pos: np.ndarray, *, rot_tol: float, len_tol: float,
+                 source: str, fps: float, where: str) -> Reimported:
+    """q from the local rotations (S, T, 3, 3) and translations (S, T, 3) in our axes, character order."""
+    _check_tol(rot_tol, len_tol)
+    T = rot.shape[1]
+    q = np.zeros((character.n, T))
+    worst_rot, worst_len = 0.0, 0.0
+    k0 = 0
+    for i, seg in enumerate(character.segments):
+        hinges = [(j, d) for j, d in enumerate(seg.dofs) if d.kind == "hinge"]
+        slides = [(j, d) for j, d in enumerate(seg.dofs) if d.kind == "slide"]
+        M = seg.orientation.T @ rot[i]
+        axes = [d.axis for _, d in hinges]
+        lo = np.array([d.lower for _, d in hinges])
+        hi = np.array([d.upper for _, d in hinges])
+        try:
+            theta, res = decompose_hinges(M, axes, lo, hi)
+        except ReimportError as e:
+            raise ReimportError(f"segment {seg.name!r}: {e}") from None
+        bad = int(np.argmax(res))
+        if res[bad] > rot_tol:
+            names = ", ".join(d.name for _, d in hinges) or "no hinge"
+            raise ReimportError(
+                f"{where} does not match character {character.name!r}: segment {seg.name!r} ({names}) cannot "
+                f"take the file's rotations (off by {res[bad]:.3g} rad > {rot_tol:g} at frame {bad}); "
+                "was it exported for another character?")
+        worst_rot = max(worst_rot, float(res.max()))
+        for h, (j, d) in enumerate(hinges):
+            q[k0 + j] = _continuous(theta[:, h], d.lower, d.upper)
+        # translation: offset + Σ (orientation · hinges before the slide) axis · value
+        target = pos[i] - seg.offset
+        if slides:
+            cols = []
+            for j, d in slides:
+                before = [a for jj, a in zip([jj for jj, _ in hinges], axes) if jj < j]
+                P, _ = _product(before, theta[:, : len(before)])
+                cols.append(seg.orientation @ P @ d.axis)  # (T, 3)
+            A = np.stack(cols, axis=-1)  # (T, 3, m)
+            AtA = np.swapaxes(A, 1, 2) @ A
+            if np.min(np.linalg.eigvalsh(AtA)) < 1e-9:
+                raise ReimportError(f"segment {seg.name!r}: its slide axes are not independent")
+            vals = np.linalg.solve(AtA, np.einsum("tim,ti->tm", A, target)[..., None])[..., 0]
+            for m, (j, _) in enumerate(slides):
+                q[k0 + j] = vals[:, m]
+            target = target - np.einsum("tim,tm->ti", A, vals)
+        err = np.linalg.norm(target, axis=1)
+        bad = int(np.argmax(err))
+        if err[bad] > len_tol:
+            raise ReimportError(
+                f"{where} does not match character {character.name!r}: segment {seg.name!r} is "
+                f"{err[bad]:.3g} m from where the character's joints can put it (> {len_tol:g} m at frame {bad}); "
+                "was it exported for another character?")
+        worst_len = max(worst_len, float(err.max()))
+        k0 += len(seg.dofs)
+    return Reimported(character, float(fps), q, worst_rot, worst_len, source)
+
+
+def _check_tol(rot_tol: Any, len_tol: Any) -> None:
+    for name, v in (("rot_tol", rot_tol), ("len_tol", len_tol)):
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
+            raise ReimportError(f"{name} must be a positive number, got {v!r}")
+
+
+def _where(what: str, file_character: Any) -> str:
+    return f"{what} (exported for {file_character!r})" if isinstance(file_character, str) and file_character else what
+
+
+def _match_skeleton(character: Character, names: list[str], parents: list[str | None], where: str) -> list[int]:
+    """Index in the file of each character segment; refuses another skeleton with what differs."""
+    ours = [s.name for s in character.segments]
+    if len(set(names)) != len(names):
+        raise ReimportError(f"{where} has duplicate segment names")
+    missing = [n for n in ours if n not in names]
+    extra = [n for n in names if n not in ours]
+    if missing or extra:
+        parts = []
+        if missing:
+            parts.append(f"missing segments {missing}")
+        if extra:
+            parts.append(f"unknown segments {extra}")
+        raise ReimportError(f"{where} does not match character {character.name!r}: " + "; ".join(parts))
+    index = [names.index(n) for n in ours]
+    for s, i in zip(character.segments, index):
+        if parents[i] != s.parent:
+            raise ReimportError(f"{where} does not match character {character.name!r}: segment {s.name!r} "
+                                f"hangs from {parents[i]!r} in the file, from {s.parent!r} in the character")
+    return index
+
+
+def _check_rest(character: Character, offsets: np.ndarray | None, rest_rot: np.ndarray | None, where: str,
+                rot_tol: float, len_tol: float, skip_root_offset: bool = False) -> None:
+    """Rest offsets (S, 3) and rest rotations (S, 3, 3) of the file, our axes and character order."""
+    for i, s in enumerate(character.segments):
+        if offsets is not None and not (i == 0 and skip_root_offset):
+            d = float(np.linalg.norm(offsets[i] - s.offset))
+            if d > len_tol:
+                raise ReimportError(f"{where} does not match character {character.name!r}: segment {s.name!r} "
+                                    f"has its joint {d:.3g} m from the character's (> {len_tol:g} m)")
+        if rest_rot is not None:
+            a = float(_angle(rest_rot[i] @ s.orientation.T))
+            if a > rot_tol:
+                raise ReimportError(f"{where} does not match character {character.name!r}: segment {s.name!r} "
+                                    f"has a rest orientation {a:.3g} rad from the character's")
+
+
+def _fps_from(value: float) -> float:
+    """A frame rate read back through a float32 or a reciprocal: snapped to an integer when
+    it is one to 1e-6 (relative)."""
+    r = round(value)
+    return float(r) if r > 0 and abs(value - r) <= 1e-6 * value else float(value)
+
+
+# --- JSON clip ----------------------------------------------------------------------------------
+
+
+def motion_from_clip(clip: dict | str | bytes, character: Character, *, rot_tol: float = ROT_TOL,
+                     len_tol: float = LEN_TOL) -> Reimported:
+    """Read a motionx JSON clip (a dict or its JSON text), Z-up or Y-up."""
+    from solver.export.clip import FORMAT, validate_clip
+
+    if isinstance(clip, (str, bytes)):
+        try:
+            clip = json.loads(clip)
+        except ValueError as e:
+            raise ReimportError(f"the clip is not JSON: {e}") from None
+    if not isinstance(clip, dict) or clip.get("format") != FORMAT:
+        raise ReimportError(f"not a motionx clip (expected \"format\": \"{FORMAT}\")")
+    try:
+        validate_clip(clip)
+    except ExportError as e:
+        raise ReimportError(str(e)) from None
+    where = _where("the clip", clip.get("character"))
+    skel = clip["skeleton"]
+    names = [s["name"] for s in skel]
+    index = _match_skeleton(character, names, [s["parent"] for s in skel], where)
+    conv = Y_UP if clip["axes"]["up"] == "+y" else np.eye(3)
+    offsets = np.array([skel[i]["offset"] for i in index], dtype=float) @ conv
+    rest = conv.T @ quaternion_to_matrix(np.array([skel[i]["rotation"] for i in index], dtype=float)) @ conv
+    _check_rest(character, offsets, rest, where, rot_tol, len_tol)
+    T = clip["frame_count"]
+    rots = np.array(clip["rotations"], dtype=float)[:, index].transpose(1, 0, 2)  # (S, T, 4)
+    rot = conv.T @ quaternion_to_matrix(rots) @ conv
+    pos = np.broadcast_to(offsets[:, None, :], (len(index), T, 3)).copy()
+    pos[0] = np.array(clip["root_translation"], dtype=float) @ conv
+    for name, tr in clip.get("translations", {}).items():
+        if name in names:
+            pos[[s.name for s in character.segments].index(name)] = np.array(tr, dtype=float) @ conv
+    return _coordinates(character, rot, pos, rot_tol=rot_tol, len_tol=len_tol, source="clip",
+                        fps=float(clip["fps"]), where=where)
+
+
+# --- glTF 2.0 -----------------------------------------------------------------------------------
+
+_GLB_MAGIC, _GLB_JSON, _GLB_BIN = 0x46546C67, 0x4E4F534A, 0x004E4942
+_NCOMP = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
+_CTYPE = {5126: np.dtype("<f4"), 5121: np.dtype("u1"), 5123: np.dtype("<u2"), 5125: np.dtype("<u4")}
+
+
+def _parse_glb(data: bytes) -> tuple[dict, bytes | None]:
+    if len(data) < 20:
+        raise ReimportError("truncated GLB (shorter than its header)")
+    magic, version, length = struct.unpack_from("<III", data, 0)
+    if magic != _GLB_MAGIC:
+        raise ReimportError("not a GLB file (bad magic)")
+    if version != 2:
+        raise ReimportError(f"GLB version {version} is not supported (2 only)")
+    if length > len(data):
+        raise ReimportError(f"truncated GLB: header says {length} bytes, got {len(data)}")
+    doc, blob, off = None, None, 12
+    while off + 8 <= length:
+        clen, ctype = struct.unpack_from("<II", data, off)
+        chunk = data[off + 8: off + 8 + clen]
+        if len(chunk) != clen:
+            raise ReimportError("truncated GLB chunk")
+        if ctype == _GLB_JSON and doc is None:
+            try:
+                doc = json.loads(chunk.decode("utf-8"))
+            except (UnicodeDecodeError, ValueError) as e:
+                raise ReimportError(f"GLB JSON chunk is not JSON: {e}") from None
+        elif ctype == _GLB_BIN and blob is None:
+            blob = bytes(chunk)
+        off += 8 + clen + (-clen % 4)
+    if doc is None:
+        raise ReimportError("GLB without a JSON chunk")
+    return doc, blob
+
+
+def _buffer(doc: dict, i: int, blob: bytes | None) -> bytes:
+    try:
+        buf = doc["buffers"][i]
+    except (KeyError, IndexError, TypeError):
+        raise ReimportError(f"glTF buffer {i} does not exist") from None
+    uri = buf.get("uri")
+    if uri is None:
+        if blob is None or i != 0:
+            raise ReimportError(f"glTF buffer {i} has no data (no uri and no GLB BIN chunk)")
+        return blob
+    m = re.match(r"data:[^,;]*(;base64)?,", uri)
+    if not m or not m.group(1):
+        raise ReimportError(f"glTF buffer {i} is an external file ({uri[:60]!r}): pass the .glb, or a .gltf "
+                            "with its buffer embedded")
+    return base64.b64decode(uri[m.end():])
+
+
+def _accessor(doc: dict, i: int, blobs: dict, blob: bytes | None) -> np.ndarray:
+    """The float data (count, components) of accessor ``i``."""
+    try:
+        acc = doc["accessors"][i]
+        view = doc["bufferViews"][acc["bufferView"]]
+        dt = _CTYPE[acc["componentType"]]
+        nc = _NCOMP[acc["type"]]
+        count = int(acc["count"])
+    except (KeyError, IndexError, TypeError):
+        raise ReimportError(f"glTF accessor {i} is missing or malformed") from None
+    if "sparse" in acc:
+        raise ReimportError(f"glTF accessor {i} is sparse (not supported)")
+    if dt != np.dtype("<f4"):
+        raise ReimportError(f"glTF accessor {i}: animation data must be FLOAT")
+    b = view.get("buffer", 0)
+    if b not in blobs:
+        blobs[b] = _buffer(doc, b, blob)
+    data = blobs[b]
+    stride = view.get("byteStride") or nc * dt.itemsize
+    start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+    end = start + (count - 1) * stride + nc * dt.itemsize
+    if count < 1 or end > view.get("byteOffset", 0) + view["byteLength"] or end > len(data):
+        raise ReimportError(f"glTF accessor {i} reads past its buffer view")
+    arr = np.lib.stride_tricks.as_strided(
+        np.frombuffer(data, dtype=dt, count=(end - start) // dt.itemsize, offset=start),
+        shape=(count, nc), strides=(stride, dt.itemsize))
+    return np.array(arr, dtype=float)
+
+
+def motion_from_gltf(data: bytes | str | dict, character: Character, *, animation: int = 0,
+                     rot_tol: float = ROT_TOL, len_tol: float = LEN_TOL) -> Reimported:
+    """Read a glTF 2.0 file: ``.glb`` bytes, ``.gltf`` JSON text (buffer embedded) or its parsed dict.
+
+    Segment nodes are found by name; the animation's rotation and translation channels give
+    the local transforms at its key times (one shared set of times, uniformly spaced), the
+    node's rest TRS where a segment has no channel. The frame rate is ``asset.extras.fps``
+    when present (our exports), else from the key times.
+    """
+    blob = None
+    if isinstance(data, (bytes, bytearray, memoryview)):
+        data = bytes(data)
+        if data[:4] == b"glTF":
+            doc, blob = _parse_glb(data)
+        else:
+            try:
+                doc = json.loads(data.decode("utf-8"))
+            except (UnicodeDecodeError, ValueError):
+                raise ReimportError("neither a GLB nor glTF JSON") from None
+    elif isinstance(data, str):
+        try:
+            doc = json.loads(data)
+        except ValueError as e:
+            raise ReimportError(f"glTF JSON is not JSON: {e}") from None
+    else:
+        doc = data
+    if not isinstance(doc, dict) or not str(doc.get("asset", {}).get("version", "")).startswith("2."):
+        raise ReimportError("not a glTF 2.0 document (asset.version)")
+    nodes = doc.get("nodes") or []
+    extras = doc["asset"].get("extras") or {}
+    where = _where("the glTF file", extras.get("character") if isinstance(extras, dict) else None)
+    parent_of = {c: i for i, n in enumerate(nodes) for c in n.get("children", [])}
+    seg_names = {s.name for s in character.segments}
+    node_of: dict[str, int] = {}
+    for i, n in enumerate(nodes):
+        nm = n.get("name")
+        if nm in seg_names or ("mesh" not in n and "camera" not in n and nm is not None and "skin" not in n):
+            if nm in node_of:
+                raise ReimportError(f"{where} has two nodes named {nm!r}")
+            node_of[nm] = i
+    names = list(node_of)
+    parents = [nodes[parent_of[i]].get("name") if i in parent_of else None for i in node_of.values()]
+    _match_skeleton(character, names, parents, where)
+    node_ids = [node_of[s.name] for s in character.segments]
+    root_node = node_ids[0]
+    if root_node in parent_of:
+        raise ReimportError(f"{where}: the root segment's node has a parent node "
+                            f"{nodes[parent_of[root_node]].get('name')!r}; its transform is not supported")
+
+    S = len(node_ids)
+    rest_rot = np.empty((S, 3, 3))
+    rest_pos = np.empty((S, 3))
+    for k, i in enumerate(node_ids):
+        n = nodes[i]
+        if "matrix" in n:
+            m = np.array(n["matrix"], dtype=float).reshape(4, 4).T
+            rest_rot[k], rest_pos[k] = m[:3, :3], m[:3, 3]
+        else:
+            rest_rot[k] = quaternion_to_matrix(n.get("rotation", [0.0, 0.0, 0.0, 1.0]))
+            rest_pos[k] = n.get("translation", [0.0, 0.0, 0.0])
+            if not np.allclose(n.get("scale", [1.0, 1.0, 1.0]), 1.0, atol=1e-6):
+                raise ReimportError(f"{where}: node {n.get('name')!r} is scaled")
+    offsets = rest_pos @ Y_UP  # Y-up -> ours: v_ours = Y_UPᵀ v
+    rest_ours = Y_UP.T @ rest_rot @ Y_UP
+    _check_rest(character, offsets, rest_ours, where, rot_tol, len_tol)
+
+    anims = doc.get("animations") or []
+    if not isinstance(animation, int) or not 0 <= animation < len(anims):
+        raise ReimportError(f"{where} has no animation {animation} ({len(anims)} animations)")
+    anim = anims[animation]
+    blobs: dict[int, bytes] = {}
+    times = None
+    tracks: dict[tuple[int, str], np.ndarray] = {}
+    for ch in anim.get("channels", []):
+        tgt = ch.get("target", {})
+        node, path = tgt.get("node"), tgt.get("path")
+        if node not in node_ids or path not in ("rotation", "translation"):
+            continue
+        smp = anim["samplers"][ch["sampler"]]
+        t = _accessor(doc, smp["input"], blobs, blob)[:, 0]
+        out = _accessor(doc, smp["output"], blobs, blob)
+        if smp.get("interpolation", "LINEAR") == "CUBICSPLINE":
+            out = out.reshape(len(t), 3, -1)[:, 1]  # in-tangent, value, out-tangent
+        if len(out) != len(t):
+            raise ReimportError(f"{where}: a {path} channel has {len(out)} values for {len(t)} key times")
+        if times is None:
+            times = t
+        elif len(t) != len(times) or np.max(np.abs(t - times)) > 1e-5:
+            raise ReimportError(f"{where}: the channels do not share their key times (resample the animation)")
+        tracks[(node, path)] = out
+    if times is None:
+        raise ReimportError(f"{where}: animation {animation} animates no segment")
+    T = len(times)
+    if T >= 2:
+        dt = np.diff(times)
+        if np.any(dt <= 0) or np.max(np.abs(dt - dt.mean())) > 1e-4 * dt.mean() + 1e-6:
+            raise ReimportError(f"{where}: key times are not uniformly spaced (resample the animation)")
+    fps = extras.get("fps") if isinstance(extras, dict) else None
+    if not (isinstance(fps, (int, float)) and fps > 0 and abs((T - 1) / fps - (times[-1] - times[0])) < 1e-4):
+        if T < 2:
+            raise ReimportError(f"{where}: one key time gives no frame rate")
+        fps = _fps_from((T - 1) / float(times[-1] - times[0]))
+    rot = np.empty((S, T, 3, 3))
+    pos = np.empty((S, T, 3))
+    for k, i in enumerate(node_ids):
+        r = tracks.get((i, "rotation"))
+        rot[k] = quaternion_to_matrix(r) if r is not None else rest_rot[k]
+        p = tracks.get((i, "translation"))
+        pos[k] = p if p is not None else rest_pos[k]
+    rot = Y_UP.T @ rot @ Y_UP
+    pos = pos @ Y_UP
+    return _coordinates(character, rot, pos, rot_tol=rot_tol, len_tol=len_tol, source="gltf", fps=fps, where=where)
+
+
+# --- BVH ----------------------------------------------------------------------------------------
+
+_UNITS = {"m": 1.0, "cm": 100.0, "mm": 1000.0}
+
+
+def _elementary(axis: str, deg: np.ndarray) -> np.ndarray:
+    a = np.radians(deg)
+    c, s = np.cos(a), np.sin(a)
+    o, z = np.ones_like(a), np.zeros_like(a)
+    rows = {
+        "X": [[o, z, z], [z, c, -s], [z, s, c]],
+        "Y": [[c, z, s], [z, o, z], [-s, z, c]],
+        "Z": [[c, -s, z], [s, c, z], [z, z, o]],
+    }[axis]
+    return np.moveaxis(np.array(rows), (0, 1), (-2, -1))
+
+
+def _parse_bvh(text: str) -> tuple[list, int, float, np.ndarray]:
+    """Joints [(name, parent index, offset, channels)], frame count, frame time, values (T, channels)."""
+    tok = text.split()
+    joints: list = []
+    i = 0
+
+    def expect(word: str) -> None:
+        if i >= len(tok) or tok[i] != word:
+            got = tok[i] if i < len(tok) else "end of file"
+            raise ReimportError(f"BVH: expected {word!r}, got {got!r}")
+
+    def number(j: int) -> float:
+        try:
+            return float(tok[j])
+        except (IndexError, ValueError):
+            raise ReimportError(f"BVH: expected a number, got {tok[j] if j < len(tok) else 'end of file'!r}") from None
+
+    def joint(parent: int) -> None:
+        nonlocal i
+        name = tok[i + 1]
+        i += 2
+        expect("{")
+        i += 1
+        expect("OFFSET")
+        off = np.array([number(i + 1), number(i + 2), number(i + 3)])
+        i += 4
+        chans: list[str] = []
+        if i < len(tok) and tok[i] == "CHANNELS":
+            nch = int(number(i + 1))
+            chans = tok[i + 2: i + 2 + nch]
+            for c in chans:
+                if c not in ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation"):
+                    raise ReimportError(f"BVH: unknown channel {c!r}")
+            i += 2 + nch
+        me = len(joints)
+        joints.append((name, parent, off, chans))
+        while i < len(tok) and tok[i] != "}":
+            if tok[i] == "JOINT":
+                joint(me)
+            elif tok[i] == "End":
+                i += 2  # End Site
+                expect("{")
+                while i < len(tok) and tok[i] != "}":
+                    i += 1
+                i += 1
+            else:
+                raise ReimportError(f"BVH: unexpected {tok[i]!r} in joint {name!r}")
+        expect("}")
+        i += 1
+
+    expect("HIERARCHY")
+    i += 1
+    expect("ROOT")
+    joint(-1)
+    expect("MOTION")
+    if tok[i + 1: i + 2] != ["Frames:"] or tok[i + 3: i + 5] != ["Frame", "Time:"]:
+        raise ReimportError("BVH: expected 'Frames: N' and 'Frame Time: dt' after MOTION")
+    frames, ftime = int(number(i + 2)), number(i + 5)
+    nch = sum(len(j[3]) for j in joints)
+    try:
+        vals = np.array(tok[i + 6:], dtype=float)
+    except ValueError:
+        raise ReimportError("BVH: the motion table holds something that is not a number") from None
+    if vals.size != frames * nch:
+        raise ReimportError(f"BVH: {vals.size} values for {frames} frames x {nch} channels")
+    if not (ftime > 0 and math.isfinite(ftime)):
+        raise ReimportError(f"BVH: Frame Time must be positive, got {ftime}")
+    return joints, frames, ftime, vals.reshape(frames, nch)
+
+
+def motion_from_bvh(text: str | bytes, character: Character, *, units: str = "auto", rot_tol: float = ROT_TOL,
+                    len_tol: float = LEN_TOL) -> Reimported:
+    """Read a BVH file (Y-up; any rotation channel order). ``units``: "cm", "m", "mm", or
+    "auto" (the one that makes the file's joint offsets the character's)."""
+    if isinstance(text, bytes):
+        text = text.decode("utf-8", errors="replace")
+    joints, T, ftime, vals = _parse_bvh(text)
+    where = "the BVH file"
+    names = [j[0] for j in joints]
+    parents = [joints[j[1]][0] if j[1] >= 0 else None for j in joints]
+    index = _match_skeleton(character, names, parents, where)
+    raw_off = np.array([joints[i][2] for i in index]) @ Y_UP  # ours, file units
+    if units == "auto":
+        ours = np.array([s.offset for s in character.segments[1:]])
+        fit = {u: float(np.abs(raw_off[1:] / f - ours).max()) if len(ours) else 0.0 for u, f in _UNITS.items()}
+        units = min(fit, key=fit.get) if len(ours) else "cm"
+    if units not in _UNITS:
+        raise ReimportError(f"units must be 'auto' or one of {sorted(_UNITS)}, got {units!r}")
+    scale = _UNITS[units]
+    offsets = raw_off / scale
+    _check_rest(character, offsets, None, where, rot_tol, len_tol, skip_root_offset=True)
+    S = len(index)
+    rot = np.empty((S, T, 3, 3))
+    pos = np.empty((S, T, 3))
+    starts = np.cumsum([0] + [len(j[3]) for j in joints])
+    for k, i in enumerate(index):
+        _, _, off, chans = joints[i]
+        r = np.broadcast_to(np.eye(3), (T, 3, 3)).copy()
+        p = np.broadcast_to(off, (T, 3)).copy()
+        for c, col in zip(chans, range(starts[i], starts[i + 1])):
+            if c.endswith("rotation"):
+                r = r @ _elementary(c[0], vals[:, col])
+            else:
+                p[:, "XYZ".index(c[0])] += vals[:, col]
+        rot[k] = Y_UP.T @ r @ Y_UP
+        pos[k] = (p @ Y_UP) / scale
+    return _coordinates(character, rot, pos, rot_tol=rot_tol, len_tol=len_tol, source="bvh",
+                        fps=_fps_from(1.0 / ftime), where=where)
+
+
+# --- any of them ---------------------------------------------------------------------------------
+
+
+def motion_from_file(data: bytes | str | dict, character: Character, **options: Any) -> Reimported:
+    """Recognise the format (GLB magic, BVH ``HIERARCHY``, glTF JSON ``asset``, motionx clip)
+    and read it with the matching reader (``options`` are passed on)."""
+    if isinstance(data, (bytes, bytearray, memoryview)):
+        data = bytes(data)
+        if data[:4] == b"glTF":
+            return motion_from_gltf(data, character, **options)
+        try:
+            data = data.decode("utf-8")
+        except UnicodeDecodeError:
+            raise ReimportError("unrecognised file: binary but not a GLB") from None
+    if isinstance(data, str):
+        head = data.lstrip()[:16]
+        if head.startswith("HIERARCHY"):
+            return motion_from_bvh(data, character, **options)
+        try:
+            data = json.loads(data)
+        except ValueError:
+            raise ReimportError("unrecognised file: not a GLB, a BVH or JSON") from None
+    if isinstance(data, dict) and "asset" in data:
+        return motion_from_gltf(data, character, **options)
+    if isinstance(data, dict) and "format" in data:
+        return motion_from_clip(data, character, **options)
+    raise ReimportError("unrecognised file: JSON but neither glTF nor a motionx clip")

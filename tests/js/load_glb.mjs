@@ -1,0 +1,122 @@
+// Load a GLB with three.js's own GLTFLoader in Node (no browser) and print what three.js sees.
+//
+//   node tests/js/load_glb.mjs FILE.glb [TIME ...]
+//
+// TIME: seconds, or "end" (the clip's duration). Environment: THREE_DIR, the `three` package
+// directory (default: service/web/node_modules/three beside this repository's tests/).
+//
+// Prints one JSON object: counts (nodes, bones, skins, skinned meshes, meshes), every
+// animation's duration and tracks (name, type, key count, interpolation), the world position
+// and quaternion of every bone at rest and, for each TIME, after an AnimationMixer has
+// evaluated the first animation at that time; plus the skinned world position of vertex 0
+// of every skinned mesh (three.js's own skinning: SkinnedMesh.getVertexPosition).
+//
+// Shims: none. GLTFLoader.parse() on an ArrayBuffer needs only TextDecoder, which Node has;
+// it touches the DOM (document, createImageBitmap, URL from `self`) only to decode images,
+// and our files have none. Errors (and GLTFLoader's onError) exit with status 1.
+
+import { readFileSync } from 'node:fs';
+import { dirname, resolve } from 'node:path';
+import { fileURLToPath, pathToFileURL } from 'node:url';
+
+const here = dirname(fileURLToPath(import.meta.url));
+const threeDir = process.env.THREE_DIR || resolve(here, '../../service/web/node_modules/three');
+// the same file GLTFLoader's `import ... from 'three'` resolves to (package exports "."),
+// so both share one module instance
+const THREE = await import(pathToFileURL(resolve(threeDir, 'build/three.module.js')).href);
+const { GLTFLoader } = await import(pathToFileURL(resolve(threeDir, 'examples/jsm/loaders/GLTFLoader.js')).href);
+
+const [file, ...timeArgs] = process.argv.slice(2);
+if (!file) {
+  console.error('usage: node load_glb.mjs FILE.glb [TIME ...]');
+  process.exit(2);
+}
+const bytes = readFileSync(file);
+const data = bytes.buffer.slice(bytes.byteOffset, bytes.byteOffset + bytes.byteLength);
+
+const gltf = await new Promise((ok, fail) => new GLTFLoader().parse(data, '', ok, fail)).catch((e) => {
+  console.error(`GLTFLoader failed: ${e && e.stack ? e.stack : e}`);
+  process.exit(1);
+});
+
+const scene = gltf.scene;
+const bones = [];
+const skinned = [];
+let meshes = 0;
+scene.traverse((o) => {
+  if (o.isBone) bones.push(o);
+  if (o.isMesh) meshes += 1;
+  if (o.isSkinnedMesh) skinned.push(o);
+});
+const skeletons = new Set(skinned.map((m) => m.skeleton));
+
+const vec = (v) => [v.x, v.y, v.z];
+const quat = (q) => [q.x, q.y, q.z, q.w];
+
+function pose() {
+  scene.updateMatrixWorld(true);
+  const world = {};
+  for (const b of bones) {
+    world[b.name] = {
+      position: vec(b.getWorldPosition(new THREE.Vector3())),
+      quaternion: quat(b.getWorldQuaternion(new THREE.Quaternion())),
+    };
+  }
+  const vertex0 = {};
+  for (const m of skinned) {
+    const v = m.getVertexPosition(0, new THREE.Vector3()); // skinned, in the mesh's space
+    vertex0[m.name] = vec(v.applyMatrix4(m.matrixWorld));
+  }
+  return { bones: world, vertex0 };
+}
+
+const rest = pose();
+const animations = gltf.animations.map((clip) => ({
+  name: clip.name,
+  duration: clip.duration,
+  tracks: clip.tracks.map((t) => ({
+    name: t.name,
+    type: t.ValueTypeName,
+    keys: t.times.length,
+    first: t.times[0],
+    last: t.times[t.times.length - 1],
+    interpolation: t.getInterpolation() === THREE.InterpolateLinear ? 'LINEAR'
+      : t.getInterpolation() === THREE.InterpolateDiscrete ? 'STEP' : 'OTHER',
+  })),
+}));
+
+const poses = [];
+if (gltf.animations.length > 0 && timeArgs.length > 0) {
+  const clip = gltf.animations[0];
+  const mixer = new THREE.AnimationMixer(scene);
+  const action = mixer.clipAction(clip);
+  action.setLoop(THREE.LoopOnce, 1); // so that t = duration is the last key, not frame 0 again
+  action.clampWhenFinished = true;
+  for (const arg of timeArgs) {
+    const t = arg === 'end' ? clip.duration : Number(arg);
+    if (!Number.isFinite(t)) {
+      console.error(`bad time ${arg}`);
+      process.exit(2);
+    }
+    action.reset();
+    action.play();
+    mixer.setTime(t);
+    poses.push({ time: t, ...pose() });
+  }
+}
+
+process.stdout.write(JSON.stringify({
+  three_revision: THREE.REVISION,
+  same_three_instance: scene instanceof THREE.Object3D,
+  nodes: (gltf.parser.json.nodes || []).length,
+  bones: bones.length,
+  bone_names: bones.map((b) => b.name),
+  skins: (gltf.parser.json.skins || []).length,
+  skeletons: skeletons.size,
+  skinned_meshes: skinned.length,
+  meshes,
+  asset: gltf.asset,
+  animations,
+  rest,
+  poses,
+}) + '\n');
