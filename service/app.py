@@ -80,12 +80,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     problems.install(app)
     app.add_middleware(BodyLimitMiddleware, max_bytes=app_settings.max_body_bytes)
 
-    from service.routes import health, jobs, motions, plots
+    from service.routes import health, jobs, motions, plots, web
 
     app.include_router(health.router)
     app.include_router(motions.router)
     app.include_router(jobs.router)
     app.include_router(plots.router)
+    app.include_router(web.router)  # the page at /ui/: public files, its API calls carry the key
     app.openapi = lambda: _openapi(app)
     return app
 

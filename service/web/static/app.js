@@ -1,0 +1,505 @@
+// The motionx page: lists of motions and jobs, a job's live progress curve, a motion's 3D
+// preview, GRF plot and plausibility report. Plain ES modules, no framework, no build step.
+//
+// Every API call carries the key (X-API-Key). The key comes from the input box or from the
+// URL fragment (#key=...), and is remembered in localStorage. Authenticated images are
+// fetched as blobs and shown through object URLs.
+//
+// Test hook: window.motionx.state (flags such as progressPoints, previewReady, grfLoaded).
+
+import { drawProgress } from './progress.js';
+
+const KEY_STORAGE = 'motionx.apiKey';
+const LIST_POLL_MS = 3000;
+const JOB_POLL_MS = 1000;
+const TERMINAL = new Set(['succeeded', 'failed', 'canceled', 'impasse']);
+const PREVIEW_UNAVAILABLE = '3D preview unavailable: run npm ci in service/web';
+
+const state = {
+  keyStatus: 'none', // none | ok | invalid
+  motions: [],
+  jobs: [],
+  jobId: null,
+  jobStatus: null,
+  progressPoints: 0, // solves drawn in the progress canvas
+  jobMotions: [],
+  motionId: null,
+  previewReady: false,
+  previewError: null,
+  grfLoaded: false,
+  grfError: null,
+  residualsLoaded: false,
+  residualsError: null,
+  validation: null,
+  errors: [],
+};
+window.motionx = { state, viewer: null, selectJob, selectMotion };
+
+const $ = (id) => document.getElementById(id);
+let apiKey = '';
+let jobToken = 0; // bumped on every selection, so late answers for a previous one are dropped
+let motionToken = 0;
+let lastProgress = [];
+let viewerPromise = null;
+const objectUrls = new Map(); // <img> id -> object URL to revoke
+
+// ---------------------------------------------------------------- helpers
+
+/** A DOM element: h('li', {class: 'x', onclick: f}, child, 'text', ...). */
+function h(tag, attrs = {}, ...children) {
+  const el = document.createElement(tag);
+  for (const [k, v] of Object.entries(attrs)) {
+    if (v === undefined || v === null || v === false) continue;
+    if (k.startsWith('on')) el.addEventListener(k.slice(2), v);
+    else if (k === 'class') el.className = v;
+    else el.setAttribute(k, v === true ? '' : v);
+  }
+  el.append(...children.flat().filter((c) => c !== null && c !== undefined && c !== false));
+  return el;
+}
+
+const sleep = (ms) => new Promise((resolve) => setTimeout(resolve, ms));
+const shortId = (id) => (id ? id.slice(0, 10) : '');
+const fmt = (x, digits = 3) => (typeof x === 'number' && Number.isFinite(x) ? String(+x.toPrecision(digits)) : '–');
+const sci = (x) => (typeof x === 'number' && Number.isFinite(x) ? (x === 0 ? '0' : x.toExponential(1)) : '–');
+const clock = (iso) => (iso ? new Date(iso).toLocaleString([], { dateStyle: 'short', timeStyle: 'medium' }) : '');
+
+function targetText(t = {}) {
+  const parts = [];
+  if (t.slope_deg) parts.push(`slope ${t.slope_deg}°`);
+  if (t.curve_deg) parts.push(`curve ${t.curve_deg}°`);
+  if (t.friction !== null && t.friction !== undefined) parts.push(`friction ${t.friction}`);
+  if (t.gravity !== null && t.gravity !== undefined) parts.push(`gravity ${t.gravity} m/s²`);
+  return parts.join(', ') || '–';
+}
+
+function noteError(where, err) {
+  const msg = `${where}: ${err && err.message ? err.message : err}`;
+  state.errors.push(msg);
+  console.warn(msg);
+}
+
+// ---------------------------------------------------------------- API
+
+class ApiError extends Error {
+  constructor(status, detail) {
+    super(detail);
+    this.status = status;
+  }
+}
+
+/** fetch() with the API key; `as` is json | blob | arrayBuffer. Problem details become ApiError. */
+async function api(path, { as = 'json', method = 'GET' } = {}) {
+  if (!apiKey) throw new ApiError(401, 'no API key');
+  const res = await fetch(path, { method, headers: { 'X-API-Key': apiKey } });
+  if (!res.ok) {
+    let detail = `${res.status} ${res.statusText}`;
+    try {
+      const problem = await res.json();
+      if (problem && problem.detail) detail = problem.detail;
+    } catch { /* not JSON */ }
+    if (res.status === 401) setKeyStatus('invalid', detail);
+    throw new ApiError(res.status, detail);
+  }
+  setKeyStatus('ok');
+  return res[as]();
+}
+
+/** The newest `n` items of a paginated list (the API lists oldest first), newest first. */
+async function newest(path, n = 200) {
+  let page = await api(`${path}?limit=${n}`);
+  if (page.total > n) page = await api(`${path}?offset=${page.total - n}&limit=${n}`);
+  return page.items.slice().reverse();
+}
+
+// ---------------------------------------------------------------- API key
+
+function setKeyStatus(status, detail = '') {
+  state.keyStatus = status;
+  const el = $('key-status');
+  el.className = `status ${status === 'ok' ? 'ok' : status === 'invalid' ? 'bad' : ''}`;
+  el.textContent = status === 'ok' ? 'connected' : status === 'invalid' ? detail || 'invalid API key' : 'no key';
+}
+
+function useKey(key) {
+  apiKey = key.trim();
+  if (apiKey) localStorage.setItem(KEY_STORAGE, apiKey);
+  else localStorage.removeItem(KEY_STORAGE);
+  $('key-input').value = apiKey;
+  // another key sees other motions and jobs: start afresh
+  jobToken += 1;
+  motionToken += 1;
+  Object.assign(state, { motions: [], jobs: [], jobId: null, jobStatus: null, motionId: null });
+  $('job-panel').hidden = $('motion-panel').hidden = true;
+  $('intro').hidden = false;
+  setKeyStatus('none');
+  refreshLists();
+}
+
+function keyFromFragment() {
+  const params = new URLSearchParams(location.hash.slice(1));
+  const key = params.get('key');
+  if (key === null) return null;
+  params.delete('key'); // keep the key out of the address bar, bookmarks and screenshots
+  const rest = params.toString();
+  history.replaceState(null, '', location.pathname + location.search + (rest ? `#${rest}` : ''));
+  return key;
+}
+
+// ---------------------------------------------------------------- lists
+
+async function refreshLists() {
+  try {
+    const [motions, jobs] = await Promise.all([newest('/motions'), newest('/jobs')]);
+    state.motions = motions;
+    state.jobs = jobs;
+  } catch (err) {
+    if (!(err instanceof ApiError && err.status === 401)) noteError('lists', err);
+    else state.motions = state.jobs = [];
+  }
+  renderMotionList();
+  renderJobList();
+}
+
+/** What an empty list says: nothing there yet, or no access. */
+function emptyText(what) {
+  if (state.keyStatus === 'ok') return `no ${what} yet`;
+  return state.keyStatus === 'invalid' ? 'this API key is not valid' : `enter an API key to see your ${what}`;
+}
+
+function listButton(id, selected, title, badge, sub, onclick) {
+  return h('li', {}, h('button', { type: 'button', class: selected ? 'selected' : '', 'data-id': id, onclick },
+    h('span', { class: 'title' }, title), badge, h('span', { class: 'sub' }, sub)));
+}
+
+function renderJobList() {
+  const ul = $('job-list');
+  ul.replaceChildren(...state.jobs.map((j) => listButton(
+    j.id,
+    j.id === state.jobId,
+    targetText(j.target),
+    h('span', { class: `badge ${j.status}` }, j.status),
+    `λ ${fmt(j.lam_reached)} · ${j.steps} steps · ${shortId(j.id)} · ${clock(j.created_at)}`,
+    () => selectJob(j.id),
+  )));
+  if (!state.jobs.length) ul.append(h('li', { class: 'empty' }, emptyText('jobs')));
+  ul.dataset.count = state.jobs.length;
+}
+
+function renderMotionList() {
+  const showSteps = $('show-steps').checked;
+  const motions = state.motions.filter((m) => showSteps || m.kind !== 'step');
+  const ul = $('motion-list');
+  ul.replaceChildren(...motions.map((m) => listButton(
+    m.id,
+    m.id === state.motionId,
+    m.name || (m.kind === 'step' ? `λ = ${fmt(m.lam)} (step ${m.step})` : m.kind),
+    plausibleBadge(m.plausible),
+    `${m.kind} · ${m.character} · ${m.frames} frames at ${fmt(m.fps)} fps · ${shortId(m.id)}`,
+    () => selectMotion(m.id),
+  )));
+  if (!motions.length) ul.append(h('li', { class: 'empty' }, emptyText('motions')));
+  ul.dataset.count = motions.length;
+}
+
+function plausibleBadge(plausible) {
+  if (plausible === null || plausible === undefined) return h('span', { class: 'badge' }, 'unchecked');
+  return h('span', { class: `badge ${plausible ? 'yes' : 'no'}` }, plausible ? 'plausible' : 'not plausible');
+}
+
+// ---------------------------------------------------------------- a job
+
+async function selectJob(id) {
+  const token = ++jobToken;
+  Object.assign(state, { jobId: id, jobStatus: null, progressPoints: 0, jobMotions: [] });
+  lastProgress = [];
+  $('intro').hidden = true;
+  $('job-panel').hidden = false;
+  $('job-id').textContent = id;
+  $('job-facts').replaceChildren();
+  $('job-motions').replaceChildren(h('li', { class: 'empty' }, 'none yet'));
+  renderJobList();
+  drawProgress($('progress-canvas'), []);
+
+  // poll every second while the job runs; one last time when it has ended
+  while (token === jobToken) {
+    try {
+      const job = await api(`/jobs/${id}`);
+      if (token !== jobToken) return;
+      renderJob(job);
+      await loadJobMotions(id, token);
+      if (TERMINAL.has(job.status)) return;
+    } catch (err) {
+      if (token !== jobToken) return;
+      $('job-facts').replaceChildren(h('dt', {}, 'error'), h('dd', {}, err.message));
+      if (err instanceof ApiError && err.status < 500) return;
+    }
+    await sleep(JOB_POLL_MS);
+  }
+}
+
+function renderJob(job) {
+  state.jobStatus = job.status;
+  const status = $('job-status');
+  status.className = `badge ${job.status}`;
+  status.textContent = job.status;
+  $('job-cancel').hidden = TERMINAL.has(job.status);
+  const facts = [
+    ['target', targetText(job.target)],
+    ['λ reached', fmt(job.lam_reached, 4)],
+    ['steps / solves', `${job.steps} / ${job.solves}`],
+    ['attempt', `${job.attempts} of ${job.max_attempts}`],
+    ['method', `${job.control.method ?? '–'}, Δ0 = ${job.control.delta0 ?? '–'}`],
+    ['started', clock(job.started_at) || '–'],
+  ];
+  if (job.message) facts.push(['message', job.message]);
+  $('job-facts').replaceChildren(...facts.flatMap(([k, v]) => [h('dt', {}, k), h('dd', {}, v)]));
+  lastProgress = job.progress;
+  state.progressPoints = drawProgress($('progress-canvas'), lastProgress);
+  // keep the list's badge in step with the panel
+  const listed = state.jobs.find((j) => j.id === job.id);
+  if (listed && (listed.status !== job.status || listed.lam_reached !== job.lam_reached)) {
+    Object.assign(listed, job);
+    renderJobList();
+  }
+}
+
+async function loadJobMotions(id, token) {
+  const items = [];
+  let url = `/jobs/${id}/motions?limit=200`;
+  while (url) {
+    const page = await api(url);
+    items.push(...page.items);
+    url = page.next;
+  }
+  if (token !== jobToken) return;
+  state.jobMotions = items;
+  const ol = $('job-motions');
+  ol.replaceChildren(...items.map((m) => h('li', {}, h('button', {
+    type: 'button',
+    class: m.id === state.motionId ? 'selected' : '',
+    'data-id': m.id,
+    title: `step ${m.step}, ${m.id}`,
+    onclick: () => selectMotion(m.id),
+  }, `λ = ${fmt(m.lam)} `, plausibleMark(m.plausible)))));
+  if (!items.length) ol.append(h('li', { class: 'empty' }, 'none yet'));
+}
+
+function plausibleMark(plausible) {
+  if (plausible === null || plausible === undefined) return '';
+  return h('span', { class: plausible ? 'mark-yes' : 'mark-no', title: plausible ? 'plausible' : 'not plausible' },
+    plausible ? '✓' : '✗');
+}
+
+async function cancelJob() {
+  if (!state.jobId) return;
+  try {
+    await api(`/jobs/${state.jobId}/cancel`, { method: 'POST' });
+  } catch (err) {
+    noteError('cancel', err);
+  }
+}
+
+// ---------------------------------------------------------------- a motion
+
+async function selectMotion(id) {
+  const token = ++motionToken;
+  Object.assign(state, {
+    motionId: id, previewReady: false, previewError: null, grfLoaded: false, grfError: null,
+    residualsLoaded: false, residualsError: null, validation: null,
+  });
+  $('intro').hidden = true;
+  $('motion-panel').hidden = false;
+  $('motion-id').textContent = id;
+  $('motion-facts').textContent = '';
+  $('validation').replaceChildren(h('tbody', {}, h('tr', {}, h('td', {}, 'loading…'))));
+  renderMotionList();
+  document.querySelectorAll('#job-motions button').forEach((b) => b.classList.toggle('selected', b.dataset.id === id));
+
+  const meta = state.motions.find((m) => m.id === id) || state.jobMotions.find((m) => m.id === id);
+  if (meta) {
+    $('motion-facts').textContent = [meta.kind, meta.character, `${meta.frames} frames at ${fmt(meta.fps)} fps`,
+      `${fmt(meta.duration_s)} s`, meta.lam !== null ? `λ = ${fmt(meta.lam)} (step ${meta.step})` : null,
+      meta.job_id ? `job ${shortId(meta.job_id)}` : null].filter(Boolean).join(' · ');
+  }
+  const validation = loadValidation(id, token);
+  await Promise.all([
+    loadPreview(id, token, validation),
+    loadImage('grf', `/motions/${id}/plots/grf.png`, token),
+    loadImage('residuals', `/motions/${id}/plots/residuals.png`, token),
+    validation,
+  ]);
+}
+
+async function loadValidation(id, token) {
+  try {
+    const report = await api(`/motions/${id}/validation`);
+    if (token !== motionToken) return null;
+    state.validation = report;
+    renderValidation(report);
+    return report;
+  } catch (err) {
+    if (token === motionToken) {
+      $('validation').replaceChildren(h('tbody', {}, h('tr', {}, h('td', { class: 'check-no' }, err.message))));
+    }
+    return null;
+  }
+}
+
+function renderValidation(r) {
+  const checks = r.checks || {};
+  const tol = r.tolerances || {};
+  const rr = r.root_residual || {};
+  const mj = r.mujoco_replay || {};
+  const mark = (...names) => {
+    const known = names.filter((n) => n in checks);
+    if (!known.length) return h('td', {}, '');
+    const ok = known.every((n) => checks[n]);
+    return h('td', { class: ok ? 'check-yes' : 'check-no' }, ok ? '✓' : '✗');
+  };
+  const row = (label, value, limit, check) => h('tr', {}, h('th', {}, label), h('td', { class: 'num' }, value),
+    h('td', { class: 'num' }, limit), check);
+  const rows = [
+    h('tr', { class: 'verdict' }, h('th', {}, 'plausible'),
+      h('td', { colspan: 3 }, plausibleBadge(r.plausible === undefined ? null : r.plausible))),
+  ];
+  if (r.error) rows.push(h('tr', { class: 'problems' }, h('td', { colspan: 4 }, r.error)));
+  rows.push(
+    h('tr', {}, h('th', {}, ''), h('th', {}, 'value'), h('th', {}, 'tolerance'), h('th', {}, '')),
+    row('root residual, force / weight', sci(rr.max_force_rel_weight), sci(tol.residual), mark('root_force')),
+    row('root residual, moment / (weight·leg)', sci(rr.max_moment_rel_weight_leg), sci(tol.residual), mark('root_moment')),
+    row('MuJoCo replay, force / weight', sci(mj.max_force_rel_weight), sci(tol.residual), mark('mujoco_root')),
+    row('MuJoCo agreement', sci(Math.max(mj.agreement_force_rel_weight ?? NaN, mj.agreement_moment_rel_weight_leg ?? NaN)),
+      sci(tol.residual), mark('mujoco_agrees')),
+    row('slip (mm)', sci(r.slip_mm), fmt(tol.slip_mm), mark('slip')),
+    row('penetration (mm)', sci(r.penetration_mm), fmt(tol.penetration_mm), mark('penetration')),
+    row('contact height error (mm)', sci(r.contact_height_error_mm), fmt(tol.contact_height_mm), mark('contact_height')),
+    row('friction cone excess (N)', sci(r.friction_cone_excess_N), fmt(tol.friction), mark('friction')),
+    row('min normal force (N)', fmt(r.min_normal_force_N), '', mark('normal_force')),
+    row('CoP outside the foot (mm)', sci(r.cop_outside_mm), fmt(tol.cop_mm), mark('cop')),
+  );
+  const env = r.environment || {};
+  if (env.gravity) rows.push(row('gravity (m/s²)', env.gravity.map((g) => fmt(g)).join(', '), '', h('td')));
+  if (env.friction !== undefined) rows.push(row('friction', fmt(env.friction), '', h('td')));
+  if (r.problems && r.problems.length) rows.push(h('tr', { class: 'problems' }, h('td', { colspan: 4 }, r.problems.join('; '))));
+  $('validation').replaceChildren(h('tbody', {}, rows));
+}
+
+function viewer() {
+  // three.js is imported on demand: without node_modules the rest of the page keeps working
+  viewerPromise ??= import('./preview.js').then(({ Viewer }) => {
+    const v = new Viewer($('viewer-canvas'));
+    window.motionx.viewer = v;
+    return v;
+  });
+  return viewerPromise;
+}
+
+function viewerMessage(text) {
+  const el = $('viewer-message');
+  el.hidden = !text;
+  el.textContent = text || '';
+}
+
+async function loadPreview(id, token, validation) {
+  viewerMessage('');
+  let v;
+  try {
+    v = await viewer();
+  } catch (err) {
+    state.previewError = PREVIEW_UNAVAILABLE;
+    document.querySelectorAll('.viewer > :not(.message)').forEach((el) => { el.hidden = true; });
+    viewerMessage(PREVIEW_UNAVAILABLE);
+    noteError('preview', err);
+    return;
+  }
+  try {
+    const [glb, report] = await Promise.all([api(`/motions/${id}?format=glb`, { as: 'arrayBuffer' }), validation]);
+    if (token !== motionToken) return;
+    const gravity = report && report.environment ? report.environment.gravity : undefined;
+    await v.show(glb, { gravity });
+    if (token !== motionToken) return;
+    state.previewReady = true;
+  } catch (err) {
+    if (token !== motionToken) return;
+    state.previewError = err.message;
+    viewerMessage(`No 3D preview: ${err.message}`);
+  }
+}
+
+/** An authenticated PNG into <img id="{name}-img">, or the API's reason in {name}-message. */
+async function loadImage(name, path, token) {
+  const img = $(`${name}-img`);
+  const message = $(`${name}-message`);
+  img.hidden = true;
+  message.hidden = true;
+  try {
+    const blob = await api(path, { as: 'blob' });
+    if (token !== motionToken) return;
+    const url = URL.createObjectURL(blob);
+    if (objectUrls.has(name)) URL.revokeObjectURL(objectUrls.get(name));
+    objectUrls.set(name, url);
+    await new Promise((resolve, reject) => {
+      img.onload = resolve;
+      img.onerror = () => reject(new Error('not a valid image'));
+      img.src = url;
+    });
+    if (token !== motionToken) return;
+    img.hidden = false;
+    state[`${name}Loaded`] = true;
+  } catch (err) {
+    if (token !== motionToken) return;
+    state[`${name}Error`] = err.message;
+    message.textContent = `No plot: ${err.message}`;
+    message.hidden = false;
+  }
+}
+
+async function download(format) {
+  const id = state.motionId;
+  if (!id) return;
+  try {
+    const blob = await api(`/motions/${id}?format=${format}`, { as: 'blob' });
+    const ext = { glb: 'glb', bvh: 'bvh', json: 'clip.json', motion: 'motion.json' }[format];
+    const a = h('a', { href: URL.createObjectURL(blob), download: `${id}.${ext}` });
+    a.click();
+    setTimeout(() => URL.revokeObjectURL(a.href), 10_000);
+  } catch (err) {
+    noteError('download', err);
+    alert(`Download failed: ${err.message}`);
+  }
+}
+
+// ---------------------------------------------------------------- start
+
+function start() {
+  $('key-form').addEventListener('submit', (e) => {
+    e.preventDefault();
+    useKey($('key-input').value);
+  });
+  $('key-forget').addEventListener('click', () => useKey(''));
+  $('show-steps').addEventListener('change', renderMotionList);
+  $('job-cancel').addEventListener('click', cancelJob);
+  document.querySelectorAll('.downloads button').forEach((b) => b.addEventListener('click', () => download(b.dataset.format)));
+  $('viewer-play').addEventListener('click', async () => {
+    const v = await viewer();
+    v.setPlaying(!v.playing);
+    $('viewer-play').textContent = v.playing ? 'Pause' : 'Play';
+  });
+  $('viewer-follow').addEventListener('change', async (e) => (await viewer()).setFollow(e.target.checked));
+  new ResizeObserver(() => {
+    if (state.jobId) drawProgress($('progress-canvas'), lastProgress);
+  }).observe($('progress-canvas'));
+  window.addEventListener('hashchange', () => {
+    const key = keyFromFragment();
+    if (key !== null) useKey(key);
+  });
+
+  const key = keyFromFragment() ?? localStorage.getItem(KEY_STORAGE) ?? '';
+  useKey(key);
+  setInterval(() => {
+    if (!document.hidden) refreshLists();
+  }, LIST_POLL_MS);
+}
+
+start();

@@ -1,0 +1,185 @@
+// The 3D preview: a motion's glTF (GLB) played by an AnimationMixer on a ground grid.
+// Imported dynamically by app.js, so the page still works when three.js is not installed.
+
+import * as THREE from 'three';
+import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
+import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
+
+/** The character's colour (one material for every segment, so it stands out from the ground). */
+export const CHARACTER_COLOR = 0xe07b39;
+const BACKGROUND = 0xeef1f5;
+/** Where the camera looks from, relative to the character: front right, a little above (glTF: Y up, Z forward). */
+const VIEW_DIRECTION = new THREE.Vector3(-0.72, 0.22, 0.66).normalize();
+
+const GROUND_SIZE = 60; // m
+const GRID_CELL = 0.5; // m
+
+/**
+ * The ground grid as a repeated texture: long GridHelper lines that pass behind the camera
+ * are dropped by some software rasterizers (SwiftShader, headless Chromium).
+ */
+function gridTexture(renderer) {
+  const canvas = document.createElement('canvas');
+  canvas.width = canvas.height = 128;
+  const ctx = canvas.getContext('2d');
+  ctx.fillStyle = '#dfe4ea';
+  ctx.fillRect(0, 0, 128, 128);
+  ctx.fillStyle = '#9eabb8';
+  ctx.fillRect(0, 0, 128, 3);
+  ctx.fillRect(0, 0, 3, 128);
+  const texture = new THREE.CanvasTexture(canvas);
+  texture.colorSpace = THREE.SRGBColorSpace;
+  texture.wrapS = texture.wrapT = THREE.RepeatWrapping;
+  texture.repeat.set(GROUND_SIZE / GRID_CELL, GROUND_SIZE / GRID_CELL);
+  texture.anisotropy = renderer.capabilities.getMaxAnisotropy();
+  return texture;
+}
+
+export class Viewer {
+  constructor(canvas) {
+    this.canvas = canvas;
+    // preserveDrawingBuffer: the canvas can be read back (screenshots, tests)
+    this.renderer = new THREE.WebGLRenderer({ canvas, antialias: true, preserveDrawingBuffer: true });
+    this.renderer.setPixelRatio(Math.min(window.devicePixelRatio || 1, 2));
+    this.scene = new THREE.Scene();
+    this.scene.background = new THREE.Color(BACKGROUND);
+    this.scene.fog = new THREE.Fog(BACKGROUND, 6, 22);
+    this.camera = new THREE.PerspectiveCamera(40, 16 / 10, 0.05, 200);
+    this.controls = new OrbitControls(this.camera, canvas);
+    this.controls.enableDamping = true;
+
+    this.scene.add(new THREE.HemisphereLight(0xffffff, 0x8d9299, 1.8));
+    const sun = new THREE.DirectionalLight(0xffffff, 2.2);
+    sun.position.set(-3, 6, 4);
+    this.scene.add(sun);
+
+    // the ground, tilted so that the motion's gravity points down (a slope looks like one)
+    this.world = new THREE.Group();
+    this.scene.add(this.world);
+    const ground = new THREE.Mesh(
+      new THREE.PlaneGeometry(GROUND_SIZE, GROUND_SIZE),
+      new THREE.MeshStandardMaterial({ map: gridTexture(this.renderer), roughness: 1 }),
+    );
+    ground.rotation.x = -Math.PI / 2;
+    this.world.add(ground);
+
+    this.material = new THREE.MeshStandardMaterial({ color: CHARACTER_COLOR, roughness: 0.6, metalness: 0 });
+    this.model = null;
+    this.mixer = null;
+    this.pelvis = null;
+    this.lastPelvis = new THREE.Vector3();
+    this.playing = true;
+    this.follow = true;
+    this.frames = 0;
+    this.waiting = [];
+    this.timer = new THREE.Timer();
+
+    this.resize();
+    new ResizeObserver(() => this.resize()).observe(canvas.parentElement);
+    this.renderer.setAnimationLoop(() => this.frame());
+  }
+
+  resize() {
+    const box = this.canvas.parentElement;
+    const w = box.clientWidth, h = box.clientHeight;
+    if (!w || !h) return;
+    this.renderer.setSize(w, h, false);
+    this.camera.aspect = w / h;
+    this.camera.updateProjectionMatrix();
+  }
+
+  /** Shows the motion in `glb` (an ArrayBuffer); `gravity` is the motion's gravity (motionx axes: Z up). */
+  async show(glb, { gravity } = {}) {
+    const gltf = await new GLTFLoader().parseAsync(glb, '');
+    this.clear();
+    this.model = gltf.scene;
+    this.model.traverse((o) => {
+      if (o.isMesh) {
+        o.material = this.material;
+        o.frustumCulled = false; // skinned: the bind-pose bounds do not follow the walk
+      }
+    });
+    this.world.add(this.model);
+    this.mixer = new THREE.AnimationMixer(this.model);
+    const clip = gltf.animations[0];
+    if (clip) this.mixer.clipAction(clip).play();
+    this.mixer.update(0);
+    this.frameCamera();
+    this.tilt(gravity);
+
+    this.pelvis = this.model.getObjectByName('pelvis') || this.firstBone(this.model) || this.model;
+    this.world.updateMatrixWorld(true);
+    this.pelvis.getWorldPosition(this.lastPelvis);
+    this.world.localToWorld(this.controls.target);
+    this.world.localToWorld(this.camera.position);
+    this.controls.update();
+    await this.nextFrame();
+    return { duration: clip ? clip.duration : 0, name: clip ? clip.name : '' };
+  }
+
+  /** Points the camera at the character's first pose (in the untilted world's frame). */
+  frameCamera() {
+    this.world.quaternion.identity();
+    this.world.updateMatrixWorld(true);
+    const box = new THREE.Box3().setFromObject(this.model, true); // skinned: the posed vertices
+    const center = box.getCenter(new THREE.Vector3());
+    const size = Math.max(box.getSize(new THREE.Vector3()).length(), 0.5);
+    const distance = (0.75 * size) / Math.tan(THREE.MathUtils.degToRad(this.camera.fov / 2));
+    this.controls.target.copy(center);
+    this.camera.position.copy(center).addScaledVector(VIEW_DIRECTION, distance);
+  }
+
+  clear() {
+    if (!this.model) return;
+    this.mixer.stopAllAction();
+    this.world.remove(this.model);
+    this.model.traverse((o) => o.geometry && o.geometry.dispose());
+    this.model = this.mixer = this.pelvis = null;
+  }
+
+  firstBone(root) {
+    let bone = null;
+    root.traverse((o) => { if (!bone && o.isBone) bone = o; });
+    return bone;
+  }
+
+  /** Rotates the world so that gravity (motionx axes x forward, y left, z up) points down. */
+  tilt(gravity) {
+    this.world.quaternion.identity();
+    if (!Array.isArray(gravity) || gravity.length !== 3) return;
+    const [gx, gy, gz] = gravity; // glTF axes: (x, y, z)_gltf = (y, z, x)_motionx
+    const g = new THREE.Vector3(gy, gz, gx);
+    if (g.lengthSq() === 0) return;
+    this.world.quaternion.setFromUnitVectors(g.normalize(), new THREE.Vector3(0, -1, 0));
+  }
+
+  setPlaying(on) { this.playing = on; }
+
+  setFollow(on) { this.follow = on; }
+
+  setCharacterVisible(on) { if (this.model) this.model.visible = on; }
+
+  /** Resolves once the next frame has been rendered. */
+  nextFrame() { return new Promise((resolve) => this.waiting.push(resolve)); }
+
+  frame() {
+    this.timer.update();
+    const dt = Math.min(this.timer.getDelta(), 0.1);
+    if (this.mixer && this.playing) this.mixer.update(dt);
+    if (this.pelvis && this.follow) {
+      // move the camera with the character (the clip loops: it jumps back with it)
+      this.world.updateMatrixWorld(true);
+      const now = this.pelvis.getWorldPosition(new THREE.Vector3());
+      const delta = now.clone().sub(this.lastPelvis);
+      this.camera.position.add(delta);
+      this.controls.target.add(delta);
+      this.lastPelvis.copy(now);
+    }
+    this.controls.update();
+    this.renderer.render(this.scene, this.camera);
+    this.frames += 1;
+    const waiting = this.waiting;
+    this.waiting = [];
+    waiting.forEach((resolve) => resolve());
+  }
+}

@@ -1,0 +1,252 @@
+"""The web page (``GET /ui/``) in headless Chromium, on a real job.
+
+The API runs as its own process (``motionx serve``), a real tutor is uploaded and a real
+extrapolation job (``CHEAP``) runs. The page is opened with the key in the URL fragment and
+driven like a user: select the job (its progress curve must be drawn), select a λ optimum
+(its character must be rendered by three.js, its GRF plot loaded, its plausibility report
+shown). Pixels are checked from screenshots of the canvases.
+
+Chromium is Debian's ``chromium`` driven by the Python ``playwright`` package with
+``executable_path`` (never ``playwright install``). Without it the browser tests skip,
+unless ``MOTIONX_REQUIRE_BROWSER=1`` (CI), where they fail.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import re
+import shutil
+from pathlib import Path
+from urllib.parse import urljoin
+
+import numpy as np
+import pytest
+from svc_util import CHEAP, KEY_A, halfboy_motion, wait_job
+
+from service.routes.web import STATIC_DIR, THREE_DIR
+
+REPO = Path(__file__).resolve().parents[2]
+SCREENSHOT = REPO / "out" / "web" / "screenshot.png"
+REQUIRE_BROWSER = os.environ.get("MOTIONX_REQUIRE_BROWSER") == "1"
+#: WebGL in headless Chromium without a GPU: ANGLE on SwiftShader (software)
+CHROMIUM_ARGS = ["--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--ignore-gpu-blocklist"]
+PREVIEW_UNAVAILABLE = "3D preview unavailable: run npm ci in service/web"
+TIMEOUT_MS = 30_000
+
+
+def _missing(reason: str):
+    if REQUIRE_BROWSER:
+        pytest.fail(f"{reason} (MOTIONX_REQUIRE_BROWSER=1)")
+    pytest.skip(reason)
+
+
+def _chromium() -> str | None:
+    exe = shutil.which("chromium") or "/usr/bin/chromium"
+    return exe if os.access(exe, os.X_OK) else None
+
+
+@pytest.fixture(scope="module")
+def browser():
+    exe = _chromium()
+    if exe is None:
+        _missing("chromium is not installed (apt-get install chromium)")
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        _missing("the playwright package is not installed (pip install -e '.[test]')")
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=exe, headless=True, args=CHROMIUM_ARGS)
+        yield b
+        b.close()
+
+
+@pytest.fixture(scope="module")
+def tutor_id(api, tutor_motion_json) -> str:
+    """The tutor of the DeepMimic walk (made by the pipeline), uploaded."""
+    r = api.a.post("/motions?name=DeepMimic%20walk%20tutor", content=tutor_motion_json,
+                   headers={"Content-Type": "application/json"})
+    assert r.status_code == 201, r.text
+    return r.json()["id"]
+
+
+def _start_job(api, tutor_id: str) -> str:
+    r = api.a.post(f"/motions/{tutor_id}/extrapolate", json=CHEAP)
+    assert r.status_code == 202, r.text
+    return r.json()["id"]
+
+
+def _pixels(png: bytes) -> np.ndarray:
+    from PIL import Image
+
+    return np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(int)
+
+
+def _near(img: np.ndarray, rgb: str, tol: int = 40) -> int:
+    """How many pixels are within ``tol`` (per channel) of the colour ``#rrggbb``."""
+    target = np.array([int(rgb[i:i + 2], 16) for i in (1, 3, 5)])
+    return int((np.abs(img - target).max(axis=2) <= tol).sum())
+
+
+def _orange(img: np.ndarray) -> int:
+    """Pixels of the character (CHARACTER_COLOR 0xe07b39, shaded): red well above green above blue."""
+    r, g, b = img[..., 0], img[..., 1], img[..., 2]
+    return int(((r > 110) & (r - g > 35) & (g - b > 20)).sum())
+
+
+def viewer(page, js: str) -> None:
+    """Runs ``js`` with ``v`` = the page's 3D viewer, then waits for a rendered frame."""
+    page.evaluate(f"async () => {{ const v = window.motionx.viewer; {js}; await v.nextFrame(); }}")
+
+
+def _state(page) -> dict:
+    return page.evaluate("JSON.parse(JSON.stringify(window.motionx.state))")
+
+
+# ------------------------------------------------------------------ without a browser
+
+def test_page_and_vendor_files_are_served_locally(api):
+    r = api.anon.get("/", follow_redirects=False)
+    assert r.status_code in (302, 307) and r.headers["location"].endswith("/ui/")
+    page = api.anon.get("/ui/")  # public: no key needed for the page itself
+    assert page.status_code == 200 and page.headers["content-type"].startswith("text/html")
+    assert api.anon.get("/motions").status_code == 401  # ... but the API still wants one
+
+    html = page.text
+    imports = json.loads(re.search(r'<script type="importmap">(.*?)</script>', html, re.DOTALL).group(1))["imports"]
+    assert set(imports) == {"three", "three/addons/"}
+    if not THREE_DIR.is_dir():
+        r = api.anon.get(urljoin("/ui/", imports["three"]))
+        assert r.status_code == 404 and "npm ci" in r.json()["detail"]
+        _missing("three.js is not installed: run `npm ci` in service/web")
+    for url in (imports["three"], "./vendor/three/build/three.core.js", imports["three/addons/"] + "loaders/GLTFLoader.js",
+                imports["three/addons/"] + "controls/OrbitControls.js", "app.js", "progress.js", "preview.js"):
+        r = api.anon.get(urljoin("/ui/", url))
+        assert r.status_code == 200, (url, r.status_code)
+        assert r.headers["content-type"].split(";")[0] == "text/javascript", (url, r.headers["content-type"])
+    assert api.anon.get("/ui/style.css").headers["content-type"].startswith("text/css")
+    # only what the page needs from node_modules, and nothing outside it
+    for url in ("/ui/vendor/three/package.json", "/ui/vendor/three/build/three.cjs", "/ui/vendor/three/src/Three.js",
+                "/ui/vendor/three/examples/jsm/..%2F..%2Fsrc%2FThree.js", "/ui/..%2Fnode_modules%2Fthree%2Fsrc%2FThree.js",
+                "/ui/nope.js"):
+        assert api.anon.get(url).status_code == 404, url
+
+    # no CDN or other host: no absolute http(s) URL in our own files
+    for path in sorted(STATIC_DIR.iterdir()):
+        found = re.findall(r"https?://[^\s'\"<>)]+", path.read_text())
+        assert not found, f"{path.name} refers to another host: {found}"
+    # and none of it in the API's OpenAPI document
+    assert not [p for p in api.anon.get("/openapi.json").json()["paths"] if p == "/" or p.startswith("/ui")]
+
+
+# ------------------------------------------------------------------ in headless Chromium
+
+def test_page_shows_progress_and_renders_the_character(api, browser, tutor_id):
+    if not THREE_DIR.is_dir():
+        _missing("three.js is not installed: run `npm ci` in service/web")
+    context = browser.new_context(viewport={"width": 1400, "height": 1000})
+    page = context.new_page()
+    page.set_default_timeout(TIMEOUT_MS)
+    requests, errors = [], []
+    page.on("request", lambda req: requests.append(req.url))
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    try:
+        page.goto(f"{api.base_url}/ui/#key={KEY_A}")
+        assert "key=" not in page.url  # taken from the fragment, then out of the address bar
+        assert page.evaluate("localStorage.getItem('motionx.apiKey')") == KEY_A
+        page.wait_for_selector("#key-status.ok")
+
+        # a job started while the page is open: the list shows it, its progress curve is drawn
+        job_id = _start_job(api, tutor_id)
+        page.click(f'#job-list button[data-id="{job_id}"]')
+        job = wait_job(api.a, job_id, timeout=60)
+        assert job["status"] == "succeeded", job
+        page.wait_for_function(f"window.motionx.state.jobStatus === 'succeeded' && "
+                               f"window.motionx.state.progressPoints === {len(job['progress'])} && "
+                               f"window.motionx.state.jobMotions.length === {job['steps']}")
+        assert page.text_content("#job-status") == "succeeded"
+        curve = _pixels(page.locator("#progress-canvas").screenshot())
+        assert _near(curve, "#2f6fb0") > 30 * len(job["progress"]), "accepted solves not drawn"
+        assert _near(curve, "#2e7d4f") > 100, "λ-reached staircase not drawn"
+
+        # its last λ optimum: 3D preview, GRF plot, plausibility report
+        last = page.locator("#job-motions button").last
+        assert last.text_content().startswith("λ = 1")
+        last.click()
+        page.wait_for_function("(s => s.previewReady && (s.grfLoaded || s.grfError) && s.validation)"
+                               "(window.motionx.state)")
+        state = _state(page)
+        assert state["previewError"] is None and state["grfError"] is None, state
+        assert page.evaluate("document.getElementById('grf-img').naturalWidth") > 0
+        table = page.text_content("#validation")
+        assert "plausible" in table and "not plausible" not in table, table
+        assert state["validation"]["plausible"] is True
+
+        # the character, paused: present when shown, gone when hidden
+        canvas = page.locator("#viewer-canvas")
+        viewer(page, "v.setPlaying(false)")
+        shown = _pixels(canvas.screenshot())
+        viewer(page, "v.setCharacterVisible(false)")
+        hidden = _pixels(canvas.screenshot())
+        viewer(page, "v.setCharacterVisible(true); v.setPlaying(true)")
+        assert len(np.unique(shown.reshape(-1, 3), axis=0)) > 200, "3D canvas looks empty"
+        assert _orange(shown) > 0.01 * shown.shape[0] * shown.shape[1], "no character pixels"
+        assert _orange(hidden) < 0.0005 * hidden.shape[0] * hidden.shape[1]
+        changed = (np.abs(shown - hidden).max(axis=2) > 30).sum()
+        assert changed > 0.01 * shown.shape[0] * shown.shape[1], "hiding the character changes nothing"
+        assert hidden.std() > 2, "no ground grid"
+
+        SCREENSHOT.parent.mkdir(parents=True, exist_ok=True)
+        page.wait_for_function("window.motionx.state.residualsLoaded || window.motionx.state.residualsError")
+        page.screenshot(path=str(SCREENSHOT), full_page=True)
+
+        # everything came from the API's own host
+        foreign = [u for u in requests if not u.startswith((api.base_url + "/", "blob:", "data:"))]
+        assert not foreign, foreign
+        assert not errors, errors
+        assert not _state(page)["errors"]
+    finally:
+        context.close()
+
+
+def test_page_without_three_says_so_and_keeps_working(api, browser, tutor_id):
+    """What a pip install without ``npm ci`` looks like: no vendor files, the rest works.
+    And a raw capture (no contact wrenches) has no GRF plot: the page says why."""
+    job_id = _start_job(api, tutor_id)
+    capture = api.a.post("/motions?name=raw%20capture", content=halfboy_motion().to_json(),
+                         headers={"Content-Type": "application/json"})
+    assert capture.status_code == 201 and capture.json()["kind"] == "capture", capture.text
+    assert wait_job(api.a, job_id, timeout=60)["status"] == "succeeded"
+    context = browser.new_context(viewport={"width": 1200, "height": 900})
+    context.route("**/ui/vendor/**", lambda route: route.fulfill(
+        status=404, content_type="application/problem+json",
+        body=json.dumps({"title": "Not Found", "status": 404, "detail": "three.js is not installed"})))
+    page = context.new_page()
+    page.set_default_timeout(TIMEOUT_MS)
+    errors = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    try:
+        page.goto(f"{api.base_url}/ui/")
+        page.fill("#key-input", KEY_A)
+        page.click("#key-form button[type=submit]")
+        page.click(f'#job-list button[data-id="{job_id}"]')
+        page.wait_for_function("window.motionx.state.jobMotions.length > 0 && window.motionx.state.progressPoints > 0")
+        page.locator("#job-motions button").first.click()
+        page.wait_for_function("(s => s.previewError && s.validation && (s.grfLoaded || s.grfError))"
+                               "(window.motionx.state)")
+        assert _state(page)["previewError"] == PREVIEW_UNAVAILABLE
+        assert page.locator("#viewer-message").is_visible()
+        assert page.text_content("#viewer-message") == PREVIEW_UNAVAILABLE
+        assert _state(page)["grfLoaded"]
+        assert "plausible" in page.text_content("#validation")
+
+        page.click(f'#motion-list button[data-id="{capture.json()["id"]}"]')
+        page.wait_for_function("(s => s.grfError && s.validation)(window.motionx.state)")
+        assert api.a.get(f"/motions/{capture.json()['id']}/plots/grf.png").status_code // 100 == 4
+        assert page.locator("#grf-message").is_visible() and not page.locator("#grf-img").is_visible()
+        assert page.text_content("#grf-message") == f"No plot: {_state(page)['grfError']}"
+        assert "not plausible" in page.text_content("#validation")
+        assert not errors, errors
+    finally:
+        context.close()
