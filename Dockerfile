@@ -1,4 +1,11 @@
 # motionx: one image for the API (`motionx serve`) and the workers (`motionx worker`).
+
+# three.js for the web page, from npm (served by the API itself, no CDN)
+FROM node:20-slim AS web
+WORKDIR /web
+COPY service/web/package.json service/web/package-lock.json ./
+RUN npm ci --no-audit --no-fund
+
 FROM python:3.11-slim
 
 ENV PYTHONDONTWRITEBYTECODE=1 PYTHONUNBUFFERED=1 PIP_NO_CACHE_DIR=1 PIP_DISABLE_PIP_VERSION_CHECK=1
@@ -11,6 +18,7 @@ COPY solver ./solver
 COPY mjcf ./mjcf
 COPY service ./service
 COPY worker ./worker
+COPY --from=web /web/node_modules/three ./service/web/node_modules/three
 RUN pip install .
 
 USER motionx

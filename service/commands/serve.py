@@ -55,7 +55,8 @@ def cmd_serve(args: argparse.Namespace) -> int:
     if settings.auto_migrate:
         upgrade(settings.sqlalchemy_url)
     _ensure_api_key(settings)
-    print(json.dumps({"api": f"http://{settings.host}:{settings.port}", "runner": settings.runner,
+    print(json.dumps({"api": f"http://{settings.host}:{settings.port}",
+                      "page": f"http://{settings.host}:{settings.port}/ui/", "runner": settings.runner,
                       "database": settings.sqlalchemy_url.split("@")[-1]}), flush=True)
     uvicorn.run(create_app(settings), host=settings.host, port=settings.port, log_level=args.log_level,
                 timeout_graceful_shutdown=10, access_log=args.access_log)
