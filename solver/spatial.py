@@ -288,6 +288,18 @@ def rotation_about(axis: Sequence[float], angle: float) -> np.ndarray:
     return np.eye(3) + math.sin(angle) * k + (1 - math.cos(angle)) * (k @ k)
 
 
+def quaternion_to_matrix(quat: np.ndarray) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) of quaternions (..., 4) in (x, y, z, w) order, normalised
+    first. Callers check for zero or non-finite quaternions (with their own error type)."""
+    qv = np.asarray(quat, dtype=float)
+    x, y, z, w = np.moveaxis(qv / np.linalg.norm(qv, axis=-1, keepdims=True), -1, 0)
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+    ], -2)
+
+
 def align_z(axis: Sequence[float]) -> np.ndarray:
     """A rotation A with A @ e_z = axis (unit); deterministic choice of the other columns.
 

@@ -13,8 +13,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import socket
-import subprocess
 import sys
 import tempfile
 import time
@@ -22,18 +20,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from service.cli import CliError
+from service.topology import Proc, TopologyError, free_port, motionx_cmd, wait_api
 
 TERMINAL = ("succeeded", "failed", "canceled", "impasse")
 #: what each λ optimum is downloaded as: (query format, file suffix)
 EXPORTS = (("motion", "motion.json"), ("json", "clip.json"), ("gltf", "glb"), ("bvh", "bvh"))
 #: the plots of a job's final motion: (endpoint name, file)
 MOTION_PLOTS = (("grf", "grf.png"), ("residuals", "residuals.png"))
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def _default_trial() -> list[Path]:
@@ -80,20 +73,22 @@ def cmd_demo(args: argparse.Namespace) -> int:
     jobs = _targets(args)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    port = _free_port()
+    port = free_port()
     key = "demo-" + os.urandom(8).hex()
     data_dir = tempfile.mkdtemp(prefix="motionx-demo-")
     env = dict(os.environ, MOTIONX_API_KEYS=key, MOTIONX_DATA_DIR=data_dir)
     env.pop("MOTIONX_DATABASE_URL", None)
     env.pop("DATABASE_URL", None)
-    exe = Path(sys.executable).with_name("motionx")
-    log = open(out / "server.log", "w")
-    server = subprocess.Popen([str(exe), "serve", "--port", str(port)], env=env, stdout=log, stderr=subprocess.STDOUT)
+    (out / "server.log").unlink(missing_ok=True)
+    server = Proc("api", motionx_cmd("serve", "--port", str(port)), env, out / "server.log").start()
     base = f"http://127.0.0.1:{port}"
     t0 = time.perf_counter()
     try:
+        try:
+            wait_api(base, server, timeout=120)
+        except TopologyError as e:
+            raise CliError(f"the service did not start (see {out / 'server.log'}): {str(e)[:500]}") from None
         with httpx.Client(base_url=base, headers={"X-API-Key": key}, timeout=120.0) as http:
-            _wait_ready(http, server, deadline=time.monotonic() + 120)
             print(f"[demo] service up at {base} (SQLite in {data_dir}, local runner)", flush=True)
             up = http.post("/motions", files=[("files", (f.name, f.read_bytes())) for f in files],
                            data={"name": "demo capture", **({"mass": str(args.mass)} if args.mass else {})})
@@ -118,18 +113,13 @@ def cmd_demo(args: argparse.Namespace) -> int:
             if args.serve:
                 print(f"[demo] the web page: {base}/ui/#key={key}  (Ctrl-C stops the service)", flush=True)
                 try:
-                    server.wait()
+                    server.proc.wait()
                 except KeyboardInterrupt:
                     pass
             ok = all(j["status"] in ("succeeded", "impasse") for j in summary["jobs"])
             return 0 if ok else 1
     finally:
-        server.terminate()
-        try:
-            server.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            server.kill()
-        log.close()
+        server.stop()
 
 
 def _check(resp, code: int, what: str) -> None:
@@ -137,26 +127,11 @@ def _check(resp, code: int, what: str) -> None:
         raise CliError(f"{what} failed: HTTP {resp.status_code} {resp.text[:500]}")
 
 
-def _wait_ready(http, server, deadline: float) -> None:
-    import httpx
-
-    while time.monotonic() < deadline:
-        if server.poll() is not None:
-            raise CliError("the service exited at start (see server.log)")
-        try:
-            if http.get("/health").status_code == 200:
-                return
-        except httpx.HTTPError:
-            pass
-        time.sleep(0.3)
-    raise CliError("the service did not start in time (see server.log)")
-
-
 def _bar(job: _Job, width: int = 24) -> str:
     """One job's progress as text: λ bar, status, environment value reached, steps, time."""
     s = job.state
     lam = float(s.get("lam_reached") or 0.0)
-    fill = int(round(lam * width))
+    fill = round(lam * width)
     prog = s.get("progress") or []
     t = _job_time(prog)
     status = s.get("status", "?")

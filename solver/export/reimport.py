@@ -40,6 +40,7 @@ from typing import Any
 
 import numpy as np
 
+from solver import spatial as sp
 from solver.character import Character
 from solver.export import Y_UP, ExportError, _axis_rotations
 from solver.motion import Motion
@@ -98,19 +99,9 @@ class Reimported:
 def quaternion_to_matrix(quat: np.ndarray) -> np.ndarray:
     """Rotation matrices (..., 3, 3) of quaternions (..., 4) in (x, y, z, w) order (normalised first)."""
     qv = np.asarray(quat, dtype=float)
-    n = np.linalg.norm(qv, axis=-1, keepdims=True)
-    if np.any(n < 1e-6) or not np.all(np.isfinite(qv)):
+    if not np.all(np.isfinite(qv)) or np.any(np.linalg.norm(qv, axis=-1) < 1e-6):
         raise ReimportError("a rotation quaternion is zero or not finite")
-    x, y, z, w = np.moveaxis(qv / n, -1, 0)
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
-        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
-        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
-    ], -2)
-
-
-def _skew(a: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+    return sp.quaternion_to_matrix(qv)
 
 
 def _angle(E: np.ndarray) -> np.ndarray:
@@ -131,7 +122,7 @@ def _about(axis: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
 
 def _single(axis: np.ndarray, M: np.ndarray) -> np.ndarray:
     """The angle θ maximising tr(R(axis, θ)ᵀ M), i.e. the rotation about ``axis`` nearest M (T, 3, 3)."""
-    K = _skew(axis)
+    K = sp.skew(axis)
     b = np.einsum("ij,tij->t", K, M)
     c = np.einsum("i,tij,j->t", axis, M, axis) - np.trace(M, axis1=1, axis2=2)
     return np.arctan2(b, -c)
@@ -599,15 +590,8 @@ _UNITS = {"m": 1.0, "cm": 100.0, "mm": 1000.0}
 
 
 def _elementary(axis: str, deg: np.ndarray) -> np.ndarray:
-    a = np.radians(deg)
-    c, s = np.cos(a), np.sin(a)
-    o, z = np.ones_like(a), np.zeros_like(a)
-    rows = {
-        "X": [[o, z, z], [z, c, -s], [z, s, c]],
-        "Y": [[c, z, s], [z, o, z], [-s, z, c]],
-        "Z": [[c, -s, z], [s, c, z], [z, z, o]],
-    }[axis]
-    return np.moveaxis(np.array(rows), (0, 1), (-2, -1))
+    """(T, 3, 3) rotations about the BVH channel's axis by angles in degrees."""
+    return _axis_rotations(np.eye(3)["XYZ".index(axis)], np.radians(deg))
 
 
 def _parse_bvh(text: str) -> tuple[list, int, float, np.ndarray]:

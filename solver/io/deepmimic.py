@@ -49,6 +49,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from solver import spatial as sp
 from solver.capture import Capture, GroundFrame
 from solver.io.track import SkeletonTrack
 
@@ -122,12 +123,7 @@ def _quat_to_matrix(q: np.ndarray) -> np.ndarray:
     n = np.linalg.norm(q, axis=1)
     if np.any(n < 1e-6):
         raise DeepMimicError(f"zero-norm quaternion at frame {int(np.argmax(n < 1e-6))}")
-    w, x, y, z = (q / n[:, None]).T
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=1),
-    ], axis=1)
+    return sp.quaternion_to_matrix(q[:, [1, 2, 3, 0]])
 
 
 def _rotz(a: np.ndarray) -> np.ndarray:
