@@ -50,10 +50,9 @@ def tutor_motion_json() -> str:
     from solver.io import load_trial
     from solver.pipeline import capture_motion, make_tutor
 
-    cands = [Path(os.environ["MOTIONX_DATA"])] if os.environ.get("MOTIONX_DATA") else []
-    cands += [Path(__file__).resolve().parents[2] / "shared" / "data", Path("/work/shared/data")]
-    data = next((c for c in cands if c.is_dir()), cands[0])
-    d = data / "deepmimic_humanoid3d_walk"
+    from service.examples import data_dir
+
+    d = data_dir() / "deepmimic_humanoid3d_walk"
     res = make_tutor(capture_motion(load_trial([d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt"])))
     if res.status != "succeeded":
         raise RuntimeError(f"tutor failed: {res.message}")

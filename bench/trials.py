@@ -1,11 +1,12 @@
-"""The shared walking trials the benchmarks run on (read from ../shared/data, never copied)."""
+"""The walking trials the benchmarks run on (the repository's data/, or $MOTIONX_DATA)."""
 
 from __future__ import annotations
 
-import os
 import time
 from pathlib import Path
 from typing import Callable
+
+from service import examples
 
 
 def best_time(fn: Callable[[], object], repeat: int) -> float:
@@ -19,13 +20,10 @@ def best_time(fn: Callable[[], object], repeat: int) -> float:
 
 
 def data_dir() -> Path:
-    env = os.environ.get("MOTIONX_DATA")
-    if env:
-        return Path(env)
-    for cand in (Path(__file__).resolve().parents[2] / "shared" / "data", Path("/work/shared/data")):
-        if cand.is_dir():
-            return cand
-    raise FileNotFoundError("shared walking data not found (set MOTIONX_DATA)")
+    d = examples.data_dir()
+    if not d.is_dir():
+        raise FileNotFoundError(f"walking data not found at {d} (the repository's data/, or $MOTIONX_DATA)")
+    return d
 
 
 def trials() -> dict[str, list[Path]]:

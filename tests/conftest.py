@@ -1,22 +1,14 @@
-import os
 from pathlib import Path
 
 import pytest
 
-def _find_data() -> Path:
-    if os.environ.get("MOTIONX_DATA"):
-        return Path(os.environ["MOTIONX_DATA"])
-    for cand in (Path(__file__).resolve().parents[2] / "shared" / "data", Path("/work/shared/data")):
-        if cand.is_dir():
-            return cand
-    return Path(__file__).resolve().parents[2] / "shared" / "data"
+from service.examples import data_dir
 
-
-SHARED_DATA = _find_data()
+SHARED_DATA = data_dir()  # the repository's data/ (or $MOTIONX_DATA)
 
 
 @pytest.fixture(scope="session")
 def shared_data() -> Path:
     if not SHARED_DATA.is_dir():
-        pytest.fail(f"shared walking data not found at {SHARED_DATA} (set MOTIONX_DATA)")
+        pytest.fail(f"walking data not found at {SHARED_DATA} (the repository's data/ folder, or $MOTIONX_DATA)")
     return SHARED_DATA

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from service.cli import CliError
+from service import examples
 from service.topology import Proc, TopologyError, free_port, motionx_cmd, wait_api
 
 TERMINAL = ("succeeded", "failed", "canceled", "impasse")
@@ -30,14 +31,10 @@ MOTION_PLOTS = (("grf", "grf.png"), ("residuals", "residuals.png"))
 
 
 def _default_trial() -> list[Path]:
-    env = os.environ.get("MOTIONX_DATA")
-    roots = [Path(env)] if env else []
-    roots += [Path(__file__).resolve().parents[3] / "shared" / "data", Path("/work/shared/data")]
-    for root in roots:
-        d = root / "deepmimic_humanoid3d_walk"
-        if d.is_dir():
-            return [d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt"]
-    raise CliError("no input given and the shared walking data was not found (set MOTIONX_DATA or pass files)")
+    d = examples.data_dir() / "deepmimic_humanoid3d_walk"
+    if d.is_dir():
+        return [d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt"]
+    raise CliError(f"no input given and the default trial is missing ({d}); pass trial files")
 
 
 @dataclass
