@@ -15,7 +15,8 @@ import pytest
 
 ezc3d = pytest.importorskip("ezc3d")
 
-from solver.io.c3d import C3DError, _runs, fill_gaps, read_c3d, read_c3d_trial  # noqa: E402
+from solver.io.c3d import C3DError, fill_gaps, read_c3d, read_c3d_trial  # noqa: E402
+from solver.io.c3d.reader import _runs  # noqa: E402
 
 TRIAL = "btk_pig_flatfoot_full/PiG_Motion-FlatFoot-Full.c3d"
 MASS, HEIGHT = 47.5, 1.505
@@ -585,7 +586,7 @@ def test_load_c3d_fits_the_capture_character(path):
 
 def test_mass_from_plates_needs_a_complete_stride():
     from solver.capture import MeasuredGRF
-    from solver.io.c3d import _mass_from_plates
+    from solver.io.c3d.events import _mass_from_plates
 
     T = 200
     times = np.arange(T) / 100.0

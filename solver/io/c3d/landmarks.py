@@ -1,0 +1,302 @@
+"""Anatomical landmarks and segment orientations from the markers."""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from solver.io.c3d.markers import _alias_names, _Markers
+from solver.io.c3d.reader import SIDES, C3DError, SubjectParams, _mid, _perp, _rigid_fill, _unit, fill_gaps
+
+log = logging.getLogger("solver.io.c3d")
+
+
+# ----------------------------------------------------------------------------------------
+# landmarks
+
+
+def _chord(delta: float, joint: np.ndarray, wand: np.ndarray, lateral: np.ndarray) -> np.ndarray:
+    """PiG chord function: the centre C at distance ``delta`` from the lateral marker, in the
+    plane (joint, wand, lateral), with joint-C ⟂ C-lateral, on the side away from the wand."""
+    w = joint - lateral
+    L = np.linalg.norm(w, axis=0)
+    wh = w / L
+    along = delta**2 / L
+    e = -_unit(_perp(wand - lateral, wh))
+    across = np.sqrt(np.clip(delta**2 - along**2, 0.0, None))
+    return lateral + along * wh + across * e
+
+
+def _medial_shift(lateral: np.ndarray, axis_to: np.ndarray, medial_dir: np.ndarray, delta: float) -> np.ndarray:
+    """Without a wand or medial marker: shift medially, orthogonal to the segment axis."""
+    seg = _unit(axis_to - lateral)
+    return lateral + delta * _unit(_perp(medial_dir, seg))
+
+
+@dataclass
+class _Built:
+    landmarks: dict[str, np.ndarray]
+    orientations: dict[str, np.ndarray]
+    notes: list[str]
+    markers_used: dict[str, str]
+
+
+def _landmarks(mk: _Markers, R: np.ndarray, floor: float, sp: SubjectParams, height_est: float,
+               frames: slice, max_gap: int, name: str) -> _Built:
+    """Landmarks (3, T) in our frame from the markers (lab frame) over ``frames``."""
+    notes: list[str] = []
+    used: dict[str, str] = {}
+    shift = np.array([0.0, 0.0, floor])[:, None]
+
+    def ours(x: np.ndarray) -> np.ndarray:
+        return R @ x[:, frames] - shift
+
+    filled: dict[str, np.ndarray] = {}
+
+    def marker(role: str, side: str | None = None, required: bool = True,
+               partial: bool = False) -> np.ndarray | None:
+        lbl = mk.find(role, side)
+        key = f"{side or ''}{role}"
+        if lbl is None:
+            if required:
+                raise C3DError(f"{name}: required marker {key} not found (looked for "
+                               f"{', '.join(_alias_names(role, side))})")
+            return None
+        if lbl not in filled:
+            x, gaps = fill_gaps(ours(mk.get(lbl)), max_gap)
+            filled[lbl] = x
+            if gaps and required:
+                a, b = gaps[0]
+                raise C3DError(f"{name}: marker {lbl} has a gap of {b - a} frames (> {max_gap}) "
+                               f"at frames {a}-{b - 1} of the trial")
+        x = filled[lbl]
+        if not required and not partial and not np.isfinite(x).all():
+            notes.append(f"{lbl} not used (gaps longer than {max_gap} frames)")
+            return None
+        used[key] = lbl
+        return x
+
+    mr = sp.marker_radius
+    H = sp.height or height_est
+    # --- pelvis -------------------------------------------------------------------------
+    rasi, lasi = marker("ASI", "R"), marker("ASI", "L")
+    rpsi, lpsi = marker("PSI", "R", required=False), marker("PSI", "L", required=False)
+    if rpsi is not None and lpsi is not None:
+        mpsi = _mid(rpsi, lpsi)
+    else:
+        sacr = marker("SACR", None, required=False)
+        if sacr is None:
+            raise C3DError(f"{name}: required markers RPSI/LPSI (or SACR) not found")
+        mpsi = sacr
+    masi = _mid(lasi, rasi)
+    py = _unit(lasi - rasi)
+    px = _unit(_perp(masi - mpsi, py))
+    pz = np.cross(px, py, axis=0)
+    inter_asis = sp.inter_asis or float(np.median(np.linalg.norm(lasi - rasi, axis=0)))
+    lm: dict[str, np.ndarray] = {}
+    ori: dict[str, np.ndarray] = {}
+    ori["pelvis"] = np.stack([px, py, pz], axis=1)
+    knee_lat: dict[str, np.ndarray] = {}
+    ankle_lat: dict[str, np.ndarray] = {}
+    for s in SIDES:
+        S = s.upper()
+        sgn = 1.0 if s == "l" else -1.0
+        # leg length: parameter, else ASIS -> knee -> ankle path along the markers
+        kne = marker("KNE", S)
+        ank = marker("ANK", S)
+        asi = lasi if s == "l" else rasi
+        leg = sp.leg_length[s]
+        if leg is None:
+            leg = float(np.median(np.linalg.norm(asi - kne, axis=0) + np.linalg.norm(kne - ank, axis=0)))
+            notes.append(f"{S} leg length estimated from markers: {leg:.3f} m")
+        # Davis (1991) / Newington hip joint centre in the pelvis frame (mm in the regression)
+        Lmm = leg * 1000.0
+        xdis = (sp.asis_trochanter[s] * 1000.0) if sp.asis_trochanter[s] else 0.1288 * Lmm - 48.56
+        C = 0.115 * Lmm - 15.3
+        theta, beta = 0.5, 0.314
+        mm = mr * 1000.0
+        hx = C * math.cos(theta) * math.sin(beta) - (xdis + mm) * math.cos(beta)
+        hy = sgn * (inter_asis * 500.0 - C * math.sin(theta))
+        hz = -C * math.cos(theta) * math.cos(beta) - (xdis + mm) * math.sin(beta)
+        hip = masi + (px * hx + py * hy + pz * hz) / 1000.0
+        lm[f"hip_{s}"] = hip
+        medial_dir = -sgn * py  # towards the body's midline
+        # knee
+        knm = marker("KNM", S, required=False)
+        thi = marker("THI", S, required=False)
+        kw = sp.knee_width[s]
+        if knm is not None:
+            knee = _mid(kne, knm)
+        else:
+            if kw is None:
+                kw = 0.065 * H
+                notes.append(f"{S} knee width estimated {kw:.3f} m (0.065 H)")
+            delta = kw / 2 + mr
+            knee = _chord(delta, hip, thi, kne) if thi is not None else _medial_shift(kne, hip, medial_dir, delta)
+        lm[f"knee_{s}"] = knee
+        knee_lat[s] = kne
+        # ankle
+        med = marker("MED", S, required=False)
+        tib = marker("TIB", S, required=False)
+        aw = sp.ankle_width[s]
+        if med is not None:
+            ankle = _mid(ank, med)
+        else:
+            if aw is None:
+                aw = 0.045 * H
+                notes.append(f"{S} ankle width estimated {aw:.3f} m (0.045 H)")
+            delta = aw / 2 + mr
+            ankle = _chord(delta, knee, tib, ank) if tib is not None else _medial_shift(ank, knee, medial_dir, delta)
+        lm[f"ankle_{s}"] = ankle
+        ankle_lat[s] = ank
+        # foot: heel and toe markers sit at the same height above the sole (PiG); the toe
+        # marker is on the 2nd metatarsal head. Sole = their heights during stance.
+        hee = marker("HEE", S)
+        toe_m = marker("TOE", S, required=False)
+        if toe_m is None:
+            mt1, mt5 = marker("MT1", S, required=False), marker("MT5", S, required=False)
+            if mt1 is None or mt5 is None:
+                raise C3DError(f"{name}: required marker {S}TOE (or {S}MT1 and {S}MT5) not found")
+            toe_m = _mid(mt1, mt5)
+        f_raw = toe_m - hee
+        u = _unit(_perp(ankle - hee, _unit(f_raw)))  # foot up, ⟂ heel-toe line
+        f = _unit(_perp(f_raw, u))
+        h_heel = float(np.percentile(hee[2], 5))
+        h_toe = float(np.percentile(toe_m[2], 5))
+        mtp_h = 0.01 * H  # metatarsal heads above the sole (as the capture character)
+        heel = hee - u * h_heel
+        mtp = toe_m - u * max(h_toe - mtp_h, 0.0)
+        toes_len = float(np.median(np.sum((mtp - heel) * f, axis=0))) / 3.0  # heel-mtp : mtp-tip = 3 : 1
+        lm[f"heel_{s}"] = heel
+        lm[f"mtp_{s}"] = mtp
+        lm[f"toe_{s}"] = _toe_tip(mtp, f, u, toes_len, mtp_h)
+        # segment orientations (x forward, y left, z up in the neutral pose)
+        ky = (knee - kne) if s == "r" else (kne - knee)
+        tz = _unit(hip - knee)
+        ty = _unit(_perp(ky, tz))
+        ori[f"thigh_{s}"] = np.stack([np.cross(ty, tz, axis=0), ty, tz], axis=1)
+        ay = (ankle - ank) if s == "r" else (ank - ankle)
+        sz = _unit(knee - ankle)
+        sy = _unit(_perp(ay, sz))
+        ori[f"shank_{s}"] = np.stack([np.cross(sy, sz, axis=0), sy, sz], axis=1)
+        ori[f"foot_{s}"] = np.stack([f, np.cross(u, f, axis=0), u], axis=1)
+    lm["pelvis"] = _mid(lm["hip_r"], lm["hip_l"])
+    # --- upper body (optional) ------------------------------------------------------------
+    try:
+        upper = _upper_landmarks(marker, masi, px, pz, inter_asis, sp, H, mr)
+    except _NoUpper as e:
+        notes.append(f"upper body not built: {e}")
+        log.info("%s: upper body not built: %s", name, e)
+    else:
+        lm.update(upper)
+    return _Built(lm, ori, notes, used)
+
+
+def _toe_tip(mtp: np.ndarray, f: np.ndarray, u: np.ndarray, length: float, mtp_h: float) -> np.ndarray:
+    """Tip of the toes, on the sole ``length`` ahead of the metatarsal heads; during push-off
+    the toes stay on the floor (z >= 0) while the foot rotates about the MTP joints."""
+    tip = mtp + f * length - u * mtp_h
+    low = tip[2] < 0.0
+    if low.any():
+        reach = math.hypot(length, mtp_h)
+        dz = np.clip(-mtp[2, low], -reach, reach)
+        h = _unit(np.vstack([f[:2, low], np.zeros((1, int(low.sum())))]))
+        tip[:, low] = mtp[:, low] + h * np.sqrt(reach**2 - dz**2) + np.vstack([np.zeros((2, dz.size)), dz])
+    return tip
+
+
+class _NoUpper(Exception):
+    pass
+
+
+
+def _upper_landmarks(marker: Callable[..., np.ndarray | None], masi: np.ndarray, px: np.ndarray,
+                     pz: np.ndarray, inter_asis: float, sp: SubjectParams, H: float, mr: float
+                     ) -> dict[str, np.ndarray]:
+    def need(role: str, side: str | None = None) -> np.ndarray:
+        x = marker(role, side, required=False)
+        if x is None:
+            raise _NoUpper(f"marker {(side or '') + role} missing or with long gaps")
+        return x
+
+    c7, clav = need("C7"), need("CLAV")
+    t10 = marker("T10", None, required=False)
+    strn = marker("STRN", None, required=False)
+    if t10 is None and strn is None:
+        raise _NoUpper("neither T10 nor STRN")
+    lower_back = t10 if t10 is not None else strn
+    lower_front = strn if strn is not None else t10
+    assert lower_back is not None and lower_front is not None
+    t_up = _unit(_mid(c7, clav) - _mid(lower_back, lower_front))
+    # head: four markers (one may be rebuilt from the other three)
+    heads = {k: marker(r, sd, required=False, partial=True) for k, (r, sd) in
+             {"lf": ("FHD", "L"), "rf": ("FHD", "R"), "lb": ("BHD", "L"), "rb": ("BHD", "R")}.items()}
+    present = {k: v for k, v in heads.items() if v is not None and np.isfinite(v).all(axis=0).sum() >= 3}
+    if len(present) < 3:
+        raise _NoUpper("fewer than three head markers")
+    out: dict[str, np.ndarray] = {}
+    # lumbar joint (L5/S1) from the pelvis (Reed 1999 / Dumas 2007: ~34 % of the ASIS width behind mid-ASIS)
+    out["lumbar"] = masi - 0.34 * inter_asis * px + 0.01 * inter_asis * pz
+    # C7/T1 (base of the neck): 55 % of the C7-CLAV distance from C7, 8° above that line (Dumas 2007)
+    d = clav - c7
+    dn = np.linalg.norm(d, axis=0)
+    dh = d / dn
+    up_d = _unit(_perp(t_up, dh))
+    a = math.radians(8.0)
+    out["neck"] = c7 + 0.55 * dn * (math.cos(a) * dh + math.sin(a) * up_d)
+    out["sternum"] = _mid(clav, strn) if strn is not None else clav
+    hd = dict(present)
+    for k in list(hd):  # a marker's long gaps rebuilt from the other three (rigid head)
+        if not np.isfinite(hd[k]).all():
+            hd[k] = _rigid_fill(hd[k], [hd[j] for j in hd if j != k])
+    if not all(np.isfinite(v).all() for v in hd.values()):
+        raise _NoUpper("head markers with gaps that the other head markers cannot fill")
+    if len(hd) == 3:  # the fourth, never seen: a parallelogram (front/back pairs)
+        k = next(j for j in ("lf", "rf", "lb", "rb") if j not in hd)
+        o = {"lf": ("rf", "lb", "rb"), "rf": ("lf", "rb", "lb"), "lb": ("rb", "lf", "rf"), "rb": ("lb", "rf", "lf")}[k]
+        hd[k] = hd[o[0]] + hd[o[1]] - hd[o[2]]
+    centre = (hd["lf"] + hd["rf"] + hd["lb"] + hd["rb"]) / 4.0
+    h_fwd = _mid(hd["lf"], hd["rf"]) - _mid(hd["lb"], hd["rb"])
+    h_left = _mid(hd["lf"], hd["lb"]) - _mid(hd["rf"], hd["rb"])
+    h_up = _unit(np.cross(h_fwd, h_left, axis=0))
+    out["head_top"] = centre + 0.05 * H * h_up  # vertex ~5 % of stature above the head band
+    t_left = None
+    for s in SIDES:
+        S = s.upper()
+        sgn = 1.0 if s == "l" else -1.0
+        sho, elb = need("SHO", S), need("ELB", S)
+        wra, wrb, fin = need("WRA", S), need("WRB", S), need("FIN", S)
+        if t_left is None:
+            t_left = _unit(_perp(need("SHO", "L") - need("SHO", "R"), t_up))
+        off = sp.shoulder_offset[s] or 0.033 * H
+        shoulder = sho - t_up * (off + mr)
+        ew = sp.elbow_width[s] or 0.053 * H
+        elbow = _medial_shift(elb, shoulder, -sgn * t_left, ew / 2 + mr)
+        out[f"shoulder_{s}"] = shoulder
+        out[f"elbow_{s}"] = elbow
+        out[f"wrist_{s}"] = _mid(wra, wrb)
+        out[f"hand_{s}"] = fin
+    return out
+
+
+
+def _height_estimate(mk: _Markers, R: np.ndarray, floor: float, sp: SubjectParams) -> float:
+    if sp.height:
+        return sp.height
+    heads = [mk.find(r, s) for r in ("FHD", "BHD") for s in ("L", "R")]
+    heads = [h for h in heads if h]
+    if heads:
+        z = np.nanmedian(np.stack([R[2] @ mk.get(h) for h in heads]), axis=0) - floor
+        return float(np.nanmedian(z) / 0.955)
+    legs = [v for v in sp.leg_length.values() if v]
+    if legs:
+        return float(np.mean(legs) / 0.53)
+    asis = [mk.find("ASI", s) for s in ("L", "R")]
+    z = np.nanmedian(np.stack([R[2] @ mk.get(a) for a in asis if a])) - floor
+    return float(z / 0.55)
+
+
