@@ -10,16 +10,14 @@ from solver.contact import (
     ContactError,
     Status,
     Support,
-    _dense_pose,
-    _derivatives,
-    _qp_batch,
-    _screws,
-    _skew,
     cop_and_free_moment,
     estimate_capture,
     estimate_contact_wrenches,
     foot_schedule,
 )
+from solver.contact.common import _derivatives
+from solver.contact.geometry import _dense_pose, _screws, _skew
+from solver.contact.qp import _qp_batch
 from solver.dynamics import rnea
 from solver.kinematics import contact_points, joint_screws
 
