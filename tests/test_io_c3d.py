@@ -484,12 +484,26 @@ def test_subject_mass_and_height_from_the_file(path, trial):
     assert read_c3d(path, mass=50.0).mass == 50.0
 
 
-def test_no_mass_anywhere_is_a_clear_error(path, tmp_path):
-    def edit(c):
+def test_mass_from_the_plates_when_the_file_has_none(path, trial, tmp_path):
+    """Without PROCESSING:Bodymass the mass is the vertical impulse of one whole stance of each foot (one
+    stride holds one stance of each) over the stride time; it is reported even when the file has a mass."""
+    m = trial.track.measured
+    implied = float(np.mean(m.force[:, 2].sum(axis=0)[m.valid])) / 9.81  # the complete-plates window (~ a stride)
+    assert trial.track.source["mass_implied_kg"] == pytest.approx(implied, rel=0.03)
+    assert trial.track.mass == MASS  # the file's mass is used, the plates' reported
+
+    def no_mass(c):
         c["parameters"]["PROCESSING"]["Bodymass"]["value"] = np.array([0.0])
 
-    with pytest.raises(C3DError, match="mass"):
-        read_c3d(_variant(path, tmp_path / "nomass.c3d", edit))
+    tr = read_c3d(_variant(path, tmp_path / "nomass.c3d", no_mass))
+    assert tr.mass == pytest.approx(implied, rel=0.03) and "whole stance of each foot" in tr.source["mass_from"]
+
+    def no_mass_one_plate(c):
+        no_mass(c)
+        c["parameters"]["FORCE_PLATFORM"]["USED"]["value"] = np.array([1])
+
+    with pytest.raises(C3DError, match="mass unknown.*--mass"):
+        read_c3d(_variant(path, tmp_path / "nomass1.c3d", no_mass_one_plate))
 
 
 def test_file_without_plates(path, tmp_path):
@@ -515,18 +529,107 @@ def test_missing_required_marker_is_named(path, tmp_path):
         read_c3d(_variant(path, tmp_path / "nolhee.c3d", edit))
 
 
-def test_subject_prefixes_and_a_missing_upper_body(path, trial, tmp_path):
+def test_subject_prefixes_and_a_missing_trunk_marker(path, trial, tmp_path):
     def edit(c):
         labels = [f"BELT_C:{s.strip()}" for s in c["parameters"]["POINT"]["LABELS"]["value"]]
         labels[labels.index("BELT_C:C7")] = "BELT_C:XC7"
         c["parameters"]["POINT"]["LABELS"]["value"] = labels
 
     tr = read_c3d(_variant(path, tmp_path / "prefixed.c3d", edit))
-    assert not tr.has_upper_body and "lumbar" not in tr.landmarks
-    assert any("C7" in n for n in tr.source["notes"])
-    for name in ("hip_r", "knee_l", "toe_r", "heel_l"):
+    # the trunk is modelled upright (never lumped into the pelvis); head and arms still come from markers
+    assert tr.has_upper_body and tr.source["upper_body"]["trunk"].startswith("modelled")
+    assert tr.source["upper_body"]["head"] == tr.source["upper_body"]["arm_l"] == "markers"
+    assert any("trunk" in n for n in tr.source["notes"])
+    for name in ("hip_r", "knee_l", "toe_r", "heel_l", "lumbar", "head_top", "wrist_r"):
         np.testing.assert_allclose(tr.landmarks[name], trial.track.landmarks[name], atol=1e-9)
+    np.testing.assert_allclose(tr.landmarks["neck"][:2], tr.landmarks["lumbar"][:2], atol=1e-9)  # upright
     np.testing.assert_array_equal(tr.measured.valid, trial.track.measured.valid)
+
+
+UPPER_PIG = ("C7", "T10", "CLAV", "STRN", "RBAK", "LFHD", "RFHD", "LBHD", "RBHD", "LSHO", "LELB", "LWRA", "LWRB",
+             "LFIN", "RSHO", "RELB", "RWRA", "RWRB", "RFIN")
+
+
+def lower_body_only(path: Path, out: Path) -> Path:
+    """The trial as a Plug-in Gait lower-body set (upper-body marker labels removed)."""
+    def edit(c):
+        labels = [s.strip() for s in c["parameters"]["POINT"]["LABELS"]["value"]]
+        c["parameters"]["POINT"]["LABELS"]["value"] = [f"X{s}" if s in UPPER_PIG else s for s in labels]
+    return _variant(path, out, edit)
+
+
+def test_lower_body_marker_set_models_an_upright_trunk_and_hanging_arms(path, trial, tmp_path):
+    tr = read_c3d(lower_body_only(path, tmp_path / "lower.c3d"))
+    assert tr.has_upper_body and all(v.startswith("modelled") for v in tr.source["upper_body"].values())
+    lm = tr.landmarks
+    H = tr.height
+    up = lm["neck"] - lm["lumbar"]
+    np.testing.assert_allclose(up[:2], 0.0, atol=1e-9)  # vertical, whatever the pelvis does
+    np.testing.assert_allclose(up[2], 0.24 * H)
+    for s in "rl":  # arms hang below the shoulders
+        np.testing.assert_allclose((lm[f"hand_{s}"] - lm[f"shoulder_{s}"])[:2], 0.0, atol=1e-9)
+    # the modelled trunk faces the walking direction (+x here) and turns with the hips' heading only slowly
+    assert np.all(tr.orientations["thorax"][0, 0] > np.cos(np.radians(15)))
+    # the pelvis wobbles (obliquity, rotation): the modelled trunk does not follow it
+    roll = np.degrees(np.arcsin(tr.orientations["thorax"][2, 1]))
+    assert np.ptp(roll) < 1e-6
+
+
+def test_missing_landmarks_are_listed_with_how_to_map_them(path, trial, tmp_path):
+    def edit(c):
+        labels = [s.strip() for s in c["parameters"]["POINT"]["LABELS"]["value"]]
+        ren = {"LASI": "AntSupL", "RASI": "AntSupR", "LHEE": "HeelL", "RKNE": "EpiLatR"}
+        c["parameters"]["POINT"]["LABELS"]["value"] = [ren.get(x, x) for x in labels]
+
+    out = _variant(path, tmp_path / "renamed.c3d", edit)
+    with pytest.raises(C3DError) as e:
+        read_c3d(out)
+    msg = str(e.value)
+    for role in ("LASI", "RASI", "LHEE", "RKNE"):
+        assert role in msg
+    assert "anterior superior iliac spine" in msg and "ANTSUPL" in msg and "--markers" in msg  # labels upper-cased
+    mapping = "LASI=AntSupL,RASI=AntSupR,LHEE=HeelL,RKNE=EpiLatR"
+    tr = read_c3d(out, markers=mapping)
+    for name in ("hip_r", "knee_r", "heel_l", "toe_l"):
+        np.testing.assert_allclose(tr.landmarks[name], trial.track.landmarks[name], atol=1e-9)
+    with pytest.raises(C3DError, match="no marker 'NOPE'"):
+        read_c3d(out, markers="LASI=Nope")
+    with pytest.raises(C3DError, match="unknown role 'LFOO'"):
+        read_c3d(out, markers="LFOO=AntSupL")
+
+
+def test_marker_mapping_forms(tmp_path):
+    from solver.io.c3d import parse_mapping
+
+    want = {"LASI": "L_IAS", "RASI": "R_IAS", "SACR": ""}
+    assert parse_mapping("LASI=L_IAS, RASI=R_IAS,SACR=") == want
+    assert parse_mapping({"lasi": "L_IAS", "RASI": "R_IAS", "SACR": ""}) == want
+    txt = tmp_path / "map.txt"
+    txt.write_text("# my lab\nLASI = L_IAS\nRASI: R_IAS  # right\nSACR=\n")
+    assert parse_mapping(txt) == want
+    js = tmp_path / "map.json"
+    js.write_text('{"LASI": "L_IAS", "RASI": "R_IAS", "SACR": ""}')
+    assert parse_mapping(str(js)) == want
+    with pytest.raises(C3DError, match="not ROLE=label"):
+        parse_mapping("LASI")
+    with pytest.raises(C3DError, match="not found"):
+        parse_mapping(tmp_path / "missing.txt")
+
+
+@pytest.mark.parametrize("labels, name", [
+    (["LASI", "RASI", "LPSI", "RPSI", "LTHI", "LKNE", "LTIB", "LANK", "LHEE", "LTOE", "RTHI", "RKNE", "RTIB", "RANK",
+      "RHEE", "RTOE"], "Plug-in Gait / Helen Hayes"),
+    (["LASI", "RASI", "LPSI", "RPSI", "LKNE", "LKNM", "LANK", "LMED", "LHEE", "LTOE", "LTHAP", "LTHAD", "LTIAP",
+      "LTIAD", "LFMH", "LVMH", "RKNE", "RKNM", "RANK", "RMED", "RTHAP", "RTHAD", "RTIAP", "RTIAD"], "CGM 2.x"),
+    (["L_IAS", "R_IAS", "L_IPS", "R_IPS", "L_FLE", "L_FME", "L_FAL", "L_TAM", "L_FCC", "L_FM1", "L_FM5", "R_FLE"],
+     "IOR / ISB anatomical"),
+    (["LTH1", "LTH2", "LTH3", "LTH4", "LSK1", "LSK2", "LSK3", "RTH1", "RTH2", "RTH3", "RSK1", "RSK2"], "clusters"),
+    (["M1", "M2", "M3", "M4", "M5", "M6", "M7"], "unknown"),
+])
+def test_marker_sets_are_detected_from_the_labels(labels, name):
+    from solver.io.c3d import detect_marker_set
+
+    assert detect_marker_set(labels)["name"] == name
 
 
 def test_marker_gaps_short_filled_long_refused(path, trial, tmp_path):
@@ -605,3 +708,76 @@ def test_mass_from_plates_needs_a_complete_stride():
     valid[100] = False  # the stride 10 -> 110 is no longer complete: none left
     m = MeasuredGRF(force=force, cop=np.zeros((2, 3, T)), free_moment=np.zeros((2, T)), valid=valid)
     assert _mass_from_plates(m, contacts, times) is None
+
+
+# --- a trial from another lab and marker set: Qualisys, ISB/IOR anatomical names -----------------
+
+QUALISYS = "qualisys_ior_walk/Qualisys.c3d"
+T0_QUALISYS = 3.520  # file time of the first frame (README)
+
+
+@pytest.fixture(scope="module")
+def qualisys(shared_data: Path):
+    return read_c3d_trial(shared_data / QUALISYS)
+
+
+def test_qualisys_marker_set_and_landmarks(qualisys):
+    tr = qualisys.track
+    src = tr.source
+    assert src["marker_set"]["name"] == "IOR / ISB anatomical"
+    assert src["markers"]["LASI"] == "L_IAS" and src["markers"]["RKNM"] == "R_FME" and src["markers"]["CLAV"] == "SNJ"
+    assert tr.has_upper_body and set(src["upper_body"].values()) == {"markers"}
+    assert tr.frame.axes == "input +X forward, +Y left, +Z up" and tr.frame.unit_m == 0.001
+    lm = tr.landmarks
+    c, labels = ezc3d.c3d(str(src["path"])), None
+    labels = [s.strip() for s in c["parameters"]["POINT"]["LABELS"]["value"]]
+
+    def mk(name):
+        return c["data"]["points"][:3, labels.index(name)] / 1000.0
+
+    # knee and ankle centres: mid-points of the epicondyle and malleolus markers (lab axes = ours here)
+    np.testing.assert_allclose(lm["knee_r"], 0.5 * (mk("R_FLE") + mk("R_FME")), atol=1e-9)
+    np.testing.assert_allclose(lm["ankle_l"], 0.5 * (mk("L_FAL") + mk("L_TAM")), atol=1e-9)
+    np.testing.assert_allclose(lm["elbow_r"], 0.5 * (mk("R_HLE") + mk("R_HME")), atol=1e-9)
+    # the hip centres sit medial to and below the greater trochanters (FTC), between the ASIS
+    for s, S in (("r", "R"), ("l", "L")):
+        d = lm[f"hip_{s}"] - mk(f"{S}_FTC")
+        assert 0.0 < np.median(np.abs(d[1])) < 0.12 and np.median(np.abs(d[2])) < 0.05
+    L = {seg: float(np.median(np.linalg.norm(lm[a] - lm[b], axis=0)))
+         for seg, (a, b) in {"thigh": ("hip_r", "knee_r"), "shank": ("knee_r", "ankle_r"),
+                             "foot": ("heel_r", "toe_r")}.items()}
+    H = src["height_estimate_m"]
+    assert 1.4 < H < 1.9
+    assert L["thigh"] == pytest.approx(0.245 * H, rel=0.2) and L["shank"] == pytest.approx(0.246 * H, rel=0.2)
+    assert L["foot"] == pytest.approx(0.152 * H, rel=0.2)
+
+
+def test_qualisys_plates_events_mass_and_schedule(qualisys):
+    tr = qualisys.track
+    # README: FP1 loaded by the left foot 3.595-4.136 s (peak 808 N), FP2 by the right 4.058-4.638 s (840 N)
+    (fp1,), (fp2,) = (p.periods for p in qualisys.plates)
+    assert fp1[2] == "left" and fp2[2] == "right"
+    assert fp1[0] == pytest.approx(3.595 - T0_QUALISYS, abs=0.005) and fp1[1] == pytest.approx(4.136 - T0_QUALISYS,
+                                                                                                 abs=0.005)
+    assert fp2[0] == pytest.approx(4.058 - T0_QUALISYS, abs=0.005) and fp2[1] == pytest.approx(4.638 - T0_QUALISYS,
+                                                                                                 abs=0.02)
+    assert [round(p.peak_vertical) for p in qualisys.plates] == [808, 840]
+    # the file's EVENT group: LHS 3.590, RTO 3.685, RHS 4.050, LTO 4.160, LHS 4.535, RTO 4.650, RHS 5.030 (the
+    # trial ends at 5.215 s); every event is found, those near the trial's ends too (LHS 3.590: 14 frames in)
+    ev = tr.source["gait_events"]
+    for got, want in ((ev["left"]["foot_strike"], [3.590, 4.535]), (ev["right"]["foot_strike"], [4.050, 5.030]),
+                      (ev["right"]["foot_off"], [3.685, 4.650]), (ev["left"]["foot_off"], [4.160])):
+        for w in want:
+            assert np.min(np.abs(np.asarray(got) - (w - T0_QUALISYS))) < 0.03, (got, w)
+    # no mass in the file: one whole stance of each foot over the stride time (README: ~66 kg)
+    assert "whole stance of each foot" in tr.source["mass_from"] and tr.mass == pytest.approx(66.0, rel=0.04)
+    # a walk has no flight: every frame has a foot down; double support on both plates 4.05-4.16 s
+    feet = np.stack([tr.contacts[0] | tr.contacts[1], tr.contacts[2] | tr.contacts[3]])
+    assert feet.any(axis=0).all()
+    both = feet.all(axis=0) & tr.measured.valid
+    t = tr.times + T0_QUALISYS
+    assert t[both][0] == pytest.approx(4.058, abs=0.015) and t[both][-1] == pytest.approx(4.136, abs=0.015)
+    # complete plates from the right foot-off (3.685) to the next left strike off the plates (4.535)
+    v = np.flatnonzero(tr.measured.valid)
+    assert t[v[0]] == pytest.approx(3.69, abs=0.02) and t[v[-1]] == pytest.approx(4.535, abs=0.02)
+    assert np.all(np.diff(v) == 1)

@@ -26,10 +26,10 @@ Package layout: ``reader`` (file access, units, gaps, subject parameters), ``pla
 (plates -> feet, gait events, contacts), ``trial`` (the reader functions).
 """
 
-from solver.io.c3d.markers import ALIASES, CENTRAL_ALIASES
+from solver.io.c3d.markers import MARKER_SETS, ROLES, detect_marker_set, parse_mapping
 from solver.io.c3d.plates import PlateSignal, PlateSpec
 from solver.io.c3d.reader import C3DError, SubjectParams, fill_gaps, length_unit
 from solver.io.c3d.trial import C3DTrial, load_c3d, read_c3d, read_c3d_trial
 
-__all__ = ["ALIASES", "CENTRAL_ALIASES", "C3DError", "C3DTrial", "PlateSignal", "PlateSpec", "SubjectParams",
+__all__ = ["MARKER_SETS", "ROLES", "detect_marker_set", "parse_mapping", "C3DError", "C3DTrial", "PlateSignal", "PlateSpec", "SubjectParams",
            "fill_gaps", "length_unit", "load_c3d", "read_c3d", "read_c3d_trial"]

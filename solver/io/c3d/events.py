@@ -75,10 +75,54 @@ def _extrema(x: np.ndarray, times: np.ndarray, fps: float, maxima: bool) -> np.n
 
 def _zeni_events(lm: Mapping[str, np.ndarray], s: str, fwd: np.ndarray, times: np.ndarray,
                  fps: float) -> tuple[np.ndarray, np.ndarray]:
-    """Foot strikes (heel farthest ahead of the pelvis) and foot offs (forefoot farthest behind)."""
+    """Foot strikes (heel farthest ahead of the pelvis) and foot offs (forefoot farthest behind),
+    completed where the prominence test misses one (:func:`_complete_events`)."""
     heel = np.sum((lm[f"heel_{s}"] - lm["pelvis"]) * fwd, axis=0)
     fore = np.sum((lm[f"mtp_{s}"] - lm["pelvis"]) * fwd, axis=0)
-    return _extrema(heel, times, fps, True), _extrema(fore, times, fps, False)
+    return _complete_events(_extrema(heel, times, fps, True), _extrema(fore, times, fps, False), heel, fore, times)
+
+
+#: an extremum added by :func:`_complete_events` stands out this much (m) from its interval's ends
+EVENT_DEPTH = 0.01
+#: and lies this far (s) from the neighbouring events
+EVENT_GAP = 0.1
+
+
+def _complete_events(hs: np.ndarray, to: np.ndarray, heel: np.ndarray, fore: np.ndarray, times: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """A foot's strikes and offs alternate. Where two events of a kind follow each other, or before
+    the first / after the last event of the trial, the event of the other kind that can be missing
+    there (find_peaks' prominence is one-sided near the trial's ends, and a stance cut by the end of
+    the trial loses its off) is the extremum of its signal (heel: maximum, forefoot: minimum) over
+    that interval, when it lies inside it (two frames from the trial's ends, ``EVENT_GAP`` from the
+    neighbouring events) and stands out by ``EVENT_DEPTH`` from both of the interval's ends."""
+    dt = times[1] - times[0]
+    T = times.size
+    ev = sorted([(float(t), 0) for t in hs] + [(float(t), 1) for t in to])
+    found: list[tuple[float, int]] = []
+    bounds = [(times[0] - 1.0, None)] + ev + [(times[-1] + 1.0, None)]
+    for (ta, ka), (tb, kb) in zip(bounds[:-1], bounds[1:]):
+        if ka is not None and kb is not None and ka != kb:
+            continue  # alternating already
+        kinds = [1 - ka] if ka is not None else [1 - kb] if kb is not None else [0, 1]
+        for kind in kinds:
+            y = heel if kind == 0 else -fore
+            lo = 2 if ka is None else int(np.searchsorted(times, ta + EVENT_GAP))
+            hi = T - 2 if kb is None else int(np.searchsorted(times, tb - EVENT_GAP))
+            if hi - lo < 3:
+                continue
+            i = lo + int(np.argmax(y[lo:hi]))
+            a = 0 if ka is None else int(np.clip(np.searchsorted(times, ta), 0, T - 1))
+            b = T - 1 if kb is None else int(np.clip(np.searchsorted(times, tb), 0, T - 1))
+            if i in (lo, hi - 1) or y[i] - max(y[a], y[b]) < EVENT_DEPTH:
+                continue
+            den = y[i - 1] - 2 * y[i] + y[i + 1]
+            d = 0.5 * (y[i - 1] - y[i + 1]) / den if den != 0 else 0.0
+            found.append((float(times[i] + np.clip(d, -0.5, 0.5) * dt), kind))
+    if found:
+        hs = np.sort(np.concatenate([hs, [t for t, k in found if k == 0]]))
+        to = np.sort(np.concatenate([to, [t for t, k in found if k == 1]]))
+    return hs, to
 
 
 def _event_offsets(events: Mapping[str, tuple[np.ndarray, np.ndarray]],
@@ -328,3 +372,31 @@ def _mass_from_plates(measured: MeasuredGRF, contacts: np.ndarray | None, times:
     return None
 
 
+
+
+def _mass_from_stances(plates: Sequence[PlateSignal], periods: Sequence[Mapping[str, Any]],
+                       events: Mapping[str, Mapping[str, list]], times: np.ndarray) -> tuple[float, str] | None:
+    """Without a complete stride of complete plates: over one stride each foot has exactly one
+    stance, so the vertical impulse of one whole stance of each foot (each on plates, inside the
+    trial) divided by the stride time (median time between strikes of a foot) is the stride's mean
+    vertical force, m g in steady walking."""
+    dt = times[1] - times[0]
+    impulse: dict[str, float] = {}
+    by_plate = {s.index: s for s in plates}
+    for p in periods:
+        foot = p["foot"]
+        if foot not in FEET or foot in impulse or p["start_split"] or p["end_split"]:
+            continue
+        if p["start"] <= times[0] + dt or p["end"] >= times[-1] - dt:
+            continue  # the stance is cut by the trial's ends
+        sig = by_plate[p["plate"]]
+        k = (sig.times >= p["start"]) & (sig.times <= p["end"])
+        rate = 1.0 / (sig.times[1] - sig.times[0])
+        impulse[foot] = float(np.sum(sig.force[2, k]) / rate)
+    strides = [b - a for foot in FEET for a, b in zip(events[foot]["foot_strike"], events[foot]["foot_strike"][1:])]
+    if len(impulse) < 2 or not strides:
+        return None
+    T_stride = float(np.median(strides))
+    return (impulse["right"] + impulse["left"]) / (G * T_stride), (
+        f"plates: one whole stance of each foot, {impulse['right'] + impulse['left']:.0f} N·s over a "
+        f"{T_stride:.3f} s stride / g")

@@ -9,7 +9,7 @@ from typing import Callable
 
 import numpy as np
 
-from solver.io.c3d.markers import _alias_names, _Markers
+from solver.io.c3d.markers import _Markers
 from solver.io.c3d.reader import SIDES, C3DError, SubjectParams, _mid, _perp, _rigid_fill, _unit, fill_gaps
 
 log = logging.getLogger("solver.io.c3d")
@@ -43,10 +43,11 @@ class _Built:
     orientations: dict[str, np.ndarray]
     notes: list[str]
     markers_used: dict[str, str]
+    upper_body: dict[str, str]  # part -> "markers" or how it was modelled
 
 
 def _landmarks(mk: _Markers, R: np.ndarray, floor: float, sp: SubjectParams, height_est: float,
-               frames: slice, max_gap: int, name: str) -> _Built:
+               frames: slice, max_gap: int, name: str, fps: float, upper: str = "auto") -> _Built:
     """Landmarks (3, T) in our frame from the markers (lab frame) over ``frames``."""
     notes: list[str] = []
     used: dict[str, str] = {}
@@ -63,8 +64,7 @@ def _landmarks(mk: _Markers, R: np.ndarray, floor: float, sp: SubjectParams, hei
         key = f"{side or ''}{role}"
         if lbl is None:
             if required:
-                raise C3DError(f"{name}: required marker {key} not found (looked for "
-                               f"{', '.join(_alias_names(role, side))})")
+                raise C3DError(mk.missing_message([key]))
             return None
         if lbl not in filled:
             x, gaps = fill_gaps(ours(mk.get(lbl)), max_gap)
@@ -90,7 +90,8 @@ def _landmarks(mk: _Markers, R: np.ndarray, floor: float, sp: SubjectParams, hei
     else:
         sacr = marker("SACR", None, required=False)
         if sacr is None:
-            raise C3DError(f"{name}: required markers RPSI/LPSI (or SACR) not found")
+            raise C3DError(mk.missing_message([k for k, x in (("RPSI", rpsi), ("LPSI", lpsi)) if x is None]
+                                              + ["SACR"]))
         mpsi = sacr
     masi = _mid(lasi, rasi)
     py = _unit(lasi - rasi)
@@ -185,15 +186,17 @@ def _landmarks(mk: _Markers, R: np.ndarray, floor: float, sp: SubjectParams, hei
         ori[f"shank_{s}"] = np.stack([np.cross(sy, sz, axis=0), sy, sz], axis=1)
         ori[f"foot_{s}"] = np.stack([f, np.cross(u, f, axis=0), u], axis=1)
     lm["pelvis"] = _mid(lm["hip_r"], lm["hip_l"])
-    # --- upper body (optional) ------------------------------------------------------------
-    try:
-        upper = _upper_landmarks(marker, masi, px, pz, inter_asis, sp, H, mr)
-    except _NoUpper as e:
-        notes.append(f"upper body not built: {e}")
-        log.info("%s: upper body not built: %s", name, e)
-    else:
-        lm.update(upper)
-    return _Built(lm, ori, notes, used)
+    # --- upper body: markers where there are some, modelled elsewhere ---------------------------
+    how: dict[str, str] = {}
+    if upper != "none":
+        up_lm, up_ori, how = _upper_landmarks(marker, lm, masi, px, pz, inter_asis, sp, H, mr, fps)
+        lm.update(up_lm)
+        ori.update(up_ori)
+        modelled = [f"{k}: {v}" for k, v in how.items() if v != "markers"]
+        if modelled:
+            notes.append("upper body " + "; ".join(modelled))
+            log.info("%s: upper body %s", name, "; ".join(modelled))
+    return _Built(lm, ori, notes, used, how)
 
 
 def _toe_tip(mtp: np.ndarray, f: np.ndarray, u: np.ndarray, length: float, mtp_h: float) -> np.ndarray:
@@ -209,79 +212,137 @@ def _toe_tip(mtp: np.ndarray, f: np.ndarray, u: np.ndarray, length: float, mtp_h
     return tip
 
 
-class _NoUpper(Exception):
-    pass
+#: Proportions of the modelled upper body (fractions of the height H; capture_full's trunk and
+#: Winter's table, Drillis & Contini): lumbar -> neck, neck -> vertex, shoulder below the neck and
+#: to the side, upper arm, forearm, hand
+TRUNK_H, HEAD_H, SHOULDER_DROP_H, SHOULDER_HALF_H = 0.24, 0.182, 0.025, 0.129
+UPPER_ARM_H, FOREARM_H, HAND_H = 0.186, 0.146, 0.108
+#: cut-off (Hz) of the walking heading the modelled trunk faces (below the stride frequency)
+HEADING_HZ = 0.5
 
 
+def _heading(lm: dict[str, np.ndarray], fps: float) -> tuple[np.ndarray, np.ndarray]:
+    """Horizontal forward and left unit vectors (3, T) of the walk: the hips' left-right axis
+    made horizontal, low-passed below the stride frequency (the pelvis' own yaw oscillation
+    at the stride frequency is not the trunk's: the thorax counter-rotates)."""
+    from scipy.signal import butter, sosfiltfilt
 
-def _upper_landmarks(marker: Callable[..., np.ndarray | None], masi: np.ndarray, px: np.ndarray,
-                     pz: np.ndarray, inter_asis: float, sp: SubjectParams, H: float, mr: float
-                     ) -> dict[str, np.ndarray]:
-    def need(role: str, side: str | None = None) -> np.ndarray:
-        x = marker(role, side, required=False)
-        if x is None:
-            raise _NoUpper(f"marker {(side or '') + role} missing or with long gaps")
-        return x
+    y = lm["hip_l"] - lm["hip_r"]
+    y = _unit(np.vstack([y[:2], np.zeros((1, y.shape[1]))]))
+    T = y.shape[1]
+    if T > 6 and HEADING_HZ < fps / 2:
+        sos = butter(2, HEADING_HZ, fs=fps, output="sos")
+        y = _unit(sosfiltfilt(sos, y, axis=1, padtype="odd", padlen=min(T - 1, int(3 * fps / HEADING_HZ))))
+    up = np.zeros_like(y)
+    up[2] = 1.0
+    return np.cross(y, up, axis=0), y
 
-    c7, clav = need("C7"), need("CLAV")
-    t10 = marker("T10", None, required=False)
-    strn = marker("STRN", None, required=False)
-    if t10 is None and strn is None:
-        raise _NoUpper("neither T10 nor STRN")
-    lower_back = t10 if t10 is not None else strn
-    lower_front = strn if strn is not None else t10
-    assert lower_back is not None and lower_front is not None
-    t_up = _unit(_mid(c7, clav) - _mid(lower_back, lower_front))
-    # head: four markers (one may be rebuilt from the other three)
-    heads = {k: marker(r, sd, required=False, partial=True) for k, (r, sd) in
-             {"lf": ("FHD", "L"), "rf": ("FHD", "R"), "lb": ("BHD", "L"), "rb": ("BHD", "R")}.items()}
-    present = {k: v for k, v in heads.items() if v is not None and np.isfinite(v).all(axis=0).sum() >= 3}
-    if len(present) < 3:
-        raise _NoUpper("fewer than three head markers")
+
+def _upper_landmarks(marker: Callable[..., np.ndarray | None], lm: dict[str, np.ndarray], masi: np.ndarray,
+                     px: np.ndarray, pz: np.ndarray, inter_asis: float, sp: SubjectParams, H: float, mr: float,
+                     fps: float) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], dict[str, str]]:
+    """Upper-body landmarks from whatever upper-body markers the trial has; the parts without
+    markers are modelled (an upright trunk facing the walking direction, the head upright on it,
+    arms hanging), never lumped into the pelvis. Returns (landmarks, orientations of modelled
+    segments, how each part was obtained)."""
     out: dict[str, np.ndarray] = {}
+    ori: dict[str, np.ndarray] = {}
+    how: dict[str, str] = {}
+    fwd, left = _heading(lm, fps)
+    vert = np.zeros_like(fwd)
+    vert[2] = 1.0
+    upright = np.stack([fwd, left, vert], axis=1)  # (3, 3, T): x forward, y left, z up
     # lumbar joint (L5/S1) from the pelvis (Reed 1999 / Dumas 2007: ~34 % of the ASIS width behind mid-ASIS)
     out["lumbar"] = masi - 0.34 * inter_asis * px + 0.01 * inter_asis * pz
-    # C7/T1 (base of the neck): 55 % of the C7-CLAV distance from C7, 8° above that line (Dumas 2007)
-    d = clav - c7
-    dn = np.linalg.norm(d, axis=0)
-    dh = d / dn
-    up_d = _unit(_perp(t_up, dh))
-    a = math.radians(8.0)
-    out["neck"] = c7 + 0.55 * dn * (math.cos(a) * dh + math.sin(a) * up_d)
-    out["sternum"] = _mid(clav, strn) if strn is not None else clav
-    hd = dict(present)
+    # --- trunk: C7 and the jugular notch, else upright -------------------------------------------------
+    c7, clav = marker("C7", None, required=False), marker("CLAV", None, required=False)
+    t10, strn = marker("T10", None, required=False), marker("STRN", None, required=False)
+    if c7 is not None and clav is not None:
+        low = [x for x in (t10, strn) if x is not None]
+        base = _mid(low[0], low[-1]) if low else out["lumbar"]
+        t_up = _unit(_mid(c7, clav) - base)
+        # C7/T1 (base of the neck): 55 % of the C7-CLAV distance from C7, 8° above that line (Dumas 2007)
+        d = clav - c7
+        dn = np.linalg.norm(d, axis=0)
+        dh = d / dn
+        up_d = _unit(_perp(t_up, dh))
+        a = math.radians(8.0)
+        out["neck"] = c7 + 0.55 * dn * (math.cos(a) * dh + math.sin(a) * up_d)
+        out["sternum"] = _mid(clav, strn) if strn is not None else clav
+        how["trunk"] = "markers"
+    else:
+        t_up = vert
+        out["neck"] = out["lumbar"] + TRUNK_H * H * vert
+        out["sternum"] = out["neck"] - 0.07 * H * vert + 0.06 * H * fwd
+        ori["abdomen"] = ori["thorax"] = upright
+        how["trunk"] = "modelled: upright, facing the walking direction (no C7/CLAV markers)"
+    # --- head: three or four head markers, else upright on the neck -------------------------------------
+    heads = {k: marker(r, sd, required=False, partial=True) for k, (r, sd) in
+             {"lf": ("FHD", "L"), "rf": ("FHD", "R"), "lb": ("BHD", "L"), "rb": ("BHD", "R")}.items()}
+    hd = {k: v for k, v in heads.items() if v is not None and np.isfinite(v).all(axis=0).sum() >= 3}
     for k in list(hd):  # a marker's long gaps rebuilt from the other three (rigid head)
         if not np.isfinite(hd[k]).all():
             hd[k] = _rigid_fill(hd[k], [hd[j] for j in hd if j != k])
-    if not all(np.isfinite(v).all() for v in hd.values()):
-        raise _NoUpper("head markers with gaps that the other head markers cannot fill")
-    if len(hd) == 3:  # the fourth, never seen: a parallelogram (front/back pairs)
-        k = next(j for j in ("lf", "rf", "lb", "rb") if j not in hd)
-        o = {"lf": ("rf", "lb", "rb"), "rf": ("lf", "rb", "lb"), "lb": ("rb", "lf", "rf"), "rb": ("lb", "rf", "lf")}[k]
-        hd[k] = hd[o[0]] + hd[o[1]] - hd[o[2]]
-    centre = (hd["lf"] + hd["rf"] + hd["lb"] + hd["rb"]) / 4.0
-    h_fwd = _mid(hd["lf"], hd["rf"]) - _mid(hd["lb"], hd["rb"])
-    h_left = _mid(hd["lf"], hd["lb"]) - _mid(hd["rf"], hd["rb"])
-    h_up = _unit(np.cross(h_fwd, h_left, axis=0))
-    out["head_top"] = centre + 0.05 * H * h_up  # vertex ~5 % of stature above the head band
-    t_left = None
+    if len(hd) >= 3 and all(np.isfinite(v).all() for v in hd.values()):
+        if len(hd) == 3:  # the fourth, never seen: a parallelogram (front/back pairs)
+            k = next(j for j in ("lf", "rf", "lb", "rb") if j not in hd)
+            o = {"lf": ("rf", "lb", "rb"), "rf": ("lf", "rb", "lb"), "lb": ("rb", "lf", "rf"),
+                 "rb": ("lb", "rf", "lf")}[k]
+            hd[k] = hd[o[0]] + hd[o[1]] - hd[o[2]]
+        centre = (hd["lf"] + hd["rf"] + hd["lb"] + hd["rb"]) / 4.0
+        h_fwd = _mid(hd["lf"], hd["rf"]) - _mid(hd["lb"], hd["rb"])
+        h_left = _mid(hd["lf"], hd["lb"]) - _mid(hd["rf"], hd["rb"])
+        h_up = _unit(np.cross(h_fwd, h_left, axis=0))
+        out["head_top"] = centre + 0.05 * H * h_up  # vertex ~5 % of stature above the head band
+        how["head"] = "markers"
+    else:
+        out["head_top"] = out["neck"] + HEAD_H * H * vert
+        ori["head"] = upright
+        how["head"] = "modelled: upright on the neck (fewer than three head markers)"
+    # --- arms -----------------------------------------------------------------------------------------
+    if how["trunk"] == "markers":
+        sl, sr = marker("SHO", "L", required=False), marker("SHO", "R", required=False)
+        t_left = _unit(_perp(sl - sr, t_up)) if sl is not None and sr is not None else left
+    else:
+        t_left = left
     for s in SIDES:
         S = s.upper()
         sgn = 1.0 if s == "l" else -1.0
-        sho, elb = need("SHO", S), need("ELB", S)
-        wra, wrb, fin = need("WRA", S), need("WRB", S), need("FIN", S)
-        if t_left is None:
-            t_left = _unit(_perp(need("SHO", "L") - need("SHO", "R"), t_up))
-        off = sp.shoulder_offset[s] or 0.033 * H
-        shoulder = sho - t_up * (off + mr)
-        ew = sp.elbow_width[s] or 0.053 * H
-        elbow = _medial_shift(elb, shoulder, -sgn * t_left, ew / 2 + mr)
-        out[f"shoulder_{s}"] = shoulder
-        out[f"elbow_{s}"] = elbow
-        out[f"wrist_{s}"] = _mid(wra, wrb)
-        out[f"hand_{s}"] = fin
-    return out
-
+        parts = []
+        sho = marker("SHO", S, required=False)
+        if sho is not None:
+            off = sp.shoulder_offset[s] or 0.033 * H
+            shoulder = sho - t_up * (off + mr)
+            parts.append("shoulder")
+        else:
+            shoulder = out["neck"] - SHOULDER_DROP_H * H * t_up + sgn * SHOULDER_HALF_H * H * t_left
+        elb, elm = marker("ELB", S, required=False), marker("ELM", S, required=False)
+        if elb is not None and elm is not None:
+            elbow = _mid(elb, elm)
+            parts.append("elbow")
+        elif elb is not None:
+            ew = sp.elbow_width[s] or 0.053 * H
+            elbow = _medial_shift(elb, shoulder, -sgn * t_left, ew / 2 + mr)
+            parts.append("elbow")
+        else:
+            elbow = shoulder - UPPER_ARM_H * H * t_up
+        wra, wrb = marker("WRA", S, required=False), marker("WRB", S, required=False)
+        if wra is not None or wrb is not None:
+            wrist = _mid(wra, wrb) if wra is not None and wrb is not None else (wra if wra is not None else wrb)
+            parts.append("wrist")
+        else:
+            wrist = elbow + FOREARM_H * H * _unit(elbow - shoulder)
+        fin, fi5 = marker("FIN", S, required=False), marker("FI5", S, required=False)
+        if fin is not None:
+            hand = _mid(fin, fi5) if fi5 is not None else fin
+            parts.append("hand")
+        else:
+            hand = wrist + HAND_H * H * _unit(wrist - elbow)
+        out[f"shoulder_{s}"], out[f"elbow_{s}"], out[f"wrist_{s}"], out[f"hand_{s}"] = shoulder, elbow, wrist, hand
+        how[f"arm_{s}"] = ("markers" if len(parts) == 4 else
+                           f"markers: {', '.join(parts)}; modelled: the rest (hanging / straight)" if parts else
+                           "modelled: hanging from the shoulder")
+    return out, ori, how
 
 
 def _height_estimate(mk: _Markers, R: np.ndarray, floor: float, sp: SubjectParams) -> float:

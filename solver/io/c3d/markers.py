@@ -1,94 +1,304 @@
-"""Marker names: roles and the labels other marker sets use for them."""
+"""Marker sets: which label in the file plays which anatomical role.
+
+Every landmark the reader builds comes from *roles* named as in Plug-in Gait (``ASI``,
+``KNE``, ``HEE``, ..., sided with an ``L``/``R`` prefix; ``SACR``, ``C7``, ... central).
+A label is matched to a role by its normalised form — upper case, subject prefix
+(``Name:``) and separators (``_ . - space``) removed, the side as a prefix or suffix
+(``L``, ``R``, ``LEFT``, ``RIGHT``) — against the names the supported marker sets use for
+that role (:data:`ROLES`). The marker set itself is detected from the labels
+(:data:`MARKER_SETS`, :func:`detect_marker_set`) and reported; a user mapping
+(``mapping={"LASI": "my_label", ...}``, :func:`parse_mapping`) overrides the names.
+"""
 
 from __future__ import annotations
 
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Mapping, Sequence
+
 import numpy as np
 
-from solver.io.c3d.reader import C3DError, _Raw
-
-# ----------------------------------------------------------------------------------------
-# marker access, gap filling
+from solver.io.c3d.reader import C3DError, _clean_label, _Raw
 
 
-#: Landmark markers and the names other marker sets use for them ({s}: side letter L/R).
-ALIASES: dict[str, tuple[str, ...]] = {
-    "ASI": ("{s}ASI", "{s}ASIS", "{s}_ASIS", "{s}_ASI", "{s}IAS", "{s}.ASIS"),
-    "PSI": ("{s}PSI", "{s}PSIS", "{s}_PSIS", "{s}_PSI", "{s}IPS", "{s}.PSIS"),
-    "THI": ("{s}THI", "{s}_THI", "{s}THL", "{s}TH"),
-    "KNE": ("{s}KNE", "{s}_KNE", "{s}KNEL", "{s}LKNE", "{s}LEK", "{s}FLE", "{s}_KNEE_LAT", "{s}LFC"),
-    "KNM": ("{s}KNM", "{s}MKNE", "{s}KNEM", "{s}_KNM", "{s}MEK", "{s}FME", "{s}_KNEE_MED", "{s}MFC"),
-    "TIB": ("{s}TIB", "{s}_TIB", "{s}TBL", "{s}TI"),
-    "ANK": ("{s}ANK", "{s}_ANK", "{s}LMAL", "{s}LM", "{s}FAL", "{s}_ANKLE_LAT", "{s}LAT_MAL"),
-    "MED": ("{s}MED", "{s}MMAL", "{s}MM", "{s}TAM", "{s}_ANKLE_MED", "{s}ANM", "{s}MED_MAL"),
-    "HEE": ("{s}HEE", "{s}_HEE", "{s}HEEL", "{s}CAL", "{s}FCC", "{s}_HEEL"),
-    "TOE": ("{s}TOE", "{s}_TOE", "{s}MT2", "{s}FM2", "{s}_TOE"),
-    "MT1": ("{s}MT1", "{s}FM1", "{s}MH1"),
-    "MT5": ("{s}MT5", "{s}FM5", "{s}MH5"),
-    "SHO": ("{s}SHO", "{s}_SHO", "{s}ACR", "{s}SHOULDER", "{s}CA"),
-    "ELB": ("{s}ELB", "{s}_ELB", "{s}LEL", "{s}ELBL", "{s}EL"),
-    "WRA": ("{s}WRA", "{s}_WRA", "{s}RSP", "{s}WRR"),
-    "WRB": ("{s}WRB", "{s}_WRB", "{s}USP", "{s}WRU"),
-    "FIN": ("{s}FIN", "{s}_FIN", "{s}MH2", "{s}HAND"),
-    "FHD": ("{s}FHD", "{s}_FHD", "{s}FH"),
-    "BHD": ("{s}BHD", "{s}_BHD", "{s}BH"),
-}
-CENTRAL_ALIASES: dict[str, tuple[str, ...]] = {
-    "SACR": ("SACR", "SACRUM", "S1", "MPSI"),
-    "C7": ("C7", "CV7"),
-    "T10": ("T10", "TV10", "T8"),
-    "CLAV": ("CLAV", "IJ", "SJN", "STER", "MAN"),
-    "STRN": ("STRN", "PX", "SXS", "XIPH"),
-}
+@dataclass(frozen=True)
+class Role:
+    """An anatomical role: its Plug-in-Gait-style name, whether it is sided, what it marks,
+    and the names (normalised, without side) marker sets give it."""
+
+    name: str
+    sided: bool
+    what: str
+    names: tuple[str, ...]
+
+
+_ROLE_LIST = (
+    # pelvis
+    Role("ASI", True, "anterior superior iliac spine", ("ASI", "ASIS", "IAS", "SIAS", "EIAS", "AS")),
+    Role("PSI", True, "posterior superior iliac spine", ("PSI", "PSIS", "IPS", "SIPS", "EIPS", "PS")),
+    Role("SACR", False, "sacrum (mid-PSIS)", ("SACR", "SACRUM", "SAC", "S1", "S2", "MPSI", "MIPS", "MPSIS")),
+    # thigh, shank
+    Role("THI", True, "thigh wand (lateral thigh)", ("THI", "THL", "TH", "THIGH", "THIW")),
+    Role("KNE", True, "lateral femoral epicondyle (knee)",
+         ("KNE", "KNEE", "KNEL", "KNL", "LKNE", "LEK", "FLE", "LFE", "LFC", "LEPI", "KNEELAT", "LATKNEE",
+          "KNEELATERAL", "LATEPI")),
+    Role("KNM", True, "medial femoral epicondyle (knee)",
+         ("KNM", "KNEM", "MKNE", "KNI", "MEK", "FME", "MFE", "MFC", "MEPI", "KNEEMED", "MEDKNEE", "KNEEMEDIAL",
+          "MEDEPI")),
+    Role("TRO", True, "greater trochanter", ("TRO", "FTC", "GTR", "TROC", "GT", "TROCH")),
+    Role("TIB", True, "tibia wand (lateral shank)", ("TIB", "TIBL", "TBL", "TI", "SHANK", "TIBW")),
+    Role("ANK", True, "lateral malleolus (ankle)",
+         ("ANK", "ANKL", "LMAL", "LM", "FAL", "LMA", "LATMAL", "ANKLELAT", "ANKLAT", "MALL")),
+    Role("MED", True, "medial malleolus (ankle)",
+         ("MED", "MMAL", "MM", "TAM", "MMA", "MEDMAL", "ANKLEMED", "ANKMED", "ANM", "ANKM")),
+    # foot
+    Role("HEE", True, "calcaneus (heel)", ("HEE", "HEEL", "CAL", "FCC", "HEL", "CALC")),
+    Role("TOE", True, "2nd metatarsal head (toe)", ("TOE", "MT2", "FM2", "SMH", "TOES", "MET2")),
+    Role("MT1", True, "1st metatarsal head", ("MT1", "FM1", "MH1", "FMH", "MET1", "MTH1")),
+    Role("MT5", True, "5th metatarsal head", ("MT5", "FM5", "MH5", "VMH", "MET5", "MTH5")),
+    # trunk
+    Role("C7", False, "7th cervical vertebra", ("C7", "CV7", "VC7")),
+    Role("T10", False, "10th (or 8th) thoracic vertebra", ("T10", "TV10", "TH10", "T8", "TV8", "TH8")),
+    Role("CLAV", False, "jugular notch (clavicles)", ("CLAV", "IJ", "SJN", "SNJ", "JN", "STER", "MAN", "SUP")),
+    Role("STRN", False, "xiphoid process (sternum)", ("STRN", "PX", "SXS", "XIPH", "XP", "XYP")),
+    # head
+    Role("FHD", True, "front head", ("FHD", "HDF", "FH", "HEADF", "FHEAD")),
+    Role("BHD", True, "back head", ("BHD", "HDB", "BH", "HEADB", "BHEAD")),
+    # arms
+    Role("SHO", True, "acromion (shoulder)", ("SHO", "ACR", "SAJ", "AC", "ACRO", "SAE", "SHOULDER", "CA")),
+    Role("ELB", True, "lateral humeral epicondyle (elbow)", ("ELB", "LEL", "ELBL", "HLE", "LHE", "EL", "ELBOW")),
+    Role("ELM", True, "medial humeral epicondyle (elbow)", ("ELM", "MEL", "ELBM", "HME", "MHE")),
+    Role("WRA", True, "radial styloid (wrist, thumb side)", ("WRA", "RSP", "WRR", "RS", "RAD", "WRI")),
+    Role("WRB", True, "ulnar styloid (wrist, little-finger side)", ("WRB", "USP", "WRU", "US", "UHE", "ULN")),
+    Role("FIN", True, "2nd metacarpal head (hand)", ("FIN", "HM2", "MH2", "MC2", "MCP2", "HAND")),
+    Role("FI5", True, "5th metacarpal head (hand)", ("HM5", "MC5", "MCP5")),
+)
+#: role name -> :class:`Role`
+ROLES: dict[str, Role] = {r.name: r for r in _ROLE_LIST}
+
+#: roles every trial needs (sided ones on both sides); TOE may be MT1 + MT5, PSI may be SACR
+REQUIRED = ("ASI", "KNE", "ANK", "HEE")
+
+
+@dataclass(frozen=True)
+class MarkerSet:
+    """A marker set the reader knows, by the labels it uses (normalised, ``{s}`` = L/R)."""
+
+    name: str
+    reference: str
+    labels: tuple[str, ...]
+
+
+def _sided(*names: str) -> tuple[str, ...]:
+    return tuple(n.format(s=s) for n in names for s in "LR")
+
+
+MARKER_SETS: tuple[MarkerSet, ...] = (
+    MarkerSet("Plug-in Gait / Helen Hayes", "Davis et al. 1991; Kadaba et al. 1990 (Vicon Plug-in Gait)",
+              _sided("{s}ASI", "{s}PSI", "{s}THI", "{s}KNE", "{s}TIB", "{s}ANK", "{s}HEE", "{s}TOE", "{s}FHD",
+                     "{s}BHD", "{s}SHO", "{s}ELB", "{s}WRA", "{s}WRB", "{s}FIN") + ("SACR", "C7", "T10", "CLAV",
+                                                                                    "STRN", "RBAK")),
+    MarkerSet("CGM 2.x", "Leboeuf et al. 2019 (pyCGM2: Plug-in Gait + medial markers, clusters, foot)",
+              _sided("{s}ASI", "{s}PSI", "{s}KNE", "{s}KNM", "{s}ANK", "{s}MED", "{s}HEE", "{s}TOE", "{s}THAP",
+                     "{s}THAD", "{s}TIAP", "{s}TIAD", "{s}FMH", "{s}VMH", "{s}SMH", "{s}CUN", "{s}THLD", "{s}PAT",
+                     "{s}TIBUP", "{s}TIBLO", "{s}D1M", "{s}D5M")),
+    MarkerSet("IOR / ISB anatomical", "Cappozzo et al. 1995; Leardini et al. 2007 (ISB landmark names)",
+              _sided("{s}IAS", "{s}IPS", "{s}FTC", "{s}FLE", "{s}FME", "{s}FAX", "{s}TTC", "{s}FAL", "{s}TAM",
+                     "{s}FCC", "{s}FM1", "{s}FM2", "{s}FM5", "{s}HDF", "{s}HDB", "{s}SAJ", "{s}HLE", "{s}HME",
+                     "{s}RSP", "{s}UHE", "{s}USP", "{s}HM2", "{s}HM5") + ("CV7", "TV8", "TV10", "SJN", "SNJ",
+                                                                          "SXS", "PX")),
+)
+
+_SEP = re.compile(r"[\s_.\-]+")
+_CLUSTER = re.compile(r"^[LR](TH|THI|THIGH|SH|SK|SHK|SHANK|TB|TIB|LEG|FT|FOOT)(CL)?\d$")
+
+
+def _norm(label: str) -> str:
+    return _SEP.sub("", _clean_label(label))
+
+
+def _readings(label: str) -> list[tuple[str | None, str]]:
+    """The ways a label can be read: (side 'L'/'R', core) and (None, the whole name)."""
+    up = _clean_label(label)
+    n = _SEP.sub("", up)
+    out: list[tuple[str | None, str]] = [(None, n)]
+    for word, s in (("LEFT", "L"), ("RIGHT", "R")):
+        if n.startswith(word) and len(n) > len(word):
+            out.append((s, n[len(word):]))
+        if n.endswith(word) and len(n) > len(word):
+            out.append((s, n[: -len(word)]))
+    m = re.match(r"^(.*?)[\s_.\-]+([LR])$", up)
+    if m:
+        out.append((m.group(2), _SEP.sub("", m.group(1))))
+    if len(n) > 1 and n[0] in "LR":
+        out.append((n[0], n[1:]))
+    return out
+
+
+def detect_marker_set(labels: Sequence[str]) -> dict:
+    """The known marker set whose labels best match ``labels``: {"name", "reference",
+    "matched" (labels of the set present), "of"}; name ``"unknown"`` below 6 matches, and
+    ``"clusters"`` when technical clusters (e.g. ``LTH1..4``) outnumber every set."""
+    present = {_norm(x) for x in labels}
+    best = {"name": "unknown", "reference": "", "matched": 0, "of": 0}
+    for ms in MARKER_SETS:
+        hit = len(present & set(ms.labels))
+        if hit > best["matched"]:
+            best = {"name": ms.name, "reference": ms.reference, "matched": hit, "of": len(ms.labels)}
+    clusters = sum(1 for x in present if _CLUSTER.match(x))
+    if clusters >= 6 and clusters > best["matched"]:
+        return {"name": "clusters", "reference": "technical marker clusters (e.g. CAST, Cappozzo et al. 1995)",
+                "matched": clusters, "of": clusters}
+    if best["matched"] < 6:
+        best["name"] = "unknown"
+    return best
+
+
+def role_key(role: str, side: str | None) -> str:
+    return f"{side or ''}{role}"
+
+
+def parse_mapping(spec: str | Path | Mapping[str, str] | None) -> dict[str, str]:
+    """A user mapping role -> label: a dict, ``"LASI=L_IAS,RASI=R_IAS"``, or a file (JSON object,
+    or one ``ROLE=label`` / ``ROLE: label`` per line, ``#`` comments). An empty label means
+    "do not use this role"."""
+    if spec is None:
+        return {}
+    if isinstance(spec, Mapping):
+        items = list(spec.items())
+    else:
+        text = str(spec)
+        p = Path(text)
+        if "=" not in text and p.suffix and not p.is_file():
+            raise C3DError(f"marker mapping file not found: {p}")
+        if p.is_file():
+            text = p.read_text()
+            try:
+                d = json.loads(text)
+            except json.JSONDecodeError:
+                d = None
+            if isinstance(d, dict):
+                items = list(d.items())
+            else:
+                lines = [ln.split("#", 1)[0].strip() for ln in text.splitlines()]
+                items = []
+                for ln in lines:
+                    if not ln:
+                        continue
+                    k, sep, v = ln.replace(":", "=", 1).partition("=")
+                    if not sep:
+                        raise C3DError(f"marker mapping {p}: line {ln!r} is not ROLE=label")
+                    items.append((k, v))
+        else:
+            items = []
+            for part in text.split(","):
+                if not part.strip():
+                    continue
+                k, sep, v = part.partition("=")
+                if not sep:
+                    raise C3DError(f"marker mapping {part!r} is not ROLE=label (e.g. LASI=L_IAS,RASI=R_IAS)")
+                items.append((k, v))
+    out: dict[str, str] = {}
+    for k, v in items:
+        key = str(k).strip().upper()
+        if _parse_key(key) is None:
+            raise C3DError(f"marker mapping: unknown role {k!r}; roles are Plug-in Gait names with a side prefix "
+                           f"(e.g. LASI, RKNE) or central ({', '.join(r.name for r in _ROLE_LIST if not r.sided)})"
+                           f"; sided roles: {', '.join(r.name for r in _ROLE_LIST if r.sided)}")
+        out[key] = str(v).strip()
+    return out
+
+
+def _parse_key(key: str) -> tuple[str, str | None] | None:
+    if key in ROLES and not ROLES[key].sided:
+        return key, None
+    if len(key) > 1 and key[0] in "LR" and key[1:] in ROLES and ROLES[key[1:]].sided:
+        return key[1:], key[0]
+    return None
 
 
 class _Markers:
-    """Marker lookup by role, with aliases; arrays (3, T) in the lab frame, metres."""
+    """Marker lookup by role; arrays (3, T) in the lab frame, metres."""
 
-    def __init__(self, raw: _Raw) -> None:
+    def __init__(self, raw: _Raw, mapping: Mapping[str, str] | None = None) -> None:
+        self.name = raw.path.name
+        self.labels = raw.labels
         self._index: dict[str, int] = {}
-        for i, name in enumerate(raw.labels):
-            self._index.setdefault(name, i)
+        for i, lbl in enumerate(raw.labels):
+            self._index.setdefault(lbl, i)
         self._pts = raw.points
-        self.used: dict[str, str] = {}  # role -> label found
+        self._seen = {lbl: bool(np.isfinite(raw.points[:, i]).any()) for lbl, i in self._index.items()}
+        self.marker_set = detect_marker_set(raw.labels)
+        self.mapping: dict[tuple[str, str | None], str] = {}
+        for key, lbl in (mapping or {}).items():
+            role_side = _parse_key(key.upper())
+            if role_side is None:
+                raise C3DError(f"{self.name}: marker mapping: unknown role {key!r}")
+            if lbl:
+                lbl = _clean_label(lbl)
+                if lbl not in self._index:
+                    raise C3DError(f"{self.name}: marker mapping {key}={lbl}: no marker {lbl!r} in the file "
+                                   f"(labels: {', '.join(raw.labels)})")
+            self.mapping[role_side] = lbl
+        # label readings, once
+        self._by_reading: dict[tuple[str | None, str], str] = {}
+        for lbl in raw.labels:
+            for rd in _readings(lbl):
+                self._by_reading.setdefault(rd, lbl)
 
     def find(self, role: str, side: str | None = None) -> str | None:
-        if side is None:
-            cands = CENTRAL_ALIASES.get(role, (role,))
-        else:
-            cands = tuple(a.format(s=side.upper()) for a in ALIASES[role])
-        for c in cands:
-            if c in self._index and np.isfinite(self._pts[:, self._index[c]]).any():
-                return c
+        side = side.upper() if side else None
+        if (role, side) in self.mapping:
+            lbl = self.mapping[(role, side)]
+            return lbl if lbl and self._seen.get(lbl) else None
+        r = ROLES[role]
+        for core in r.names:
+            lbl = self._by_reading.get((side if r.sided else None, core))
+            if lbl is not None and self._seen.get(lbl) and lbl not in self.mapping.values():
+                return lbl
         return None
 
     def get(self, label: str) -> np.ndarray:
         return self._pts[:, self._index[label]]
 
+    def missing_message(self, missing: list[str]) -> str:
+        """The error for missing required roles: what they mark, the names looked for, the labels
+        in the file, the detected set and how to pass a mapping."""
+        lines = []
+        for key in missing:
+            role = key[1:] if key[0] in "LR" and key[1:] in ROLES and ROLES[key[1:]].sided else key
+            r = ROLES[role]
+            side = key[0] if r.sided else ""
+            names = ", ".join(f"{side}{n}" for n in r.names[:6])
+            lines.append(f"{key} ({'left ' if side == 'L' else 'right ' if side == 'R' else ''}{r.what}; "
+                         f"looked for {names}, ...)")
+        ms = self.marker_set
+        hint = ("technical clusters need the anatomical landmarks of a static calibration trial: add them to the "
+                "trial or map them; " if ms["name"] == "clusters" else "")
+        return (f"{self.name}: marker set {ms['name']!r}: required landmarks not found: " + "; ".join(lines)
+                + f". Labels in the file: {', '.join(self.labels)}. {hint}Pass a mapping from Plug-in Gait roles "
+                "to your labels: markers='LASI=<label>,RASI=<label>,...' (CLI: --markers LASI=...,RASI=... or "
+                "--markers mapping.txt with one ROLE=label per line); supported marker sets and roles: docs/c3d.md")
 
 
-def _alias_names(role: str, side: str | None) -> list[str]:
-    if side is None:
-        return list(CENTRAL_ALIASES.get(role, (role,)))
-    return [a.format(s=side.upper()) for a in ALIASES[role]]
-
-
-
-def _required_lower(mk: _Markers, name: str) -> list[str]:
-    out = []
+def required_markers(mk: _Markers) -> list[str]:
+    """Labels of the markers every frame needs (pelvis, knees, ankles, heels, toes); a
+    :class:`C3DError` naming everything missing otherwise."""
+    out: list[str] = []
+    missing: list[str] = []
     for s in ("R", "L"):
-        for role in ("ASI", "KNE", "ANK", "HEE"):
+        for role in REQUIRED:
             lbl = mk.find(role, s)
-            if lbl is None:
-                raise C3DError(f"{name}: required marker {s}{role} not found (looked for "
-                               f"{', '.join(_alias_names(role, s))})")
-            out.append(lbl)
+            (out.append(lbl) if lbl else missing.append(role_key(role, s)))
         toe = mk.find("TOE", s)
         if toe is None:
             mt = [mk.find("MT1", s), mk.find("MT5", s)]
-            if not all(mt):
-                raise C3DError(f"{name}: required marker {s}TOE not found (looked for "
-                               f"{', '.join(_alias_names('TOE', s))}, or {s}MT1 and {s}MT5)")
-            out += [m for m in mt if m]
+            if all(mt):
+                out += [m for m in mt if m]
+            else:
+                missing.append(role_key("TOE", s))
         else:
             out.append(toe)
     psi = [mk.find("PSI", s) for s in ("R", "L")]
@@ -97,7 +307,7 @@ def _required_lower(mk: _Markers, name: str) -> list[str]:
     elif mk.find("SACR") is not None:
         out.append(mk.find("SACR"))  # type: ignore[arg-type]
     else:
-        raise C3DError(f"{name}: required markers RPSI and LPSI (or SACR) not found")
+        missing += [role_key("PSI", s) for s, p in zip("RL", psi) if p is None] + ["SACR"]
+    if missing:
+        raise C3DError(mk.missing_message(missing))
     return out
-
-

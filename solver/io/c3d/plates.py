@@ -293,6 +293,7 @@ def _plate_signals(raw: _Raw, specs: Sequence[PlateSpec], R: np.ndarray, floor: 
         fz = F[2]
         with np.errstate(invalid="ignore", divide="ignore"):
             x, y = -M[1] / fz, M[0] / fz
+        x, y = np.where(np.isfinite(x), x, 0.0), np.where(np.isfinite(y), y, 0.0)  # unloaded: NaN below
         tz = M[2] - (x * F[1] - y * F[0])
         F_lab = Rp @ F
         vert = up_lab @ F_lab

@@ -5,20 +5,23 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 
 from solver.capture import Capture, GroundFrame
 from solver.io.c3d.axes import _axes_text, _detect_axes
-from solver.io.c3d.events import _feet_and_plates, _mass_from_plates
+from solver.io.c3d.events import _feet_and_plates, _mass_from_plates, _mass_from_stances
 from solver.io.c3d.landmarks import _height_estimate, _landmarks
-from solver.io.c3d.markers import _alias_names, _Markers, _required_lower
+from solver.io.c3d.markers import _Markers, parse_mapping, required_markers
 from solver.io.c3d.plates import PlateSignal, _plate_signals, _plate_specs
 from solver.io.c3d.reader import FEET, C3DError, G, _mid, _param, _read_raw, _strings, _subject_params, fill_gaps
 from solver.io.track import SkeletonTrack
 
 log = logging.getLogger("solver.io.c3d")
+
+#: relative difference between the subject mass and the mass the plates imply above which a warning is logged
+MASS_MISMATCH = 0.05
 
 
 # ----------------------------------------------------------------------------------------
@@ -34,15 +37,20 @@ class C3DTrial:
 
 
 def read_c3d_trial(path: str | Path, *, mass: float | None = None, require_plates: bool = True,
-                   max_gap_s: float = 0.1, fz_threshold: float = 20.0) -> C3DTrial:
-    """Read a C3D trial: see the module docstring. ``max_gap_s``: longest marker gap filled."""
+                   max_gap_s: float = 0.1, fz_threshold: float = 20.0,
+                   markers: str | Path | Mapping[str, str] | None = None) -> C3DTrial:
+    """Read a C3D trial: see the module docstring. ``max_gap_s``: longest marker gap filled;
+    ``markers``: a mapping from Plug-in Gait roles to the file's labels (a dict, ``"LASI=a,RASI=b"``
+    or a mapping file; :func:`solver.io.c3d.markers.parse_mapping`) for marker sets the reader
+    does not recognise."""
     path = Path(path)
     raw = _read_raw(path)
     name = path.name
     T_all = raw.points.shape[2]
     if T_all < 10:
         raise C3DError(f"{name}: only {T_all} marker frames")
-    mk = _Markers(raw)
+    mk = _Markers(raw, parse_mapping(markers))
+    required = required_markers(mk)
     sp = _subject_params(raw.params)
     specs = _plate_specs(raw)
     if not specs and require_plates:
@@ -54,15 +62,11 @@ def read_c3d_trial(path: str | Path, *, mass: float | None = None, require_plate
         pair = [mk.find(role, s) for s in ("R", "L")]
         if all(pair):
             roles[role] = _mid(mk.get(pair[0]), mk.get(pair[1]))
-    if "ASI" not in roles:
-        raise C3DError(f"{name}: required markers RASI and LASI not found (looked for "
-                       f"{', '.join(_alias_names('ASI', 'R') + _alias_names('ASI', 'L'))})")
     if "PSI" not in roles and mk.find("SACR") is not None:
         roles["PSI"] = mk.get(mk.find("SACR"))  # type: ignore[arg-type]
     R, floor, axes_info = _detect_axes(raw, mk, specs, roles)
     # frames where every required lower-body marker is seen (after short-gap filling)
     max_gap = max(int(round(max_gap_s * raw.point_rate)), 1)
-    required = _required_lower(mk, name)
     good = np.ones(T_all, dtype=bool)
     for lbl in required:
         x, gaps = fill_gaps(mk.get(lbl), max_gap)
@@ -84,7 +88,7 @@ def read_c3d_trial(path: str | Path, *, mass: float | None = None, require_plate
     times = np.arange(first, last) / raw.point_rate
     # height estimate (only for defaults when the file has none)
     height_est = _height_estimate(mk, R, floor, sp)
-    built = _landmarks(mk, R, floor, sp, height_est, frames, max_gap, name)
+    built = _landmarks(mk, R, floor, sp, height_est, frames, max_gap, name, raw.point_rate)
     lm = built.landmarks
     frame = GroundFrame(R=R.T, offset=R[2] * floor, unit_m=raw.unit_m,
                         axes=_axes_text(R))
@@ -92,6 +96,7 @@ def read_c3d_trial(path: str | Path, *, mass: float | None = None, require_plate
         "format": "c3d", "path": str(path), "first_frame": raw.first_frame + first,
         "point_rate": raw.point_rate, "analog_rate": raw.analog_rate, "point_unit_m": raw.unit_m,
         "frames_kept": (first, last), "axes": axes_info, "floor_m": floor, "markers": built.markers_used,
+        "marker_set": mk.marker_set, "upper_body": built.upper_body,
         "notes": built.notes, "height_estimate_m": height_est,
         "manufacturer": _strings(_param(raw.params, "MANUFACTURER", "COMPANY"))[:1],
     }
@@ -108,20 +113,34 @@ def read_c3d_trial(path: str | Path, *, mass: float | None = None, require_plate
         source["gait_events"] = feet.events
         if not any(p[2] in FEET for s in plates for p in s.periods):
             log.warning("%s: no foot lands on a force plate", name)
-    # subject mass: argument, file, plates over a complete stride
+    # subject mass: argument, file, plates (a complete stride, else one whole stance of each foot)
+    implied = None
+    if measured is not None:
+        m_pl = _mass_from_plates(measured, contacts, times)
+        if m_pl is not None:
+            implied = (m_pl, "plates (mean vertical force over a stride / g)")
+        else:
+            implied = _mass_from_stances(plates, feet.periods, feet.events, times)
     if mass is not None:
         m, how = float(mass), "argument"
     elif sp.mass is not None:
         m, how = sp.mass, "file"
+    elif implied is not None:
+        m, how = implied
     else:
-        m_pl = _mass_from_plates(measured, contacts, times) if measured is not None else None
-        if m_pl is None:
-            raise C3DError(f"{name}: subject mass unknown: the file has no PROCESSING:Bodymass and the plates "
-                           "never measure a complete stride; pass mass=...")
-        m, how = m_pl, "plates (mean vertical force over a stride / g)"
+        raise C3DError(f"{name}: subject mass unknown: the file has no PROCESSING:Bodymass and the plates "
+                       "measure neither a complete stride nor one whole stance of each foot; pass mass=... "
+                       "(CLI: --mass KG)")
     if not 5.0 <= m <= 400.0:
         raise C3DError(f"{name}: implausible subject mass {m:g} kg")
     source["mass_from"] = how
+    if implied is not None:
+        source["mass_implied_kg"] = round(float(implied[0]), 2)
+        source["mass_implied_from"] = implied[1]
+        if abs(m - implied[0]) > MASS_MISMATCH * implied[0]:
+            log.warning("%s: subject mass %.1f kg (%s) differs by %.0f %% from the %.1f kg the plates imply; the "
+                        "vertical force estimate scales with the mass (pass mass=... / --mass to choose)",
+                        name, m, how, 100 * (m / implied[0] - 1), implied[0])
     if measured is not None:
         peak = float(np.max(measured.force[:, 2].sum(axis=0)))
         if not 0.5 * m * G < peak < 5.0 * m * G:
@@ -135,19 +154,21 @@ def read_c3d_trial(path: str | Path, *, mass: float | None = None, require_plate
 
 
 def read_c3d(path: str | Path, *, mass: float | None = None, require_plates: bool = True,
-             max_gap_s: float = 0.1, fz_threshold: float = 20.0) -> SkeletonTrack:
+             max_gap_s: float = 0.1, fz_threshold: float = 20.0,
+             markers: str | Path | Mapping[str, str] | None = None) -> SkeletonTrack:
     """Landmarks, measured ground reactions and contacts of a C3D trial, in our frame."""
     return read_c3d_trial(path, mass=mass, require_plates=require_plates, max_gap_s=max_gap_s,
-                          fz_threshold=fz_threshold).track
+                          fz_threshold=fz_threshold, markers=markers).track
 
 
 def load_c3d(path: str | Path, *, mass: float | None = None, require_plates: bool = True,
-             max_gap_s: float = 0.1, fz_threshold: float = 20.0, **fit_options: Any) -> Capture:
+             max_gap_s: float = 0.1, fz_threshold: float = 20.0,
+             markers: str | Path | Mapping[str, str] | None = None, **fit_options: Any) -> Capture:
     """The capture of a C3D trial: ``fit_track(read_c3d(path, ...), **fit_options)``
     (``fit_options``: e.g. ``lower_only``, ``orientation_weight``; see ``solver.io.fit``)."""
     from solver.io.fit import fit_track
 
     track = read_c3d(path, mass=mass, require_plates=require_plates, max_gap_s=max_gap_s,
-                     fz_threshold=fz_threshold)
+                     fz_threshold=fz_threshold, markers=markers)
     return fit_track(track, **fit_options)
 
