@@ -17,7 +17,14 @@ compared frames when there is no double support). Components: force along our wo
 (x forward, y left, z up), free moment, and CoP distance (compared only where both the
 measured and the estimated vertical force exceed ``cop_min_load`` of the peak measured
 vertical force: a CoP is undefined under no load and meaningless under a small one).
-Samples of both feet are pooled, over the frames where the measured reaction is complete.
+Samples of both feet are pooled, over the frames where the measured reaction is complete;
+:func:`per_foot` gives the same metrics foot by foot. :func:`feet_on_plates` is the
+geometric check that a loaded foot stands on a plate (a C3D's plate outlines and foot
+landmarks), so a frame where a foot carries load off the plates is never compared.
+
+The estimate's free moment is not reported (:func:`from_estimate` leaves it NaN, the CSV's
+``tz`` is ``nan``): on every shared trial with plates its error exceeds that of predicting
+zero (docs/grf.md); ``free_moment=True`` keeps it for analysis.
 """
 
 from __future__ import annotations
@@ -32,6 +39,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from solver.capture import GroundFrame
+from solver.io.c3d.events import feet_on_plates  # noqa: F401  (the check grf-compare applies)
 
 FEET = ("right", "left")
 CSV_COLUMNS = ("time", "side", "fx", "fy", "fz", "cop_x", "cop_y", "cop_z", "tz")
@@ -164,8 +172,8 @@ def read_csv(path: str | Path) -> GroundReactions:
             raise GRFFileError(f"{p}:{lineno}: malformed row {row!r}") from None
         if side not in FEET:
             raise GRFFileError(f"{p}:{lineno}: side must be 'right' or 'left', got {side!r}")
-        if not all(math.isfinite(v) for v in vals[:3] + vals[-1:]):
-            raise GRFFileError(f"{p}:{lineno}: force and free moment must be finite")
+        if not all(math.isfinite(v) for v in vals[:3]):
+            raise GRFFileError(f"{p}:{lineno}: force must be finite")
         if side in data.setdefault(t, {}):
             raise GRFFileError(f"{p}:{lineno}: duplicate row for time {t} and side {side}")
         data[t][side] = vals
@@ -233,6 +241,7 @@ def compare(
     length_unit_m: float = 1.0,
     vertical: int = 2,
     cop_min_load: float = COP_MIN_LOAD,
+    feet: Sequence[int] = (0, 1),
 ) -> tuple[Comparison, Comparison | None]:
     """Table 4.1 metrics over all compared frames, and over the double-support ones.
 
@@ -240,7 +249,7 @@ def compare(
     frame's axes; ``vertical`` is the index of its vertical axis). Frames compared: valid in
     both. ``double_support`` (T,) marks double-support frames (for the relative-RMS
     amplitudes and the second table); by default, frames where both measured vertical forces
-    exceed ``cop_min_load`` of the peak.
+    exceed ``cop_min_load`` of the peak. ``feet``: whose samples are pooled (0 right, 1 left).
     """
     if estimate.T != measured.T or not np.allclose(estimate.times, measured.times, atol=1e-6):
         raise ValueError("estimate and measurement must share their time grid (resample first)")
@@ -256,21 +265,23 @@ def compare(
     ds = np.asarray(double_support, dtype=bool) & both
     amp_frames = ds if ds.any() else both
 
+    fs = list(feet)
+    ef, mf = estimate.force[fs], measured.force[fs]
+    et, mt = estimate.free_moment[fs], measured.free_moment[fs]
+
     def table(frames: np.ndarray, label: str) -> Comparison:
         rows = []
         axes = [i for i in range(3) if i != vertical]
         names = {axes[0]: "fx", axes[1]: "fy", vertical: "fz"}
         for k in range(3):
-            e, m = estimate.force[:, k][:, frames], measured.force[:, k][:, frames]
-            rms, mx, rel, n = _stats(e - m, measured.force[:, k][:, amp_frames], estimate.force[:, k][:, amp_frames])
+            e, m = ef[:, k][:, frames], mf[:, k][:, frames]
+            rms, mx, rel, n = _stats(e - m, mf[:, k][:, amp_frames], ef[:, k][:, amp_frames])
             rows.append(Row(names[k], "N", rms, mx, rel, n))
         rows.sort(key=lambda r: r.component)
-        e, m = estimate.free_moment[:, frames], measured.free_moment[:, frames]
-        rows.append(Row("tz", "N·m", *_stats(e - m, measured.free_moment[:, amp_frames],
-                                             estimate.free_moment[:, amp_frames])))
-        loaded = (fz_m[:, frames] > thr) & (fz_e[:, frames] > thr)
-        d = np.linalg.norm(estimate.cop[:, :, frames] - measured.cop[:, :, frames], axis=1) * length_unit_m * 100.0
-        d = np.where(loaded, d, np.nan)
+        rows.append(Row("tz", "N·m", *_stats(et[:, frames] - mt[:, frames], mt[:, amp_frames], et[:, amp_frames])))
+        loaded = (fz_m[fs][:, frames] > thr) & (fz_e[fs][:, frames] > thr)
+        d = np.linalg.norm(estimate.cop[fs][:, :, frames] - measured.cop[fs][:, :, frames], axis=1)
+        d = np.where(loaded, d * length_unit_m * 100.0, np.nan)
         rms, mx, _, n = _stats(d, np.array([]), np.array([]))
         rows.append(Row("cop", "cm", rms, mx, math.nan, n))
         return Comparison(label, tuple(rows), int(frames.sum()))
@@ -282,6 +293,10 @@ def format_table(comp: Comparison) -> str:
     lines = [f"frames: {comp.frames} ({comp.n_frames})",
              f"{'component':<10} {'unit':<5} {'RMS':>9} {'max':>9} {'rel. RMS':>9} {'samples':>8}"]
     for r in comp.rows:
+        if r.samples == 0:
+            what = "not estimated (docs/grf.md)" if r.component == "tz" else "–"
+            lines.append(f"{r.component:<10} {r.unit:<5} {what:>29} {0:>8}")
+            continue
         rel = "–" if not math.isfinite(r.rel_rms) else f"{100 * r.rel_rms:.1f} %"
         lines.append(f"{r.component:<10} {r.unit:<5} {r.rms:>9.2f} {r.max:>9.2f} {rel:>9} {r.samples:>8}")
     return "\n".join(lines)
@@ -336,13 +351,31 @@ def plot(
     plt.close(fig)
 
 
-def from_estimate(estimate: Any, times: np.ndarray) -> GroundReactions:
-    """A :class:`~solver.contact.ContactEstimate` as :class:`GroundReactions` (our frame, SI)."""
-    return GroundReactions(np.asarray(times, dtype=float), estimate.force, estimate.cop, estimate.free_moment,
-                           estimate.defined)
+def from_estimate(estimate: Any, times: np.ndarray, *, free_moment: bool = False) -> GroundReactions:
+    """A :class:`~solver.contact.ContactEstimate` as :class:`GroundReactions` (our frame, SI); the free
+    moment NaN (not reported, see the module doc) unless ``free_moment``."""
+    tz = estimate.free_moment if free_moment else np.full(estimate.free_moment.shape, np.nan)
+    return GroundReactions(np.asarray(times, dtype=float), estimate.force, estimate.cop, tz, estimate.defined)
 
 
 def from_measured(measured: Any, times: np.ndarray) -> GroundReactions:
     """A :class:`~solver.capture.MeasuredGRF` (our frame, on the capture's times) as :class:`GroundReactions`."""
     return GroundReactions(np.asarray(times, dtype=float), measured.force, measured.cop, measured.free_moment,
                            measured.valid)
+
+
+def plates_complete(estimate: GroundReactions, measured: GroundReactions, on_plates: np.ndarray,
+                    threshold: float = 20.0, vertical: int = 2) -> np.ndarray:
+    """(T,) frames where every foot that carries load — by the plates or by the estimate (> ``threshold``
+    N) — stands on a plate (``on_plates`` (2, T), :func:`feet_on_plates`): only there do the plates
+    measure the whole ground reaction the estimate is compared with."""
+    loaded = (np.nan_to_num(measured.force[:, vertical]) > threshold) | (np.nan_to_num(estimate.force[:, vertical])
+                                                                          > threshold)
+    return np.all(~loaded | np.asarray(on_plates, dtype=bool), axis=0)
+
+
+def per_foot(estimate: GroundReactions, measured: GroundReactions, **options: Any
+             ) -> dict[str, tuple[Comparison, Comparison | None]]:
+    """:func:`compare` foot by foot: {"right": (all frames, double support), "left": ...}, each over that
+    foot's samples only (amplitudes too); double support as in :func:`compare` (both feet loaded)."""
+    return {side: compare(estimate, measured, feet=(s,), **options) for s, side in enumerate(FEET)}

@@ -15,7 +15,7 @@ from solver.contact import (
     estimate_contact_wrenches,
     foot_schedule,
 )
-from solver.contact.common import _derivatives
+from solver.contact.common import COP_MIN_FZ, _derivatives
 from solver.contact.geometry import _dense_pose, _screws, _skew
 from solver.contact.qp import _qp_batch
 from solver.dynamics import rnea
@@ -142,7 +142,7 @@ def test_cop_and_free_moment_describe_the_same_wrench(sway):
     q, fps, fc, est = sway
     ok = est.defined
     for s in range(2):
-        loaded = ok & (est.wrenches[s][5] > 1.0)
+        loaded = ok & (est.wrenches[s][5] > COP_MIN_FZ)
         f = est.force[s][:, loaded]
         p = est.cop[s][:, loaded]
         m = np.cross(p.T, f.T).T

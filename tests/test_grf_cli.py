@@ -29,14 +29,17 @@ def per_foot(rows: list[dict], col: str) -> dict[str, np.ndarray]:
     return {s: np.array([float(r[col]) for r in rows if r["side"] == s]) for s in ("right", "left")}
 
 
-def check_contract(path: Path) -> list[dict]:
+def check_contract(path: Path, vertical: str = "fz") -> list[dict]:
     header, rows = read_rows(path)
     assert header == COLUMNS
     times = [r["time"] for r in rows]
     assert len(rows) == 2 * len(set(times))  # both feet at every frame, right then left
     assert [r["side"] for r in rows[:4]] == ["right", "left", "right", "left"]
     for r in rows:
-        assert all(np.isfinite(float(r[c])) for c in ("time", "fx", "fy", "fz", "tz"))
+        assert all(np.isfinite(float(r[c])) for c in ("time", "fx", "fy", "fz"))
+        assert r["tz"] == "nan"  # the free moment is not reported (no skill: docs/grf.md)
+        if float(r[vertical]) < 10.0:  # no centre of pressure under a few newtons
+            assert r["cop_x"] == r["cop_y"] == r["cop_z"] == "nan"
     return rows
 
 
@@ -55,7 +58,7 @@ def test_treadmill_estimate_is_written_in_opensim_axes_and_compares_with_the_pla
     assert info["contacts_from"] == "plates" and info["rows"] == 2 * 209
     # defaults: temporal prior at the kinematics' cut-off, single-support CoPs kept in the feet
     assert info["smoothing_hz"] == info["cutoff_hz"] == 6.0 and info["status_projected"] > 0
-    rows = check_contract(out)
+    rows = check_contract(out, vertical="fy")  # OpenSim ground: Y up
     t = np.array(sorted({float(r["time"]) for r in rows}))
     assert t[0] == pytest.approx(0.5 + 1 / 60, abs=1e-4) and t[-1] == pytest.approx(4.0 - 1 / 60, abs=1e-4)
     # OpenSim ground: Y is up. Total vertical force ~ body weight on average (72.6 kg).
@@ -101,10 +104,61 @@ def test_c3d_estimate_is_in_the_lab_frame_in_millimetres(tmp_path, shared_data):
     assert np.allclose(cz[np.isfinite(cz)], 0.0, atol=1e-6)
     cx = np.concatenate(list(per_foot(rows, "cop_x").values()))
     assert np.nanmax(cx) - np.nanmin(cx) > 2000
-    r = motionx("grf-compare", "--estimate", out, "--c3d", c3d)
+    r = motionx("grf-compare", "--estimate", out, "--c3d", c3d, "--json", tmp_path / "cmp.json")
     assert r.returncode == 0, r.stderr
     cop_rms = float(next(line for line in r.stdout.splitlines() if line.startswith("cop ")).split()[2])
     assert cop_rms < 4.8  # cm, tests/test_contact.py ACCURACY
+    assert "tz" in r.stdout and "not estimated" in r.stdout
+    cmp = json.loads((tmp_path / "cmp.json").read_text())
+    assert set(cmp["per_foot"]) == {"right", "left"} and cmp["per_foot"]["left"]["all"]["rows"]["fz"]["samples"] > 0
+    # only frames with every loaded foot on a plate are compared: the reader's valid mask already leaves out
+    # the right heel behind FP1's rear edge (test_io_c3d), nothing else stands off the plates
+    assert cmp["frames_off_plates"] == 0 and cmp["all"]["n_frames"] == 70
+
+
+def test_c3d_from_another_lab_runs_through_grf_grf_compare_and_tutor(tmp_path, shared_data):
+    """The Qualisys trial (ISB/IOR marker names, no mass in the file) through every command."""
+    c3d = shared_data / "qualisys_ior_walk" / "Qualisys.c3d"
+    out = tmp_path / "est.csv"
+    r = motionx("grf", "--c3d", c3d, "--out", out)
+    assert r.returncode == 0, r.stderr
+    info = json.loads(r.stdout)
+    assert info["marker_set"] == "IOR / ISB anatomical" and info["mass_kg"] == pytest.approx(66.0, rel=0.04)
+    assert "whole stance of each foot" in info["mass_from"]
+    assert info["mass_implied_kg"] == pytest.approx(info["mass_kg"], abs=0.01)
+    assert "support_flight" not in info  # a walk: a foot on the ground at every frame
+    assert [len(info["stances"][f]) for f in ("right", "left")] == [3, 2]
+    check_contract(out)
+    r = motionx("grf-compare", "--estimate", out, "--c3d", c3d, "--json", tmp_path / "cmp.json")
+    assert r.returncode == 0, r.stderr
+    cmp = json.loads((tmp_path / "cmp.json").read_text())
+    assert cmp["all"]["n_frames"] >= 160 and cmp["double_support"]["n_frames"] >= 10
+    tut = tmp_path / "tutor.json"
+    r = motionx("tutor", c3d, "--character", "halfboy", "--fps", "15", "--out", tut)
+    assert r.returncode == 0, r.stderr + r.stdout
+    assert json.loads(r.stdout)["status"] == "succeeded"
+
+
+def test_unknown_marker_set_error_says_how_to_map(tmp_path, shared_data):
+    ezc3d = pytest.importorskip("ezc3d")
+    c = ezc3d.c3d(str(shared_data / "qualisys_ior_walk" / "Qualisys.c3d"))
+    labels = [s.strip() for s in c["parameters"]["POINT"]["LABELS"]["value"]]
+    c["parameters"]["POINT"]["LABELS"]["value"] = [f"M{i:02d}" if s in ("L_IAS", "R_IAS") else s
+                                                   for i, s in enumerate(labels)]
+    bad = tmp_path / "renamed.c3d"
+    c.write(str(bad))
+    r = motionx("grf", "--c3d", bad, "--out", tmp_path / "est.csv")
+    assert r.returncode == 2 and "LASI" in r.stderr and "RASI" in r.stderr and "--markers" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+    pair = f"LASI=M{labels.index('L_IAS'):02d},RASI=M{labels.index('R_IAS'):02d}"
+    r = motionx("grf", "--c3d", bad, "--markers", pair,
+                "--out", tmp_path / "est.csv")
+    assert r.returncode == 0, r.stderr
+    mapping = tmp_path / "map.txt"
+    mapping.write_text(f"LASI = M{labels.index('L_IAS'):02d}\nRASI = M{labels.index('R_IAS'):02d}\n")
+    r = motionx("grf", "--c3d", bad, "--markers", mapping, "--out", tmp_path / "est2.csv")
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "est.csv").read_text() == (tmp_path / "est2.csv").read_text()
 
 
 def test_thesis_form_through_the_cli(tmp_path, shared_data):

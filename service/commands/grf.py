@@ -29,14 +29,13 @@ def _user_errors() -> tuple[type[Exception], ...]:
     """Exceptions that describe bad input (their message is the user-facing error)."""
     from solver.contact import ContactError
     from solver.grf_compare import GRFFileError
+    from solver.io import TrialError
+    from solver.io.bvh import BvhError
     from solver.io.c3d import C3DError
+    from solver.io.deepmimic import DeepMimicError
     from solver.io.fit import FitError
     from solver.io.opensim import OpenSimError
     from solver.io.preprocess import PreprocessError
-
-    from solver.io import TrialError
-    from solver.io.bvh import BvhError
-    from solver.io.deepmimic import DeepMimicError
 
     return (ContactError, GRFFileError, C3DError, FitError, OpenSimError, PreprocessError, TrialError, BvhError,
             DeepMimicError)
@@ -74,7 +73,9 @@ def _load(args: argparse.Namespace):
         _exists(args.c3d, "--c3d")
         from solver.io.c3d import load_c3d
 
-        return load_c3d(args.c3d, mass=args.mass)
+        return load_c3d(args.c3d, mass=args.mass, markers=args.markers)
+    if args.markers:
+        raise CliError("--markers goes with --c3d")
     for p in args.input:
         _exists(p, "--input")
     from solver.io import load_trial
@@ -83,7 +84,7 @@ def _load(args: argparse.Namespace):
 
 
 def cmd_grf(args: argparse.Namespace) -> int:
-    from solver.contact import estimate_capture
+    from solver.contact import estimate_capture, foot_schedule
     from solver.grf_compare import from_estimate, to_input_frame, write_csv
 
     errors = _user_errors()
@@ -112,13 +113,28 @@ def cmd_grf(args: argparse.Namespace) -> int:
     except OSError as e:
         raise CliError(f"cannot write {args.out}: {e.strerror or e}") from None
     summary = {k: v for k, v in est.summary().items() if v not in (0, None)}
+    src = cap.source or {}
+    extra = {k: src[k] for k in ("mass_from", "mass_implied_kg", "marker_set", "upper_body") if k in src}
+    if isinstance(extra.get("marker_set"), dict):
+        extra["marker_set"] = extra["marker_set"].get("name")
+    feet = foot_schedule(tr.contacts, cap.character)
     print(json.dumps({
         "out": args.out, "rows": rows, "character": cap.character.name, "mass_kg": round(cap.character.total_mass, 3),
-        "fps": round(cap.fps, 6), "frame": cap.frame.axes, "length_unit_m": cap.frame.unit_m,
-        "contacts_from": tr.contacts_from, "cutoff_hz": tr.cutoff_hz, **summary,
+        **extra, "fps": round(cap.fps, 6), "frame": cap.frame.axes, "length_unit_m": cap.frame.unit_m,
+        "contacts_from": tr.contacts_from, "stances": _stances(feet, tr.times), "cutoff_hz": tr.cutoff_hz, **summary,
+        "free_moment": "not reported (tz = nan): its error exceeds predicting zero on every trial with plates "
+                       "(docs/grf.md)",
         "import_s": round(t1 - t0, 3), "estimate_s": round(t2 - t1, 4),
     }))
     return 0
+
+
+def _stances(feet: np.ndarray, times: np.ndarray) -> dict[str, list[list[float]]]:
+    """Each foot's stances [start, end] (s) in the contact schedule used."""
+    from solver.io.c3d.reader import _runs
+
+    return {side: [[round(float(times[a]), 3), round(float(times[b - 1]), 3)] for a, b in _runs(feet[i])]
+            for i, side in enumerate(("right", "left"))}
 
 
 # --- grf-compare -------------------------------------------------------------------------------
@@ -126,7 +142,18 @@ def cmd_grf(args: argparse.Namespace) -> int:
 
 def cmd_grf_compare(args: argparse.Namespace) -> int:
     from solver.capture import GroundFrame
-    from solver.grf_compare import compare, format_table, from_input_frame, from_measured, plot, read_csv
+    from solver.grf_compare import (
+        GroundReactions,
+        compare,
+        feet_on_plates,
+        format_table,
+        from_input_frame,
+        from_measured,
+        per_foot,
+        plates_complete,
+        plot,
+        read_csv,
+    )
 
     errors = _user_errors()
     if bool(args.grf) == bool(args.c3d):
@@ -134,6 +161,7 @@ def cmd_grf_compare(args: argparse.Namespace) -> int:
     if args.external_loads and not args.grf:
         raise CliError("--external-loads goes with --grf")
     _exists(args.estimate, "--estimate")
+    off_plates = 0
     try:
         est_in = read_csv(args.estimate)
         times = est_in.times
@@ -150,33 +178,56 @@ def cmd_grf_compare(args: argparse.Namespace) -> int:
                                                   contacts=contacts), times)
         else:
             _exists(args.c3d, "--c3d")
-            from solver.io.c3d import read_c3d
+            from solver.io.c3d import read_c3d_trial
 
-            track = read_c3d(args.c3d, mass=args.mass)
+            trial = read_c3d_trial(args.c3d, mass=args.mass, markers=args.markers)
+            track = trial.track
             if track.measured is None:
                 raise CliError(f"{args.c3d}: no force plates to compare with")
             est = from_input_frame(est_in, track.frame)
             meas = from_measured(track.measured, track.times).resample(times)
+            # a frame counts only when every loaded foot (plates or estimate) stands on a plate
+            lm = {k: np.stack([np.interp(times, track.times, x) for x in track.landmarks[k]])
+                  for k in ("heel_r", "mtp_r", "toe_r", "heel_l", "mtp_l", "toe_l")}
+            on = feet_on_plates(lm, [p.corners for p in trial.plates])
+            ok = plates_complete(est, meas, on)
+            off_plates = int(np.sum(meas.valid & est.valid & ~ok))
+            meas = GroundReactions(meas.times, meas.force, meas.cop, meas.free_moment, meas.valid & ok)
     except errors as e:
         raise CliError(str(e)) from None
     # both in our axes (x forward, y left, z up), SI: CoPs in metres
     try:
         all_frames, ds = compare(est, meas)
+        feet = per_foot(est, meas)
     except ValueError as e:
         raise CliError(str(e)) from None
+    if off_plates:
+        print(f"{off_plates} frames left out: a loaded foot stands off the plates")
     print(format_table(all_frames))
     if ds is not None:
         print()
         print(format_table(ds))
+    print()
+    print("per foot (all frames): " + "; ".join(
+        f"{side} " + ", ".join(_cell(a.row(c)) for c in ("fx", "fy", "fz", "cop")) for side, (a, _) in feet.items()))
     if args.json:
-        Path(args.json).write_text(json.dumps({"all": all_frames.as_dict(), "double_support": ds and ds.as_dict()},
-                                              indent=2, allow_nan=True))
+        Path(args.json).write_text(json.dumps({
+            "all": all_frames.as_dict(), "double_support": ds and ds.as_dict(), "frames_off_plates": off_plates,
+            "per_foot": {side: {"all": a.as_dict(), "double_support": d and d.as_dict()}
+                         for side, (a, d) in feet.items()},
+        }, indent=2, allow_nan=True))
     if args.plot:
         both = est.valid & meas.valid
         thr = 0.05 * float(np.nanmax(np.where(both, meas.force[:, 2].sum(0), np.nan)))
         plot(args.plot, est, meas, axis_names=("x (forward)", "y (left)", "z (up)"), length_unit="m",
              double_support=np.all(meas.force[:, 2] > thr, axis=0), title=Path(args.estimate).name)
     return 0
+
+
+def _cell(row) -> str:
+    if row.component == "cop":
+        return f"cop {row.rms:.2f} cm"
+    return f"{row.component} {100 * row.rel_rms:.1f} %"
 
 
 def _contacts_of(gr) -> np.ndarray:
@@ -196,6 +247,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--input", nargs="+", metavar="FILE", help="any trial solver.io.load_trial reads "
                    "(DeepMimic motion + character, BVH, ...)")
     s.add_argument("--mass", type=float, default=None, help="subject mass in kg (default: from the input)")
+    s.add_argument("--markers", metavar="MAP", default=None,
+                   help="C3D marker mapping for unrecognised marker sets: ROLE=label,... (Plug-in Gait roles, e.g. "
+                        "LASI=L_IAS,RASI=R_IAS) or a file with one ROLE=label per line (docs/c3d.md)")
     s.add_argument("--belt-speed", default=None, metavar="auto|V",
                    help="treadmill belt speed (m/s) or 'auto' (OpenSim): kinematics made overground-equivalent")
     s.add_argument("--grf", metavar="GRF.mot", help="OpenSim force-plate file: contact timing from the plates "
@@ -225,6 +279,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--external-loads", metavar="X.xml", help="OpenSim ExternalLoads file for --grf")
     s.add_argument("--c3d", metavar="FILE.c3d", help="C3D trial with force plates")
     s.add_argument("--mass", type=float, default=None, help="subject mass (kg) for a C3D without one")
+    s.add_argument("--markers", metavar="MAP", default=None, help="C3D marker mapping (as for motionx grf)")
     s.add_argument("--plot", metavar="OUT.png", help="write estimated vs measured curves")
     s.add_argument("--json", metavar="OUT.json", help="write the metrics as JSON")
     s.set_defaults(func=cmd_grf_compare)

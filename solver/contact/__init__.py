@@ -93,6 +93,7 @@ Package layout: ``common`` (status codes, the estimate, input checks, derivative
 """
 
 from solver.contact.common import (
+    COP_MIN_FZ,
     DEFAULT_FRICTION,
     DEFAULT_PENETRATION,
     DEFAULT_REGULARIZATION,
@@ -113,6 +114,7 @@ from solver.contact.trial import (
     lowpass_kinematics,
 )
 
-__all__ = ["CONTACT_SOURCES", "DEFAULT_CUTOFF_HZ", "DEFAULT_FRICTION", "DEFAULT_PENETRATION", "DEFAULT_REGULARIZATION",
-           "METHODS", "ContactError", "ContactEstimate", "Status", "Support", "TrialEstimate", "cop_and_free_moment",
-           "estimate_capture", "estimate_contact_wrenches", "foot_schedule", "lowpass_kinematics"]
+__all__ = ["COP_MIN_FZ", "CONTACT_SOURCES", "DEFAULT_CUTOFF_HZ", "DEFAULT_FRICTION", "DEFAULT_PENETRATION",
+           "DEFAULT_REGULARIZATION", "METHODS", "ContactError", "ContactEstimate", "Status", "Support", "TrialEstimate",
+           "cop_and_free_moment", "estimate_capture", "estimate_contact_wrenches", "foot_schedule",
+           "lowpass_kinematics"]

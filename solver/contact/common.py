@@ -21,6 +21,9 @@ DEFAULT_PENETRATION = 0.01  # m, SPEC §2
 DEFAULT_FRICTION = 1.0  # SPEC Table 5.1
 DEFAULT_REGULARIZATION = 1e-6
 FEASIBILITY_TOL = 1e-9  # relative, on the constraint rows (N·m per N of load)
+#: below this vertical load (N) a foot's centre of pressure is undefined (NaN), as force-plate software
+#: reports it: a moment of 0.01 N·m over 0.003 N would put the CoP 3 m away
+COP_MIN_FZ = 10.0
 
 
 class ContactError(ValueError):
@@ -74,9 +77,12 @@ class ContactEstimate:
     ``wrenches`` (2, 6, T): feet (right, left), world frame, (moment about the world
     origin; force) — the :class:`~solver.motion.Motion` convention. ``total`` (6, T) is
     c = h0. ``support`` and ``status`` hold :class:`Support` / :class:`Status` codes per
-    frame. ``cop`` (2, 3, T) on the ground (NaN for an unloaded foot), ``free_moment``
-    (2, T) about the vertical at the CoP, ``cop_violation`` (2, T) metres outside the
-    contact polygon (0 inside; NaN where undefined).
+    frame. ``cop`` (2, 3, T) on the ground (NaN for a foot carrying less than ``COP_MIN_FZ``),
+    ``free_moment`` (2, T) about the vertical at the CoP (0 there), ``cop_violation`` (2, T)
+    metres outside the contact polygon (0 inside; NaN where undefined). The free moment is the
+    wrench's own (what the dynamics use) but not a reliable estimate of the plates' free moment:
+    on every shared trial its error exceeds that of predicting zero, so the reports leave it out
+    (docs/grf.md).
     """
 
     wrenches: np.ndarray
@@ -96,7 +102,7 @@ class ContactEstimate:
             object.__setattr__(self, name, _frozen(getattr(self, name)))
         object.__setattr__(self, "support", _frozen(self.support, np.int8))
         object.__setattr__(self, "status", _frozen(self.status, np.int8))
-        cop, tz = cop_and_free_moment(self.wrenches)
+        cop, tz = cop_and_free_moment(self.wrenches, COP_MIN_FZ)
         object.__setattr__(self, "cop", _frozen(cop))
         object.__setattr__(self, "free_moment", _frozen(tz))
 

@@ -170,6 +170,60 @@ def _stance_from_events(hs: np.ndarray, to: np.ndarray, times: np.ndarray, low: 
     return out
 
 
+#: a foot is down when its lowest landmark is this low (m) and slower than ``FOOT_DOWN_SPEED`` m/s
+FOOT_DOWN_HEIGHT = 0.03
+FOOT_DOWN_SPEED = 0.3
+#: shortest run of "foot down" frames counted as a stance the events missed
+MIN_STANCE_S = 0.1
+
+
+def _foot_down(lm: Mapping[str, np.ndarray], s: str, fps: float) -> np.ndarray:
+    """Frames where the heel or the metatarsal heads are on the floor and still (horizontal speed by
+    central differences below ``FOOT_DOWN_SPEED``): the independent check that no stance is dropped."""
+    out = np.zeros(lm[f"heel_{s}"].shape[1], dtype=bool)
+    for key in ("heel", "mtp"):
+        p = lm[f"{key}_{s}"]
+        v = np.linalg.norm(np.gradient(p[:2], 1.0 / fps, axis=1), axis=0)
+        out |= (p[2] < FOOT_DOWN_HEIGHT) & (v < FOOT_DOWN_SPEED)
+    return out
+
+
+#: a foot landmark this close to the floor (m) bears load; its contact region starts this far in front of
+#: the heel landmark (the back of the heel) and ends this far behind the toe tip
+LOW = 0.03
+HEEL_PAD, TOE_PAD = 0.02, 0.01
+
+
+def feet_on_plates(landmarks: Any, corners: Sequence[np.ndarray], margin: float = 0.01) -> np.ndarray:
+    """(2, T) bool: each foot (right, left) stands on the plates — every part of it that touches the floor
+    (heel, metatarsal heads, toe tip, when lower than ``LOW``) lies inside the union of the plate outlines
+    ``corners`` ((4, 3) each, our frame) grown by ``margin`` m. ``landmarks``: ``heel_r``, ``mtp_r``,
+    ``toe_r``, ... (3, T) in our frame. A foot in the air is trivially "on the plates"."""
+    T = np.asarray(landmarks["heel_r"]).shape[1]
+    out = np.ones((2, T), dtype=bool)
+    for i, s in enumerate("rl"):
+        heel, mtp, toe = (np.asarray(landmarks[f"{k}_{s}"], dtype=float) for k in ("heel", "mtp", "toe"))
+        fwd = toe[:2] - heel[:2]
+        fwd = fwd / np.maximum(np.linalg.norm(fwd, axis=0), 1e-9)
+        pts = [(heel[:2] + HEEL_PAD * fwd, heel[2]), (mtp[:2], mtp[2]), (toe[:2] - TOE_PAD * fwd, toe[2])]
+        for p, z in pts:
+            inside = np.zeros(T, dtype=bool)
+            for poly in corners:
+                c = np.asarray(poly)[:, :2]
+                ctr = c.mean(axis=0)
+                ok = np.ones(T, dtype=bool)
+                for k in range(len(c)):
+                    a, b = c[k], c[(k + 1) % len(c)]
+                    n = np.array([b[1] - a[1], a[0] - b[0]])
+                    n /= np.linalg.norm(n)
+                    if n @ (ctr - a) > 0:
+                        n = -n  # outward
+                    ok &= n @ (p - a[:, None]) <= margin
+                inside |= ok
+            out[i] &= inside | (z > LOW)
+    return out
+
+
 @dataclass
 class _FeetResult:
     measured: MeasuredGRF
@@ -308,6 +362,14 @@ def _feet_and_plates(signals: Sequence[PlateSignal], lm: Mapping[str, np.ndarray
         to = events[foot][1] + offsets[foot][1]
         low = np.minimum(lm[f"heel_{s}"][2], lm[f"mtp_{s}"][2])
         kin = _stance_from_events(hs, to, times, low)
+        missed = _foot_down(lm, s, fps) & ~kin
+        for a, b in _runs(missed):
+            at_end = a == 0 or b == T  # a stance cut by the trial's ends may be short
+            long_enough = (b - a) / fps >= MIN_STANCE_S or (at_end and b - a >= 2)
+            if long_enough and not kin[max(a - 1, 0):min(b + 1, T)].any():
+                log.warning("%s: %s foot down %.2f-%.2f s without gait events there: counted as stance",
+                            name, foot, times[a], times[b - 1])
+                kin[a:b] = True
         plate = loaded_plate[i]
         c = np.zeros(T, dtype=bool)
         for a, b in _runs(kin | plate):
@@ -335,8 +397,9 @@ def _feet_and_plates(signals: Sequence[PlateSignal], lm: Mapping[str, np.ndarray
         for key in ("heel", "mtp", "toe"):
             on_plate |= _inside(sig.corners, lm[f"{key}_{s_o}"], -0.01)
         shared |= fr & contact_foot[other] & on_plate & ~loaded_plate[other]
+    on_plates = feet_on_plates(lm, [s.corners for s in signals])
     for i in range(2):
-        valid &= ~contact_foot[i] | loaded_plate[i]
+        valid &= ~contact_foot[i] | (loaded_plate[i] & on_plates[i])
     valid &= ~shared & ~unassigned
     if shared.any():
         log.warning("%s: %d frames with both feet on one plate marked invalid", name, int(shared.sum()))

@@ -113,10 +113,12 @@ def _plate_specs(raw: _Raw) -> list[PlateSpec]:
             )
         k = 8 if t == 3 else 6
         if chans.shape[0] < k:
-            raise C3DError(f"{raw.path.name}: force plate {i + 1} (type {t}) needs {k} channels in FORCE_PLATFORM:CHANNEL")
+            raise C3DError(f"{raw.path.name}: force plate {i + 1} (type {t}) needs {k} channels in "
+                           "FORCE_PLATFORM:CHANNEL")
         ch = tuple(int(c) - 1 for c in chans[:k, i])
         if min(ch) < 0 or max(ch) >= raw.analogs.shape[0]:
-            raise C3DError(f"{raw.path.name}: force plate {i + 1} channels {[c + 1 for c in ch]} outside the analog data")
+            raise C3DError(f"{raw.path.name}: force plate {i + 1} channels {[c + 1 for c in ch]} outside the "
+                           "analog data")
         m = None
         if cal_arr is not None and cal_arr.ndim == 3 and cal_arr.shape[2] > i and cal_arr.shape[0] >= k:
             m = cal_arr[:k, :k, i]
