@@ -29,7 +29,15 @@ ZERO3: Vec3 = (0.0, 0.0, 0.0)
 IDENTITY3: Mat3 = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
 
 
+_ARRAY = np.ndarray
+
+
 def _is_const(x: Scalar) -> bool:
+    t = type(x)
+    if t is float or t is int:
+        return True
+    if t is _ARRAY:
+        return False
     return isinstance(x, (int, float)) and not isinstance(x, bool)
 
 
@@ -38,6 +46,8 @@ def _is_zero(x: Scalar) -> bool:
 
 
 def add(a: Scalar, b: Scalar) -> Scalar:
+    if type(a) is _ARRAY and type(b) is _ARRAY:  # the numeric batch: nothing to fold
+        return a + b
     if _is_zero(a):
         return b
     if _is_zero(b):
@@ -46,6 +56,8 @@ def add(a: Scalar, b: Scalar) -> Scalar:
 
 
 def sub(a: Scalar, b: Scalar) -> Scalar:
+    if type(a) is _ARRAY and type(b) is _ARRAY:
+        return a - b
     if _is_zero(b):
         return a
     if _is_zero(a):
@@ -60,6 +72,8 @@ def neg(a: Scalar) -> Scalar:
 
 
 def mul(a: Scalar, b: Scalar) -> Scalar:
+    if type(a) is _ARRAY and type(b) is _ARRAY:
+        return a * b
     if _is_zero(a) or _is_zero(b):
         return 0.0
     if _is_const(a):

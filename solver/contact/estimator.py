@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from typing import Any, Sequence
@@ -22,8 +23,9 @@ from solver.contact.common import (
     _check_schedule,
     _derivatives,
 )
+from solver.contact.correction import centre_of_mass, correct_double, correct_single, foot_rows
 from solver.contact.geometry import _cop_violation, _dense_pose, _project_cop
-from solver.contact.qp import _qp_batch, _solve_batch
+from solver.contact.qp import _qp_batch, _QPBatch, _solve_batch
 from solver.contact.smoothing import _smooth_split, _timeline
 from solver.dynamics import DEFAULT_GRAVITY, rnea
 from solver.motion import FEET
@@ -47,7 +49,7 @@ def estimate_contact_wrenches(
     regularization: float = DEFAULT_REGULARIZATION,
     effort_coordinates: Sequence[str] | None = None,
     smoothing_hz: float | None = None,
-    project_cop: bool = False,
+    project_cop: bool | str = False,
 ) -> ContactEstimate:
     """Ground reaction wrench of each foot at every frame, from kinematics alone.
 
@@ -56,10 +58,19 @@ def estimate_contact_wrenches(
     docstring for the method; ``method`` is ``"qp"`` (default) or ``"nested"`` (the
     thesis's reference form, slow). ``smoothing_hz`` (qp only): the temporal prior on the
     double-support split, as a cut-off frequency (None: one QP per frame, the thesis).
-    ``project_cop``: single-support CoPs outside the foot's polygon moved into it.
+    ``project_cop``: what to do with a total wrench c the feet on the ground cannot take
+    (its CoP outside the support): ``False`` the thesis (single support: the foot takes c;
+    double support: the least relaxation of the rows, status ``RELAXED``); ``True`` or
+    ``"com"`` c corrected by the least force at the centre of mass (:mod:`solver.contact.correction`,
+    single support ``PROJECTED``, double support ``RELAXED`` with its CoPs in the feet);
+    ``"cop"`` single-support CoPs moved to the nearest point of the foot (same force and free
+    moment), double support as ``False``.
     """
     if method not in METHODS:
         raise ContactError(f"unknown method {method!r}; use one of {METHODS}")
+    if project_cop not in (False, True, "com", "cop"):
+        raise ContactError(f"project_cop must be False, True, 'com' or 'cop', got {project_cop!r}")
+    mode = "com" if project_cop is True else (project_cop or None)
     if friction is not None and not (math.isfinite(friction) and friction > 0):
         raise ContactError(f"friction must be a positive number or None, got {friction!r}")
     if not (math.isfinite(penetration) and penetration >= 0):
@@ -104,18 +115,48 @@ def estimate_contact_wrenches(
     w[1][:, left] = h0[:, left]
     st[right | left] = Status.SINGLE
     ds = np.flatnonzero(sup == Support.DOUBLE)
-    pose = _dense_pose(character, qf)
+    pose = _dense_pose(character, qf, full=mode == "com")
+    c = h0  # the total each split must sum to (corrected where no split exists, mode "com")
+    if mode == "com":
+        com = centre_of_mass(character, pose)
+        c = h0.copy()
+        for s, mask in ((0, right), (1, left)):
+            k = np.flatnonzero(mask)
+            if len(k):
+                G = foot_rows(character, pose.take(k), FEET[s], penetration, friction)
+                bad = _outside(G, h0[:, k])
+                if bad.any():
+                    kb = k[bad]
+                    w[s][:, kb], moved = correct_single(h0[:, kb], com[:, kb], G[bad])
+                    c[:, kb] = w[s][:, kb]
+                    st[kb[moved]] = Status.PROJECTED
     w_right_exact = w[0].copy()  # c or 0: the boundary values of the temporal prior (dynamics-consistent)
-    if project_cop:
+    if mode == "cop":
         for s, mask in ((0, right), (1, left)):
             k = np.flatnonzero(mask)
             if len(k):
                 w[s][:, k], moved = _project_cop(w[s][:, k], character, pose.take(k), FEET[s], penetration)
                 st[k[moved]] = Status.PROJECTED
     if len(ds):
-        batch = _qp_batch(character, pose.take(ds), tau0[:, ds], h0[:, ds], friction=friction,
-                          penetration=penetration, regularization=regularization, effort=effort)
+        opts = dict(friction=friction, penetration=penetration, regularization=regularization, effort=effort)
+        pose_ds = pose.take(ds)
+        batch = _qp_batch(character, pose_ds, tau0[:, ds], c[:, ds], **opts)
         y, st_ds, rows = _solve_batch(batch, method)
+        if mode == "com" and np.any(st_ds == Status.RELAXED):
+            # no split exists: the least force at the centre of mass that makes one exist, then the split
+            j = np.flatnonzero(st_ds == Status.RELAXED)
+            pj = pose_ds.take(j)
+            cj, moved = correct_double(c[:, ds[j]], com[:, ds[j]], batch.r[j],
+                                       foot_rows(character, pj, FEET[0], penetration, friction),
+                                       foot_rows(character, pj, FEET[1], penetration, friction))
+            c[:, ds[j]] = cj
+            sub = _qp_batch(character, pose_ds.take(j), tau0[:, ds[j]], cj, **opts)
+            y_j, st_j, rows_j = _solve_batch(sub, method)
+            batch = _splice(batch, sub, j)
+            y[j] = y_j
+            for k, i in enumerate(j):
+                rows[i] = rows_j[k]
+            st_ds[j] = np.where(moved & (st_j == Status.OPTIMAL), Status.RELAXED, st_j)
         if smoothing_hz is not None:
             y = _smooth_split(batch, y, rows, ds, _timeline(character, pose, w_right_exact, cyclic),
                               float(fps) / (2.0 * math.pi * float(smoothing_hz)))
@@ -123,7 +164,7 @@ def estimate_contact_wrenches(
         y_o = y.copy()
         y_o[:, :3] += np.cross(batch.r, y[:, 3:])
         w[0][:, ds] = y_o.T
-        w[1][:, ds] = h0[:, ds] - y_o.T
+        w[1][:, ds] = c[:, ds] - y_o.T
         st[ds] = st_ds
         failed = st_ds == Status.FAILED
         if failed.any():
@@ -134,9 +175,30 @@ def estimate_contact_wrenches(
     viol[:, frames] = np.where((sup != Support.FLIGHT)[None, :], _cop_violation(w, character, pose, penetration), 0.0)
     n_rel = int(np.sum(st == Status.RELAXED))
     if n_rel:
-        log.info("contact estimation: %d of %d double-support frames infeasible, relaxed", n_rel, len(ds))
+        log.info("contact estimation: %d of %d double-support frames infeasible, %s", n_rel, len(ds),
+                 "total corrected at the centre of mass" if mode == "com" else "relaxed")
     return ContactEstimate(wrenches=wrenches, total=total, support=support, status=status,
                            cop_violation=viol, fps=float(fps), method=method, cyclic=bool(cyclic),
                            smoothing_hz=None if smoothing_hz is None else float(smoothing_hz))
 
 
+
+
+def _outside(G: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """(N,) frames whose wrench c (6, N) breaks one of its rows G (N, m, 6) (G c ≤ 0 with a relative tolerance)."""
+    tol = 1e-9 * np.maximum(np.abs(c[5]), 1.0)
+    return np.any(np.einsum("nmi,in->nm", G, c) > tol[:, None], axis=1)
+
+
+def _splice(batch: _QPBatch, sub: _QPBatch, j: np.ndarray) -> _QPBatch:
+    """``batch`` with the frames ``j`` replaced by the frames of ``sub`` (same rows per frame)."""
+    out = {}
+    for f in dataclasses.fields(batch):
+        a = getattr(batch, f.name)
+        if f.name in ("row_foot", "row_is_cop"):
+            out[f.name] = a
+            continue
+        a = np.array(a, copy=True)
+        a[j] = getattr(sub, f.name)
+        out[f.name] = a
+    return _QPBatch(**out)

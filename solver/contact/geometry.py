@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from solver.character import Character, merge_segments
-from solver.contact.common import cop_and_free_moment
+from solver.contact.common import COP_MIN_FZ, cop_and_free_moment
 from solver.kinematics import forward_kinematics
 from solver.motion import FEET
 
@@ -61,10 +61,14 @@ def _legs(character: Character) -> tuple[Character, np.ndarray]:
     return legs, kept
 
 
-def _dense_pose(character: Character, q: np.ndarray) -> _Pose:
+def _dense_pose(character: Character, q: np.ndarray, full: bool = False) -> _Pose:
     """Pose of the bodies the estimator uses (the feet and their ancestors; NaN for the others):
-    forward kinematics of the character reduced to them (the rest of the body does not move them)."""
-    legs, kept = _legs(character)
+    forward kinematics of the character reduced to them (the rest of the body does not move them);
+    ``full``: every body (the centre of mass needs them)."""
+    if full:
+        legs, kept = character, np.arange(character.n)
+    else:
+        legs, kept = _legs(character)
     pose = forward_kinematics(legs, q[kept])
     N, n = q.shape[1], character.n
     rot = np.full((N, n, 3, 3), np.nan)
@@ -166,10 +170,11 @@ def _project_cop(w: np.ndarray, character: Character, pose: _Pose, side: str,
 
 
 def _cop_violation(wrenches: np.ndarray, character: Character, pose: _Pose, penetration: float) -> np.ndarray:
-    """Metres by which each foot's CoP lies outside its contact polygon (0 inside), (2, N)."""
+    """Metres by which each foot's CoP lies outside its contact polygon (0 inside, and 0 for a foot
+    carrying less than ``COP_MIN_FZ``: its CoP is undefined), (2, N)."""
     N = pose.rot.shape[0]
     out = np.zeros((2, N))
-    cop, _ = cop_and_free_moment(wrenches)
+    cop, _ = cop_and_free_moment(wrenches, COP_MIN_FZ)
     for s, side in enumerate(FEET):
         rot, ctr, half = _foot_frames(character, pose, side)
         z_low = ctr[:, 2] - np.abs(rot[:, 2, :]) @ half
