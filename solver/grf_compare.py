@@ -242,6 +242,8 @@ def compare(
     vertical: int = 2,
     cop_min_load: float = COP_MIN_LOAD,
     feet: Sequence[int] = (0, 1),
+    single_support: list | None = None,
+    loaded_only: bool = False,
 ) -> tuple[Comparison, Comparison | None]:
     """Table 4.1 metrics over all compared frames, and over the double-support ones.
 
@@ -250,6 +252,10 @@ def compare(
     both. ``double_support`` (T,) marks double-support frames (for the relative-RMS
     amplitudes and the second table); by default, frames where both measured vertical forces
     exceed ``cop_min_load`` of the peak. ``feet``: whose samples are pooled (0 right, 1 left).
+    ``single_support``: a list that receives the table over the other compared frames (same
+    amplitudes), or None there is none. ``loaded_only``: a foot's samples count only where it carries
+    load (measured or estimated vertical force above ``cop_min_load`` of the peak; the pooled thesis
+    metric counts the swing foot's zeros too).
     """
     if estimate.T != measured.T or not np.allclose(estimate.times, measured.times, atol=1e-6):
         raise ValueError("estimate and measurement must share their time grid (resample first)")
@@ -268,6 +274,10 @@ def compare(
     fs = list(feet)
     ef, mf = estimate.force[fs], measured.force[fs]
     et, mt = estimate.free_moment[fs], measured.free_moment[fs]
+    if loaded_only:  # unloaded samples (a foot in the air by both accounts) leave the errors
+        idle = ~((fz_m[fs] > thr) | (fz_e[fs] > thr))
+        ef = np.where(idle[:, None], np.nan, ef)
+        et = np.where(idle, np.nan, et)
 
     def table(frames: np.ndarray, label: str) -> Comparison:
         rows = []
@@ -286,6 +296,9 @@ def compare(
         rows.append(Row("cop", "cm", rms, mx, math.nan, n))
         return Comparison(label, tuple(rows), int(frames.sum()))
 
+    if single_support is not None:
+        ss = both & ~ds
+        single_support.append(table(ss, "single support") if ss.any() else None)
     return table(both, "all"), (table(ds, "double support") if ds.any() else None)
 
 
@@ -375,7 +388,13 @@ def plates_complete(estimate: GroundReactions, measured: GroundReactions, on_pla
 
 
 def per_foot(estimate: GroundReactions, measured: GroundReactions, **options: Any
-             ) -> dict[str, tuple[Comparison, Comparison | None]]:
-    """:func:`compare` foot by foot: {"right": (all frames, double support), "left": ...}, each over that
-    foot's samples only (amplitudes too); double support as in :func:`compare` (both feet loaded)."""
-    return {side: compare(estimate, measured, feet=(s,), **options) for s, side in enumerate(FEET)}
+             ) -> dict[str, tuple[Comparison, Comparison | None, Comparison | None]]:
+    """:func:`compare` foot by foot: {"right": (all frames, double support, single support), "left": ...},
+    each over that foot's samples only, where it carries load (amplitudes: that foot's range over
+    double support)."""
+    out = {}
+    for s, side in enumerate(FEET):
+        ss: list = []
+        a, d = compare(estimate, measured, feet=(s,), single_support=ss, loaded_only=True, **options)
+        out[side] = (a, d, ss[0])
+    return out

@@ -209,12 +209,12 @@ def cmd_grf_compare(args: argparse.Namespace) -> int:
         print(format_table(ds))
     print()
     print("per foot (all frames): " + "; ".join(
-        f"{side} " + ", ".join(_cell(a.row(c)) for c in ("fx", "fy", "fz", "cop")) for side, (a, _) in feet.items()))
+        f"{side} " + ", ".join(_cell(a.row(c)) for c in ("fx", "fy", "fz", "cop")) for side, (a, *_) in feet.items()))
     if args.json:
         Path(args.json).write_text(json.dumps({
             "all": all_frames.as_dict(), "double_support": ds and ds.as_dict(), "frames_off_plates": off_plates,
-            "per_foot": {side: {"all": a.as_dict(), "double_support": d and d.as_dict()}
-                         for side, (a, d) in feet.items()},
+            "per_foot": {side: {"all": a.as_dict(), "double_support": d and d.as_dict(),
+                                "single_support": ss and ss.as_dict()} for side, (a, d, ss) in feet.items()},
         }, indent=2, allow_nan=True))
     if args.plot:
         both = est.valid & meas.valid

@@ -14,7 +14,7 @@ height, the centre of pressure (F_x / F_z = (x_com − x_cop) / z_com). So the c
 
 (one 3-variable QP per single-support frame, a 9-variable QP — δ and a feasible right-foot
 wrench — per double-support frame), rather than moving the CoP at a fixed force, which
-would attribute the whole error to the angular momentum. Its size is reported.
+would attribute the whole error to the angular momentum.
 """
 
 from __future__ import annotations
@@ -75,43 +75,37 @@ def com_force_matrix(com: np.ndarray) -> np.ndarray:
 
 def least_norm(B: np.ndarray, b: np.ndarray, tol: np.ndarray) -> np.ndarray:
     """argmin ‖δ‖² s.t. B δ ≤ b for a batch (B (N, m, 3), b (N, m), tol (N,)); NaN rows where no δ is
-    feasible. Exact and vectorised: the optimum is the least-norm solution of B_S δ = b_S for its
-    active set S (at most 3 independent rows in R³), so every set of 1-3 rows is tried and the
-    feasible solution of least norm kept (δ = 0 when it is feasible)."""
-    from itertools import combinations
+    feasible. δ = 0 where it is feasible. Otherwise the optimum's active set holds a row that 0 breaks
+    (b_i < 0; KKT: if every active b_i ≥ 0, ‖δ‖² = −Σ λ_i b_i ≤ 0), and when the least-norm point of
+    one such row's boundary, b_i B_i / ‖B_i‖², satisfies every row it is the optimum (every feasible
+    point satisfies row i, so lies at least that far from 0): one batched step settles most frames;
+    the others (corners: 2 or 3 active rows) are one small QP each (quadprog)."""
+    import quadprog
 
     N, m, k = B.shape
-    best = np.full((N, k), np.nan)
-    best_n = np.where(np.all(b >= -tol[:, None], axis=1), 0.0, np.inf)
-    best[np.isfinite(best_n)] = 0.0
-    todo = np.flatnonzero(~np.isfinite(best_n))
-    for size in range(1, k + 1):
-        if not len(todo):
-            break
-        S = np.array(list(combinations(range(m), size)))  # (K, size)
-        Bt, bt, tt = B[todo], b[todo], tol[todo]
-        BS = Bt[:, S]  # (n, K, size, 3)
-        M = BS @ np.swapaxes(BS, -1, -2)
-        det = np.linalg.det(M)
-        scale = np.einsum("...ii->...", M) ** size + 1e-300
-        ok = np.abs(det) > 1e-10 * scale
-        Mi = np.where(ok[..., None, None], M, np.eye(size))
-        lam = np.linalg.solve(Mi, bt[:, S][..., None])  # (n, K, size, 1)
-        d = (np.swapaxes(BS, -1, -2) @ lam)[..., 0]  # (n, K, 3)
-        feas = ok & np.all(np.einsum("nmi,nki->nkm", Bt, d) <= bt[:, None, :] + tt[:, None, None], axis=2)
-        if size == 1:  # a single active row must be one that 0 breaks (KKT: its multiplier > 0)
-            feas &= bt < -tt[:, None]
-        nrm = np.where(feas, np.sum(d * d, axis=2), np.inf)
-        j = np.argmin(nrm, axis=1)
-        cand = nrm[np.arange(len(todo)), j]
-        better = cand < best_n[todo]
-        best_n[todo[better]] = cand[better]
-        best[todo[better]] = d[np.arange(len(todo)), j][better]
-        if size == 1:
-            # a feasible point on one violated row's boundary is optimal (every feasible point satisfies
-            # that row, so it lies at least that far from 0): only the others need larger active sets
-            todo = todo[~better]
-    return best
+    out = np.full((N, k), np.nan)
+    ok0 = np.all(b >= -tol[:, None], axis=1)
+    out[ok0] = 0.0
+    todo = np.flatnonzero(~ok0)
+    if not len(todo):
+        return out
+    Bt, bt, tt = B[todo], b[todo], tol[todo]
+    g2 = np.einsum("nmi,nmi->nm", Bt, Bt)
+    d = Bt * (bt / np.where(g2 > 0, g2, np.inf))[..., None]  # (n, m, 3): each row's boundary point
+    feas = (bt < -tt[:, None]) & (g2 > 0)
+    feas &= np.all(np.einsum("nmi,nki->nkm", Bt, d) <= bt[:, None, :] + tt[:, None, None], axis=2)
+    nrm = np.where(feas, np.sum(d * d, axis=2), np.inf)
+    j = np.argmin(nrm, axis=1)
+    found = np.isfinite(nrm[np.arange(len(todo)), j])
+    out[todo[found]] = d[np.arange(len(todo)), j][found]
+    for i in todo[~found]:
+        try:
+            out[i] = quadprog.solve_qp(2.0 * np.eye(k), np.zeros(k), -B[i].T, -b[i], 0)[0]
+        except ValueError:  # infeasible: stays NaN
+            pass
+    return out
+
+
 def correct_single(c: np.ndarray, com: np.ndarray, G: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Single-support wrenches (6, N) about the origin the stance foot (rows G (N, m, 6)) cannot take,
     corrected by the least force at the centre of mass (3, N) (:func:`least_norm`). Returns
@@ -123,30 +117,24 @@ def correct_single(c: np.ndarray, com: np.ndarray, G: np.ndarray) -> tuple[np.nd
     b = -np.einsum("nmi,in->nm", G, out)
     tol = 1e-9 * np.maximum(np.abs(out[5]), 1.0)
     d = least_norm(B, b, tol)
-    for i in np.flatnonzero(~np.all(np.isfinite(d), axis=1)):  # ill-conditioned active sets: quadprog
-        import quadprog
-
-        try:
-            d[i] = quadprog.solve_qp(2.0 * np.eye(3), np.zeros(3), -B[i].T, -b[i], 0)[0]
-        except ValueError:  # no force at the centre of mass makes it feasible
-            pass
     moved = np.all(np.isfinite(d), axis=1) & (np.linalg.norm(np.nan_to_num(d), axis=1) > 0)
     out[:, moved] += np.einsum("nij,nj->in", A[moved], d[moved])
     return out, moved
 
 
 def correct_double(c: np.ndarray, com: np.ndarray, r: np.ndarray, G_r: np.ndarray, G_l: np.ndarray
-                   ) -> tuple[np.ndarray, np.ndarray]:
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Double-support totals (6, N) about the origin that no split between the feet (rows G_r, G_l
     (N, m, 6)) can take, corrected by the least force at the centre of mass: the QP in (δ, y), y the
     right foot's wrench about the frame's reference point r (N, 3) (conditioning), minimises ‖δ‖²
     (plus 1e-8 ‖y‖² for strict convexity: 1e-8 N² per N² of load) under both feet's rows. Returns
-    (totals, corrected (N,))."""
+    (totals, corrected (N,), a feasible right-foot wrench about r (N, 6), NaN where not corrected)."""
     import quadprog
 
     out = np.array(c, dtype=float, copy=True)
     N = out.shape[1]
     moved = np.zeros(N, dtype=bool)
+    y_r = np.full((N, 6), np.nan)
     A = com_force_matrix(com)
     for i in range(N):
         T = np.eye(6)  # wrench about r -> about the origin: m_O = m_r + r × f
@@ -167,7 +155,8 @@ def correct_double(c: np.ndarray, com: np.ndarray, r: np.ndarray, G_r: np.ndarra
             continue
         out[:, i] += A[i] @ d
         moved[i] = True
-    return out, moved
+        y_r[i] = sol[3:]
+    return out, moved, y_r
 
 
 __all__ = ["centre_of_mass", "com_force_matrix", "correct_double", "correct_single", "foot_rows", "least_norm"]

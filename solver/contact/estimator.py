@@ -146,17 +146,20 @@ def estimate_contact_wrenches(
             # no split exists: the least force at the centre of mass that makes one exist, then the split
             j = np.flatnonzero(st_ds == Status.RELAXED)
             pj = pose_ds.take(j)
-            cj, moved = correct_double(c[:, ds[j]], com[:, ds[j]], batch.r[j],
-                                       foot_rows(character, pj, FEET[0], penetration, friction),
-                                       foot_rows(character, pj, FEET[1], penetration, friction))
-            c[:, ds[j]] = cj
-            sub = _qp_batch(character, pose_ds.take(j), tau0[:, ds[j]], cj, **opts)
-            y_j, st_j, rows_j = _solve_batch(sub, method)
-            batch = _splice(batch, sub, j)
-            y[j] = y_j
-            for k, i in enumerate(j):
-                rows[i] = rows_j[k]
-            st_ds[j] = np.where(moved & (st_j == Status.OPTIMAL), Status.RELAXED, st_j)
+            cj, moved, y_c = correct_double(c[:, ds[j]], com[:, ds[j]], batch.r[j],
+                                            foot_rows(character, pj, FEET[0], penetration, friction),
+                                            foot_rows(character, pj, FEET[1], penetration, friction))
+            if moved.any():
+                # c' sits on the edge of what the feet can take: its split is (all but) unique, the
+                # correction's own; the frame's rows (for the temporal prior) are those of c'
+                jm = j[moved]
+                c[:, ds[jm]] = cj[:, moved]
+                sub = _qp_batch(character, pose_ds.take(jm), tau0[:, ds[jm]], c[:, ds[jm]], **opts)
+                batch = _splice(batch, sub, jm)
+                y[jm] = y_c[moved]
+                tol = 1e-7 * np.maximum(np.abs(sub.c[:, 5]), 1.0)
+                for k, i in enumerate(jm):
+                    rows[i] = (sub.G[k], sub.h[k] + np.maximum(sub.G[k] @ y_c[moved][k] - sub.h[k], 0.0) + tol[k])
         if smoothing_hz is not None:
             y = _smooth_split(batch, y, rows, ds, _timeline(character, pose, w_right_exact, cyclic),
                               float(fps) / (2.0 * math.pi * float(smoothing_hz)))
