@@ -126,32 +126,25 @@ def _landmarks(mk: _Markers, R: np.ndarray, floor: float, sp: SubjectParams, hei
         hip = masi + (px * hx + py * hy + pz * hz) / 1000.0
         lm[f"hip_{s}"] = hip
         medial_dir = -sgn * py  # towards the body's midline
-        # knee
-        knm = marker("KNM", S, required=False)
-        thi = marker("THI", S, required=False)
-        kw = sp.knee_width[s]
-        if knm is not None:
-            knee = _mid(kne, knm)
-        else:
-            if kw is None:
-                kw = 0.065 * H
-                notes.append(f"{S} knee width estimated {kw:.3f} m (0.065 H)")
-            delta = kw / 2 + mr
-            knee = _chord(delta, hip, thi, kne) if thi is not None else _medial_shift(kne, hip, medial_dir, delta)
+        def centre(lateral: np.ndarray, medial_role: str, wand_role: str, width: float | None, frac: float,
+                   proximal: np.ndarray, what: str) -> np.ndarray:
+            """Mid-point of the lateral and medial markers, else PiG's chord (wand) or a medial shift."""
+            medial = marker(medial_role, S, required=False)
+            if medial is not None:
+                return _mid(lateral, medial)
+            wand = marker(wand_role, S, required=False)
+            if width is None:
+                width = frac * H
+                notes.append(f"{S} {what} width estimated {width:.3f} m ({frac} H)")
+            delta = width / 2 + mr
+            if wand is not None:
+                return _chord(delta, proximal, wand, lateral)
+            return _medial_shift(lateral, proximal, medial_dir, delta)
+
+        knee = centre(kne, "KNM", "THI", sp.knee_width[s], 0.065, hip, "knee")
         lm[f"knee_{s}"] = knee
         knee_lat[s] = kne
-        # ankle
-        med = marker("MED", S, required=False)
-        tib = marker("TIB", S, required=False)
-        aw = sp.ankle_width[s]
-        if med is not None:
-            ankle = _mid(ank, med)
-        else:
-            if aw is None:
-                aw = 0.045 * H
-                notes.append(f"{S} ankle width estimated {aw:.3f} m (0.045 H)")
-            delta = aw / 2 + mr
-            ankle = _chord(delta, knee, tib, ank) if tib is not None else _medial_shift(ank, knee, medial_dir, delta)
+        ankle = centre(ank, "MED", "TIB", sp.ankle_width[s], 0.045, knee, "ankle")
         lm[f"ankle_{s}"] = ankle
         ankle_lat[s] = ank
         # foot: heel and toe markers sit at the same height above the sole (PiG); the toe
