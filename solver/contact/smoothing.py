@@ -206,8 +206,12 @@ def _smooth_split(batch: _QPBatch, y: np.ndarray, rows: list, ds: np.ndarray, li
                             "solutions kept", m)
                 continue
         out[rows_i] = x.reshape(m, 6)
-    if P is not None and where[P] >= 0 and where[0] >= 0:  # frame P is frame 0 one period later
-        out[where[P]] = line.wrap @ out[where[0]]
+    if P is not None and where[P] >= 0 and where[0] >= 0:  # frame P is frame 0 one period later ...
+        cand = line.wrap @ out[where[0]]
+        k = where[P]
+        G, h = rows[k] if rows[k] is not None else (batch.G[k], batch.h[k])
+        if np.all(G @ cand <= h + 1e3 * tol[k]):  # ... unless the loop does not close (its own total differs)
+            out[k] = cand
     return out
 
 
