@@ -136,4 +136,19 @@ def motion_from_trial(files: list[tuple[str, bytes]], *, mass: float | None, bel
             return capture_motion(capture)
         except Exception as e:  # the parsing boundary: whatever a reader trips on is bad input
             log.info("trial import failed: %s", e, exc_info=True)
-            raise UploadError(f"could not import the trial: {e}") from None
+            raise UploadError(f"could not import the trial: {client_message(e, tmp)}") from None
+
+
+#: importer parameters (``solver.io.NeedsParameter.parameter``) -> how a client sends them
+FORM_FIELDS = {"mass": "send the form field 'mass' (kg)", "belt_speed": "send the form field 'belt_speed' (m/s)"}
+
+
+def client_message(e: BaseException, tmp: str) -> str:
+    """An importer's error as the client may read it: the server's temporary folder is
+    never shown (the client's file names stay), and a missing importer parameter is named
+    as the upload form's field."""
+    param = getattr(e, "parameter", None)
+    msg = f"{e.reason}; {FORM_FIELDS[param]}" if param in FORM_FIELDS and getattr(e, "reason", None) else str(e)
+    for folder in {tmp, str(Path(tmp).resolve())}:
+        msg = msg.replace(folder + "/", "").replace(folder, "<upload>")
+    return msg

@@ -32,7 +32,7 @@ from typing import Any, Sequence
 
 from solver.capture import Capture
 
-__all__ = ["TrialError", "load_trial", "READERS"]
+__all__ = ["NeedsParameter", "TrialError", "load_trial", "READERS"]
 
 READERS = {
     "opensim": ".osim + .mot/.sto (+ GRF .mot, ExternalLoads .xml)",
@@ -44,6 +44,20 @@ READERS = {
 
 class TrialError(ValueError):
     """The files given do not form a trial any reader understands."""
+
+
+class NeedsParameter:
+    """Mixin of importer errors that one argument of the importer would fix (the subject's
+    mass of a file that does not state it). ``str(e)`` advises the Python argument
+    (``…; pass mass=... (kg)``); ``e.reason`` is the message without the advice and
+    ``e.parameter`` the argument's name, so that a front end names its own control
+    (the CLI's ``--mass``, the upload's form field)."""
+
+    def __init__(self, reason: str, *, parameter: str | None = None, unit: str = "") -> None:
+        advice = f"; pass {parameter}=...{f' ({unit})' if unit else ''}" if parameter else ""
+        super().__init__(reason + advice)
+        self.reason = reason
+        self.parameter = parameter
 
 
 def _is_grf_mot(path: Path) -> bool:

@@ -34,6 +34,7 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 
 from solver.capture import Capture, GroundFrame, MeasuredGRF
+from solver.io import NeedsParameter
 from solver.io.track import SkeletonTrack
 
 log = logging.getLogger(__name__)
@@ -43,8 +44,9 @@ SIDES = ("r", "l")
 FEET = ("right", "left")
 
 
-class C3DError(ValueError):
-    """The file cannot be turned into a trial (missing plates or markers, gaps, units, ...)."""
+class C3DError(NeedsParameter, ValueError):
+    """The file cannot be turned into a trial (missing plates or markers, gaps, units, ...);
+    ``parameter`` names the argument that would fix it, when one would (e.g. "mass")."""
 
 
 # ----------------------------------------------------------------------------------------
@@ -1493,7 +1495,7 @@ def read_c3d_trial(path: str | Path, *, mass: float | None = None, require_plate
         m_pl = _mass_from_plates(measured, contacts, times) if measured is not None else None
         if m_pl is None:
             raise C3DError(f"{name}: subject mass unknown: the file has no PROCESSING:Bodymass and the plates "
-                           "never measure a complete stride; pass mass=...")
+                           "never measure a complete stride", parameter="mass", unit="kg")
         m, how = m_pl, "plates (mean vertical force over a stride / g)"
     if not 5.0 <= m <= 400.0:
         raise C3DError(f"{name}: implausible subject mass {m:g} kg")
