@@ -45,13 +45,20 @@ def treadmill(shared_data):
     return shared_data / "opensim_gait2354_subject01_treadmill"
 
 
-def test_treadmill_estimate_is_written_in_opensim_axes_and_compares_with_the_plates(tmp_path, treadmill):
-    out = tmp_path / "est.csv"
-    r = motionx("grf", "--osim", treadmill / "subject01.osim", "--coordinates", treadmill / "subject01_walk1_ik.mot",
-                "--belt-speed", "auto", "--grf", treadmill / "subject01_walk1_grf.mot",
-                "--external-loads", treadmill / "subject01_walk1_grf.xml", "--out", out)
+@pytest.fixture(scope="module")
+def treadmill_estimate(treadmill, tmp_path_factory):
+    out = tmp_path_factory.mktemp("treadmill") / "est.csv"
+    # the trial's files as `motionx tutor` takes them (the plates' .mot and .xml recognised as such)
+    r = motionx("grf", treadmill / "subject01.osim", treadmill / "subject01_walk1_ik.mot",
+                treadmill / "subject01_walk1_grf.mot", treadmill / "subject01_walk1_grf.xml",
+                "--belt-speed", "auto", "--out", out)
     assert r.returncode == 0, r.stderr
-    info = json.loads(r.stdout)
+    return out, json.loads(r.stdout)
+
+
+def test_treadmill_estimate_is_written_in_opensim_axes_and_compares_with_the_plates(tmp_path, treadmill,
+                                                                                     treadmill_estimate):
+    out, info = treadmill_estimate
     assert info["contacts_from"] == "plates" and info["rows"] == 2 * 209
     # defaults: temporal prior at the kinematics' cut-off, single-support CoPs kept in the feet
     assert info["smoothing_hz"] == info["cutoff_hz"] == 6.0 and info["status_projected"] > 0
@@ -85,6 +92,27 @@ def test_treadmill_estimate_is_written_in_opensim_axes_and_compares_with_the_pla
     assert metrics["all"]["rows"]["cop"]["rms"] < 4.5
 
 
+def test_grf_compare_plot_is_drawn_in_the_csvs_frame(tmp_path, treadmill, treadmill_estimate, monkeypatch):
+    """The CSV is in OpenSim's ground frame (y up, z right): the plot shows those numbers
+    under those names, the measured curves mapped into the same frame."""
+    import solver.grf_compare as gc
+    from service.cli import main
+
+    out = treadmill_estimate[0]
+    drawn = {}
+    monkeypatch.setattr(gc, "plot", lambda path, est, meas, **kw: drawn.update(est=est, meas=meas, **kw))
+    assert main(["grf-compare", "--estimate", str(out), "--grf", str(treadmill / "subject01_walk1_grf.mot"),
+                 "--external-loads", str(treadmill / "subject01_walk1_grf.xml"), "--plot",
+                 str(tmp_path / "c.png")]) == 0
+    assert drawn["axis_names"] == ("x (forward)", "y (up)", "z (right)") and drawn["vertical"] == 1
+    assert drawn["length_unit"] == "m" and "OpenSim ground" in drawn["title"]
+    fy = per_foot(read_rows(out)[1], "fy")
+    np.testing.assert_allclose(drawn["est"].force[0, 1], fy["right"], rtol=1e-5, atol=1e-3)  # the CSV's fy
+    # the plates measure the body weight along y (up) in that frame, not along z
+    both = drawn["meas"].force.sum(axis=0)
+    assert np.nanmean(both[1]) == pytest.approx(72.6 * 9.81, rel=0.05) and abs(np.nanmean(both[2])) < 50
+
+
 def test_c3d_estimate_is_in_the_lab_frame_in_millimetres(tmp_path, shared_data):
     c3d = shared_data / "btk_pig_flatfoot_full" / "PiG_Motion-FlatFoot-Full.c3d"
     out = tmp_path / "est.csv"
@@ -111,7 +139,7 @@ def test_thesis_form_through_the_cli(tmp_path, shared_data):
     """--smoothing 0 --exact-single-support: one QP per frame and c under the stance foot (the thesis)."""
     c3d = shared_data / "btk_pig_flatfoot_full" / "PiG_Motion-FlatFoot-Full.c3d"
     out = tmp_path / "est.csv"
-    r = motionx("grf", "--c3d", c3d, "--smoothing", "0", "--exact-single-support", "--out", out)
+    r = motionx("grf", c3d, "--smoothing", "0", "--exact-single-support", "--out", out)  # the trial as for tutor
     assert r.returncode == 0, r.stderr
     info = json.loads(r.stdout)
     assert "smoothing_hz" not in info and "status_projected" not in info and info["status_single"] > 100
@@ -122,7 +150,9 @@ def test_thesis_form_through_the_cli(tmp_path, shared_data):
     (["grf", "--osim", "{T}/subject01.osim", "--out", "x.csv"], "--coordinates"),
     (["grf", "--c3d", "/no/such.c3d", "--out", "x.csv"], "file not found"),
     (["grf", "--osim", "{T}/subject01.osim", "--coordinates", "{T}/subject01_walk1_ik.mot",
-      "--c3d", "x.c3d", "--out", "x.csv"], "exactly one input"),
+      "--c3d", "x.c3d", "--out", "x.csv"], "give the trial once"),
+    (["grf", "{T}/subject01.osim", "{T}/subject01_walk1_ik.mot", "--c3d", "x.c3d", "--out", "x.csv"],
+     "give the trial once"),
     (["grf", "--osim", "{T}/subject01.osim", "--coordinates", "{T}/subject01_walk1_ik.mot",
       "--belt-speed", "fast", "--out", "x.csv"], "--belt-speed"),
     (["grf", "--osim", "{T}/subject01.osim", "--coordinates", "{T}/subject01_walk1_ik.mot",
