@@ -194,3 +194,30 @@ def test_grf_compare_plots_in_the_csvs_frame():
     assert input_axes(GroundFrame(unit_m=0.001)) == (("x (forward)", "y (left)", "z (up)"), 2, "mm")
     turned = GroundFrame(R=np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]]), unit_m=0.01)  # x to the right
     assert input_axes(turned) == (("x (right)", "y (forward)", "z (up)"), 2, "cm")
+
+
+def test_serve_prints_a_new_api_key_alone_on_its_line(tmp_path):
+    """First start without any key: the key is printed once, on a line of its own, and works."""
+    import os
+    import re
+
+    import httpx
+
+    from service.topology import Proc, free_port, motionx_cmd, wait_api
+
+    port = free_port()
+    env = {k: v for k, v in os.environ.items() if k not in ("MOTIONX_API_KEYS", "DATABASE_URL", "MOTIONX_DATABASE_URL")}
+    env.update(MOTIONX_DATA_DIR=str(tmp_path), MOTIONX_LOCAL_WORKERS="1", PYTHONUNBUFFERED="1")
+    api = Proc("api", motionx_cmd("serve", "--port", str(port)), env, tmp_path / "serve.log").start()
+    try:
+        base = f"http://127.0.0.1:{port}"
+        wait_api(base, api, timeout=60)
+        log = api.log_text()
+        alone = [line.strip() for line in log.splitlines() if re.fullmatch(r"\s+mx_[\w-]+", line)]
+        assert len(alone) == 1, log
+        key = alone[0]
+        assert f'curl -H "X-API-Key: {key}" {base}/jobs' in log and f"{base}/ui/#key={key}" in log
+        assert httpx.get(f"{base}/jobs", headers={"X-API-Key": key}, timeout=10).status_code == 200
+        assert httpx.get(f"{base}/jobs", headers={"X-API-Key": key[:-1]}, timeout=10).status_code == 401
+    finally:
+        api.stop()
