@@ -123,7 +123,7 @@ def test_treadmill_belt_shift(treadmill, shared_data):
 
 def _opensim_com(model, motion, frame, times):
     """Whole-body centre of mass (our frame) from the bodies OpenSim itself places (child process)."""
-    from solver.io.opensim import _run_worker
+    from solver.io.opensim.worker import run_worker as _run_worker
 
     sto = read_mot(motion)
     res = _run_worker(str(model), sto.labels, sto.data, sto.in_degrees)

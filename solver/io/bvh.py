@@ -55,6 +55,7 @@ from typing import Mapping
 import numpy as np
 
 from solver.capture import Capture, GroundFrame
+from solver.io.errors import InputError
 from solver.io.track import SkeletonTrack
 
 log = logging.getLogger(__name__)
@@ -67,7 +68,7 @@ UNIT_M = {"cm": 0.01, "m": 1.0, "mm": 0.001, "in": 0.0254, "cmu": 0.0254 / 0.45}
 LEG_RANGE = (0.45, 1.2)
 
 
-class BvhError(ValueError):
+class BvhError(InputError):
     """A BVH file is unreadable or cannot be interpreted; the message names the problem."""
 
 

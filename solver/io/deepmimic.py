@@ -51,6 +51,7 @@ import numpy as np
 
 from solver import spatial as sp
 from solver.capture import Capture, GroundFrame
+from solver.io.errors import InputError
 from solver.io.track import SkeletonTrack
 
 log = logging.getLogger(__name__)
@@ -61,7 +62,7 @@ C_DM = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 _DOF = {"none": 0, "fixed": 0, "spherical": 4, "revolute": 1}
 
 
-class DeepMimicError(ValueError):
+class DeepMimicError(InputError):
     """A DeepMimic file is unreadable or inconsistent; the message names the problem."""
 
 
