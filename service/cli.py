@@ -30,6 +30,26 @@ def parse_belt_speed(text: str | None) -> float | str | None:
     return v
 
 
+#: the command-line flag giving what a reader reports missing (solver.io.errors.InputError.parameter)
+PARAMETER_FLAGS = {"mass": "--mass KG", "belt_speed": "--belt-speed", "units": "--units"}
+
+
+def input_error_message(e: Exception) -> str:
+    """A reader error as the command line says it: the flag that fixes it named when known."""
+    msg = str(e)
+    param = getattr(e, "parameter", None)
+    if param:
+        msg += f" (pass {PARAMETER_FLAGS.get(param, '--' + param.replace('_', '-'))})"
+    return msg
+
+
+def warn_input(summary: dict) -> None:
+    """Print what a user must see about an input (e.g. a mass the plates contradict) on stderr."""
+    if summary.get("mass_warning"):
+        print(f"motionx: warning: {summary['mass_warning']}; pass --mass KG if the trial's mass is wrong",
+              file=sys.stderr)
+
+
 def reference_character(name: str):
     from solver.character import CharacterError, reference
 

@@ -133,7 +133,23 @@ def motion_from_trial(files: list[tuple[str, bytes]], *, mass: float | None, bel
             paths.append(p)
         try:
             capture = load_trial(paths, mass=mass, belt_speed=belt_speed)
-            return capture_motion(capture)
+            motion = capture_motion(capture)
         except Exception as e:  # the parsing boundary: whatever a reader trips on is bad input
             log.info("trial import failed: %s", e, exc_info=True)
-            raise UploadError(f"could not import the trial: {e}") from None
+            param = getattr(e, "parameter", None)
+            hint = f" (send the form field {param!r})" if param in ("mass", "belt_speed") else ""
+            raise UploadError(f"could not import the trial: {e}{hint}") from None
+    return motion.evolve(provenance={**motion.provenance, "input": input_summary(capture)})
+
+
+def input_summary(capture: Any) -> dict | None:
+    """What the uploaded trial looks like (``solver.io.summary.describe``): mass, the mass the
+    plates imply and a warning when they disagree, fit errors, stance intervals per foot."""
+    from solver.io.summary import describe
+    from solver.pipeline import jsonable
+
+    try:
+        return jsonable(describe(capture))
+    except Exception:  # noqa: BLE001 - a description must never fail an upload that imported
+        log.warning("could not describe the uploaded trial", exc_info=True)
+        return None

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from service.cli import CliError, parse_belt_speed
+from service.cli import CliError, input_error_message, parse_belt_speed, warn_input
 
 log = logging.getLogger("motionx")
 
@@ -37,9 +37,10 @@ def _user_errors() -> tuple[type[Exception], ...]:
     from solver.io import TrialError
     from solver.io.bvh import BvhError
     from solver.io.deepmimic import DeepMimicError
+    from solver.io.errors import InputError
 
     return (ContactError, GRFFileError, C3DError, FitError, OpenSimError, PreprocessError, TrialError, BvhError,
-            DeepMimicError)
+            DeepMimicError, InputError)
 
 
 def _exists(path: str | None, flag: str) -> None:
@@ -100,7 +101,7 @@ def cmd_grf(args: argparse.Namespace) -> int:
                               cyclic=True if args.cyclic else None, smoothing_hz=smoothing,
                               project_cop=not args.exact_single_support)
     except errors as e:
-        msg = str(e)
+        msg = input_error_message(e)
         if ("double support" in msg or "never" in msg) and args.belt_speed is None and not args.c3d:
             msg += " (on a treadmill the stance foot moves with the belt: pass --belt-speed auto or the speed)"
         raise CliError(msg) from None
@@ -112,11 +113,16 @@ def cmd_grf(args: argparse.Namespace) -> int:
     except OSError as e:
         raise CliError(f"cannot write {args.out}: {e.strerror or e}") from None
     summary = {k: v for k, v in est.summary().items() if v not in (0, None)}
+    from solver.io.summary import describe
+    from solver.pipeline import jsonable
+
+    described = jsonable(describe(cap, contacts=tr.contacts, contacts_from=tr.contacts_from))
+    warn_input(described)
     print(json.dumps({
         "out": args.out, "rows": rows, "character": cap.character.name, "mass_kg": round(cap.character.total_mass, 3),
         "fps": round(cap.fps, 6), "frame": cap.frame.axes, "length_unit_m": cap.frame.unit_m,
         "contacts_from": tr.contacts_from, "cutoff_hz": tr.cutoff_hz, **summary,
-        "import_s": round(t1 - t0, 3), "estimate_s": round(t2 - t1, 4),
+        "import_s": round(t1 - t0, 3), "estimate_s": round(t2 - t1, 4), "input": described,
     }))
     return 0
 
@@ -158,7 +164,7 @@ def cmd_grf_compare(args: argparse.Namespace) -> int:
             est = from_input_frame(est_in, track.frame)
             meas = from_measured(track.measured, track.times).resample(times)
     except errors as e:
-        raise CliError(str(e)) from None
+        raise CliError(input_error_message(e)) from None
     # both in our axes (x forward, y left, z up), SI: CoPs in metres
     try:
         all_frames, ds = compare(est, meas)
@@ -191,7 +197,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     s = sub.add_parser("grf", help="estimate each foot's ground reaction from a trial's kinematics (CSV)")
     g = s.add_argument_group("input (one of)")
     g.add_argument("--osim", metavar="MODEL.osim", help="OpenSim model; with --coordinates")
-    g.add_argument("--coordinates", metavar="IK.mot", help="OpenSim coordinates over time (IK result)")
+    g.add_argument("--coordinates", metavar="IK.mot", help="OpenSim coordinates over time (IK result), or the "
+                   "markers (.trc) whose inverse kinematics OpenSim solves with the model's marker set")
     g.add_argument("--c3d", metavar="FILE.c3d", help="C3D trial (markers; plates give the contact timing)")
     g.add_argument("--input", nargs="+", metavar="FILE", help="any trial solver.io.load_trial reads "
                    "(DeepMimic motion + character, BVH, ...)")

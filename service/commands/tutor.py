@@ -11,7 +11,7 @@ import time
 from dataclasses import asdict
 from pathlib import Path
 
-from service.cli import CliError, parse_belt_speed
+from service.cli import CliError, input_error_message, parse_belt_speed, warn_input
 
 
 def _load_motion(path: str):
@@ -43,14 +43,20 @@ def cmd_tutor(args: argparse.Namespace) -> int:
     try:
         capture = load_trial(args.inputs, mass=args.mass, belt_speed=parse_belt_speed(args.belt_speed))
     except (ValueError, FileNotFoundError) as e:
-        raise CliError(f"cannot import {' '.join(args.inputs)}: {e}") from None
+        raise CliError(f"cannot import {' '.join(args.inputs)}: {input_error_message(e)}") from None
     t_import = time.perf_counter() - t0
+    from solver.io.summary import describe
+    from solver.pipeline import jsonable
+
+    described = jsonable(describe(capture))
+    warn_input(described)
     try:
         res = make_tutor(capture, character=args.character, fps=args.fps, cycle=args.cycle, start=args.start,
                          max_iter=args.max_iter)
     except (PipelineError, ValueError) as e:
         raise CliError(str(e)) from None
-    out = {"status": res.status, "message": res.message, "import_s": round(t_import, 3), "stats": res.stats}
+    out = {"status": res.status, "message": res.message, "import_s": round(t_import, 3), "input": described,
+           "stats": res.stats}
     if res.motion is None:
         print(json.dumps(out))
         return 1

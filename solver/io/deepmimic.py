@@ -273,7 +273,8 @@ def deepmimic_track(motion: str | Path, character: str | Path, *, mass: float | 
         frame=GroundFrame(R=C_DM.T, axes="DeepMimic: x forward, y up, z right"),
         mass=total, segment_masses=seg_mass,
         source={"format": "deepmimic", "motion": str(Path(motion).resolve()),
-                "character": str(Path(character).resolve()), "loop": loop},
+                "character": str(Path(character).resolve()), "loop": loop,
+                "mass_from": "given" if mass is not None else "character file"},
     )
 
 

@@ -303,9 +303,10 @@ def _masses(track: SkeletonTrack, segs: list[str], lower_topology: bool) -> tupl
     if total is None and given:
         total = float(sum(given.values()))
     if total is None:
-        fmt = str(track.source.get("format") or "the input")
-        raise FitError(f"subject mass unknown: {fmt} does not state it; give the subject's mass in kg",
-                       parameter="mass")
+        fmt = str(track.source.get("format") or "")
+        fmt = {"bvh": "BVH", "c3d": "C3D", "opensim": "OpenSim", "deepmimic": "DeepMimic"}.get(fmt, fmt)
+        raise FitError(f"subject mass unknown: the {fmt + ' ' if fmt else ''}input does not state it; give the "
+                       "subject's mass in kg", parameter="mass")
     out: dict[str, float] = {}
     if lower_topology:
         legs = {s: given.get(s, winter_mass(SEGMENT_LANDMARKS[s][2], total)) for s in LEG_SEGMENTS}

@@ -145,7 +145,7 @@ def opensim_track(
         times = np.asarray(res["ik_times"], dtype=float)
     else:
         if ik_weights is not None or ik_reweight is not None:
-            raise OpenSimError("ik_weights / ik_reweight apply to a .trc marker file, not to coordinates")
+            raise OpenSimError("ik_weights / ik_reweight only apply to a .trc marker file, not to coordinates")
         sto = read_mot(motion)
         if len(sto.time) < 2:
             raise OpenSimError(f"{motion}: a motion needs at least 2 frames, got {len(sto.time)}")
