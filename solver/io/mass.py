@@ -5,9 +5,11 @@ value, so the mean total vertical ground force over the cycle is the body weight
 
     m = ∫_cycle (F_z,right + F_z,left) dt / (T_cycle g)
 
-* **Continuous plates** (a treadmill, or a walkway where every stance lands on a plate):
-  from the first to the last heel strike of one foot, every stance of the other foot inside
-  accounted for (one strike per cycle), the mean total vertical force over those whole cycles.
+* **Continuous plates** (a treadmill, or a walkway where every stance lands on a plate): the
+  mean total vertical force over the longest run of consecutive whole cycles (heel strike to
+  heel strike of one foot) that each hold exactly one stance of the other foot, stances
+  lasting within 25 % of their foot's median (a foot half on a plate does not count) and
+  cycles within 25 % of the median stride.
 * **One complete stance per foot** (an overground trial with two plates): over one cycle each
   foot has exactly one stance, so ``m = (J_right + J_left) / (T_cycle g)`` with J the stances'
   impulses; T_cycle is the stride time of the kinematics when the caller knows it, else twice
@@ -67,6 +69,15 @@ def stances(t: np.ndarray, f: np.ndarray, threshold: float = 20.0) -> list[tuple
     return out
 
 
+def _regular(t: np.ndarray, st: list[tuple[int, int]]) -> list[tuple[int, int]]:
+    """The stances lasting within 25 % of the foot's median stance (all of them when < 3)."""
+    if len(st) < 3:
+        return st
+    d = np.array([t[b] - t[a] for a, b in st])
+    med = float(np.median(d))
+    return [s for s, x in zip(st, d) if abs(x / med - 1) <= 0.25]
+
+
 def _trapz(f: np.ndarray, t: np.ndarray) -> float:
     return float(np.sum(0.5 * (f[1:] + f[:-1]) * np.diff(t)))
 
@@ -87,27 +98,35 @@ def implied_mass(t: np.ndarray, fz: np.ndarray, *, threshold: float = 20.0, stri
         raise ValueError(f"implied_mass: fz must be (2, N={t.size}), got {fz.shape}")
     st = [stances(t, fz[k], threshold) for k in range(2)]
     total = fz.sum(axis=0)
-    # whole cycles: strikes of one foot, the other foot's stances all measured in between
+    # whole cycles: consecutive strikes of one foot, each cycle holding exactly one stance of the
+    # other foot; stances much shorter or longer than the foot's median (a foot half on a plate)
+    # do not count; the longest run of such cycles wins
+    regular = [_regular(t, s) for s in st]
     best = None
     for k in range(2):
-        strikes = [t[a] for a, _ in st[k]]
-        if len(strikes) < 2:
-            continue
-        other = [t[a] for a, _ in st[1 - k]]
-        i0, i1 = 0, len(strikes) - 1
-        # every cycle must hold exactly one complete stance strike of the other foot
-        ok = all(sum(strikes[i] <= s < strikes[i + 1] for s in other) == 1 for i in range(i0, i1))
-        if not ok:
-            continue
-        a, b = st[k][i0][0], st[k][i1][0]
-        n_cyc = i1 - i0
-        if best is None or n_cyc > best[2]:
-            best = (a, b, n_cyc)
+        strikes = [t[a] for a, _ in regular[k]]
+        other = [t[a] for a, _ in regular[1 - k]]
+        ok = [sum(strikes[i] <= s < strikes[i + 1] for s in other) == 1 for i in range(len(strikes) - 1)]
+        if len(strikes) > 2:
+            period = np.median(np.diff(strikes))
+            ok = [o and abs((strikes[i + 1] - strikes[i]) / period - 1) <= 0.25 for i, o in enumerate(ok)]
+        i = 0
+        while i < len(ok):
+            if not ok[i]:
+                i += 1
+                continue
+            j = i
+            while j < len(ok) and ok[j]:
+                j += 1
+            if best is None or j - i > best[2]:
+                best = (regular[k][i][0], regular[k][j][0], j - i)
+            i = j
     if best is not None:
         a, b, n_cyc = best
         T = float(t[b] - t[a])
         mean_f = _trapz(total[a:b + 1], t[a:b + 1]) / T
-        return ImpliedMass(float(mean_f / g), "whole cycles", T / n_cyc, float(n_cyc), (float(t[a]), float(t[b])), "plates")
+        return ImpliedMass(float(mean_f / g), "whole cycles", T / n_cyc, float(n_cyc), (float(t[a]), float(t[b])),
+                           "plates")
     # one complete stance per foot, consecutive
     pairs = []
     for r in st[0]:
