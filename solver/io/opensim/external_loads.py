@@ -62,7 +62,7 @@ def external_loads(xml: str | Path) -> list[ForceSpec]:
         raise OpenSimError(f"{p}: not valid XML ({e})") from None
     specs = []
     for k, ef in enumerate(root.iter("ExternalForce")):
-        def txt(tag: str, default: str = "") -> str:
+        def txt(tag: str, default: str = "", ef=ef) -> str:
             el = ef.find(tag)
             return (el.text or "").strip() if el is not None and el.text else default
 
