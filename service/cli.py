@@ -30,17 +30,17 @@ def parse_belt_speed(text: str | None) -> float | str | None:
     return v
 
 
-#: the command-line flag giving what a reader reports missing (solver.io.errors.InputError.parameter)
-PARAMETER_FLAGS = {"mass": "--mass KG", "belt_speed": "--belt-speed", "units": "--units"}
+#: importer parameters (``solver.io.errors.InputError.parameter``) -> the flag that sets them
+PARAMETER_FLAGS = {"mass": "--mass KG", "belt_speed": "--belt-speed auto|V"}
 
 
-def input_error_message(e: Exception) -> str:
-    """A reader error as the command line says it: the flag that fixes it named when known."""
-    msg = str(e)
+def import_message(e: BaseException) -> str:
+    """An importer's error in the command line's words: an error that names a missing
+    importer parameter (``e.parameter``, e.g. ``"mass"``) says which flag to pass."""
     param = getattr(e, "parameter", None)
-    if param:
-        msg += f" (pass {PARAMETER_FLAGS.get(param, '--' + param.replace('_', '-'))})"
-    return msg
+    if param in PARAMETER_FLAGS:
+        return f"{getattr(e, 'reason', None) or e}; pass {PARAMETER_FLAGS[param]}"
+    return str(e)
 
 
 def warn_input(summary: dict) -> None:

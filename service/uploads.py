@@ -137,8 +137,11 @@ def motion_from_trial(files: list[tuple[str, bytes]], *, mass: float | None, bel
         except Exception as e:  # the parsing boundary: whatever a reader trips on is bad input
             log.info("trial import failed: %s", e, exc_info=True)
             param = getattr(e, "parameter", None)
-            hint = f" (send the form field {param!r})" if param in ("mass", "belt_speed") else ""
-            raise UploadError(f"could not import the trial: {e}{hint}") from None
+            if param in ("mass", "belt_speed"):  # the form field, not the Python argument
+                msg = f"{getattr(e, 'reason', None) or e}; send the form field {param!r}"
+            else:
+                msg = str(e)
+            raise UploadError(f"could not import the trial: {msg}") from None
     return motion.evolve(provenance={**motion.provenance, "input": input_summary(capture)})
 
 

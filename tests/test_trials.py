@@ -60,12 +60,12 @@ def check_input(info: dict, plates: bool) -> None:
     """The input summary: mass, stance intervals per foot, implied mass with plates, fit error."""
     assert info["mass_kg"] > 20 and info["frames"] > 10
     for side in ("right", "left"):
-        st = info["stance_s"][side]
+        st = info["stances"][side]
         assert st and all(b >= a for a, b in st), (side, st)
     assert info["landmark_fit_error_mm"]["mean"] < 5.0
     if plates:
-        assert info["implied_mass_kg"] is not None
-        rel = abs(info["implied_mass_kg"] - info["mass_kg"]) / info["implied_mass_kg"]
+        assert info["mass_implied_kg"] is not None
+        rel = abs(info["mass_implied_kg"] - info["mass_kg"]) / info["mass_implied_kg"]
         assert (rel > 0.05) == ("mass_warning" in info), info  # warned exactly when off by more than 5 %
 
 

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from service.cli import CliError, input_error_message, parse_belt_speed, warn_input
+from service.cli import CliError, import_message, parse_belt_speed, warn_input
 
 log = logging.getLogger("motionx")
 
@@ -101,7 +101,7 @@ def cmd_grf(args: argparse.Namespace) -> int:
                               cyclic=True if args.cyclic else None, smoothing_hz=smoothing,
                               project_cop=not args.exact_single_support)
     except errors as e:
-        msg = input_error_message(e)
+        msg = import_message(e)
         if ("double support" in msg or "never" in msg) and args.belt_speed is None and not args.c3d:
             msg += " (on a treadmill the stance foot moves with the belt: pass --belt-speed auto or the speed)"
         raise CliError(msg) from None
@@ -164,7 +164,7 @@ def cmd_grf_compare(args: argparse.Namespace) -> int:
             est = from_input_frame(est_in, track.frame)
             meas = from_measured(track.measured, track.times).resample(times)
     except errors as e:
-        raise CliError(input_error_message(e)) from None
+        raise CliError(import_message(e)) from None
     # both in our axes (x forward, y left, z up), SI: CoPs in metres
     try:
         all_frames, ds = compare(est, meas)

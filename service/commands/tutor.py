@@ -11,7 +11,7 @@ import time
 from dataclasses import asdict
 from pathlib import Path
 
-from service.cli import CliError, input_error_message, parse_belt_speed, warn_input
+from service.cli import CliError, import_message, parse_belt_speed, warn_input
 
 
 def _load_motion(path: str):
@@ -43,7 +43,7 @@ def cmd_tutor(args: argparse.Namespace) -> int:
     try:
         capture = load_trial(args.inputs, mass=args.mass, belt_speed=parse_belt_speed(args.belt_speed))
     except (ValueError, FileNotFoundError) as e:
-        raise CliError(f"cannot import {' '.join(args.inputs)}: {input_error_message(e)}") from None
+        raise CliError(f"cannot import {' '.join(args.inputs)}: {import_message(e)}") from None
     t_import = time.perf_counter() - t0
     from solver.io.summary import describe
     from solver.pipeline import jsonable

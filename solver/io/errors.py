@@ -1,16 +1,20 @@
-"""The one base of every reader error: a bad input file or argument, with a message naming it."""
+"""The one base class of every reader's bad-input error."""
 
 from __future__ import annotations
 
 
 class InputError(ValueError):
-    """An input (a trial's files or the options given with them) is unreadable or inconsistent.
+    """An input (a trial's files or the options given with them) cannot be turned into a
+    trial; the message names the file and the problem.
 
-    ``parameter`` names the keyword argument that would fix it when there is one (e.g.
-    ``"mass"`` when the source does not state the subject's mass), so that a front end can
-    name its own flag or field for it (``--mass`` on the command line).
+    When one argument of the importer would fix it (the subject's mass of a file that does
+    not state it), ``parameter`` names it: ``str(e)`` then advises the Python argument
+    (``…; pass mass=... (kg)``) while ``reason`` is the message without the advice, so that
+    a front end names its own control instead (the CLI's ``--mass``, the upload's form field).
     """
 
-    def __init__(self, message: str = "", *, parameter: str | None = None) -> None:
-        super().__init__(message)
+    def __init__(self, reason: str = "", *, parameter: str | None = None, unit: str = "") -> None:
+        advice = f"; pass {parameter}=...{f' ({unit})' if unit else ''}" if parameter else ""
+        super().__init__(reason + advice)
+        self.reason = reason
         self.parameter = parameter

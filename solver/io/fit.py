@@ -305,8 +305,8 @@ def _masses(track: SkeletonTrack, segs: list[str], lower_topology: bool) -> tupl
     if total is None:
         fmt = str(track.source.get("format") or "")
         fmt = {"bvh": "BVH", "c3d": "C3D", "opensim": "OpenSim", "deepmimic": "DeepMimic"}.get(fmt, fmt)
-        raise FitError(f"subject mass unknown: the {fmt + ' ' if fmt else ''}input does not state it; give the "
-                       "subject's mass in kg", parameter="mass")
+        raise FitError(f"subject mass unknown: the {fmt + ' ' if fmt else ''}input does not state it",
+                       parameter="mass", unit="kg")
     out: dict[str, float] = {}
     if lower_topology:
         legs = {s: given.get(s, winter_mass(SEGMENT_LANDMARKS[s][2], total)) for s in LEG_SEGMENTS}

@@ -147,15 +147,17 @@ def implied_mass(t: np.ndarray, fz: np.ndarray, *, threshold: float = 20.0, stri
                        (float(t[first[0]]), float(t[second[1]])), how)
 
 
-def mass_warning(mass: float | None, implied: ImpliedMass | None, *, tolerance: float = MASS_TOLERANCE) -> str | None:
-    """A one-line warning when the trial's mass and the plates' implied mass differ by more
-    than ``tolerance`` (relative to the implied mass), else None."""
-    if mass is None or implied is None or not implied.kg > 0:
+def mass_warning(mass: float | None, implied: ImpliedMass | float | None, *,
+                 tolerance: float = MASS_TOLERANCE) -> str | None:
+    """A one-line warning when the trial's mass and the plates' implied mass (kg, or an
+    :class:`ImpliedMass`) differ by more than ``tolerance`` (relative to the implied mass)."""
+    kg = implied.kg if isinstance(implied, ImpliedMass) else implied
+    if mass is None or kg is None or not kg > 0:
         return None
-    rel = (mass - implied.kg) / implied.kg
+    rel = (mass - kg) / kg
     if abs(rel) <= tolerance:
         return None
-    return (f"the subject mass {mass:.1f} kg differs from the {implied.kg:.1f} kg the force plates imply "
+    return (f"the subject mass {mass:.1f} kg differs from the {kg:.1f} kg the force plates imply "
             f"({100 * rel:+.0f} %): estimated ground reactions scale with the mass")
 
 

@@ -14,7 +14,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from solver.io.mass import ImpliedMass, implied_mass, mass_warning, stride_from_events
+from solver.io.mass import implied_mass, mass_warning, stride_from_events
 
 log = logging.getLogger(__name__)
 
@@ -78,29 +78,28 @@ def describe(capture: Any, *, contacts: np.ndarray | None = None, contacts_from:
     if contacts is not None:
         contacts = np.asarray(contacts, dtype=bool)
         out["contacts_from"] = how
-        out["stance_s"] = stance_intervals(contacts, capture.times, sides)
+        out["stances"] = stance_intervals(contacts, capture.times, sides)
         rows = [[i for i, s in enumerate(sides) if s == side] for side in ("right", "left")]
         if contacts.shape[0] == len(sides) and all(rows):
             feet = [np.any(contacts[r], axis=0) for r in rows]
             stride = stride_from_events(gait_events(np.stack([feet[0], feet[0], feet[1], feet[1]]), capture.times))
-    # implied mass: the reader's (at the plates' own rate) or from the measured reactions
-    implied: ImpliedMass | dict | None = src.get("implied_mass")
+    # implied mass: the reader's (OpenSim: at the plates' own rate; C3D: its own stride/stance
+    # figure) or from the measured reactions on the capture's times
+    implied: dict | None = src.get("implied_mass")
+    if implied is None and src.get("mass_implied_kg") is not None:
+        implied = {"kg": float(src["mass_implied_kg"]), "method": src.get("mass_implied_from")}
     if implied is None and capture.measured is not None:
         im = implied_mass(capture.times, np.asarray(capture.measured.force)[:, 2], stride_s=stride)
         implied = im.as_dict() if im is not None else None
     if implied is not None:
-        out["implied_mass_kg"] = round(float(implied["kg"]), 2)
-        out["implied_mass"] = implied
-        warn = src.get("mass_warning")
-        if warn is None:
-            warn = mass_warning(float(ch.total_mass), ImpliedMass(float(implied["kg"]), implied["method"],
-                                                                  implied["cycle_s"], implied["cycles"],
-                                                                  tuple(implied["window_s"]), implied["stride_from"]))
+        out["mass_implied_kg"] = round(float(implied["kg"]), 2)
+        out["mass_implied"] = implied
+        warn = src.get("mass_warning") or mass_warning(float(ch.total_mass), float(implied["kg"]))
         if warn:
             out["mass_warning"] = warn
     elif capture.measured is not None:
-        out["implied_mass_kg"] = None
-        out["implied_mass_note"] = "the plates do not hold a whole cycle nor one complete stance per foot"
+        out["mass_implied_kg"] = None
+        out["mass_implied_note"] = "the plates hold neither a whole cycle nor one complete stance per foot"
     # fit errors
     if src.get("ik"):
         out["marker_fit_error_mm"] = _round(src["ik"].get("marker_error_mm"), 1)

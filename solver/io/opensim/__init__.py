@@ -167,6 +167,8 @@ def load_opensim(
         implied = plates_implied_mass(grf, grf_xml, stride_s=stride_from_events(gait_events(contacts, cap.times)))
         if implied is not None:
             src["implied_mass"] = implied.as_dict()
+            src["mass_implied_kg"] = round(implied.kg, 2)
+            src["mass_implied_from"] = f"plates: {implied.method}"
             warn = mass_warning(cap.character.total_mass, implied)
             if warn:
                 log.warning("%s: %s", Path(grf).name, warn)
