@@ -26,7 +26,7 @@ log = logging.getLogger("motionx")
 #: the files of a captured trial (what `motionx tutor` reads), by suffix
 TRIAL_SUFFIXES = {".c3d": "C3D", ".bvh": "BVH", ".osim": "OpenSim model", ".mot": "OpenSim motion",
                   ".sto": "OpenSim storage", ".trc": "marker trajectories"}
-#: importer parameters (``solver`` exceptions carry ``parameter``) -> the flag that sets them
+#: importer parameters (``solver.io.errors.InputError.parameter``) -> the flag that sets them
 PARAMETER_FLAGS = {"mass": "--mass KG", "belt_speed": "--belt-speed auto|V"}
 
 
@@ -90,15 +90,6 @@ def parse_belt_speed(text: str | None) -> float | str | None:
     return v
 
 
-def reference_character(name: str):
-    from solver.character import CharacterError, reference
-
-    try:
-        return reference(name)
-    except CharacterError as e:
-        raise CliError(str(e)) from None
-
-
 def import_message(e: BaseException) -> str:
     """An importer's error in the command line's words: an error that names a missing
     importer parameter (``e.parameter``, e.g. ``"mass"``) says which flag to pass."""
@@ -106,6 +97,22 @@ def import_message(e: BaseException) -> str:
     if param in PARAMETER_FLAGS:
         return f"{getattr(e, 'reason', None) or e}; pass {PARAMETER_FLAGS[param]}"
     return str(e)
+
+
+def warn_input(summary: dict) -> None:
+    """Print what a user must see about an input (e.g. a mass the plates contradict) on stderr."""
+    if summary.get("mass_warning"):
+        print(f"motionx: warning: {summary['mass_warning']}; pass --mass KG if the trial's mass is wrong",
+              file=sys.stderr)
+
+
+def reference_character(name: str):
+    from solver.character import CharacterError, reference
+
+    try:
+        return reference(name)
+    except CharacterError as e:
+        raise CliError(str(e)) from None
 
 
 def _not_a_motion(path: Path, why: str) -> CliError:

@@ -41,6 +41,10 @@ def test_tutor_prints_a_short_summary_for_a_person(tutor_file):
     lines = text.splitlines()
     assert 3 <= len(lines) <= 6 and all(len(line) < 160 for line in lines), text
     assert lines[0].startswith("tutor succeeded in ") and "IPOPT iterations" in lines[0]
+    # the input summary (the `input` key of --json) in short: format, mass and where it comes from, stances
+    assert info["input"]["format"] == "deepmimic" and info["input"]["mass_kg"] == 45.0
+    assert lines[1].startswith("  input: deepmimic, ") and "45 kg (character file)" in lines[1]
+    assert f"stances right {len(info['input']['stances']['right'])}" in lines[1]
     assert f"wrote {tutor_file}: halfboy, 16 coordinates" in text and "at 15 fps" in text
     assert "plausible: root residual" in text and "{" not in text
     assert f"motionx extrapolate {tutor_file}" in lines[-1]

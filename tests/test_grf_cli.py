@@ -192,3 +192,26 @@ def test_bad_motion_data_is_refused_clearly(tmp_path, treadmill):
                 tmp_path / "x.csv")
     assert r.returncode != 0 and "double support" in r.stderr and "--belt-speed" in r.stderr
     assert not (tmp_path / "x.csv").exists()
+
+
+def test_grf_compare_sums_several_plates_per_foot(tmp_path, treadmill):
+    """An ExternalLoads with three forces (right, right, left: the right record split into two
+    time-disjoint plates) compares exactly as the two-force original."""
+    from test_io_opensim import _split_grf
+
+    est = tmp_path / "est.csv"
+    r = motionx("grf", "--osim", treadmill / "subject01.osim", "--coordinates", treadmill / "subject01_walk1_ik.mot",
+                "--belt-speed", "auto", "--grf", treadmill / "subject01_walk1_grf.mot",
+                "--external-loads", treadmill / "subject01_walk1_grf.xml", "--out", est)
+    assert r.returncode == 0, r.stderr
+    mot, xml = _split_grf(treadmill, tmp_path, t_split=2.3)
+    out = {}
+    for name, files in (("two", (treadmill / "subject01_walk1_grf.mot", treadmill / "subject01_walk1_grf.xml")),
+                        ("three", (mot, xml))):
+        js = tmp_path / f"{name}.json"
+        c = motionx("grf-compare", "--estimate", est, "--grf", files[0], "--external-loads", files[1], "--json", js)
+        assert c.returncode == 0, c.stderr
+        out[name] = json.loads(js.read_text())
+    for comp in ("fx", "fy", "fz", "tz", "cop"):
+        a, b = out["two"]["all"]["rows"][comp], out["three"]["all"]["rows"][comp]
+        assert a["samples"] == b["samples"] and a["rms"] == pytest.approx(b["rms"], abs=1e-6), comp

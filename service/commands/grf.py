@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from service.cli import CliError, add_command, import_message, parse_belt_speed
+from service.cli import CliError, add_command, import_message, parse_belt_speed, warn_input
 
 log = logging.getLogger("motionx")
 
@@ -37,9 +37,10 @@ def _user_errors() -> tuple[type[Exception], ...]:
     from solver.io import TrialError
     from solver.io.bvh import BvhError
     from solver.io.deepmimic import DeepMimicError
+    from solver.io.errors import InputError
 
     return (ContactError, GRFFileError, C3DError, FitError, OpenSimError, PreprocessError, TrialError, BvhError,
-            DeepMimicError)
+            DeepMimicError, InputError)
 
 
 def _exists(path: str | None, flag: str) -> None:
@@ -58,7 +59,7 @@ def _load(args: argparse.Namespace):
     files = _files(args)
     kinds = [k for k in ("osim", "c3d") if getattr(args, k)] + (["files"] if files else [])
     if len(kinds) != 1:
-        raise CliError("give the trial once: its files (MODEL.osim IK.mot [GRF.mot X.xml] | FILE.c3d | FILE.bvh | "
+        raise CliError("give the trial once: its files (MODEL.osim IK.mot|MARKERS.trc [GRF.mot X.xml] | FILE.c3d | FILE.bvh | "
                        "DeepMimic CLIP.txt CHARACTER.txt), or --osim MODEL --coordinates IK.mot, or --c3d FILE")
     if args.mass is not None and not (math.isfinite(args.mass) and args.mass > 0):
         raise CliError(f"--mass must be a positive number of kg, got {args.mass}")
@@ -128,11 +129,16 @@ def cmd_grf(args: argparse.Namespace) -> int:
     except OSError as e:
         raise CliError(f"cannot write {args.out}: {e.strerror or e}") from None
     summary = {k: v for k, v in est.summary().items() if v not in (0, None)}
+    from solver.io.summary import describe
+    from solver.pipeline import jsonable
+
+    described = jsonable(describe(cap, contacts=tr.contacts, contacts_from=tr.contacts_from))
+    warn_input(described)
     print(json.dumps({
         "out": args.out, "rows": rows, "character": cap.character.name, "mass_kg": round(cap.character.total_mass, 3),
         "fps": round(cap.fps, 6), "frame": cap.frame.axes, "length_unit_m": cap.frame.unit_m,
         "contacts_from": tr.contacts_from, "cutoff_hz": tr.cutoff_hz, **summary,
-        "import_s": round(t1 - t0, 3), "estimate_s": round(t2 - t1, 4),
+        "import_s": round(t1 - t0, 3), "estimate_s": round(t2 - t1, 4), "input": described,
     }))
     return 0
 
@@ -175,7 +181,7 @@ def cmd_grf_compare(args: argparse.Namespace) -> int:
             est = from_input_frame(est_in, frame)
             meas = from_measured(track.measured, track.times).resample(times)
     except errors as e:
-        raise CliError(str(e)) from None
+        raise CliError(import_message(e)) from None
     # both in our axes (x forward, y left, z up), SI: CoPs in metres
     try:
         all_frames, ds = compare(est, meas)
@@ -241,11 +247,12 @@ ground frame and units: time, side, fx, fy, fz, cop_x, cop_y, cop_z, tz.
 The trial is given as for `motionx tutor` (its files); --osim/--coordinates, --c3d and
 --input are the older spellings.""")
     s.add_argument("inputs", nargs="*", metavar="INPUT",
-                   help="trial files: MODEL.osim COORDS.mot [GRF.mot X.xml] | FILE.c3d | FILE.bvh | "
+                   help="trial files: MODEL.osim COORDS.mot|MARKERS.trc [GRF.mot X.xml] | FILE.c3d | FILE.bvh | "
                         "DeepMimic CLIP.txt CHARACTER.txt")
     g = s.add_argument_group("older input flags (instead of the files)")
     g.add_argument("--osim", metavar="MODEL.osim", help="OpenSim model; with --coordinates")
-    g.add_argument("--coordinates", metavar="IK.mot", help="OpenSim coordinates over time (IK result)")
+    g.add_argument("--coordinates", metavar="IK.mot", help="OpenSim coordinates over time (IK result), or the "
+                   "markers (.trc) whose inverse kinematics OpenSim solves with the model's marker set")
     g.add_argument("--c3d", metavar="FILE.c3d", help="C3D trial (markers; plates give the contact timing)")
     g.add_argument("--input", nargs="+", metavar="FILE", help="trial files, as the positional INPUT")
     s.add_argument("--mass", type=float, default=None, metavar="KG",

@@ -10,7 +10,7 @@ import time
 from dataclasses import asdict
 from pathlib import Path
 
-from service.cli import CliError, add_command, import_message, load_motion, parse_belt_speed
+from service.cli import CliError, add_command, import_message, load_motion, parse_belt_speed, warn_input
 from service.commands.outputs import prepare_output_dir, progress_csv, step_stem
 
 
@@ -26,6 +26,25 @@ def _write_motion(motion, path: Path, *, with_replay: bool = True) -> dict:
 # --- tutor --------------------------------------------------------------------------------
 
 
+def _input_line(inp: dict | None) -> str | None:
+    """The input summary (``solver.io.summary.describe``, the ``input`` key of ``--json``) in one
+    short line: format, frames, mass used and the mass the plates imply, fit error, stances."""
+    if not inp:
+        return None
+    mass = f"{inp['mass_kg']:g} kg" + (f" ({inp['mass_from']})" if inp.get("mass_from") else "")
+    if inp.get("mass_implied_kg") is not None:
+        mass += f", plates imply {inp['mass_implied_kg']:.1f} kg"
+    parts = [f"{inp.get('format') or 'trial'}, {inp.get('frames')} frames"
+             + (f" at {inp['fps']:g} fps" if inp.get("fps") else ""), mass]
+    for key, what in (("marker_fit_error_mm", "marker fit"), ("landmark_fit_error_mm", "landmark fit")):
+        if (inp.get(key) or {}).get("max") is not None:
+            parts.append(f"{what} <= {inp[key]['max']:.1f} mm")
+            break
+    if inp.get("stances"):
+        parts.append("stances " + ", ".join(f"{side} {len(v)}" for side, v in inp["stances"].items()))
+    return "  input: " + "; ".join(parts)
+
+
 def _tutor_summary(out: dict) -> str:
     """A few lines for a person: what was made, how long it took, whether it is plausible."""
     st = out.get("stats") or {}
@@ -36,7 +55,8 @@ def _tutor_summary(out: dict) -> str:
             f"with {its} IPOPT iterations)")
     if out["status"] != "succeeded" or "out" not in out:
         return f"tutor {out['status']} {took}: {out.get('message') or 'no plausible motion'}; nothing written"
-    lines = [f"tutor {out['status']} {took}",
+    inp = _input_line(out.get("input"))
+    lines = [f"tutor {out['status']} {took}", *([inp] if inp else []),
              f"  wrote {out['out']}: {out['character']}, {out['coordinates']} coordinates, {out['frames']} frames "
              f"at {out['fps']:g} fps (one gait cycle)",
              f"  {'plausible' if out['plausible'] else 'NOT plausible'}: root residual "
@@ -59,12 +79,18 @@ def cmd_tutor(args: argparse.Namespace) -> int:
     except (ValueError, FileNotFoundError) as e:
         raise CliError(f"cannot import {' '.join(args.inputs)}: {import_message(e)}") from None
     t_import = time.perf_counter() - t0
+    from solver.io.summary import describe
+    from solver.pipeline import jsonable
+
+    described = jsonable(describe(capture))
+    warn_input(described)
     try:
         res = make_tutor(capture, character=args.character, fps=args.fps, cycle=args.cycle, start=args.start,
                          max_iter=args.max_iter)
     except (PipelineError, ValueError) as e:
         raise CliError(str(e)) from None
-    out = {"status": res.status, "message": res.message, "import_s": round(t_import, 3), "stats": res.stats}
+    out = {"status": res.status, "message": res.message, "import_s": round(t_import, 3), "input": described,
+           "stats": res.stats}
     if res.motion is None:
         print(json.dumps(out) if args.json else _tutor_summary(out))
         return 1

@@ -34,7 +34,7 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 
 from solver.capture import Capture, GroundFrame, MeasuredGRF
-from solver.io import NeedsParameter
+from solver.io.errors import InputError
 from solver.io.track import SkeletonTrack
 
 log = logging.getLogger(__name__)
@@ -44,7 +44,7 @@ SIDES = ("r", "l")
 FEET = ("right", "left")
 
 
-class C3DError(NeedsParameter, ValueError):
+class C3DError(InputError):
     """The file cannot be turned into a trial (missing plates or markers, gaps, units, ...);
     ``parameter`` names the argument that would fix it, when one would (e.g. "mass")."""
 
