@@ -21,7 +21,16 @@ COPY worker ./worker
 COPY --from=web /web/node_modules/three ./service/web/node_modules/three
 RUN pip install .
 
+# the demo's walk (`motionx demo` in the image) with its origin and license notices; the
+# installed package finds trials through MOTIONX_DATA (the other trials of data/ are for the
+# tests and benchmarks, which run from a checkout)
+COPY data/README.md ./data/README.md
+COPY data/deepmimic_humanoid3d_walk ./data/deepmimic_humanoid3d_walk
+ENV MOTIONX_DATA=/app/data
+
+# the service's state (SQLite database, stored motions) when no DATABASE_URL is given
+RUN mkdir -p /var/lib/motionx && chown motionx /var/lib/motionx
 USER motionx
-ENV MOTIONX_DATA_DIR=/home/motionx/data
+ENV MOTIONX_DATA_DIR=/var/lib/motionx
 EXPOSE 8000
 CMD ["motionx", "serve", "--host", "0.0.0.0", "--port", "8000"]

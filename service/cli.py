@@ -1,18 +1,78 @@
-"""``motionx`` command line: a thin shell over ``solver``/``mjcf`` (commands in service.commands)."""
+"""``motionx`` command line: a thin shell over ``solver``/``mjcf`` (commands in service.commands).
+
+Conventions every command follows (tests/test_cli_conventions.py checks them):
+
+- a user mistake (bad argument, unreadable or wrong file, impossible request) is one line
+  ``motionx: error: …`` on stderr and exit status 2 (:class:`CliError`);
+- output piped into a reader that stops early (``motionx validate … | head``) ends quietly
+  with status 141, as a process killed by SIGPIPE; Ctrl-C ends with one line and status 130
+  (SIGTERM: 143, for commands that clean up after themselves, e.g. ``demo``);
+- every command has a description, every option a help line that states its default.
+"""
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import json
 import logging
 import math
+import os
 import sys
+from pathlib import Path
 
 log = logging.getLogger("motionx")
+
+#: the files of a captured trial (what `motionx tutor` reads), by suffix
+TRIAL_SUFFIXES = {".c3d": "C3D", ".bvh": "BVH", ".osim": "OpenSim model", ".mot": "OpenSim motion",
+                  ".sto": "OpenSim storage", ".trc": "marker trajectories"}
+#: importer parameters (``solver.io.errors.InputError.parameter``) -> the flag that sets them
+PARAMETER_FLAGS = {"mass": "--mass KG", "belt_speed": "--belt-speed auto|V"}
 
 
 class CliError(Exception):
     """A user-facing error: printed as one line, exit status 2."""
+
+
+class Terminated(BaseException):
+    """SIGTERM arrived (a command that installs :func:`stop_on_signals`): unwinds like
+    Ctrl-C, so ``finally`` blocks stop child processes; exit status 143."""
+
+
+def _raise_terminated(signum, frame):
+    raise Terminated()
+
+
+class stop_on_signals:
+    """Within ``with stop_on_signals() as guard:`` SIGTERM raises :class:`Terminated` (SIGINT
+    raises KeyboardInterrupt already), so that ``finally`` blocks run: child processes are
+    stopped, temporary folders removed. ``guard.shield()`` then ignores both signals while
+    that bounded cleanup runs; leaving the block restores the previous handlers. Outside the
+    main thread (where handlers cannot be set) it does nothing."""
+
+    def __enter__(self) -> "stop_on_signals":
+        import signal
+        import threading
+
+        self._active = threading.current_thread() is threading.main_thread()
+        if self._active:
+            self._old = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+            signal.signal(signal.SIGTERM, _raise_terminated)
+        return self
+
+    def shield(self) -> None:
+        import signal
+
+        if self._active:
+            for sig in self._old:
+                signal.signal(sig, signal.SIG_IGN)
+
+    def __exit__(self, *exc) -> None:
+        import signal
+
+        if self._active:
+            for sig, handler in self._old.items():
+                signal.signal(sig, handler)
 
 
 def parse_belt_speed(text: str | None) -> float | str | None:
@@ -30,6 +90,22 @@ def parse_belt_speed(text: str | None) -> float | str | None:
     return v
 
 
+def import_message(e: BaseException) -> str:
+    """An importer's error in the command line's words: an error that names a missing
+    importer parameter (``e.parameter``, e.g. ``"mass"``) says which flag to pass."""
+    param = getattr(e, "parameter", None)
+    if param in PARAMETER_FLAGS:
+        return f"{getattr(e, 'reason', None) or e}; pass {PARAMETER_FLAGS[param]}"
+    return str(e)
+
+
+def warn_input(summary: dict) -> None:
+    """Print what a user must see about an input (e.g. a mass the plates contradict) on stderr."""
+    if summary.get("mass_warning"):
+        print(f"motionx: warning: {summary['mass_warning']}; pass --mass KG if the trial's mass is wrong",
+              file=sys.stderr)
+
+
 def reference_character(name: str):
     from solver.character import CharacterError, reference
 
@@ -39,26 +115,170 @@ def reference_character(name: str):
         raise CliError(str(e)) from None
 
 
+def _not_a_motion(path: Path, why: str) -> CliError:
+    return CliError(f"{path} is not a motion file ({why}); motion files are the JSON that `motionx tutor` and "
+                    "`motionx extrapolate` write")
+
+
+def _a_capture(path: Path, what: str) -> CliError:
+    return CliError(f"{path} is a captured trial ({what}), not a motion file: run `motionx tutor` first "
+                    f"(motionx tutor {path}{' CHARACTER.txt' if 'DeepMimic' in what else ''} --out TUTOR.json)")
+
+
+def load_motion(path: str | Path):
+    """A motion file v1, or a :class:`CliError` that says what the file is instead (binary,
+    not JSON, a captured trial, a motion file with errors)."""
+    from solver.motion import Motion, MotionError
+
+    p = Path(path)
+    if not p.exists():
+        raise CliError(f"motion file not found: {p}")
+    if p.is_dir():
+        raise CliError(f"{p} is a directory, not a motion file")
+    kind = TRIAL_SUFFIXES.get(p.suffix.lower())
+    if kind:
+        raise _a_capture(p, f"a {kind} file")
+    try:
+        text = p.read_bytes().decode("utf-8")
+    except UnicodeDecodeError:
+        raise _not_a_motion(p, "binary data, not JSON text") from None
+    except OSError as e:
+        raise CliError(f"cannot read {p}: {e.strerror or e}") from None
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as e:
+        raise _not_a_motion(p, f"not JSON: {e.msg} at line {e.lineno}") from None
+    except RecursionError:
+        raise _not_a_motion(p, "JSON nested too deeply") from None
+    if isinstance(data, dict) and "format" not in data:
+        if "Frames" in data:
+            raise _a_capture(p, "a DeepMimic motion clip")
+        if "Skeleton" in data:
+            raise _a_capture(p, "a DeepMimic character")
+    try:
+        return Motion.from_dict(data)
+    except MotionError as e:
+        raise CliError(f"{p}: {e}") from None
+
+
+# --- help texts ---------------------------------------------------------------------------------
+
+
+def _text(v) -> str:
+    """A default or choice as a user writes it: 15, not 15.0."""
+    if isinstance(v, float):
+        return f"{v:g}"
+    if isinstance(v, (list, tuple)):
+        return " ".join(_text(x) for x in v)
+    return str(v)
+
+
+class HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Choices as the user types them (``{15,30}``, listed ``15, 30`` in the help line) and
+    every option's default in its help line."""
+
+    def _metavar_formatter(self, action, default_metavar):
+        if action.metavar is None and action.choices is not None and not isinstance(action.choices, dict):
+            text = "{" + ",".join(_text(c) for c in action.choices) + "}"
+            return lambda n: (text,) * n
+        return super()._metavar_formatter(action, default_metavar)
+
+    def _get_help_string(self, action) -> str:
+        text = action.help or ""
+        extra = []
+        if action.choices is not None and not isinstance(action.choices, dict):
+            extra.append("choices: " + ", ".join(_text(c) for c in action.choices))
+        d = action.default
+        if (action.option_strings and d is not None and d is not False and d is not argparse.SUPPRESS
+                and d != "" and "default" not in text and action.nargs != 0):
+            extra.append(f"default: {_text(d)}".replace("%", "%%"))
+        return f"{text} ({'; '.join(extra)})" if extra else text
+
+
+def add_command(sub: argparse._SubParsersAction, name: str, summary: str, description: str | None = None,
+                **kw) -> argparse.ArgumentParser:
+    """A subcommand with its one-line summary (the command list) and its description (its
+    own ``--help``)."""
+    return sub.add_parser(name, help=summary, description=description or (summary[:1].upper() + summary[1:] + "."),
+                          formatter_class=HelpFormatter, **kw)
+
+
+def version() -> str:
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as dist_version
+
+    try:
+        return dist_version("motionx")
+    except PackageNotFoundError:  # pragma: no cover - a source tree without an install
+        return "unknown"
+
+
 def build_parser() -> argparse.ArgumentParser:
     from service.commands import MODULES
 
-    p = argparse.ArgumentParser(prog="motionx", description="Physically plausible walk extrapolation.")
+    p = argparse.ArgumentParser(prog="motionx", formatter_class=HelpFormatter, description="""\
+Turn one captured human walk into physically plausible walks on new ground: make the capture
+plausible (the tutor), then extrapolate it to a slope, a curve, another friction or gravity,
+keeping every intermediate motion.""", epilog="""\
+the main job:
+  motionx tutor TRIAL_FILE... --out tutor.json
+  motionx extrapolate tutor.json --slope -11.25 --out downhill/
+
+`motionx COMMAND --help` describes each command.""")
+    p.add_argument("--version", action="version", version=f"motionx {version()}")
     p.add_argument("-v", "--verbose", action="store_true", help="log progress to stderr")
-    sub = p.add_subparsers(dest="command", required=True)
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND", title="commands")
     for name in MODULES:
         importlib.import_module(name).register(sub)
     return p
 
 
-def main(argv: list[str] | None = None) -> int:
+def _stdout_is_broken() -> bool:
+    """True when stdout is a pipe whose reader has gone (``| head`` after its lines)."""
+    import select
+
+    try:
+        fd = sys.stdout.fileno()
+        poller = select.poll()
+        poller.register(fd, select.POLLOUT)
+        return any(ev & (select.POLLERR | select.POLLHUP) for _, ev in poller.poll(0))
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
+def _main(argv: list[str] | None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit:  # --help, --version, a usage error: their text must reach a closed pipe too
+        sys.stdout.flush()
+        raise
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(message)s")
     try:
-        return args.func(args)
+        code = args.func(args)
+        sys.stdout.flush()  # a closed pipe shows here, not as an error at exit
+        return code
     except CliError as e:
         print(f"motionx: error: {e}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print("motionx: interrupted", file=sys.stderr)
+        return 130
+    except Terminated:
+        print("motionx: terminated", file=sys.stderr)
+        return 143
+
+
+def main(argv: list[str] | None = None) -> int:
+    try:
+        return _main(argv)
+    except BrokenPipeError:
+        if not _stdout_is_broken():
+            raise
+        # the reader stopped early: end quietly (no flush error at exit), as SIGPIPE would
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 141
 
 
 if __name__ == "__main__":  # pragma: no cover

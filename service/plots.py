@@ -122,17 +122,95 @@ def changed_parameters(target: Mapping[str, float | None]) -> list[str]:
     return out
 
 
+def number_text(v: float, decimals: int = 4) -> str:
+    """A value with the decimals it needs, up to ``decimals``: -11.25, 90, 0.7, 1.62 (never
+    -11.2 for -11.25, nor 90.0000)."""
+    text = f"{float(v):.{decimals}f}".rstrip("0").rstrip(".")
+    return "0" if text in ("-0", "") else text
+
+
+_WORDS = {"slope_deg": "slope {}°", "curve_deg": "curve {}°", "friction": "μ={}", "gravity": "|g|={} m/s²"}
+
+
+def environment_text(values: Mapping[str, float]) -> str:
+    """'slope -11.25°, curve 90°': environment values in words, in display order."""
+    return ", ".join(_WORDS[k].format(number_text(values[k])) for k in TARGET_KEYS if values.get(k) is not None)
+
+
 def describe_target(target: Mapping[str, float | None] | None) -> str:
-    """'slope 11.25°, μ=0.7' — the target in words (also used in titles)."""
+    """'slope -11.25°, μ=0.7' — the target in words (also used in titles)."""
     t = _target(target)
-    words = {"slope_deg": "slope {:g}°", "curve_deg": "curve {:g}°", "friction": "μ={:g}", "gravity": "|g|={:g} m/s²"}
-    return ", ".join(words[k].format(t[k]) for k in changed_parameters(t)) or "the base problem"
+    return environment_text({k: t[k] for k in changed_parameters(t)}) or "the base problem"
+
+
+#: line styles of the environment panels (distinct from each other and from λ's)
+_ENV_STYLE = {"slope_deg": ("--", "s"), "curve_deg": ("-.", "D"), "gravity": (":", "^"), "friction": ("--", "v")}
+
+
+def progress_figure(progress: list[dict], target: dict | None):
+    """The figure of :func:`progress_png` (a matplotlib ``Figure``)."""
+    recs = _records(progress)
+    tgt = _target(target)
+    tutor = [r for r in recs if r["phase"] == "tutor"]
+    ext = [r for r in recs if r["phase"] == "extrapolate"]
+    keys = changed_parameters(tgt) if target is not None else [
+        k for k in TARGET_KEYS if len({r["environment"].get(k) for r in ext if r["accepted"]} - {None}) > 1]
+    acc = [r for r in ext if r["accepted"]]
+    keys = [k for k in keys if any(k in r["environment"] for r in acc)]
+    fig = _figure(7.0, 3.2 + 1.7 * len(keys))
+    axes = fig.subplots(1 + len(keys), 1, sharex=True, squeeze=False,
+                        gridspec_kw={"height_ratios": [2.0] + [1.0] * len(keys)})[:, 0]
+    ax = axes[0]
+    title = f"continuation toward {describe_target(tgt)}" if target is not None else "continuation"
+    if tutor:
+        t = tutor[-1]
+        title += f"\n(tutor made first: {t['wall_time']:.1f} s, {t['iterations']} iterations)"
+    fig.suptitle(title, fontsize=10)
+    axes[-1].set_xlabel("wall time of the extrapolation (s)")
+    ax.set_ylabel("λ")
+    ax.set_ylim(-0.02, 1.05)
+    for a in axes:
+        a.grid(alpha=0.3)
+    if not ext:
+        ax.set_xlim(0, 1)
+        ax.text(0.5, 0.5, "no progress yet", ha="center", va="center", transform=ax.transAxes, fontsize=12,
+                color="0.4")
+        fig.tight_layout()
+        return fig
+    t = [r["wall_time"] for r in ext]
+    rej = [r for r in ext if not r["accepted"]]
+    ax.step([0.0, *t], [0.0] + [r["lam_reached"] for r in ext], where="post", color="tab:blue", lw=1.8,
+            label="λ reached")
+    ax.plot([r["wall_time"] for r in acc], [r["lam"] for r in acc], "o", color="tab:blue", ms=4,
+            label=f"accepted λ ({len(acc)})")
+    if rej:
+        ax.plot([r["wall_time"] for r in rej], [r["lam"] for r in rej], "x", color="tab:red", ms=6,
+                label=f"rejected λ ({len(rej)})")
+    ax.legend(loc="lower right", fontsize=8)
+    labels = {k: (lab, col) for k, lab, col in ENVIRONMENT}
+    for a, k in zip(axes[1:], keys):
+        pts = [(0.0, acc[0]["environment"][k])] if acc and k in acc[0]["environment"] else []
+        pts += [(r["wall_time"], r["environment"][k]) for r in acc if k in r["environment"]]
+        lab, col = labels[k]
+        ls, marker = _ENV_STYLE[k]
+        a.step(*zip(*pts), where="post", color=col, ls=ls, lw=1.5, label=f"{lab.split(' (')[0]} reached")
+        a.plot(*zip(*pts[1:]), marker, color=col, ms=3.5, ls="none")
+        goal = tgt.get(k)
+        if goal is not None:
+            a.axhline(goal, color=col, ls=":", lw=1.0, alpha=0.7, label=f"target {number_text(goal)}")
+        a.set_ylabel(lab, color=col)
+        a.tick_params(axis="y", colors=col)
+        a.legend(loc="best", fontsize=8)
+    ax.set_xlim(0.0, max(t) * 1.03)
+    fig.tight_layout()
+    return fig
 
 
 def progress_png(progress: list[dict], target: dict | None) -> bytes:
-    """The continuation's progress curve as PNG: λ tried (accepted ●, rejected ✕) and λ
-    reached against wall time, and on extra axes the environment value reached (slope,
-    curve, gravity, friction — those the target changes; without a target, those that vary).
+    """The continuation's progress curve as PNG: on top λ tried (accepted ●, rejected ✕) and λ
+    reached against wall time; below it one panel per environment value reached (slope,
+    curve, gravity, friction — those the target changes, with the target as a dotted line;
+    without a target, those that vary), each on its own axis and in its own style.
 
     ``progress`` are records with ``wall_time`` (s since the start of the extrapolation),
     ``lam``, ``lam_reached``, ``accepted``, ``environment`` and optionally ``phase``
@@ -141,57 +219,7 @@ def progress_png(progress: list[dict], target: dict | None) -> bytes:
     are summed up in the title (their time origin is the job's start). An empty list gives
     a "no progress yet" figure.
     """
-    recs = _records(progress)
-    tgt = _target(target)
-    tutor = [r for r in recs if r["phase"] == "tutor"]
-    ext = [r for r in recs if r["phase"] == "extrapolate"]
-    keys = changed_parameters(tgt) if target is not None else [
-        k for k in TARGET_KEYS if len({r["environment"].get(k) for r in ext if r["accepted"]} - {None}) > 1]
-    fig = _figure(7.0 + 0.7 * max(0, len(keys) - 1), 4.0)
-    ax = fig.add_subplot()
-    title = f"continuation toward {describe_target(tgt)}" if target is not None else "continuation"
-    if tutor:
-        t = tutor[-1]
-        title += f"\n(tutor made first: {t['wall_time']:.1f} s, {t['iterations']} iterations)"
-    ax.set_title(title, fontsize=10)
-    ax.set_xlabel("wall time of the extrapolation (s)")
-    ax.set_ylabel("λ")
-    ax.set_ylim(-0.02, 1.05)
-    ax.grid(alpha=0.3)
-    if not ext:
-        ax.set_xlim(0, 1)
-        ax.text(0.5, 0.5, "no progress yet", ha="center", va="center", transform=ax.transAxes, fontsize=12,
-                color="0.4")
-        fig.tight_layout()
-        return _png(fig)
-    t = [r["wall_time"] for r in ext]
-    acc = [r for r in ext if r["accepted"]]
-    rej = [r for r in ext if not r["accepted"]]
-    handles = ax.step([0.0, *t], [0.0] + [r["lam_reached"] for r in ext], where="post", color="tab:blue",
-                      label="λ reached")
-    handles += ax.plot([r["wall_time"] for r in acc], [r["lam"] for r in acc], "o", color="tab:blue", ms=4,
-                       label=f"accepted λ ({len(acc)})")
-    if rej:
-        handles += ax.plot([r["wall_time"] for r in rej], [r["lam"] for r in rej], "x", color="tab:red", ms=6,
-                           label=f"rejected λ ({len(rej)})")
-    labels = {k: (lab, col) for k, lab, col in ENVIRONMENT}
-    for i, k in enumerate(keys):
-        pts = [(r["wall_time"], r["environment"][k]) for r in acc if k in r["environment"]]
-        if not pts:
-            continue
-        ax2 = ax.twinx()
-        if i:
-            ax2.spines["right"].set_position(("axes", 1.0 + 0.14 * i))
-        lab, col = labels[k]
-        handles += ax2.step(*zip(*pts), where="post", color=col, ls="--", alpha=0.8, label=f"{lab} reached")
-        ax2.plot(*zip(*pts), "s", color=col, ms=3, alpha=0.8)
-        ax2.set_ylabel(lab, color=col)
-        ax2.tick_params(axis="y", colors=col)
-    ax.set_xlim(0.0, max(t) * 1.03)
-    ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=min(len(handles), 5),
-              fontsize=8, frameon=False)
-    fig.tight_layout()
-    return _png(fig)
+    return _png(progress_figure(progress, target))
 
 
 # --- motions -------------------------------------------------------------------------------
@@ -216,15 +244,17 @@ def body_weight(motion) -> float:
     return motion.character.total_mass * (g if g > 0 else 9.81)
 
 
-def _subtitle(motion) -> str:
+def motion_caption(motion) -> str:
+    """The second title line of a motion's plots: 'halfboy, 21 frames at 15 fps, λ = 1,
+    slope -11.25°' (values with the decimals they need)."""
     prov = motion.provenance or {}
     parts = [f"{motion.character.name}, {motion.T} frames at {motion.fps:g} fps"]
     if prov.get("lambda") is not None:
-        parts.append(f"λ = {float(prov['lambda']):.4g}")
+        parts.append(f"λ = {number_text(prov['lambda'])}")
     env = prov.get("environment_values") or {}
     for k, lab, _ in ENVIRONMENT:
         if k in ("slope_deg", "curve_deg") and env.get(k):
-            parts.append(f"{lab.split(' ')[0]} {float(env[k]):.3g}°")
+            parts.append(f"{lab.split(' ')[0]} {number_text(env[k])}°")
     return ", ".join(parts)
 
 
@@ -279,7 +309,7 @@ def grf_png(motion) -> bytes:
         ax.legend(loc="upper right", fontsize=7, ncol=5)
     axes[-1].set_xlabel("time (s)")
     axes[-1].set_xlim(t[0] - 0.5 * motion.dt, t[-1] + 0.5 * motion.dt)
-    fig.suptitle(f"ground reaction forces (world frame, Z up)\n{_subtitle(motion)}", fontsize=10)
+    fig.suptitle(f"ground reaction forces (world frame, Z up)\n{motion_caption(motion)}", fontsize=10)
     fig.tight_layout()
     return _png(fig)
 
@@ -362,7 +392,7 @@ def residuals_png(motion, tolerance: float = 1e-6) -> bytes:
     handles, labels = axes[0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=8, frameon=False)
     axes[-1].set_xlabel("time (s), interior frames")
-    fig.suptitle(f"root residual of the equations of motion: h0 − Σ contact wrenches\n{_subtitle(motion)}",
+    fig.suptitle(f"root residual of the equations of motion: h0 − Σ contact wrenches\n{motion_caption(motion)}",
                  fontsize=10)
     fig.tight_layout(rect=(0, 0.05, 1, 1))
     return _png(fig)

@@ -95,6 +95,10 @@ class MotionOut(BaseModel):
     plausible: bool | None = None
     created_at: str
     links: dict[str, str]
+    input: dict[str, Any] | None = Field(
+        None, description="uploaded trials only: what the input looks like (solver.io.summary.describe) — mass, "
+                          "the mass the force plates imply and a warning when they disagree, fit errors, stance "
+                          "intervals per foot")
 
 
 class ProgressPoint(BaseModel):

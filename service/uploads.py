@@ -133,7 +133,52 @@ def motion_from_trial(files: list[tuple[str, bytes]], *, mass: float | None, bel
             paths.append(p)
         try:
             capture = load_trial(paths, mass=mass, belt_speed=belt_speed)
-            return capture_motion(capture)
+            motion = capture_motion(capture)
         except Exception as e:  # the parsing boundary: whatever a reader trips on is bad input
             log.info("trial import failed: %s", e, exc_info=True)
-            raise UploadError(f"could not import the trial: {e}") from None
+            raise UploadError(f"could not import the trial: {client_message(e, tmp)}") from None
+        return motion.evolve(provenance={**motion.provenance, "input": input_summary(capture, tmp)})
+
+
+#: importer parameters (``solver.io.errors.InputError.parameter``) -> how a client sends them
+FORM_FIELDS = {"mass": "send the form field 'mass' (kg)", "belt_speed": "send the form field 'belt_speed' (m/s)"}
+
+
+def _hide_folder(text: str, tmp: str) -> str:
+    """``text`` without the server's temporary folder (the client's file names stay)."""
+    for folder in {tmp, str(Path(tmp).resolve())}:
+        text = text.replace(folder + "/", "").replace(folder, "<upload>")
+    return text
+
+
+def client_message(e: BaseException, tmp: str) -> str:
+    """An importer's error as the client may read it: the server's temporary folder is
+    never shown (the client's file names stay), and a missing importer parameter is named
+    as the upload form's field."""
+    param = getattr(e, "parameter", None)
+    msg = f"{e.reason}; {FORM_FIELDS[param]}" if param in FORM_FIELDS and getattr(e, "reason", None) else str(e)
+    return _hide_folder(msg, tmp)
+
+
+def input_summary(capture: Any, tmp: str) -> dict | None:
+    """What the uploaded trial looks like (``solver.io.summary.describe``): mass, the mass the
+    plates imply and a warning when they disagree, fit errors, stance intervals per foot.
+    Like the error messages, it never shows the server's temporary folder."""
+    from solver.io.summary import describe
+    from solver.pipeline import jsonable
+
+    try:
+        return _hide_paths(jsonable(describe(capture)), tmp)
+    except Exception:  # noqa: BLE001 - a description must never fail an upload that imported
+        log.warning("could not describe the uploaded trial", exc_info=True)
+        return None
+
+
+def _hide_paths(obj: Any, tmp: str) -> Any:
+    if isinstance(obj, str):
+        return _hide_folder(obj, tmp)
+    if isinstance(obj, dict):
+        return {k: _hide_paths(v, tmp) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_hide_paths(v, tmp) for v in obj]
+    return obj

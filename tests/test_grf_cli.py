@@ -48,13 +48,20 @@ def treadmill(shared_data):
     return shared_data / "opensim_gait2354_subject01_treadmill"
 
 
-def test_treadmill_estimate_is_written_in_opensim_axes_and_compares_with_the_plates(tmp_path, treadmill):
-    out = tmp_path / "est.csv"
-    r = motionx("grf", "--osim", treadmill / "subject01.osim", "--coordinates", treadmill / "subject01_walk1_ik.mot",
-                "--belt-speed", "auto", "--grf", treadmill / "subject01_walk1_grf.mot",
-                "--external-loads", treadmill / "subject01_walk1_grf.xml", "--out", out)
+@pytest.fixture(scope="module")
+def treadmill_estimate(treadmill, tmp_path_factory):
+    out = tmp_path_factory.mktemp("treadmill") / "est.csv"
+    # the trial's files as `motionx tutor` takes them (the plates' .mot and .xml recognised as such)
+    r = motionx("grf", treadmill / "subject01.osim", treadmill / "subject01_walk1_ik.mot",
+                treadmill / "subject01_walk1_grf.mot", treadmill / "subject01_walk1_grf.xml",
+                "--belt-speed", "auto", "--out", out)
     assert r.returncode == 0, r.stderr
-    info = json.loads(r.stdout)
+    return out, json.loads(r.stdout)
+
+
+def test_treadmill_estimate_is_written_in_opensim_axes_and_compares_with_the_plates(tmp_path, treadmill,
+                                                                                     treadmill_estimate):
+    out, info = treadmill_estimate
     assert info["contacts_from"] == "plates" and info["rows"] == 2 * 209
     # defaults: temporal prior at the kinematics' cut-off, single-support CoPs kept in the feet
     assert info["smoothing_hz"] == info["cutoff_hz"] == 6.0 and info["status_projected"] > 0
@@ -86,6 +93,27 @@ def test_treadmill_estimate_is_written_in_opensim_axes_and_compares_with_the_pla
     assert metrics["all"]["n_frames"] == 209
     assert metrics["all"]["rows"]["fz"]["rel_rms"] < 0.05  # tests/test_contact.py ACCURACY
     assert metrics["all"]["rows"]["cop"]["rms"] < 4.5
+
+
+def test_grf_compare_plot_is_drawn_in_the_csvs_frame(tmp_path, treadmill, treadmill_estimate, monkeypatch):
+    """The CSV is in OpenSim's ground frame (y up, z right): the plot shows those numbers
+    under those names, the measured curves mapped into the same frame."""
+    import solver.grf_compare as gc
+    from service.cli import main
+
+    out = treadmill_estimate[0]
+    drawn = {}
+    monkeypatch.setattr(gc, "plot", lambda path, est, meas, **kw: drawn.update(est=est, meas=meas, **kw))
+    assert main(["grf-compare", "--estimate", str(out), "--grf", str(treadmill / "subject01_walk1_grf.mot"),
+                 "--external-loads", str(treadmill / "subject01_walk1_grf.xml"), "--plot",
+                 str(tmp_path / "c.png")]) == 0
+    assert drawn["axis_names"] == ("x (forward)", "y (up)", "z (right)") and drawn["vertical"] == 1
+    assert drawn["length_unit"] == "m" and "OpenSim ground" in drawn["title"]
+    fy = per_foot(read_rows(out)[1], "fy")
+    np.testing.assert_allclose(drawn["est"].force[0, 1], fy["right"], rtol=1e-5, atol=1e-3)  # the CSV's fy
+    # the plates measure the body weight along y (up) in that frame, not along z
+    both = drawn["meas"].force.sum(axis=0)
+    assert np.nanmean(both[1]) == pytest.approx(72.6 * 9.81, rel=0.05) and abs(np.nanmean(both[2])) < 50
 
 
 def test_c3d_estimate_is_in_the_lab_frame_in_millimetres(tmp_path, shared_data):
@@ -123,18 +151,21 @@ def test_c3d_from_another_lab_runs_through_grf_grf_compare_and_tutor(tmp_path, s
     r = motionx("grf", "--c3d", c3d, "--out", out)
     assert r.returncode == 0, r.stderr
     info = json.loads(r.stdout)
-    assert info["marker_set"] == "IOR / ISB anatomical" and info["mass_kg"] == pytest.approx(66.0, rel=0.04)
-    assert "whole stance of each foot" in info["mass_from"]
-    assert info["mass_implied_kg"] == pytest.approx(info["mass_kg"], abs=0.01)
+    inp = info["input"]  # the input summary (solver.io.summary.describe)
+    assert inp["marker_set"] == "IOR / ISB anatomical" and info["mass_kg"] == pytest.approx(66.0, rel=0.04)
+    assert set(inp["upper_body"].values()) == {"markers"}
+    assert "one stance per foot" in inp["mass_from"]
+    assert inp["mass_implied_kg"] == pytest.approx(info["mass_kg"], abs=0.01) and "mass_warning" not in inp
     assert "support_flight" not in info  # a walk: a foot on the ground at every frame
-    assert [len(info["stances"][f]) for f in ("right", "left")] == [3, 2]
+    assert [len(inp["stances"][f]) for f in ("right", "left")] == [3, 2]
+    assert info["free_moment"].startswith("not reported")
     check_contract(out)
     r = motionx("grf-compare", "--estimate", out, "--c3d", c3d, "--json", tmp_path / "cmp.json")
     assert r.returncode == 0, r.stderr
     cmp = json.loads((tmp_path / "cmp.json").read_text())
     assert cmp["all"]["n_frames"] >= 160 and cmp["double_support"]["n_frames"] >= 10
     tut = tmp_path / "tutor.json"
-    r = motionx("tutor", c3d, "--character", "halfboy", "--fps", "15", "--out", tut)
+    r = motionx("tutor", c3d, "--character", "halfboy", "--fps", "15", "--out", tut, "--json")
     assert r.returncode == 0, r.stderr + r.stdout
     assert json.loads(r.stdout)["status"] == "succeeded"
 
@@ -165,7 +196,7 @@ def test_thesis_form_through_the_cli(tmp_path, shared_data):
     """--smoothing 0 --exact-single-support: one QP per frame and c under the stance foot (the thesis)."""
     c3d = shared_data / "btk_pig_flatfoot_full" / "PiG_Motion-FlatFoot-Full.c3d"
     out = tmp_path / "est.csv"
-    r = motionx("grf", "--c3d", c3d, "--smoothing", "0", "--exact-single-support", "--out", out)
+    r = motionx("grf", c3d, "--smoothing", "0", "--exact-single-support", "--out", out)  # the trial as for tutor
     assert r.returncode == 0, r.stderr
     info = json.loads(r.stdout)
     assert "smoothing_hz" not in info and "status_projected" not in info and info["status_single"] > 100
@@ -176,7 +207,9 @@ def test_thesis_form_through_the_cli(tmp_path, shared_data):
     (["grf", "--osim", "{T}/subject01.osim", "--out", "x.csv"], "--coordinates"),
     (["grf", "--c3d", "/no/such.c3d", "--out", "x.csv"], "file not found"),
     (["grf", "--osim", "{T}/subject01.osim", "--coordinates", "{T}/subject01_walk1_ik.mot",
-      "--c3d", "x.c3d", "--out", "x.csv"], "exactly one input"),
+      "--c3d", "x.c3d", "--out", "x.csv"], "give the trial once"),
+    (["grf", "{T}/subject01.osim", "{T}/subject01_walk1_ik.mot", "--c3d", "x.c3d", "--out", "x.csv"],
+     "give the trial once"),
     (["grf", "--osim", "{T}/subject01.osim", "--coordinates", "{T}/subject01_walk1_ik.mot",
       "--belt-speed", "fast", "--out", "x.csv"], "--belt-speed"),
     (["grf", "--osim", "{T}/subject01.osim", "--coordinates", "{T}/subject01_walk1_ik.mot",
@@ -216,3 +249,26 @@ def test_bad_motion_data_is_refused_clearly(tmp_path, treadmill):
                 tmp_path / "x.csv")
     assert r.returncode != 0 and "double support" in r.stderr and "--belt-speed" in r.stderr
     assert not (tmp_path / "x.csv").exists()
+
+
+def test_grf_compare_sums_several_plates_per_foot(tmp_path, treadmill):
+    """An ExternalLoads with three forces (right, right, left: the right record split into two
+    time-disjoint plates) compares exactly as the two-force original."""
+    from test_io_opensim import _split_grf
+
+    est = tmp_path / "est.csv"
+    r = motionx("grf", "--osim", treadmill / "subject01.osim", "--coordinates", treadmill / "subject01_walk1_ik.mot",
+                "--belt-speed", "auto", "--grf", treadmill / "subject01_walk1_grf.mot",
+                "--external-loads", treadmill / "subject01_walk1_grf.xml", "--out", est)
+    assert r.returncode == 0, r.stderr
+    mot, xml = _split_grf(treadmill, tmp_path, t_split=2.3)
+    out = {}
+    for name, files in (("two", (treadmill / "subject01_walk1_grf.mot", treadmill / "subject01_walk1_grf.xml")),
+                        ("three", (mot, xml))):
+        js = tmp_path / f"{name}.json"
+        c = motionx("grf-compare", "--estimate", est, "--grf", files[0], "--external-loads", files[1], "--json", js)
+        assert c.returncode == 0, c.stderr
+        out[name] = json.loads(js.read_text())
+    for comp in ("fx", "fy", "fz", "tz", "cop"):
+        a, b = out["two"]["all"]["rows"][comp], out["three"]["all"]["rows"][comp]
+        assert a["samples"] == b["samples"] and a["rms"] == pytest.approx(b["rms"], abs=1e-6, nan_ok=True), comp

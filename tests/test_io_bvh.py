@@ -203,3 +203,52 @@ def _scaled(src: Path, tmp: Path, k: float):
     p.write_text("\n".join(out) + "\n")
     assert read_bvh(p).T == clip.T
     return bvh_track(p, mass=45.0)
+
+
+# --- the CMU clips of a game pipeline (retargeted, 19 joints, Z-X-Y channels, cm, Y up) ------
+
+CMU16 = "cmu16_bvh"
+CMU16_CLIPS = {"16_15_walk": 0.0, "16_17_walk_90deg_left_turn": 90.0, "16_19_walk_90deg_right_turn": -100.0}
+
+
+@pytest.mark.parametrize("clip", sorted(CMU16_CLIPS))
+def test_cmu_game_clips_import(shared_data, clip):
+    """ASF-style names (pelvis, lfemur, ltibia, lfoot, ltoes, thorax, head, lclavicle, lhumerus,
+    lradius, lhand) map to our roles; units cm from the leg; facing and turning as the README says."""
+    p = shared_data / CMU16 / f"{clip}.bvh"
+    clip_ = read_bvh(p)
+    assert len(clip_.names) == 19 and clip_.channels[1] == ("Zrotation", "Xrotation", "Yrotation")
+    cap = load_bvh(p, mass=60.0)
+    roles = cap.source["joint_roles"]
+    assert (roles["hip_l"], roles["knee_l"], roles["ankle_l"], roles["mtp_l"]) == ("lfemur", "ltibia", "lfoot", "ltoes")
+    assert (roles["shoulder_r"], roles["elbow_r"], roles["wrist_r"]) == ("rhumerus", "rradius", "rhand")
+    assert cap.source["units"] == "cm" and cap.fps == pytest.approx(30.0, rel=1e-4)
+    assert cap.character.name == "capture-full" and cap.character.total_mass == pytest.approx(60.0)
+    assert cap.source["fit"]["landmark_error_mm"]["max"] < 1.0  # the same rigid tree: an exact fit
+    # femur 42.0 cm + tibia 39.9 cm
+    assert cap.character.segment("thigh_r").length == pytest.approx(0.420, abs=0.002)
+    assert cap.character.segment("shank_r").length == pytest.approx(0.399, abs=0.002)
+    # feet on the floor, pelvis at walking height
+    from solver.kinematics import contact_points
+
+    z = contact_points(cap.character, cap.q)[:, 2]
+    assert -0.01 < np.percentile(z, 2) < 0.03 and 0.7 < np.median(cap.q[2]) < 0.95
+    # heading change over the clip (root yaw) as the README states (≈ 0, +90, -100 degrees)
+    yaw = np.degrees(np.unwrap(cap.q[3]))
+    assert yaw[-1] - yaw[0] == pytest.approx(CMU16_CLIPS[clip], abs=15.0)
+
+
+def test_bvh_without_mass_names_the_mass_flag(shared_data, tmp_path):
+    """No mass in a BVH: the reader says so and the command line names --mass (not 'mass=...')."""
+    import shutil
+    import subprocess
+    import sys
+
+    p = shared_data / CMU16 / "16_15_walk.bvh"
+    with pytest.raises(FitError, match=r"mass unknown: the BVH input does not state it; pass mass=\.\.\. \(kg\)") as e:
+        load_bvh(p)
+    assert e.value.parameter == "mass" and e.value.reason == "subject mass unknown: the BVH input does not state it"
+    exe = shutil.which("motionx") or str(Path(sys.executable).with_name("motionx"))
+    for cmd in (["grf", "--input", p, "--out", tmp_path / "x.csv"], ["tutor", p, "--out", tmp_path / "t.json"]):
+        r = subprocess.run([exe, *map(str, cmd)], capture_output=True, text=True, timeout=120)
+        assert r.returncode == 2 and "does not state it; pass --mass KG" in r.stderr and "mass=" not in r.stderr, r.stderr

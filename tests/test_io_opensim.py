@@ -123,7 +123,7 @@ def test_treadmill_belt_shift(treadmill, shared_data):
 
 def _opensim_com(model, motion, frame, times):
     """Whole-body centre of mass (our frame) from the bodies OpenSim itself places (child process)."""
-    from solver.io.opensim import _run_worker
+    from solver.io.opensim.worker import run_worker as _run_worker
 
     sto = read_mot(motion)
     res = _run_worker(str(model), sto.labels, sto.data, sto.in_degrees)
@@ -269,3 +269,253 @@ def test_load_trial_dispatches_opensim(shared_data, tmp_path):
         load_trial([other])
     with pytest.raises(TrialError, match="file not found"):
         load_trial([tmp_path / "nope.c3d"])
+
+
+# --- .mot columns for coordinates the model does not have (welded / locked joints) -----------
+
+
+def _weld(src, dst, joints):
+    """A copy of an OpenSim 3.x model with the named CustomJoints replaced by WeldJoints at the
+    same frames: the joint's coordinates disappear, its child is fixed in the default pose
+    (coordinate 0), as a scaled model with welded subtalar/mtp/wrist joints."""
+    import xml.etree.ElementTree as ET
+
+    tree = ET.parse(src)
+    n = 0
+    for parent in tree.getroot().iter():
+        for i, el in enumerate(list(parent)):
+            if el.tag == "CustomJoint" and el.get("name") in joints:
+                w = ET.Element("WeldJoint", name=el.get("name"))
+                for tag in ("parent_body", "location_in_parent", "orientation_in_parent", "location", "orientation"):
+                    if el.find(tag) is not None:
+                        w.append(el.find(tag))
+                parent.remove(el)
+                parent.insert(i, w)
+                n += 1
+    assert n == len(joints)
+    tree.write(dst)
+    return dst
+
+
+def _with_columns(src, dst, columns):
+    """A copy of a .mot with extra columns (name -> value per row, or a constant)."""
+    lines = src.read_text().splitlines()
+    h = lines.index("endheader") + 1
+    rows = lines[h + 1:]
+    out = lines[:h] + ["\t".join([lines[h]] + list(columns))]
+    for k, r in enumerate(rows):
+        vals = [f"{(v[k] if np.ndim(v) else v):.8f}" for v in columns.values()]
+        out.append("\t".join([r] + vals))
+    dst.write_text("\n".join(out) + "\n")
+    return dst
+
+
+def test_constant_columns_of_welded_joints_are_ignored_as_opensim_does(shared_data, tmp_path, caplog):
+    """mtp welded in the model, the IK still carrying mtp_angle_r/l (all 0): OpenSim reads the
+    columns of its coordinates and ignores the others. The import equals that of the original
+    model at mtp = 0 (OpenSim places the same bodies), with a warning naming the columns."""
+    d = shared_data / TM
+    ik = d / "subject01_walk1_ik.mot"
+    assert np.ptp(read_mot(ik).column("mtp_angle_r")) == 0.0  # the shared IK has mtp at 0 throughout
+    welded = _weld(d / "subject01.osim", tmp_path / "welded.osim", {"mtp_r", "mtp_l"})
+    # the Rajagopal case: 8 more constant columns (subtalar, mtp, wrists welded there)
+    extra = {f"{c}_{s}": 0.0 for c in ("wrist_flex", "wrist_dev") for s in "rl"}
+    extra |= {"pro_sup_r": 0.0, "pro_sup_l": 0.0, "elbow_flex_r": 0.0, "elbow_flex_l": 0.0}
+    motion = _with_columns(ik, tmp_path / "ik_extra.mot", extra)
+    with caplog.at_level("WARNING"):
+        cap = load_opensim(welded, motion)
+    ignored = cap.source["ignored_columns"]
+    assert ignored == {"mtp_angle_r": 0.0, "mtp_angle_l": 0.0, **extra}
+    assert any("ignoring 10 constant column(s)" in r.getMessage() and "mtp_angle_r=0" in r.getMessage()
+               for r in caplog.records)
+    ref = load_opensim(d / "subject01.osim", ik)
+    assert cap.character.coordinate_names == ref.character.coordinate_names
+    assert np.abs(cap.q - ref.q).max() < 1e-9
+    # OpenSim itself: the welded model has no mtp coordinates and puts every body where the
+    # original model does at mtp = 0
+    from solver.io.opensim.worker import run_worker
+
+    sto = read_mot(ik)
+    a, b = run_worker(str(welded), sto.labels, sto.data, True), run_worker(str(d / "subject01.osim"), sto.labels,
+                                                                            sto.data, True)
+    assert "mtp_angle_r" not in a["coord_names"] and "mtp_angle_r" in b["coord_names"]
+    assert np.abs(a["P"] - b["P"]).max() < 1e-12 and np.abs(a["R"] - b["R"]).max() < 1e-12
+
+
+def test_varying_columns_the_model_lacks_are_refused_by_name(shared_data, tmp_path):
+    """subtalar welded but the IK's subtalar angles vary (-8..14°): motion the model cannot follow."""
+    d = shared_data / TM
+    welded = _weld(d / "subject01.osim", tmp_path / "welded.osim", {"subtalar_r", "subtalar_l", "mtp_r", "mtp_l"})
+    with pytest.raises(OpenSimError, match=r"columns \['subtalar_angle_r', 'subtalar_angle_l'\] that are not "
+                                           r"coordinates .* vary over the motion \(subtalar_angle_r -7.851\.\.13.96"):
+        load_opensim(welded, d / "subject01_walk1_ik.mot")
+    # a column within 1e-6 of constant is constant; 1e-3 of drift is not
+    drift = _with_columns(d / "subject01_walk1_ik.mot", tmp_path / "drift.mot",
+                          {"wrist_flex_r": np.linspace(0, 1e-3, 211)})
+    with pytest.raises(OpenSimError, match=r"\['wrist_flex_r'\]"):
+        load_opensim(d / "subject01.osim", drift)
+
+
+# --- ExternalLoads: several forces per foot --------------------------------------------------
+
+
+def _split_grf(d, tmp_path, t_split):
+    """The treadmill GRF with the right foot's record split in two time-disjoint plates (columns
+    ``p1_*`` before ``t_split``, ``p2_*`` after) and an ExternalLoads with 3 forces
+    (right, right, left), as an overground trial with plates left, right, left."""
+    sto = read_mot(d / "subject01_walk1_grf.mot")
+    right = [lab for lab in sto.labels if lab.startswith(("ground_force_", "ground_torque_"))]
+    cols = np.stack([sto.column(c) for c in right], axis=1)
+    first = np.where((sto.time < t_split)[:, None], cols, 0.0)
+    second = np.where((sto.time < t_split)[:, None], 0.0, cols)
+    labels = ["time", *sto.labels, *[f"p1_{c}" for c in right], *[f"p2_{c}" for c in right]]
+    data = np.column_stack([sto.time, sto.data, first, second])
+    out = ["grf3.mot", "endheader", "\t".join(labels)] + ["\t".join(f"{x:.10g}" for x in row) for row in data]
+    mot = tmp_path / "grf3.mot"
+    mot.write_text("\n".join(out) + "\n")
+    xml = (d / "subject01_walk1_grf.xml").read_text()
+    import xml.etree.ElementTree as ET
+
+    root = ET.fromstring(xml)
+    objs = next(root.iter("objects"))
+    forces = list(objs)
+    r_force = next(f for f in forces if f.find("applied_to_body").text.strip().endswith("_r"))
+    objs.remove(r_force)
+    for k in (1, 2):
+        f = ET.fromstring(ET.tostring(r_force))
+        f.set("name", f"plate{k}_right")
+        for tag in ("force_identifier", "point_identifier", "torque_identifier"):
+            el = f.find(tag)
+            el.text = f"p{k}_" + el.text.strip()
+        objs.insert(0, f)
+    x = tmp_path / "grf3.xml"
+    x.write_text(ET.tostring(root, encoding="unicode"))
+    assert sum(1 for _ in root.iter("ExternalForce")) == 3
+    return mot, x
+
+
+def test_several_external_forces_on_one_foot_are_summed(shared_data, tmp_path, treadmill):
+    d = shared_data / TM
+    mot, xml = _split_grf(d, tmp_path, t_split=2.3)  # mid right stance (1.853-2.633 s)
+    times = treadmill.times
+    a = read_opensim_grf(mot, xml, times=times, frame=treadmill.frame)
+    b = read_opensim_grf(d / "subject01_walk1_grf.mot", d / "subject01_walk1_grf.xml", times=times,
+                         frame=treadmill.frame)
+    assert np.abs(a.force - b.force).max() < 1e-9
+    assert np.abs(a.free_moment - b.free_moment).max() < 1e-9
+    assert np.array_equal(np.isnan(a.cop), np.isnan(b.cop)) and np.nanmax(np.abs(a.cop - b.cop)) < 1e-9
+    # the same implied mass
+    from solver.io.opensim import plates_implied_mass
+
+    assert plates_implied_mass(mot, xml).kg == pytest.approx(plates_implied_mass(d / "subject01_walk1_grf.mot",
+                                                                                 d / "subject01_walk1_grf.xml").kg)
+
+
+def test_combined_plates_keep_the_total_wrench():
+    """Two plates loaded at once under one foot: the equivalent wrench (sum of forces at the
+    combined CoP with a vertical free moment) has the plates' total force and moment."""
+    from solver.io.opensim.external_loads import combine
+
+    rng = np.random.default_rng(3)
+    N = 50
+    F = np.stack([rng.uniform([-80, 100, -40], [80, 600, 40], (N, 3)) for _ in range(2)])
+    P = np.stack([np.column_stack([rng.uniform(-0.3, 0.9, N), np.full(N, -0.0075), rng.uniform(-0.2, 0.2, N)])
+                  for _ in range(2)])
+    TQ = np.zeros((2, N, 3))
+    TQ[:, :, 1] = rng.uniform(-5, 5, (2, N))
+    f, p, tq = combine(F, P, TQ)
+    assert np.allclose(f, F.sum(0))
+    assert np.allclose(p[:, 1], -0.0075) and np.allclose(tq[:, [0, 2]], 0.0)
+    M_plates = (np.cross(P, F) + TQ).sum(0)
+    assert np.allclose(np.cross(p, f) + tq, M_plates, atol=1e-9)
+    # one plate unloaded (its CoP meaningless, e.g. 33609 m): the other plate's own point and moment
+    F[1] = 0.0
+    P[1] = 33609.0
+    f, p, tq = combine(F, P, TQ)
+    assert np.allclose(p, P[0]) and np.allclose(tq[:, 1], TQ[0, :, 1])
+
+
+# --- the body mass the plates imply ----------------------------------------------------------
+
+
+def test_plates_imply_the_subjects_mass_and_a_wrong_mass_is_flagged(shared_data, loaded, treadmill):
+    # treadmill: 11 whole cycles of both plates; overground: one complete stance per foot
+    im = treadmill.source["implied_mass"]
+    assert im["method"] == "whole cycles" and im["cycles"] >= 10
+    assert im["kg"] == pytest.approx(72.6, rel=0.01)  # the model's (and the scaling setup's) mass
+    assert "mass_warning" not in treadmill.source
+    im = loaded.source["implied_mass"]
+    assert im["method"] == "one stance per foot"
+    assert im["kg"] == pytest.approx(112.43, rel=0.02)
+    # the issue's case: a model mass the plates contradict (62 kg against ~73) is flagged
+    d = shared_data / TM
+    cap = load_opensim(d / "subject01.osim", d / "subject01_walk1_ik.mot", grf=d / "subject01_walk1_grf.mot",
+                       grf_xml=d / "subject01_walk1_grf.xml", belt_speed="auto", mass=62.0)
+    assert cap.character.total_mass == pytest.approx(62.0)
+    assert "62.0 kg differs from the 72.7 kg the force plates imply (-15 %)" in cap.source["mass_warning"]
+
+
+# --- markers (.trc) + model: OpenSim's inverse kinematics -------------------------------------
+
+
+@pytest.fixture(scope="module")
+def trc_ik(shared_data):
+    from solver.io.opensim.ik import solve_ik
+
+    d = shared_data / TM
+    return solve_ik(d / "subject01.osim", d / "marker_trajectories.trc")
+
+
+def test_trc_inverse_kinematics_agrees_with_the_trials_own_ik(shared_data, trc_ik):
+    """OpenSim IK of marker_trajectories.trc (uniform weights) against the trial's IK .mot
+    (computed by the lab with its own task weights): docs/import.md has the per-coordinate table."""
+    res, src = trc_ik
+    ref = read_mot(shared_data / TM / "subject01_walk1_ik.mot")
+    t = res["ik_times"]
+    assert t.size == 151 and np.allclose(np.diff(t), 1 / 60)  # the file's rounded times rebuilt from its rate
+    sel = (t >= ref.time[0] - 1e-6) & (t <= ref.time[-1] + 1e-6)
+    rms = {}
+    for j, name in enumerate(res["coord_names"]):
+        v, r = res["ik_q"][sel, j], np.interp(t[sel], ref.time, ref.column(name))
+        v = np.degrees(v) if res["coord_rotational"][j] else 1000 * v
+        r = r if res["coord_rotational"][j] else 1000 * r
+        rms[name] = float(np.sqrt(np.mean((v - r) ** 2)))
+    assert max(rms[f"knee_angle_{s}"] for s in "rl") < 4.0  # deg
+    assert max(rms[f"ankle_angle_{s}"] for s in "rl") < 4.0
+    assert max(rms[f"pelvis_t{a}"] for a in "xyz") < 6.0  # mm
+    rot = [n for n, r in zip(res["coord_names"], res["coord_rotational"]) if r and not n.startswith("mtp")]
+    assert np.mean([rms[n] for n in rot]) < 5.5
+    ik = src["ik"]
+    assert len(ik["markers"]) == 31 and "R.Knee.Lat" in ik["model_markers_without_data"]
+    assert "R.Temple" in ik["file_markers_not_in_model"]
+    assert 10 < ik["marker_error_mm"]["rms"] < 25 and ik["marker_error_mm"]["max"] < 90
+
+
+def test_trc_input_makes_a_capture_through_load_trial(shared_data):
+    d = shared_data / TM
+    cap = load_trial([d / "subject01.osim", d / "marker_trajectories.trc", d / "subject01_walk1_grf.mot",
+                      d / "subject01_walk1_grf.xml"], belt_speed="auto")
+    assert cap.T == 151 and cap.fps == pytest.approx(60.0) and cap.character.name == "capture-full"
+    assert cap.source["motion_from"].startswith("inverse kinematics")
+    assert cap.source["ik"]["marker_error_mm"]["rms"] < 25
+    assert cap.source["belt_speed_m_s"] == pytest.approx(1.13, abs=0.03)
+    assert cap.measured is not None and cap.measured.valid.all()
+    with pytest.raises(OpenSimError, match="only apply to a .trc|apply to a .trc"):
+        load_opensim(d / "subject01.osim", d / "subject01_walk1_ik.mot", ik_reweight=1)
+
+
+def test_trc_errors(shared_data, tmp_path):
+    d = shared_data / TM
+    bad = tmp_path / "x.trc"
+    bad.write_text("hello\n")
+    with pytest.raises(OpenSimError, match="not a .trc marker file"):
+        load_opensim(d / "subject01.osim", bad)
+    # markers none of which the model has
+    lines = (d / "marker_trajectories.trc").read_text().splitlines()
+    lines[3] = "\t".join(c.replace(".", "_") if c not in ("Frame#", "Time") else c for c in lines[3].split("\t"))
+    other = tmp_path / "renamed.trc"
+    other.write_text("\n".join(lines) + "\n")
+    with pytest.raises(OpenSimError, match=r"only 1 of the model's markers have data in renamed.trc"):
+        load_opensim(d / "subject01.osim", other)
+    with pytest.raises(OpenSimError, match="weights must be finite"):
+        load_opensim(d / "subject01.osim", d / "marker_trajectories.trc", ik_weights={"R.ASIS": -1})

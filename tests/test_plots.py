@@ -16,7 +16,17 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from service.plots import PlotError, grf_png, progress_png, residual_series, residuals_png
+from service.plots import (
+    PlotError,
+    describe_target,
+    grf_png,
+    motion_caption,
+    number_text,
+    progress_figure,
+    progress_png,
+    residual_series,
+    residuals_png,
+)
 from solver.motion import Motion
 from solver.plausibility import report
 
@@ -78,9 +88,39 @@ def test_progress_png_from_the_continuations_records(continuation):
     target, res = continuation
     recs = [asdict(r) for r in res.records]
     px = assert_png(progress_png(recs, asdict(target)))
-    # two environment axes (slope and friction change): wider than a one-parameter figure
+    # two environment panels (slope and friction change) below λ: taller than a one-parameter figure
     one = assert_png(progress_png(recs, {"friction": 0.7}))
-    assert px.shape[1] > one.shape[1]
+    assert px.shape[0] > one.shape[0]
+
+
+def test_progress_plot_draws_each_environment_value_on_its_own_axes(continuation):
+    """Slope and curve both grow in proportion to λ: on shared or twin axes one line would
+    hide the other (and λ). Each gets its own panel, in its own style, with its target."""
+    _, res = continuation
+    recs = [asdict(r) for r in res.records]
+    for r in recs:  # the same solves, as a slope + curve continuation reports them
+        r["environment"] = {**r["environment"], "slope_deg": -11.25 * r["lam"], "curve_deg": 90.0 * r["lam"]}
+    fig = progress_figure(recs, {"slope_deg": -11.25, "curve_deg": 90.0})
+    axes = fig.axes
+    assert [a.get_ylabel() for a in axes] == ["λ", "slope (°)", "curve (°)"]
+    assert fig._suptitle.get_text().startswith("continuation toward slope -11.25°, curve 90°")
+    assert len({id(a) for a in axes}) == 3 and all(a.get_shared_x_axes().joined(axes[0], a) for a in axes)
+    styles = [(line.get_linestyle(), line.get_color()) for a in axes for line in a.get_lines()[:1]]
+    assert len(set(styles)) == 3, styles  # λ, slope, curve: each line its own style and colour
+    slope_lines = {line.get_label(): line for line in axes[1].get_lines()}
+    assert "target -11.25" in slope_lines
+    assert min(slope_lines["slope reached"].get_ydata()) == pytest.approx(-11.25)
+    assert max(axes[2].get_lines()[0].get_ydata()) == pytest.approx(90.0)
+
+
+def test_numbers_in_titles_keep_the_decimals_they_need(tutor, continuation):
+    assert [number_text(v) for v in (-11.25, 90.0, 0.7, 1.62, -0.0, 2.8125, 1 / 3)] == \
+        ["-11.25", "90", "0.7", "1.62", "0", "2.8125", "0.3333"]
+    assert describe_target({"slope_deg": -11.25, "curve_deg": 0.0}) == "slope -11.25°"
+    last = continuation[1].steps[-1].motion
+    env = dict(last.provenance["environment_values"], slope_deg=-11.25)
+    caption = motion_caption(last.evolve(provenance={**last.provenance, "environment_values": env}))
+    assert "slope -11.25°" in caption and "λ = 1" in caption and "-11.2°" not in caption
 
 
 def test_progress_png_takes_the_api_points(continuation):

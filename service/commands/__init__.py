@@ -4,12 +4,12 @@ Add a module to ``MODULES`` to add its commands; keep argument parsing and print
 and the work in ``solver``/``mjcf``.
 """
 
-MODULES = [
-    "service.commands.physics",
-    "service.commands.tutor",
-    "service.commands.demo",
-    "service.commands.export",
-    "service.commands.serve",
-    "service.commands.grf",
+MODULES = [  # the order of the command list: the main job first
+    "service.commands.tutor",  # tutor, extrapolate, validate
     "service.commands.plot",
+    "service.commands.export",
+    "service.commands.demo",
+    "service.commands.grf",  # grf, grf-compare
+    "service.commands.physics",  # mjcf, check-dynamics
+    "service.commands.serve",  # serve, worker, stack, db, apikey, openapi
 ]

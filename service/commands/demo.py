@@ -1,11 +1,15 @@
 """``motionx demo``: the main job end to end on the embedded defaults (``make demo``).
 
 Starts ``motionx serve`` (SQLite + local process pool) on a free port in a temporary data
-directory, uploads a real captured walk over HTTP (the shared DeepMimic walk by default),
-asks for two extrapolations of the same capture — a downhill slope and a curve — follows
-both jobs with a progress bar, and downloads into ``--out``, per job: every λ optimum
-(motion file v1, JSON clip, GLB, BVH) with its plausibility report, the progress curve and
-the final motion's GRF and residual plots; then prints a short summary.
+directory, uploads a real captured walk over HTTP (the DeepMimic walk shipped in ``data/``
+by default), asks for two extrapolations of the same capture — a downhill slope and a
+curve — follows both jobs with a progress bar, and downloads into ``--out``, per job: every
+λ optimum (``step_NNN_lambda_L.motion.json``, ``.clip.json``, ``.glb``, ``.bvh``,
+``.validation.json``, named as ``motionx extrapolate`` names them), ``progress.csv`` and
+``progress.png``, and the final motion's GRF and residual plots; then prints a short summary.
+
+The service is stopped (its whole process group, waited for) when the demo ends, fails, or
+receives Ctrl-C or SIGTERM; the temporary data directory is removed unless ``--keep-temp``.
 """
 
 from __future__ import annotations
@@ -13,14 +17,16 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import sys
 import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from service.cli import CliError
 from service import examples
+from service.cli import CliError, Terminated, add_command, stop_on_signals
+from service.commands.outputs import progress_csv, step_stem, written_here
 from service.topology import Proc, TopologyError, free_port, motionx_cmd, wait_api
 
 TERMINAL = ("succeeded", "failed", "canceled", "impasse")
@@ -28,13 +34,21 @@ TERMINAL = ("succeeded", "failed", "canceled", "impasse")
 EXPORTS = (("motion", "motion.json"), ("json", "clip.json"), ("gltf", "glb"), ("bvh", "bvh"))
 #: the plots of a job's final motion: (endpoint name, file)
 MOTION_PLOTS = (("grf", "grf.png"), ("residuals", "residuals.png"))
+#: the demo's walk, in the trials folder (``service.examples.data_dir()``)
+DEMO_TRIAL = ("deepmimic_humanoid3d_walk", ("humanoid3d_walk.txt", "humanoid3d_character.txt"))
+JOB_NAMES = ("downhill", "uphill", "curve")
+#: without a terminal, a running job's progress line is repeated this often (its clock moves)
+LOG_EVERY_S = 5.0
 
 
 def _default_trial() -> list[Path]:
-    d = examples.data_dir() / "deepmimic_humanoid3d_walk"
-    if d.is_dir():
-        return [d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt"]
-    raise CliError(f"no input given and the default trial is missing ({d}); pass trial files")
+    folder, names = DEMO_TRIAL
+    d = examples.data_dir() / folder
+    files = [d / n for n in names]
+    if all(f.is_file() for f in files):
+        return files
+    raise CliError(f"no input given and the demo walk is not in {d} (the repository's data/ folder, or "
+                   f"$MOTIONX_DATA/{folder}); pass trial files, or set MOTIONX_DATA to a folder that holds {folder}/")
 
 
 @dataclass
@@ -43,10 +57,28 @@ class _Job:
     target: dict
     url: str = ""
     state: dict = field(default_factory=dict)
+    started: float | None = None  # time.monotonic() when first seen running
+    finished: float | None = None  # ... and finished
 
     @property
     def done(self) -> bool:
         return self.state.get("status") in TERMINAL
+
+    def seen(self, state: dict) -> None:
+        """Records a polled state and the local clock of the job: it starts when the job is
+        first seen running (or finished) and stops when it is seen finished."""
+        self.state = state
+        now = time.monotonic()
+        if self.started is None and state.get("status") not in ("queued", None):
+            self.started = now
+        if self.finished is None and self.done:
+            self.finished = now
+
+    @property
+    def elapsed(self) -> float:
+        if self.started is None:
+            return 0.0
+        return (self.finished or time.monotonic()) - self.started
 
 
 def _targets(args: argparse.Namespace) -> list[_Job]:
@@ -60,63 +92,93 @@ def _targets(args: argparse.Namespace) -> list[_Job]:
     return jobs
 
 
-def cmd_demo(args: argparse.Namespace) -> int:
-    import httpx
+def _clear_earlier_run(out: Path) -> None:
+    """Removes what an earlier demo wrote into ``out`` (its job folders' files, its summary),
+    so that no stale λ files sit next to this run's; anything else stays."""
+    for name in JOB_NAMES:
+        if (out / name).is_dir():
+            for p in written_here(out / name):
+                p.unlink()
+    (out / "summary.json").unlink(missing_ok=True)
 
+
+def cmd_demo(args: argparse.Namespace) -> int:
     files = [Path(p) for p in args.inputs] if args.inputs else _default_trial()
     for f in files:
         if not f.is_file():
             raise CliError(f"input not found: {f}")
     jobs = _targets(args)
     out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise CliError(f"--out {out} exists and is not a directory")
     out.mkdir(parents=True, exist_ok=True)
-    port = free_port()
-    key = "demo-" + os.urandom(8).hex()
-    data_dir = tempfile.mkdtemp(prefix="motionx-demo-")
-    env = dict(os.environ, MOTIONX_API_KEYS=key, MOTIONX_DATA_DIR=data_dir)
-    env.pop("MOTIONX_DATABASE_URL", None)
-    env.pop("DATABASE_URL", None)
-    (out / "server.log").unlink(missing_ok=True)
-    server = Proc("api", motionx_cmd("serve", "--port", str(port)), env, out / "server.log").start()
-    base = f"http://127.0.0.1:{port}"
+    _clear_earlier_run(out)
+    with stop_on_signals() as guard:
+        data_dir = tempfile.mkdtemp(prefix="motionx-demo-")
+        server = None
+        try:
+            port = free_port()
+            key = "demo-" + os.urandom(8).hex()
+            env = dict(os.environ, MOTIONX_API_KEYS=key, MOTIONX_DATA_DIR=data_dir)
+            env.pop("MOTIONX_DATABASE_URL", None)
+            env.pop("DATABASE_URL", None)
+            (out / "server.log").unlink(missing_ok=True)
+            server = Proc("api", motionx_cmd("serve", "--port", str(port)), env, out / "server.log").start()
+            return _run(args, files, jobs, out, server, f"http://127.0.0.1:{port}", key, data_dir)
+        finally:
+            # a second Ctrl-C or SIGTERM must not cut the cleanup short; it is bounded: SIGTERM
+            # to the service's process group, waited for, SIGKILL after 20 s
+            guard.shield()
+            if server is not None:
+                server.stop()
+            if args.keep_temp:
+                print(f"[demo] kept the service's data directory {data_dir} (--keep-temp)", flush=True)
+            else:
+                shutil.rmtree(data_dir, ignore_errors=True)
+
+
+def _run(args, files: list[Path], jobs: list[_Job], out: Path, server: Proc, base: str, key: str,
+         data_dir: str) -> int:
+    import httpx
+
     t0 = time.perf_counter()
     try:
-        try:
-            wait_api(base, server, timeout=120)
-        except TopologyError as e:
-            raise CliError(f"the service did not start (see {out / 'server.log'}): {str(e)[:500]}") from None
-        with httpx.Client(base_url=base, headers={"X-API-Key": key}, timeout=120.0) as http:
-            print(f"[demo] service up at {base} (SQLite in {data_dir}, local runner)", flush=True)
-            up = http.post("/motions", files=[("files", (f.name, f.read_bytes())) for f in files],
-                           data={"name": "demo capture", **({"mass": str(args.mass)} if args.mass else {})})
-            _check(up, 201, "upload")
-            motion = up.json()
-            print(f"[demo] uploaded {', '.join(f.name for f in files)} -> motion {motion['id']} "
-                  f"({motion['kind']}, {motion['frames']} frames)")
-            tutor = {"character": args.character, "fps": args.fps}
-            for j in jobs:
-                r = http.post(f"/motions/{motion['id']}/extrapolate", json={"target": j.target, "tutor": tutor},
-                              headers={"Idempotency-Key": f"{key}-{j.name}"})
-                _check(r, 202, f"extrapolate ({j.name})")
-                j.url = r.headers["Location"]
-                j.state = r.json()
-                print(f"[demo] job {j.name}: {j.target} queued at {j.url}")
-            _follow(http, jobs, deadline=time.monotonic() + args.timeout)
-            summary = {"input": [f.name for f in files], "character": args.character, "fps": args.fps,
-                       "jobs": [_download(http, j, out / j.name) for j in jobs]}
-            summary["wall_time_s"] = round(time.perf_counter() - t0, 2)
-            (out / "summary.json").write_text(json.dumps(summary, indent=2))
-            _print_summary(summary, out)
-            if args.serve:
-                print(f"[demo] the web page: {base}/ui/#key={key}  (Ctrl-C stops the service)", flush=True)
-                try:
-                    server.proc.wait()
-                except KeyboardInterrupt:
-                    pass
-            ok = all(j["status"] in ("succeeded", "impasse") for j in summary["jobs"])
-            return 0 if ok else 1
-    finally:
-        server.stop()
+        wait_api(base, server, timeout=120)
+    except TopologyError as e:
+        raise CliError(f"the service did not start (see {out / 'server.log'}): {str(e)[:500]}") from None
+    with httpx.Client(base_url=base, headers={"X-API-Key": key}, timeout=120.0) as http:
+        print(f"[demo] service up at {base} (SQLite in {data_dir}, local runner)", flush=True)
+        up = http.post("/motions", files=[("files", (f.name, f.read_bytes())) for f in files],
+                       data={"name": "demo capture", **({"mass": str(args.mass)} if args.mass else {})})
+        _check(up, 201, "upload")
+        motion = up.json()
+        print(f"[demo] uploaded {', '.join(f.name for f in files)} -> motion {motion['id']} "
+              f"({motion['kind']}, {motion['frames']} frames)")
+        tutor = {"character": args.character, "fps": args.fps}
+        for j in jobs:
+            r = http.post(f"/motions/{motion['id']}/extrapolate", json={"target": j.target, "tutor": tutor},
+                          headers={"Idempotency-Key": f"{key}-{j.name}"})
+            _check(r, 202, f"extrapolate ({j.name})")
+            j.url = r.headers["Location"]
+            j.seen(r.json())
+            print(f"[demo] job {j.name}: {j.target} queued at {j.url}")
+        _follow(http, jobs, deadline=time.monotonic() + args.timeout)
+        summary = {"input": [f.name for f in files], "character": args.character, "fps": args.fps,
+                   "jobs": [_download(http, j, out / j.name) for j in jobs]}
+        summary["wall_time_s"] = round(time.perf_counter() - t0, 2)
+        (out / "summary.json").write_text(json.dumps(summary, indent=2))
+        _print_summary(summary, out)
+        ok = all(j["status"] in ("succeeded", "impasse") for j in summary["jobs"])
+        if args.serve:
+            print(f"[demo] the web page: {base}/ui/#key={key}  (Ctrl-C or SIGTERM stops the service)", flush=True)
+            try:
+                server.proc.wait()
+                print(f"[demo] the service exited (status {server.proc.returncode}); see {out / 'server.log'}",
+                      file=sys.stderr)
+                return 1
+            except (KeyboardInterrupt, Terminated):
+                print("[demo] stopping the service", flush=True)
+        return 0 if ok else 1
 
 
 def _check(resp, code: int, what: str) -> None:
@@ -124,20 +186,24 @@ def _check(resp, code: int, what: str) -> None:
         raise CliError(f"{what} failed: HTTP {resp.status_code} {resp.text[:500]}")
 
 
-def _bar(job: _Job, width: int = 24) -> str:
-    """One job's progress as text: λ bar, status, environment value reached, steps, time."""
+def _bar(job: _Job, width: int = 24, clock: bool = True) -> str:
+    """One job's progress as text: λ bar, status (``tutor`` while the tutor is being made),
+    environment value reached, steps, and the job's elapsed time on the demo's clock (it
+    runs from the moment the job is seen running, the tutor phase included)."""
+    from service.plots import number_text
+
     s = job.state
     lam = float(s.get("lam_reached") or 0.0)
     fill = round(lam * width)
     prog = s.get("progress") or []
-    t = _job_time(prog)
     status = s.get("status", "?")
     if status == "running" and not any(p.get("phase") == "extrapolate" for p in prog):
         status = "tutor" if not prog else "starting"
     env = next((p.get("environment") or {} for p in reversed(prog) if p.get("accepted") and p.get("environment")), {})
-    shown = [f"{k}={env[k]:.3g}" for k in job.target if k in env]
-    return (f"{job.name:9s} [{'#' * fill}{'.' * (width - fill)}] λ={lam:.3f} {status:9s} "
-            f"{' '.join(shown):16s} {s.get('steps', 0):2d} steps {t:5.1f}s")
+    shown = [f"{k}={number_text(env[k])}" for k in job.target if k in env]
+    text = (f"{job.name:9s} [{'#' * fill}{'.' * (width - fill)}] λ={lam:.3f} {status:9s} "
+            f"{' '.join(shown):17s} {s.get('steps', 0):2d} steps")
+    return f"{text} {job.elapsed:5.1f}s" if clock else text
 
 
 def _job_time(progress: list[dict]) -> float:
@@ -153,23 +219,28 @@ def _follow(http, jobs: list[_Job], deadline: float) -> None:
     place on a terminal, one line per change otherwise (logs)."""
     tty = sys.stdout.isatty()
     last: list[str] = []
+    logged: dict[int, float] = {}
     while True:
         for j in jobs:
             if not j.done:
                 r = http.get(j.url)
                 _check(r, 200, "job status")
-                j.state = r.json()
+                j.seen(r.json())
         lines = [_bar(j) for j in jobs]
         if tty:
             if last:
                 sys.stdout.write(f"\x1b[{len(last)}F")
             sys.stdout.write("".join(f"\x1b[2K[demo] {ln}\n" for ln in lines))
             sys.stdout.flush()
-        else:
-            for old, new in zip(last or [""] * len(lines), lines):
-                if old != new:
-                    print(f"[demo] {new}", flush=True)
-        last = lines
+            last = lines
+        else:  # logs: a line when a job's state changes, and every LOG_EVERY_S while it runs
+            states = [_bar(j, clock=False) for j in jobs]
+            now = time.monotonic()
+            for i, (old, new, line) in enumerate(zip(last or [""] * len(jobs), states, lines)):
+                if old != new or (not jobs[i].done and now - logged.get(i, now) >= LOG_EVERY_S):
+                    print(f"[demo] {line}", flush=True)
+                    logged[i] = now
+            last = states
         if all(j.done for j in jobs):
             return
         if time.monotonic() > deadline:
@@ -192,6 +263,7 @@ def _download(http, job: _Job, out: Path) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     s = job.state
     (out / "job.json").write_text(json.dumps(s, indent=2))
+    (out / "progress.csv").write_text(progress_csv(s.get("progress") or []))
     r = http.get(f"{job.url}/plots/progress.png")
     _check(r, 200, "progress plot")
     (out / "progress.png").write_bytes(r.content)
@@ -202,7 +274,7 @@ def _download(http, job: _Job, out: Path) -> dict:
     motions = _pages(http, f"{job.url}/motions?limit=200")
     reports = []
     for m in motions:
-        stem = f"lambda_{m['lam']:.4f}" if m.get("lam") is not None else f"step_{m['step']}"
+        stem = step_stem(m["step"], m["lam"] if m.get("lam") is not None else float("nan"))
         for fmt, suffix in EXPORTS:
             r = http.get(f"/motions/{m['id']}?format={fmt}")
             _check(r, 200, f"export {fmt}")
@@ -234,28 +306,45 @@ def _download(http, job: _Job, out: Path) -> dict:
 
 
 def _print_summary(summary: dict, out: Path) -> None:
+    from service.plots import environment_text
+
     print(f"[demo] {'job':9s} {'status':9s} {'λ':>6s} {'reached':>18s} {'motions':>7s} {'plausible':>9s} "
           f"{'time':>6s} {'max residual/weight':>19s}")
     for j in summary["jobs"]:
-        reached = ", ".join(f"{k} {v:.3g}" for k, v in j["reached"].items())
+        reached = environment_text(j["reached"])
         res = j["max_root_residual_rel_weight"]
         print(f"[demo] {j['name']:9s} {j['status']:9s} {j['lambda_reached']:6.3f} {reached:>18s} "
               f"{j['motions']:7d} {j['plausible']:>4d}/{j['motions']:<4d} {j['job_time_s']:5.1f}s "
               f"{res if res is None else format(res, '.1e'):>19s}")
-    print(f"[demo] total {summary['wall_time_s']:.1f} s; every λ motion (motion file, JSON clip, GLB, BVH, "
-          f"plausibility) and the plots are in {out}/ (summary.json)")
+    print(f"[demo] total {summary['wall_time_s']:.1f} s; in {out}/<job>/: every λ optimum as "
+          f"step_NNN_lambda_L.motion.json, .clip.json, .glb, .bvh, .validation.json; progress.csv, progress.png, "
+          f"final.grf.png, final.residuals.png (summary.json)")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    s = sub.add_parser("demo", help="the main job end to end through the embedded service (make demo)")
-    s.add_argument("inputs", nargs="*", help="trial files (default: the shared DeepMimic walk)")
-    s.add_argument("--out", default="out/demo", help="where results are written")
-    s.add_argument("--slope", type=float, default=-11.25, help="target slope in degrees (negative = downhill; 0 = none)")
-    s.add_argument("--curve", type=float, default=90.0, help="target curve in degrees (positive = left; 0 = none)")
-    s.add_argument("--character", choices=["halfboy", "fullbody"], default="halfboy")
-    s.add_argument("--fps", type=float, default=15.0)
-    s.add_argument("--mass", type=float, default=None, help="subject mass (kg) if the input lacks it")
-    s.add_argument("--timeout", type=float, default=900.0, help="seconds to wait for the jobs")
+    s = add_command(sub, "demo", "the main job end to end through the embedded service (make demo)", """\
+Start `motionx serve` on its embedded defaults (SQLite + local process pool, in a temporary
+folder, on a free port), upload a captured walk over HTTP (default: the DeepMimic walk in
+data/), ask for a downhill slope and a curve, follow both jobs with a progress bar and
+download every λ optimum (motion file, JSON clip, GLB, BVH, plausibility report), the
+progress curve (CSV, PNG) and the final motion's plots into --out/<job>/. The service is
+stopped and its temporary folder removed at the end, on Ctrl-C and on SIGTERM.""")
+    s.add_argument("inputs", nargs="*", metavar="INPUT",
+                   help="trial files, as for `motionx tutor` (default: the DeepMimic walk in data/)")
+    s.add_argument("--out", default="out/demo", metavar="DIR",
+                   help="where results are written (an earlier demo's files there are replaced)")
+    s.add_argument("--slope", type=float, default=-11.25, metavar="DEG",
+                   help="target slope in degrees, negative = downhill; 0 = no slope job")
+    s.add_argument("--curve", type=float, default=90.0, metavar="DEG",
+                   help="target curve in degrees, positive = left; 0 = no curve job")
+    s.add_argument("--character", choices=["halfboy", "fullbody"], default="halfboy",
+                   help="synthesis character of the tutor")
+    s.add_argument("--fps", type=float, choices=[15.0, 30.0], default=15.0, help="frames per second of the tutor")
+    s.add_argument("--mass", type=float, default=None, metavar="KG",
+                   help="subject mass in kg (default: from the input; required when the input does not state it)")
+    s.add_argument("--timeout", type=float, default=900.0, metavar="S", help="seconds to wait for the jobs")
     s.add_argument("--serve", action="store_true", help="keep the service running afterwards and print the web "
-                   "page's address (Ctrl-C stops it)")
+                   "page's address (Ctrl-C or SIGTERM stops it)")
+    s.add_argument("--keep-temp", action="store_true",
+                   help="keep the service's temporary data directory (SQLite database, stored motions) at the end")
     s.set_defaults(func=cmd_demo)

@@ -8,14 +8,13 @@ import json
 import sys
 from pathlib import Path
 
-from service.cli import CliError
+from service.cli import CliError, add_command, load_motion
 
 CHOICES = ("json", "gltf", "glb", "bvh")
 
 
 def cmd_export(args: argparse.Namespace) -> int:
     from solver.export import ExportError, export_motion, media_type
-    from solver.motion import Motion, MotionError
 
     fmt = "gltf" if args.format == "glb" else args.format  # glb: an alias of the binary glTF
     options: dict = {}
@@ -39,10 +38,10 @@ def cmd_export(args: argparse.Namespace) -> int:
         if args.out == "-":
             raise CliError("--out - (stdout) is only for text formats; give a .glb file name "
                            "(or --embedded for the .gltf JSON)")
+    motion = load_motion(args.motion)
     try:
-        motion = Motion.load(args.motion)
         data = export_motion(motion, fmt, **options)
-    except (MotionError, ExportError) as e:
+    except ExportError as e:
         raise CliError(str(e)) from None
     if args.out == "-":
         sys.stdout.write(data)
@@ -62,14 +61,17 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    s = sub.add_parser("export", help="export a motion file as a JSON clip, glTF 2.0 (.glb) or BVH")
-    s.add_argument("motion", help="motion file (motionx motion v1, JSON)")
+    s = add_command(sub, "export", "export a motion file as a JSON clip, glTF 2.0 (.glb) or BVH", """\
+Write a motion file for other tools: a compact JSON clip (schema solver/export/clip.schema.json),
+glTF 2.0 binary .glb (skinned ellipsoids + animation, Y-up, metres; --embedded for a .gltf
+JSON) or BVH (Y-up, cm by default). solver.export.reimport reads all three back.""")
+    s.add_argument("motion", metavar="MOTION.json", help="motion file v1 (JSON), e.g. a tutor or a λ optimum")
     s.add_argument("--format", required=True, choices=CHOICES,
                    help="json: motionx clip; gltf (alias glb): binary glTF 2.0 (.glb); bvh")
-    s.add_argument("--out", required=True, help="output file (- for stdout, text formats only)")
+    s.add_argument("--out", required=True, metavar="FILE", help="output file (- for stdout, text formats only)")
     s.add_argument("--embedded", action="store_true",
                    help="with --format gltf: the .gltf JSON with its buffer embedded (base64) instead of the .glb")
     s.add_argument("--y-up", action="store_true",
                    help="JSON clip in Y-up axes (x left, y up, z forward); glTF and BVH are always Y-up")
-    s.add_argument("--units", choices=("cm", "m"), default=None, help="BVH length unit (default cm)")
+    s.add_argument("--units", choices=("cm", "m"), default=None, help="BVH length unit (default: cm)")
     s.set_defaults(func=cmd_export)

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from service.cli import CliError, parse_belt_speed
+from service.cli import CliError, add_command, import_message, parse_belt_speed, warn_input
 
 log = logging.getLogger("motionx")
 
@@ -33,12 +33,13 @@ def _user_errors() -> tuple[type[Exception], ...]:
     from solver.io.bvh import BvhError
     from solver.io.c3d import C3DError
     from solver.io.deepmimic import DeepMimicError
+    from solver.io.errors import InputError
     from solver.io.fit import FitError
     from solver.io.opensim import OpenSimError
     from solver.io.preprocess import PreprocessError
 
     return (ContactError, GRFFileError, C3DError, FitError, OpenSimError, PreprocessError, TrialError, BvhError,
-            DeepMimicError)
+            DeepMimicError, InputError)
 
 
 def _exists(path: str | None, flag: str) -> None:
@@ -46,11 +47,19 @@ def _exists(path: str | None, flag: str) -> None:
         raise CliError(f"{flag}: file not found: {path}")
 
 
+def _files(args: argparse.Namespace) -> list[str]:
+    """The trial files given positionally (as for `motionx tutor`) or with --input."""
+    return [*(args.inputs or []), *(args.input or [])]
+
+
 def _load(args: argparse.Namespace):
-    """The capture named by the input flags (exactly one kind)."""
-    kinds = [k for k in ("osim", "c3d", "input") if getattr(args, k)]
+    """The capture named by the inputs: trial files (positional, as `motionx tutor` takes them,
+    or --input), or the older flags --osim MODEL --coordinates IK.mot, --c3d FILE."""
+    files = _files(args)
+    kinds = [k for k in ("osim", "c3d") if getattr(args, k)] + (["files"] if files else [])
     if len(kinds) != 1:
-        raise CliError("give exactly one input: --osim MODEL --coordinates IK.mot, --c3d FILE or --input FILE...")
+        raise CliError("give the trial once: its files (MODEL.osim IK.mot|MARKERS.trc [GRF.mot X.xml] | FILE.c3d | FILE.bvh | "
+                       "DeepMimic CLIP.txt CHARACTER.txt), or --osim MODEL --coordinates IK.mot, or --c3d FILE")
     if args.mass is not None and not (math.isfinite(args.mass) and args.mass > 0):
         raise CliError(f"--mass must be a positive number of kg, got {args.mass}")
     belt = parse_belt_speed(args.belt_speed)
@@ -65,26 +74,36 @@ def _load(args: argparse.Namespace):
 
         return load_opensim(args.osim, args.coordinates, mass=args.mass, belt_speed=belt, grf=args.grf,
                             grf_xml=args.external_loads)
-    if args.coordinates or args.grf or args.external_loads:
-        raise CliError("--coordinates, --grf and --external-loads go with --osim (with --input, list the files)")
+    if args.coordinates:
+        raise CliError("--coordinates goes with --osim (or list the model and its coordinates as files)")
     if kinds[0] == "c3d":
+        if args.grf or args.external_loads:
+            raise CliError("--grf and --external-loads are OpenSim force plates; a C3D has its own")
         if belt is not None:
             raise CliError("--belt-speed applies to OpenSim treadmill trials")
         _exists(args.c3d, "--c3d")
         from solver.io.c3d import load_c3d
 
         return load_c3d(args.c3d, mass=args.mass, markers=args.markers)
+    for p in files:
+        _exists(p, "input")
+    extra = [p for p in (args.grf, args.external_loads) if p]
+    if extra and not any(Path(p).suffix.lower() == ".osim" for p in files):
+        raise CliError("--grf and --external-loads go with an OpenSim trial (MODEL.osim IK.mot)")
+    _exists(args.grf, "--grf")
+    _exists(args.external_loads, "--external-loads")
+    options = {}
     if args.markers:
-        raise CliError("--markers goes with --c3d")
-    for p in args.input:
-        _exists(p, "--input")
+        if not any(Path(p).suffix.lower() == ".c3d" for p in files):
+            raise CliError("--markers goes with a C3D trial")
+        options["markers"] = args.markers
     from solver.io import load_trial
 
-    return load_trial(list(args.input), mass=args.mass, belt_speed=belt)
+    return load_trial([*files, *extra], mass=args.mass, belt_speed=belt, **options)
 
 
 def cmd_grf(args: argparse.Namespace) -> int:
-    from solver.contact import estimate_capture, foot_schedule
+    from solver.contact import estimate_capture
     from solver.grf_compare import from_estimate, to_input_frame, write_csv
 
     errors = _user_errors()
@@ -101,8 +120,9 @@ def cmd_grf(args: argparse.Namespace) -> int:
                               cyclic=True if args.cyclic else None, smoothing_hz=smoothing,
                               project_cop=not args.exact_single_support)
     except errors as e:
-        msg = str(e)
-        if ("double support" in msg or "never" in msg) and args.belt_speed is None and not args.c3d:
+        msg = import_message(e)
+        c3d = args.c3d or any(Path(p).suffix.lower() == ".c3d" for p in _files(args))
+        if ("double support" in msg or "never" in msg) and args.belt_speed is None and not c3d:
             msg += " (on a treadmill the stance foot moves with the belt: pass --belt-speed auto or the speed)"
         raise CliError(msg) from None
     t2 = time.perf_counter()
@@ -113,28 +133,20 @@ def cmd_grf(args: argparse.Namespace) -> int:
     except OSError as e:
         raise CliError(f"cannot write {args.out}: {e.strerror or e}") from None
     summary = {k: v for k, v in est.summary().items() if v not in (0, None)}
-    src = cap.source or {}
-    extra = {k: src[k] for k in ("mass_from", "mass_implied_kg", "marker_set", "upper_body") if k in src}
-    if isinstance(extra.get("marker_set"), dict):
-        extra["marker_set"] = extra["marker_set"].get("name")
-    feet = foot_schedule(tr.contacts, cap.character)
+    from solver.io.summary import describe
+    from solver.pipeline import jsonable
+
+    described = jsonable(describe(cap, contacts=tr.contacts, contacts_from=tr.contacts_from))
+    warn_input(described)
     print(json.dumps({
         "out": args.out, "rows": rows, "character": cap.character.name, "mass_kg": round(cap.character.total_mass, 3),
-        **extra, "fps": round(cap.fps, 6), "frame": cap.frame.axes, "length_unit_m": cap.frame.unit_m,
-        "contacts_from": tr.contacts_from, "stances": _stances(feet, tr.times), "cutoff_hz": tr.cutoff_hz, **summary,
+        "fps": round(cap.fps, 6), "frame": cap.frame.axes, "length_unit_m": cap.frame.unit_m,
+        "contacts_from": tr.contacts_from, "cutoff_hz": tr.cutoff_hz, **summary,
         "free_moment": "not reported (tz = nan): its error exceeds predicting zero on every trial with plates "
                        "(docs/grf.md)",
-        "import_s": round(t1 - t0, 3), "estimate_s": round(t2 - t1, 4),
+        "import_s": round(t1 - t0, 3), "estimate_s": round(t2 - t1, 4), "input": described,
     }))
     return 0
-
-
-def _stances(feet: np.ndarray, times: np.ndarray) -> dict[str, list[list[float]]]:
-    """Each foot's stances [start, end] (s) in the contact schedule used."""
-    from solver.io.c3d.reader import _runs
-
-    return {side: [[round(float(times[a]), 3), round(float(times[b - 1]), 3)] for a, b in _runs(feet[i])]
-            for i, side in enumerate(("right", "left"))}
 
 
 # --- grf-compare -------------------------------------------------------------------------------
@@ -184,7 +196,8 @@ def cmd_grf_compare(args: argparse.Namespace) -> int:
             track = trial.track
             if track.measured is None:
                 raise CliError(f"{args.c3d}: no force plates to compare with")
-            est = from_input_frame(est_in, track.frame)
+            frame = track.frame
+            est = from_input_frame(est_in, frame)
             meas = from_measured(track.measured, track.times).resample(times)
             # a frame counts only when every loaded foot (plates or estimate) stands on a plate
             lm = {k: np.stack([np.interp(times, track.times, x) for x in track.landmarks[k]])
@@ -194,7 +207,7 @@ def cmd_grf_compare(args: argparse.Namespace) -> int:
             off_plates = int(np.sum(meas.valid & est.valid & ~ok))
             meas = GroundReactions(meas.times, meas.force, meas.cop, meas.free_moment, meas.valid & ok)
     except errors as e:
-        raise CliError(str(e)) from None
+        raise CliError(import_message(e)) from None
     # both in our axes (x forward, y left, z up), SI: CoPs in metres
     try:
         all_frames, ds = compare(est, meas)
@@ -217,10 +230,15 @@ def cmd_grf_compare(args: argparse.Namespace) -> int:
                                 "single_support": ss and ss.as_dict()} for side, (a, d, ss) in feet.items()},
         }, indent=2, allow_nan=True))
     if args.plot:
+        from solver.grf_compare import to_input_frame
+
         both = est.valid & meas.valid
         thr = 0.05 * float(np.nanmax(np.where(both, meas.force[:, 2].sum(0), np.nan)))
-        plot(args.plot, est, meas, axis_names=("x (forward)", "y (left)", "z (up)"), length_unit="m",
-             double_support=np.all(meas.force[:, 2] > thr, axis=0), title=Path(args.estimate).name)
+        # drawn in the CSV's frame and units (the input's), named as the input names its axes
+        names, vertical, unit = input_axes(frame)
+        plot(args.plot, est_in, to_input_frame(meas, frame), axis_names=names, vertical=vertical, length_unit=unit,
+             double_support=np.all(meas.force[:, 2] > thr, axis=0),
+             title=f"{Path(args.estimate).name} ({frame.axes})")
     return 0
 
 
@@ -228,6 +246,29 @@ def _cell(row) -> str:
     if row.component == "cop":
         return f"cop {row.rms:.2f} cm"
     return f"{row.component} {100 * row.rel_rms:.1f} %"
+
+
+#: our world axes (x forward, y left, z up): the direction each way along them
+_DIRECTIONS = (("forward", "backward"), ("left", "right"), ("up", "down"))
+
+
+def input_axes(frame) -> tuple[tuple[str, str, str], int, str]:
+    """The input frame's axis names as the CSV's columns mean them ('x (forward)', 'y (up)',
+    'z (right)' for OpenSim), the index of its vertical axis, and its length unit.
+
+    ``frame`` is a :class:`solver.capture.GroundFrame` (p_input = R p_ours): row k of R is
+    input axis k in our axes. An axis that is not along one of ours is named by letter only."""
+    R = np.asarray(frame.R, dtype=float)
+    names = []
+    for k, letter in enumerate("xyz"):
+        j = int(np.argmax(np.abs(R[k])))
+        if abs(R[k, j]) > 1 - 1e-6:
+            names.append(f"{letter} ({_DIRECTIONS[j][0 if R[k, j] > 0 else 1]})")
+        else:
+            names.append(letter)
+    vertical = int(np.argmax(np.abs(R[:, 2])))
+    unit = {1.0: "m", 0.01: "cm", 0.001: "mm"}.get(round(float(frame.unit_m), 12), f"× {frame.unit_m:g} m")
+    return (names[0], names[1], names[2]), vertical, unit
 
 
 def _contacts_of(gr) -> np.ndarray:
@@ -239,27 +280,40 @@ def _contacts_of(gr) -> np.ndarray:
 def register(sub: argparse._SubParsersAction) -> None:
     from solver.contact import CONTACT_SOURCES, DEFAULT_CUTOFF_HZ, METHODS
 
-    s = sub.add_parser("grf", help="estimate each foot's ground reaction from a trial's kinematics (CSV)")
-    g = s.add_argument_group("input (one of)")
+    s = add_command(sub, "grf", "estimate each foot's ground reaction from a trial's kinematics (CSV)", """\
+Estimate each foot's ground reaction force, centre of pressure and free moment from the
+kinematics alone (SPEC §5: the total external wrench of inverse dynamics, split between the
+feet by one convex QP per double-support frame) and write them as CSV in the input's own
+ground frame and units: time, side, fx, fy, fz, cop_x, cop_y, cop_z, tz.
+The trial is given as for `motionx tutor` (its files); --osim/--coordinates, --c3d and
+--input are the older spellings.""")
+    s.add_argument("inputs", nargs="*", metavar="INPUT",
+                   help="trial files: MODEL.osim COORDS.mot|MARKERS.trc [GRF.mot X.xml] | FILE.c3d | FILE.bvh | "
+                        "DeepMimic CLIP.txt CHARACTER.txt")
+    g = s.add_argument_group("older input flags (instead of the files)")
     g.add_argument("--osim", metavar="MODEL.osim", help="OpenSim model; with --coordinates")
-    g.add_argument("--coordinates", metavar="IK.mot", help="OpenSim coordinates over time (IK result)")
+    g.add_argument("--coordinates", metavar="IK.mot", help="OpenSim coordinates over time (IK result), or the "
+                   "markers (.trc) whose inverse kinematics OpenSim solves with the model's marker set")
     g.add_argument("--c3d", metavar="FILE.c3d", help="C3D trial (markers; plates give the contact timing)")
-    g.add_argument("--input", nargs="+", metavar="FILE", help="any trial solver.io.load_trial reads "
-                   "(DeepMimic motion + character, BVH, ...)")
-    s.add_argument("--mass", type=float, default=None, help="subject mass in kg (default: from the input)")
+    g.add_argument("--input", nargs="+", metavar="FILE", help="trial files, as the positional INPUT")
+    s.add_argument("--mass", type=float, default=None, metavar="KG",
+                   help="subject mass in kg (default: from the input; required when the input does not state it)")
     s.add_argument("--markers", metavar="MAP", default=None,
                    help="C3D marker mapping for unrecognised marker sets: ROLE=label,... (Plug-in Gait roles, e.g. "
-                        "LASI=L_IAS,RASI=R_IAS) or a file with one ROLE=label per line (docs/c3d.md)")
+                        "LASI=L_IAS,RASI=R_IAS) or a file with one ROLE=label per line (docs/c3d.md; default: "
+                        "roles detected from the labels)")
     s.add_argument("--belt-speed", default=None, metavar="auto|V",
-                   help="treadmill belt speed (m/s) or 'auto' (OpenSim): kinematics made overground-equivalent")
+                   help="treadmill belt speed (m/s) or 'auto' (OpenSim): kinematics made overground-equivalent "
+                        "(default: none, overground)")
     s.add_argument("--grf", metavar="GRF.mot", help="OpenSim force-plate file: contact timing from the plates "
-                   "(--contacts auto|plates) and the belt-speed estimate")
-    s.add_argument("--external-loads", metavar="X.xml", help="OpenSim ExternalLoads file assigning --grf to feet")
+                   "(--contacts auto|plates) and the belt-speed estimate (default: none)")
+    s.add_argument("--external-loads", metavar="X.xml",
+                   help="OpenSim ExternalLoads file assigning --grf to feet (default: none)")
     s.add_argument("--contacts", choices=CONTACT_SOURCES, default="auto",
-                   help="contact schedule: plates (when the input has them) or kinematics (default auto: "
-                        "plates if available, else kinematic detection)")
+                   help="contact schedule: plates (when the input has them) or kinematics (auto: plates if "
+                        "available, else kinematic detection)")
     s.add_argument("--cutoff", type=float, default=DEFAULT_CUTOFF_HZ, metavar="HZ",
-                   help=f"low-pass cut-off before differentiation (default {DEFAULT_CUTOFF_HZ:g} Hz; 0 = none)")
+                   help="low-pass cut-off before differentiation in Hz; 0 = none")
     s.add_argument("--method", choices=METHODS, default="qp",
                    help="qp: one 6-variable QP per double-support frame; nested: the thesis's form (slow)")
     s.add_argument("--smoothing", type=float, default=None, metavar="HZ",
@@ -267,19 +321,27 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "0 = one QP per frame, the thesis; qp method only)")
     s.add_argument("--exact-single-support", action="store_true",
                    help="the foot takes the total wrench exactly even when its CoP falls outside the foot "
-                        "(the thesis); default: that CoP is moved to the nearest point of the foot")
+                        "(the thesis); default: a total no foot can take is corrected by the least force through "
+                        "the centre of mass")
     s.add_argument("--cyclic", action="store_true",
-                   help="the clip is one cycle whose last frame closes it (auto for DeepMimic loops)")
+                   help="the clip is one cycle whose last frame closes it (automatic for DeepMimic loops)")
     s.add_argument("--out", required=True, metavar="EST.csv", help="output CSV")
     s.set_defaults(func=cmd_grf)
 
-    s = sub.add_parser("grf-compare", help="compare a grf estimate with measured force plates (Table 4.1)")
+    s = add_command(sub, "grf-compare", "compare a grf estimate with measured force plates (Table 4.1)", """\
+Compare a `motionx grf` estimate with the trial's force plates (an OpenSim GRF .mot or the
+C3D's plates): the thesis's Table 4.1 (RMS, max and relative RMS of fx, fy, fz, the free
+moment, CoP distance) over every frame with complete plates and over double support. The
+plot shows the curves in the CSV's frame and units (the input's).""")
     s.add_argument("--estimate", required=True, metavar="EST.csv", help="CSV written by motionx grf")
-    s.add_argument("--grf", metavar="GRF.mot", help="OpenSim force-plate file")
-    s.add_argument("--external-loads", metavar="X.xml", help="OpenSim ExternalLoads file for --grf")
-    s.add_argument("--c3d", metavar="FILE.c3d", help="C3D trial with force plates")
-    s.add_argument("--mass", type=float, default=None, help="subject mass (kg) for a C3D without one")
-    s.add_argument("--markers", metavar="MAP", default=None, help="C3D marker mapping (as for motionx grf)")
-    s.add_argument("--plot", metavar="OUT.png", help="write estimated vs measured curves")
-    s.add_argument("--json", metavar="OUT.json", help="write the metrics as JSON")
+    s.add_argument("--grf", metavar="GRF.mot", help="OpenSim force-plate file (or --c3d)")
+    s.add_argument("--external-loads", metavar="X.xml",
+                   help="OpenSim ExternalLoads file for --grf (default: feet from the column names)")
+    s.add_argument("--c3d", metavar="FILE.c3d", help="C3D trial with force plates (or --grf)")
+    s.add_argument("--mass", type=float, default=None, metavar="KG",
+                   help="subject mass in kg for a C3D that does not state it (default: from the file)")
+    s.add_argument("--markers", metavar="MAP", default=None,
+                   help="C3D marker mapping, as for motionx grf (default: roles detected from the labels)")
+    s.add_argument("--plot", metavar="OUT.png", help="write estimated vs measured curves (default: no plot)")
+    s.add_argument("--json", metavar="OUT.json", help="write the metrics as JSON (default: tables on stdout only)")
     s.set_defaults(func=cmd_grf_compare)

@@ -7,7 +7,7 @@ import json
 import time
 from pathlib import Path
 
-from service.cli import CliError
+from service.cli import CliError, add_command, load_motion
 
 KINDS = ("grf", "residuals")
 
@@ -31,12 +31,8 @@ def write_motion_plots(motion, out: Path, kinds=KINDS) -> dict[str, str]:
 
 def cmd_plot(args: argparse.Namespace) -> int:
     from service.plots import PlotError
-    from solver.motion import Motion, MotionError
 
-    try:
-        motion = Motion.load(args.motion)
-    except MotionError as e:
-        raise CliError(str(e)) from None
+    motion = load_motion(args.motion)
     kinds = KINDS if args.kind == "all" else (args.kind,)
     out = Path(args.out)
     if out.exists() and not out.is_dir():
@@ -52,10 +48,15 @@ def cmd_plot(args: argparse.Namespace) -> int:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    s = sub.add_parser("plot", help="plot a motion file: ground reaction forces and root residuals (PNG)")
-    s.add_argument("motion", help="motion file v1 (JSON) with contact wrenches (a tutor or a λ optimum)")
+    s = add_command(sub, "plot", "plot a motion file: ground reaction forces and root residuals (PNG)", """\
+Write PNG plots of a motion with contact wrenches (a tutor or a λ optimum): grf.png, each
+foot's ground reaction force against time with its contact phases; residuals.png, the root
+residual of the equations of motion per frame, ours and MuJoCo's replay, with the
+plausibility tolerance. Prints a JSON line with the files.""")
+    s.add_argument("motion", metavar="MOTION.json",
+                   help="motion file v1 (JSON) with contact wrenches (a tutor or a λ optimum)")
     s.add_argument("--kind", choices=[*KINDS, "all"], default="all",
                    help="grf: forces per foot with the contact phases; residuals: root residual per frame, "
                         "ours and MuJoCo's replay (default: all)")
-    s.add_argument("--out", required=True, help="output directory (grf.png, residuals.png)")
+    s.add_argument("--out", required=True, metavar="DIR", help="output directory (grf.png, residuals.png)")
     s.set_defaults(func=cmd_plot)

@@ -12,7 +12,7 @@ import sys
 import threading
 from pathlib import Path
 
-from service.cli import CliError
+from service.cli import CliError, add_command
 
 log = logging.getLogger("motionx")
 
@@ -40,7 +40,11 @@ def _ensure_api_key(settings) -> None:
         if store.count_api_keys(s):
             return
         kid, key = store.create_api_key(s, name="created by motionx serve")
-    print(f"motionx: no API key existed; created {kid}: {key}  (keep it; only its hash is stored)",
+    base = f"http://{'127.0.0.1' if settings.host in ('0.0.0.0', '::') else settings.host}:{settings.port}"
+    print(f"motionx: no API key existed, so one was made (id {kid}). Copy it now, only its hash is stored:\n"
+          f"\n    {key}\n\n"
+          f"  requests send it as a header:  curl -H \"X-API-Key: {key}\" {base}/jobs\n"
+          f"  the web page takes it once:    {base}/ui/#key={key}\n",
           file=sys.stderr, flush=True)
 
 
@@ -163,58 +167,82 @@ def cmd_openapi(args: argparse.Namespace) -> int:
 
 
 def _db_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--database-url", default=None, help="SQLAlchemy URL (default: $DATABASE_URL or SQLite)")
-    p.add_argument("--data-dir", default=None, help="directory of the default SQLite database")
+    p.add_argument("--database-url", default=None, metavar="URL",
+                   help="SQLAlchemy URL (default: $DATABASE_URL, else SQLite in the data directory)")
+    p.add_argument("--data-dir", default=None, metavar="DIR",
+                   help="directory of the default SQLite database (default: $MOTIONX_DATA_DIR or "
+                        "~/.local/share/motionx)")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    s = sub.add_parser("serve", help="run the HTTP API (embedded default: SQLite + local process pool)")
-    s.add_argument("--host", default=None)
-    s.add_argument("--port", type=int, default=None)
-    s.add_argument("--runner", choices=["local", "celery"], default=None)
-    s.add_argument("--log-level", default="info", choices=["critical", "error", "warning", "info", "debug"])
-    s.add_argument("--access-log", action="store_true")
+    s = add_command(sub, "serve", "run the HTTP API (embedded default: SQLite + local process pool)", """\
+Run the HTTP API (FastAPI; OpenAPI at /openapi.json, the web page at /ui/). The embedded
+default needs nothing else: SQLite (WAL) in the data directory and a local process pool.
+DATABASE_URL=postgresql://... for PostgreSQL, --runner celery for Celery workers. With no API
+key configured (MOTIONX_API_KEYS) or stored, it makes one and prints it once.""")
+    s.add_argument("--host", default=None, metavar="ADDR",
+                   help="address to listen on (default: $MOTIONX_HOST or 127.0.0.1; 0.0.0.0 for every interface)")
+    s.add_argument("--port", type=int, default=None, metavar="P", help="TCP port (default: $MOTIONX_PORT or 8000)")
+    s.add_argument("--runner", choices=["local", "celery"], default=None,
+                   help="who runs the jobs: local (a process pool in this process) or celery (`motionx worker`s "
+                        "over Redis) (default: $MOTIONX_RUNNER or local)")
+    s.add_argument("--log-level", default="info", choices=["critical", "error", "warning", "info", "debug"],
+                   help="uvicorn's log level")
+    s.add_argument("--access-log", action="store_true", help="log every request")
     _db_args(s)
     s.set_defaults(func=cmd_serve)
 
-    s = sub.add_parser("worker", help="run a Celery worker executing extrapolation jobs")
-    s.add_argument("--concurrency", type=int, default=None, help="pool processes (default 1)")
-    s.add_argument("--hostname", default=None, help="Celery node name (default motionx-<pid>@%%h)")
-    s.add_argument("--loglevel", default="INFO")
-    s.add_argument("--broker-url", default=None)
-    s.add_argument("--database-url", default=None)
+    s = add_command(sub, "worker", "run a Celery worker executing extrapolation jobs", """\
+Run a Celery worker that executes extrapolation jobs from the Redis queue (the same job
+function as the local runner), with late acknowledgement and prefetch 1.""")
+    s.add_argument("--concurrency", type=int, default=None, metavar="N",
+                   help="pool processes (default: $MOTIONX_WORKER_CONCURRENCY or 1)")
+    s.add_argument("--hostname", default=None, metavar="NAME", help="Celery node name (default: motionx-<pid>@%%h)")
+    s.add_argument("--loglevel", default="INFO", metavar="LEVEL", help="Celery's log level")
+    s.add_argument("--broker-url", default=None, metavar="URL",
+                   help="Redis URL (default: $MOTIONX_BROKER_URL or redis://127.0.0.1:6379/0)")
+    s.add_argument("--database-url", default=None, metavar="URL",
+                   help="SQLAlchemy URL (default: $DATABASE_URL, else SQLite)")
     s.set_defaults(func=cmd_worker)
 
-    s = sub.add_parser("stack", help="start the docker-compose topology as processes: Redis (AOF), "
-                       "PostgreSQL database, API, N workers; Ctrl-C stops it")
-    s.add_argument("--workers", type=int, default=2)
-    s.add_argument("--port", type=int, default=0, help="API port (default: a free one)")
-    s.add_argument("--data-dir", default="./motionx-stack", help="Redis AOF, logs (and SQLite with --sqlite)")
-    s.add_argument("--database-url", default=None, help="use this database instead of creating one")
-    s.add_argument("--postgres-admin-url", default="postgresql://postgres@127.0.0.1:5432/postgres")
-    s.add_argument("--postgres-db", default="motionx_stack")
+    s = add_command(sub, "stack", "start the docker-compose topology as processes: Redis (AOF), "
+                    "PostgreSQL database, API, N workers; Ctrl-C stops it", """\
+Start the docker-compose.yml topology as plain processes: Redis with AOF on a free port, a
+PostgreSQL database (or SQLite with --sqlite), migrations, the API and N Celery workers.
+Prints the URLs and the API key; Ctrl-C or SIGTERM stops everything.""")
+    s.add_argument("--workers", type=int, default=2, metavar="N", help="Celery workers to start")
+    s.add_argument("--port", type=int, default=0, metavar="P", help="API port (0 = a free one)")
+    s.add_argument("--data-dir", default="./motionx-stack", metavar="DIR",
+                   help="Redis AOF, logs (and SQLite with --sqlite)")
+    s.add_argument("--database-url", default=None, metavar="URL",
+                   help="use this database instead of creating one (default: a new PostgreSQL database)")
+    s.add_argument("--postgres-admin-url", default="postgresql://postgres@127.0.0.1:5432/postgres", metavar="URL",
+                   help="PostgreSQL server where the database is created")
+    s.add_argument("--postgres-db", default="motionx_stack", metavar="NAME", help="name of the database created")
     s.add_argument("--sqlite", action="store_true", help="SQLite in --data-dir instead of PostgreSQL")
-    s.add_argument("--api-key", default=None, help="API key to accept (default: a new random one, printed)")
+    s.add_argument("--api-key", default=None, metavar="KEY", help="API key to accept (default: a new random one, "
+                   "printed)")
     s.set_defaults(func=cmd_stack)
 
-    s = sub.add_parser("db", help="database schema (Alembic)")
-    dsub = s.add_subparsers(dest="db_command", required=True)
-    d = dsub.add_parser("upgrade", help="upgrade the schema (default: to head)")
-    d.add_argument("revision", nargs="?", default="head")
+    s = add_command(sub, "db", "database schema (Alembic)", "Manage the database schema (Alembic migrations).")
+    dsub = s.add_subparsers(dest="db_command", required=True, metavar="COMMAND")
+    d = add_command(dsub, "upgrade", "upgrade the schema (default: to head)")
+    d.add_argument("revision", nargs="?", default="head", help="Alembic revision to upgrade to (default: head)")
     _db_args(d)
     d.set_defaults(func=cmd_db_upgrade)
 
-    s = sub.add_parser("apikey", help="create or revoke API keys (stored hashed in SQL)")
-    ksub = s.add_subparsers(dest="apikey_command", required=True)
-    k = ksub.add_parser("create")
-    k.add_argument("--name", default="")
+    s = add_command(sub, "apikey", "create or revoke API keys (stored hashed in SQL)",
+                    "Create or revoke the API keys the HTTP API accepts (only their hashes are stored).")
+    ksub = s.add_subparsers(dest="apikey_command", required=True, metavar="COMMAND")
+    k = add_command(ksub, "create", "create an API key and print it once (JSON)")
+    k.add_argument("--name", default="", metavar="TEXT", help="a note to recognise the key by (default: none)")
     _db_args(k)
     k.set_defaults(func=cmd_apikey_create)
-    k = ksub.add_parser("revoke")
-    k.add_argument("id")
+    k = add_command(ksub, "revoke", "revoke an API key by its id (k_...)")
+    k.add_argument("id", help="the key's id, as `apikey create` printed it")
     _db_args(k)
     k.set_defaults(func=cmd_apikey_revoke)
 
-    s = sub.add_parser("openapi", help="write the OpenAPI document of the HTTP API")
-    s.add_argument("--out", default="-")
+    s = add_command(sub, "openapi", "write the OpenAPI document of the HTTP API")
+    s.add_argument("--out", default="-", metavar="FILE", help="output file, - for stdout")
     s.set_defaults(func=cmd_openapi)

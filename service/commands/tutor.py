@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import math
 import sys
@@ -11,16 +10,8 @@ import time
 from dataclasses import asdict
 from pathlib import Path
 
-from service.cli import CliError, parse_belt_speed
-
-
-def _load_motion(path: str):
-    from solver.motion import Motion, MotionError
-
-    try:
-        return Motion.load(path)
-    except MotionError as e:
-        raise CliError(str(e)) from None
+from service.cli import CliError, add_command, import_message, load_motion, parse_belt_speed, warn_input
+from service.commands.outputs import prepare_output_dir, progress_csv, step_stem
 
 
 def _write_motion(motion, path: Path, *, with_replay: bool = True) -> dict:
@@ -35,6 +26,49 @@ def _write_motion(motion, path: Path, *, with_replay: bool = True) -> dict:
 # --- tutor --------------------------------------------------------------------------------
 
 
+def _input_line(inp: dict | None) -> str | None:
+    """The input summary (``solver.io.summary.describe``, the ``input`` key of ``--json``) in one
+    short line: format, frames, mass used and the mass the plates imply, fit error, stances."""
+    if not inp:
+        return None
+    mass = f"{inp['mass_kg']:g} kg" + (f" ({inp['mass_from']})" if inp.get("mass_from") else "")
+    if inp.get("mass_implied_kg") is not None:
+        mass += f", plates imply {inp['mass_implied_kg']:.1f} kg"
+    parts = [f"{inp.get('format') or 'trial'}, {inp.get('frames')} frames"
+             + (f" at {inp['fps']:g} fps" if inp.get("fps") else ""), mass]
+    for key, what in (("marker_fit_error_mm", "marker fit"), ("landmark_fit_error_mm", "landmark fit")):
+        if (inp.get(key) or {}).get("max") is not None:
+            parts.append(f"{what} <= {inp[key]['max']:.1f} mm")
+            break
+    if inp.get("stances"):
+        parts.append("stances " + ", ".join(f"{side} {len(v)}" for side, v in inp["stances"].items()))
+    return "  input: " + "; ".join(parts)
+
+
+def _tutor_summary(out: dict) -> str:
+    """A few lines for a person: what was made, how long it took, whether it is plausible."""
+    st = out.get("stats") or {}
+    simp, corr = st.get("simplify") or {}, st.get("correct") or {}
+    its = sum(a.get("iterations") or 0 for a in corr.get("attempts") or [])
+    took = (f"in {out['import_s'] + (st.get('total_s') or 0.0):.1f} s (import {out['import_s']:.1f} s, "
+            f"simplification {simp.get('time_s', 0.0):.1f} s, correction {corr.get('time_s', 0.0):.1f} s "
+            f"with {its} IPOPT iterations)")
+    if out["status"] != "succeeded" or "out" not in out:
+        return f"tutor {out['status']} {took}: {out.get('message') or 'no plausible motion'}; nothing written"
+    inp = _input_line(out.get("input"))
+    lines = [f"tutor {out['status']} {took}", *([inp] if inp else []),
+             f"  wrote {out['out']}: {out['character']}, {out['coordinates']} coordinates, {out['frames']} frames "
+             f"at {out['fps']:g} fps (one gait cycle)",
+             f"  {'plausible' if out['plausible'] else 'NOT plausible'}: root residual "
+             f"{out['root_residual_rel_weight']:.1e} x body weight (tolerance 1e-6), MuJoCo's replay agrees to "
+             f"{out['mujoco_agreement_rel_weight']:.1e}"]
+    md = st.get("marker_distance_to_capture_mm") or {}
+    if md:
+        lines.append(f"  distance to the capture: markers {md['mean']:.1f} mm on average, {md['max']:.1f} mm at most")
+    lines.append(f"  next: motionx extrapolate {out['out']} --slope DEG (or --curve DEG) --out DIR")
+    return "\n".join(lines)
+
+
 def cmd_tutor(args: argparse.Namespace) -> int:
     from solver.io import load_trial
     from solver.pipeline import PipelineError, make_tutor
@@ -43,22 +77,29 @@ def cmd_tutor(args: argparse.Namespace) -> int:
     try:
         capture = load_trial(args.inputs, mass=args.mass, belt_speed=parse_belt_speed(args.belt_speed))
     except (ValueError, FileNotFoundError) as e:
-        raise CliError(f"cannot import {' '.join(args.inputs)}: {e}") from None
+        raise CliError(f"cannot import {' '.join(args.inputs)}: {import_message(e)}") from None
     t_import = time.perf_counter() - t0
+    from solver.io.summary import describe
+    from solver.pipeline import jsonable
+
+    described = jsonable(describe(capture))
+    warn_input(described)
     try:
         res = make_tutor(capture, character=args.character, fps=args.fps, cycle=args.cycle, start=args.start,
                          max_iter=args.max_iter)
     except (PipelineError, ValueError) as e:
         raise CliError(str(e)) from None
-    out = {"status": res.status, "message": res.message, "import_s": round(t_import, 3), "stats": res.stats}
+    out = {"status": res.status, "message": res.message, "import_s": round(t_import, 3), "input": described,
+           "stats": res.stats}
     if res.motion is None:
-        print(json.dumps(out))
+        print(json.dumps(out) if args.json else _tutor_summary(out))
         return 1
     rep = _write_motion(res.motion, Path(args.out))
-    out.update({"out": args.out, "frames": res.motion.T, "coordinates": res.motion.n, "plausible": rep["plausible"],
+    out.update({"out": args.out, "character": res.motion.character.name, "fps": res.motion.fps,
+                "frames": res.motion.T, "coordinates": res.motion.n, "plausible": rep["plausible"],
                 "root_residual_rel_weight": rep["root_residual"]["max_force_rel_weight"],
                 "mujoco_agreement_rel_weight": rep["mujoco_replay"]["agreement_force_rel_weight"]})
-    print(json.dumps(out))
+    print(json.dumps(out) if args.json else _tutor_summary(out))
     return 0 if rep["plausible"] else 1
 
 
@@ -69,7 +110,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
     from mjcf.validate import validate
     from solver.plausibility import Tolerances
 
-    motion = _load_motion(args.motion)
+    motion = load_motion(args.motion)
     tol = Tolerances(residual=args.residual_tol) if args.residual_tol else Tolerances()
     rep = validate(motion, tol)
     print(json.dumps(rep, indent=2 if args.pretty else None))
@@ -80,20 +121,23 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
 
 class _ProgressBar:
-    """A one-line progress bar on stderr (λ reached, environment, elapsed)."""
+    """Progress on stderr: a bar redrawn in place on a terminal (λ reached, environment,
+    elapsed), else one line per solve; nothing with ``--quiet``."""
 
     def __init__(self, enabled: bool) -> None:
         self.enabled = enabled and sys.stderr.isatty()
         self.verbose = enabled and not self.enabled
 
     def __call__(self, rec) -> None:
-        env = ", ".join(f"{k}={v:.3g}" for k, v in rec.environment.items())
+        from service.plots import number_text
+
+        env = ", ".join(f"{k}={number_text(v)}" for k, v in rec.environment.items())
         mark = "ok" if rec.accepted else "retry"
         if self.enabled:
             width = 30
             fill = int(round(width * rec.lam_reached))
             sys.stderr.write(f"\r[{'#' * fill}{'.' * (width - fill)}] λ={rec.lam_reached:.3f} "
-                             f"(tried {rec.lam:.3f} {mark}, {rec.iterations} it) {rec.wall_time:6.1f}s  ")
+                             f"(tried {rec.lam:.3f} {mark}, {rec.iterations} it) {env} {rec.wall_time:6.1f}s  ")
             sys.stderr.flush()
         elif self.verbose:
             sys.stderr.write(f"λ {rec.lam:.4f} {mark:5s} {rec.iterations:4d} it  reached {rec.lam_reached:.4f}  "
@@ -104,16 +148,6 @@ class _ProgressBar:
             sys.stderr.write("\n")
 
 
-def write_progress_csv(records, path: Path) -> None:
-    keys = ["slope_deg", "curve_deg", "friction", "gravity"]
-    with path.open("w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["wall_time_s", "lambda", *keys, "iterations", "accepted", "status", "lambda_reached"])
-        for r in records:
-            w.writerow([f"{r.wall_time:.4f}", f"{r.lam:.6f}", *[f"{r.environment.get(k, float('nan')):.6g}" for k in keys],
-                        r.iterations, int(r.accepted), r.status, f"{r.lam_reached:.6f}"])
-
-
 def plot_progress(records, target, path: Path) -> None:
     """λ (and the environment value) against compute time, like the thesis's Figs. 5.21/5.23/5.28
     (``service.plots.progress_png``, the plot the API serves at ``/jobs/{id}/plots/progress.png``)."""
@@ -122,11 +156,33 @@ def plot_progress(records, target, path: Path) -> None:
     path.write_bytes(progress_png([asdict(r) for r in records], asdict(target)))
 
 
+def _extrapolate_summary(summary: dict, out: Path) -> str:
+    from service.plots import changed_parameters, describe_target
+
+    final = summary["final"]
+    head = (f"{summary['status']}: λ = {summary['lambda_reached']:.4f} toward {describe_target(summary['target'])} "
+            f"in {summary['wall_time_s']:.1f} s ({summary['solves']} solves, {summary['accepted']} motions kept)")
+    lines = [head]
+    if summary["message"]:
+        lines.append(f"  {summary['message']}")
+    if final:
+        env = final.get("environment") or {}
+        changed = [k for k in changed_parameters(summary["target"]) if env.get(k) is not None]
+        reached = f" ({describe_target({k: env[k] for k in changed})})" if changed else ""
+        lines.append(f"  final motion {final['file']}: λ = {final['lambda']:.4f}{reached}, "
+                     f"{'plausible' if final['plausible'] else 'NOT plausible'} (root residual "
+                     f"{final['root_residual_rel_weight']:.1e} x body weight, MuJoCo's replay agrees to "
+                     f"{final['mujoco_agreement_rel_weight']:.1e})")
+    lines.append(f"  wrote {out}/: step_NNN_lambda_L.motion.json per λ, progress.csv, progress.png, summary.json"
+                 + (", grf.png, residuals.png" if final else ""))
+    return "\n".join(lines)
+
+
 def cmd_extrapolate(args: argparse.Namespace) -> int:
     from service.commands.plot import write_motion_plots
     from solver.continuation import StepControl, Target, extrapolate
 
-    tutor = _load_motion(args.tutor)
+    tutor = load_motion(args.tutor)
     try:
         target = Target(slope_deg=args.slope or 0.0, curve_deg=args.curve or 0.0, friction=args.friction,
                         gravity=args.gravity)
@@ -140,12 +196,12 @@ def cmd_extrapolate(args: argparse.Namespace) -> int:
         raise CliError(f"{args.tutor} is not a tutor (it has no contact wrenches or contact schedule); "
                        "run `motionx tutor` first")
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    prepare_output_dir(out, force=args.force)
     bar = _ProgressBar(not args.quiet)
     files: list[str] = []
 
     def on_step(step) -> None:
-        name = f"motion_{step.step:03d}_lambda_{step.lam:.4f}.json"
+        name = f"{step_stem(step.step, step.lam)}.motion.json"
         step.motion.save(out / name)  # our plausibility report inside; MuJoCo replay for the last one
         files.append(name)
 
@@ -155,7 +211,7 @@ def cmd_extrapolate(args: argparse.Namespace) -> int:
         raise CliError(str(e)) from None
     finally:
         bar.close()
-    write_progress_csv(res.records, out / "progress.csv")
+    (out / "progress.csv").write_text(progress_csv(asdict(r) for r in res.records))
     plot_progress(res.records, target, out / "progress.png")
     final = None
     if res.steps:
@@ -175,7 +231,7 @@ def cmd_extrapolate(args: argparse.Namespace) -> int:
         "target": {"slope_deg": target.slope_deg, "curve_deg": target.curve_deg, "friction": target.friction,
                    "gravity": target.gravity},
         "control": {"method": control.method, "delta0": control.delta0, "eps": control.eps,
-                    "max_iter": control.max_iter},
+                    "max_iter": control.max_iter, "max_solves": control.max_solves},
         "solves": res.solves,
         "accepted": len(res.steps),
         "wall_time_s": round(res.wall_time, 3),
@@ -183,7 +239,7 @@ def cmd_extrapolate(args: argparse.Namespace) -> int:
         "final": final,
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2, allow_nan=False))
-    print(json.dumps(summary))
+    print(json.dumps(summary) if args.json else _extrapolate_summary(summary, out))
     return 0 if res.status in ("succeeded", "impasse") else 1
 
 
@@ -201,39 +257,69 @@ def _finite(kind: str):
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    s = sub.add_parser("tutor", help="import a trial and make it physically plausible (the tutor motion)")
-    s.add_argument("inputs", nargs="+", help="trial files: MODEL.osim COORDS.mot | FILE.c3d | FILE.bvh | "
-                                             "DeepMimic CLIP.txt CHARACTER.txt")
-    s.add_argument("--character", choices=["halfboy", "fullbody"], default="halfboy")
-    s.add_argument("--fps", type=float, choices=[15.0, 30.0], default=15.0)
-    s.add_argument("--out", required=True, help="motion file v1 (JSON) to write")
-    s.add_argument("--mass", type=_finite("--mass"), help="subject mass (kg) when the input does not state it")
-    s.add_argument("--belt-speed", default=None,
-                   help="treadmill belt speed in m/s, or 'auto' (adds v·t to the root: overground-equivalent)")
-    s.add_argument("--cycle", type=int, default=0, help="which complete gait cycle to use (0 = first)")
+    s = add_command(sub, "tutor", "import a trial and make it physically plausible (the tutor motion)", """\
+Import a captured walk, take one gait cycle, reduce the capture skeleton to the synthesis
+character, estimate the contact forces from the kinematics and correct the motion with the
+spacetime NLP (IPOPT) until it obeys the equations of motion: the tutor, written as a motion
+file v1 with its plausibility report (MuJoCo replay included). It is the input of
+`motionx extrapolate`. Exit status 1 when the correction fails (nothing is written).""")
+    s.add_argument("inputs", nargs="+", metavar="INPUT",
+                   help="trial files: MODEL.osim COORDS.mot [GRF.mot X.xml] | FILE.c3d | FILE.bvh | "
+                        "DeepMimic CLIP.txt CHARACTER.txt")
+    s.add_argument("--character", choices=["halfboy", "fullbody"], default="halfboy",
+                   help="synthesis character: halfboy (16 coordinates, legs + lumped trunk) or fullbody (43)")
+    s.add_argument("--fps", type=float, choices=[15.0, 30.0], default=15.0, help="frames per second of the tutor")
+    s.add_argument("--out", required=True, metavar="TUTOR.json", help="motion file v1 (JSON) to write")
+    s.add_argument("--mass", type=_finite("--mass"), metavar="KG",
+                   help="subject mass in kg (default: from the input; required when the input does not state it)")
+    s.add_argument("--belt-speed", default=None, metavar="auto|V",
+                   help="treadmill belt speed in m/s, or 'auto' (adds v·t to the root: overground-equivalent; "
+                        "default: none, overground)")
+    s.add_argument("--cycle", type=int, default=0, metavar="N", help="which complete gait cycle to use (0 = first)")
     s.add_argument("--start", default="auto", choices=["auto", "right_heel_strike", "left_heel_strike", "best_loop"],
                    help="where the cycle starts (auto: heel strikes, else the best-closing loop)")
-    s.add_argument("--max-iter", type=int, default=1000, help="IPOPT iteration limit of the correction")
+    s.add_argument("--max-iter", type=int, default=1000, metavar="K", help="IPOPT iteration limit of the correction")
+    s.add_argument("--json", action="store_true", help="print the result as one JSON object instead of a summary")
     s.set_defaults(func=cmd_tutor)
 
-    s = sub.add_parser("validate", help="plausibility report of a motion file (MuJoCo replay included)")
-    s.add_argument("motion", help="motion file v1 (JSON)")
-    s.add_argument("--residual-tol", type=_finite("--residual-tol"), default=None,
-                   help="root residual tolerance relative to body weight (default 1e-6)")
-    s.add_argument("--pretty", action="store_true")
-    s.set_defaults(func=cmd_validate)
-
-    s = sub.add_parser("extrapolate", help="continuation from a tutor to a new environment (the main job)")
-    s.add_argument("tutor", help="tutor motion file (motionx tutor)")
-    s.add_argument("--slope", type=_finite("--slope"), help="ground slope in degrees, positive uphill")
-    s.add_argument("--curve", type=_finite("--curve"), help="heading change over one cycle in degrees, positive left")
-    s.add_argument("--friction", type=_finite("--friction"), help="target friction coefficient")
-    s.add_argument("--gravity", type=_finite("--gravity"), help="target gravity magnitude in m/s² (Moon 1.62)")
-    s.add_argument("--out", required=True, help="output directory")
-    s.add_argument("--method", choices=["adaptive", "thesis"], default="adaptive", help="step control")
-    s.add_argument("--delta0", type=float, default=0.05, help="first step Δ0")
-    s.add_argument("--eps", type=float, default=0.005, help="smallest step ε before an impasse")
-    s.add_argument("--max-iter", type=int, default=200, help="IPOPT iterations per step (k)")
-    s.add_argument("--max-solves", type=int, default=400)
+    s = add_command(sub, "extrapolate", "continuation from a tutor to a new environment (the main job)", """\
+Walk the homotopy λ from 0 (the tutor's ground) to 1 (the target: slope, curve, friction,
+gravity, combinable), solving the spacetime NLP at each λ and keeping every optimum as a
+plausible motion of its own. Writes into --out, per accepted step,
+step_NNN_lambda_L.motion.json, then progress.csv, progress.png, summary.json and the last
+motion's grf.png and residuals.png. Exit status 0 for `succeeded` and `impasse`.""")
+    s.add_argument("tutor", metavar="TUTOR.json", help="tutor motion file (from motionx tutor)")
+    s.add_argument("--slope", type=_finite("--slope"), metavar="DEG",
+                   help="ground slope in degrees, positive uphill (default: 0, level)")
+    s.add_argument("--curve", type=_finite("--curve"), metavar="DEG",
+                   help="heading change over one cycle in degrees, positive left (default: 0, straight)")
+    s.add_argument("--friction", type=_finite("--friction"), metavar="MU",
+                   help="target friction coefficient (default: the tutor's)")
+    s.add_argument("--gravity", type=_finite("--gravity"), metavar="G",
+                   help="target gravity magnitude in m/s², Moon 1.62 (default: the tutor's)")
+    s.add_argument("--out", required=True, metavar="DIR", help="output folder (new or empty, unless --force)")
+    s.add_argument("--force", "--overwrite", action="store_true",
+                   help="write into a non-empty --out: first remove the files an extrapolation writes there "
+                        "(step_*, progress.*, summary.json, grf.png, residuals.png), keep the others")
+    s.add_argument("--method", choices=["adaptive", "thesis"], default="adaptive",
+                   help="step control: adaptive (secant predictor, steps from the recent history) or thesis "
+                        "(Algorithm 3: double on success, halve on failure)")
+    s.add_argument("--delta0", type=_finite("--delta0"), default=0.05, metavar="D", help="first step Δ0 in λ")
+    s.add_argument("--eps", type=_finite("--eps"), default=0.005, metavar="E",
+                   help="smallest step ε in λ before an impasse")
+    s.add_argument("--max-iter", type=int, default=200, metavar="K", help="IPOPT iterations per step (k)")
+    s.add_argument("--max-solves", type=int, default=400, metavar="N",
+                   help="most NLP solves of the whole continuation (accepted or not)")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
+    s.add_argument("--json", action="store_true", help="print summary.json on stdout instead of a summary")
     s.set_defaults(func=cmd_extrapolate)
+
+    s = add_command(sub, "validate", "plausibility report of a motion file (MuJoCo replay included)", """\
+Check a motion file against the equations of motion: root residual (ours and MuJoCo's
+mj_inverse replay on the motion's MJCF), foot slip, penetration, friction cone, centre of
+pressure. Prints the report as JSON; exit status 1 when the motion is not plausible.""")
+    s.add_argument("motion", metavar="MOTION.json", help="motion file v1 (JSON)")
+    s.add_argument("--residual-tol", type=_finite("--residual-tol"), default=None, metavar="R",
+                   help="root residual tolerance relative to body weight (default: 1e-6)")
+    s.add_argument("--pretty", action="store_true", help="indent the JSON")
+    s.set_defaults(func=cmd_validate)

@@ -115,6 +115,8 @@ async def upload_motion(
     except ImporterUnavailable as e:
         raise Problem(501, str(e)) from None
     out = await run_in_threadpool(_store_motion, db, owner, motion, name)
+    if ctype == "multipart/form-data":
+        out["input"] = (motion.provenance or {}).get("input")
     return JSONResponse(out, status_code=201, headers={"Location": out["links"]["self"]})
 
 

@@ -11,8 +11,10 @@ runs OpenSim in a child process, the C3D one belongs to ``solver.io.c3d``):
 files                              reader
 =================================  ========================================================
 ``.osim`` + ``.mot``/``.sto``      :func:`solver.io.opensim.load_opensim`; a second ``.mot``
-(+ GRF ``.mot``, ExternalLoads     whose columns are forces is the GRF, an ``.xml`` the
-``.xml``)                          ExternalLoads (``belt_speed`` for treadmill trials)
+or ``.trc`` (+ GRF ``.mot``,       whose columns are forces is the GRF, an ``.xml`` the
+ExternalLoads ``.xml``)            ExternalLoads (``belt_speed`` for treadmill trials); a
+                                   ``.trc`` (markers) instead of coordinates: OpenSim's
+                                   inverse kinematics with the model's marker set first
 ``.c3d``                           ``solver.io.c3d.load_c3d(path, mass=...)``
 ``.bvh``                           :func:`solver.io.bvh.load_bvh` (``mass`` required)
 ``.txt``/``.json`` (DeepMimic)     :func:`solver.io.deepmimic.load_deepmimic`: the motion
@@ -31,18 +33,19 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from solver.capture import Capture
+from solver.io.errors import InputError
 
-__all__ = ["TrialError", "load_trial", "READERS"]
+__all__ = ["InputError", "TrialError", "load_trial", "READERS"]
 
 READERS = {
-    "opensim": ".osim + .mot/.sto (+ GRF .mot, ExternalLoads .xml)",
+    "opensim": ".osim + .mot/.sto coordinates or .trc markers (+ GRF .mot, ExternalLoads .xml)",
     "c3d": ".c3d",
     "bvh": ".bvh",
     "deepmimic": "DeepMimic motion .txt/.json + character .txt/.json",
 }
 
 
-class TrialError(ValueError):
+class TrialError(InputError):
     """The files given do not form a trial any reader understands."""
 
 
@@ -92,16 +95,16 @@ def load_trial(
             raise TrialError(f"one OpenSim model expected, got {by_ext['.osim']}")
         mots = by_ext.get(".mot", []) + by_ext.get(".sto", [])
         grfs = [m for m in mots if _is_grf_mot(m)]
-        kin = [m for m in mots if m not in grfs]
+        kin = [m for m in mots if m not in grfs] + by_ext.get(".trc", [])
         if len(kin) != 1:
-            raise TrialError(f"an OpenSim trial needs exactly one coordinates .mot/.sto next to the model; "
-                             f"got {[str(k) for k in kin]} (GRF files: {[str(g) for g in grfs]})")
+            raise TrialError(f"an OpenSim trial needs exactly one coordinates .mot/.sto or one markers .trc next to "
+                             f"the model; got {[str(k) for k in kin]} (GRF files: {[str(g) for g in grfs]})")
         if len(grfs) > 1:
             raise TrialError(f"at most one GRF .mot, got {[str(g) for g in grfs]}")
         xmls = by_ext.get(".xml", [])
         if len(xmls) > 1 or (xmls and not grfs):
             raise TrialError(f"an ExternalLoads .xml goes with one GRF .mot; got xml {xmls}, GRF {grfs}")
-        other = exts - {".osim", ".mot", ".sto", ".xml"}
+        other = exts - {".osim", ".mot", ".sto", ".trc", ".xml"}
         if other:
             raise TrialError(f"unexpected files with an OpenSim trial: {sorted(other)}")
         from solver.io.opensim import load_opensim

@@ -55,6 +55,7 @@ from typing import Mapping
 import numpy as np
 
 from solver.capture import Capture, GroundFrame
+from solver.io.errors import InputError
 from solver.io.track import SkeletonTrack
 
 log = logging.getLogger(__name__)
@@ -67,7 +68,7 @@ UNIT_M = {"cm": 0.01, "m": 1.0, "mm": 0.001, "in": 0.0254, "cmu": 0.0254 / 0.45}
 LEG_RANGE = (0.45, 1.2)
 
 
-class BvhError(ValueError):
+class BvhError(InputError):
     """A BVH file is unreadable or cannot be interpreted; the message names the problem."""
 
 
@@ -240,13 +241,13 @@ def read_bvh(path: str | Path) -> BvhClip:
 
 _SIDE = {"right": "r", "left": "l", "r": "r", "l": "l"}
 _ROLES = {
-    "hip": ("upleg", "hip", "thigh", "upperleg"),
-    "knee": ("leg", "knee", "shin", "calf", "lowerleg"),
+    "hip": ("upleg", "hip", "thigh", "upperleg", "femur"),
+    "knee": ("leg", "knee", "shin", "calf", "lowerleg", "tibia"),
     "ankle": ("foot", "ankle"),
     "mtp": ("toebase", "toe", "toes", "ball"),
     "clavicle": ("shoulder", "collar", "clavicle"),
     "shoulder": ("arm", "uparm", "upperarm", "humerus"),
-    "elbow": ("forearm", "elbow", "lowerarm"),
+    "elbow": ("forearm", "elbow", "lowerarm", "radius"),
     "wrist": ("hand", "wrist"),
 }
 _OURS = {
@@ -437,6 +438,7 @@ def bvh_track(
     return SkeletonTrack(
         times=times, landmarks=lm, frame=frame, mass=mass,
         source={"format": "bvh", "file": str(Path(path).resolve()), "units": units, "metres_per_unit": scale,
+                "mass_from": "given" if mass is not None else None,
                 "up": up, "joint_roles": {r: clip.names[j] for r, j in roles.items()},
                 "spine_joints": [clip.names[j] for j in spines], "floor_height_file_units": floor_height},
     )

@@ -51,6 +51,7 @@ import numpy as np
 
 from solver import spatial as sp
 from solver.capture import Capture, GroundFrame
+from solver.io.errors import InputError
 from solver.io.track import SkeletonTrack
 
 log = logging.getLogger(__name__)
@@ -61,7 +62,7 @@ C_DM = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 _DOF = {"none": 0, "fixed": 0, "spherical": 4, "revolute": 1}
 
 
-class DeepMimicError(ValueError):
+class DeepMimicError(InputError):
     """A DeepMimic file is unreadable or inconsistent; the message names the problem."""
 
 
@@ -272,7 +273,8 @@ def deepmimic_track(motion: str | Path, character: str | Path, *, mass: float | 
         frame=GroundFrame(R=C_DM.T, axes="DeepMimic: x forward, y up, z right"),
         mass=total, segment_masses=seg_mass,
         source={"format": "deepmimic", "motion": str(Path(motion).resolve()),
-                "character": str(Path(character).resolve()), "loop": loop},
+                "character": str(Path(character).resolve()), "loop": loop,
+                "mass_from": "given" if mass is not None else "character file"},
     )
 
 

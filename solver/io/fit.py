@@ -70,6 +70,7 @@ from solver.character import (
     winter_density,
     winter_mass,
 )
+from solver.io.errors import InputError
 from solver.io.track import LOWER_LANDMARKS, UPPER_LANDMARKS, SkeletonTrack
 
 log = logging.getLogger(__name__)
@@ -77,8 +78,9 @@ log = logging.getLogger(__name__)
 __all__ = ["FitError", "fit_track", "SEGMENT_LANDMARKS", "decompose_hinges"]
 
 
-class FitError(ValueError):
-    """The track cannot be fitted (missing data, unknown mass, ...); the message says why."""
+class FitError(InputError):
+    """The track cannot be fitted (missing data, unknown mass, ...); the message says why
+    (``parameter`` names the argument that would fix it, e.g. "mass")."""
 
 
 SIDES = ("r", "l")
@@ -302,7 +304,10 @@ def _masses(track: SkeletonTrack, segs: list[str], lower_topology: bool) -> tupl
     if total is None and given:
         total = float(sum(given.values()))
     if total is None:
-        raise FitError("subject mass unknown: the source does not state it; pass mass=... (kg)")
+        fmt = str(track.source.get("format") or "")
+        fmt = {"bvh": "BVH", "c3d": "C3D", "opensim": "OpenSim", "deepmimic": "DeepMimic"}.get(fmt, fmt)
+        raise FitError(f"subject mass unknown: the {fmt + ' ' if fmt else ''}input does not state it",
+                       parameter="mass", unit="kg")
     out: dict[str, float] = {}
     if lower_topology:
         legs = {s: given.get(s, winter_mass(SEGMENT_LANDMARKS[s][2], total)) for s in LEG_SEGMENTS}

@@ -1,35 +1,115 @@
-"""``make demo`` end to end: ``motionx demo`` with its defaults (the shared DeepMimic walk,
-a downhill slope of −11.25° and a 90° curve over HTTP on the embedded service) writes every
-λ motion, its exports, plausibility reports and plots, and a summary that states what was
-reached. The files are checked with their own formats' readers, not by name only."""
+"""``make demo`` end to end: ``motionx demo`` with its defaults (the DeepMimic walk shipped in
+data/, a downhill slope of −11.25° and a 90° curve over HTTP on the embedded service) writes
+every λ motion, its exports, plausibility reports, progress curve and plots, and a summary
+that states what was reached. The files are checked with their own formats' readers, not by
+name only.
+
+One run serves every test: ``motionx demo --serve``, stopped with SIGTERM once the web page
+is up, as a user's ``kill`` would — then no process of the service may be left and no
+temporary folder. The output folder starts with an earlier run's leftovers in it."""
 
 from __future__ import annotations
 
+import csv
 import json
 import os
+import signal
 import subprocess
 import sys
+import threading
+import time
 from pathlib import Path
+from types import SimpleNamespace
 
+import httpx
 import pytest
 
 from solver.motion import motion_from_dict
 
 PNG = b"\x89PNG\r\n\x1a\n"
+STEP_KINDS = ("motion.json", "clip.json", "glb", "bvh", "validation.json")
+
+
+def _proc_stat(pid: int) -> tuple[int, int, str] | None:
+    """(ppid, session id, state) of a live process, None when it is gone (or a zombie)."""
+    try:
+        text = Path(f"/proc/{pid}/stat").read_text()
+    except (FileNotFoundError, ProcessLookupError):
+        return None
+    fields = text[text.rindex(")") + 2:].split()
+    state, ppid, sid = fields[0], int(fields[1]), int(fields[3])
+    return None if state in ("Z", "X") else (ppid, sid, state)
+
+
+def _cmdline(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+    except OSError:
+        return ""
+
+
+def _all_pids() -> list[int]:
+    return [int(p) for p in os.listdir("/proc") if p.isdigit()]
+
+
+def process_tree(root: int) -> set[int]:
+    """Every live descendant of ``root`` (by parent), and every process in the session of
+    one of them (children that a process started in its own session, or that were re-parented)."""
+    stats = {pid: s for pid in _all_pids() if (s := _proc_stat(pid)) is not None}
+    tree, grew = {root}, True
+    while grew:
+        new = {pid for pid, (ppid, _, _) in stats.items() if ppid in tree} - tree
+        grew = bool(new)
+        tree |= new
+    sessions = {stats[p][1] for p in tree if p in stats and p != root}
+    tree |= {pid for pid, (_, sid, _) in stats.items() if sid in sessions}
+    return tree - {root}
+
+
+def alive(pids: set[int]) -> set[int]:
+    return {p for p in pids if _proc_stat(p) is not None}
 
 
 @pytest.fixture(scope="module")
 def demo_run(tmp_path_factory, shared_data):
-    out = tmp_path_factory.mktemp("demo") / "out"
+    base = tmp_path_factory.mktemp("demo")
+    out, tmp = base / "out", base / "tmp"
+    tmp.mkdir()
+    # leftovers of an earlier run (and a file of the user's, which must stay)
+    (out / "downhill").mkdir(parents=True)
+    for stale in ("step_009_lambda_0.9000.motion.json", "step_009_lambda_0.9000.glb", "lambda_0.5000.motion.json"):
+        (out / "downhill" / stale).write_text("{}")
+    (out / "downhill" / "notes.txt").write_text("mine")
     exe = Path(sys.executable).with_name("motionx")
-    env = dict(os.environ, MOTIONX_DATA=str(shared_data))
-    p = subprocess.run([str(exe), "demo", "--out", str(out)], env=env, capture_output=True, text=True, timeout=600)
-    return p, out
+    env = dict(os.environ, MOTIONX_DATA=str(shared_data), TMPDIR=str(tmp), PYTHONUNBUFFERED="1")
+    p = subprocess.Popen([str(exe), "demo", "--serve", "--out", str(out)], env=env, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True)
+    watchdog = threading.Timer(600, p.kill)
+    watchdog.start()
+    lines, page = [], None
+    for line in p.stdout:  # until the web page is served (or the demo ends)
+        lines.append(line)
+        if "[demo] the web page: " in line:
+            page = line.split("[demo] the web page: ")[1].split()[0]
+            break
+    tree, health, cmds = set(), None, []
+    if page:
+        tree = process_tree(p.pid)
+        cmds = [_cmdline(pid) for pid in tree]
+        health = httpx.get(page.split("/ui/")[0] + "/health", timeout=10).status_code
+        p.send_signal(signal.SIGTERM)
+    rest, err = p.communicate(timeout=120)
+    watchdog.cancel()
+    deadline = time.monotonic() + 30
+    while alive(tree) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    return SimpleNamespace(returncode=p.returncode, stdout="".join(lines) + rest, stderr=err, out=out, tmp=tmp,
+                           page=page, health=health, tree=tree, commands=cmds, left=alive(tree))
 
 
 def test_demo_reaches_both_targets_and_prints_a_summary(demo_run):
-    p, out = demo_run
-    assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
+    r, out = demo_run, demo_run.out
+    assert r.page, r.stdout[-3000:] + r.stderr[-3000:]
     summary = json.loads((out / "summary.json").read_text())
     assert summary["input"] == ["humanoid3d_walk.txt", "humanoid3d_character.txt"]
     jobs = {j["name"]: j for j in summary["jobs"]}
@@ -43,28 +123,58 @@ def test_demo_reaches_both_targets_and_prints_a_summary(demo_run):
         assert j["reached"][key] == pytest.approx(value, abs=1e-9)
         assert j["motions"] >= 2 and j["plausible"] == j["motions"], j
         assert j["max_root_residual_rel_weight"] < 1e-6
-    # the printed summary names both jobs with their λ and where the files are
-    tail = p.stdout[p.stdout.index("[demo] job "):]
-    assert "downhill" in tail and "curve" in tail and "1.000" in tail and str(out) in p.stdout
-    # a progress bar was drawn while polling (one line per change when not on a terminal)
-    assert p.stdout.count("λ=") >= 4 and "[" in p.stdout and "#" in p.stdout
+    # the printed summary names both jobs with their λ, the values reached (not rounded:
+    # -11.25, not -11.2) and where the files are
+    tail = r.stdout[r.stdout.index("[demo] job "):]
+    assert "downhill" in tail and "curve" in tail and "1.000" in tail and str(out) in r.stdout
+    assert "slope -11.25°" in tail and "curve 90°" in tail
+    # a progress bar was drawn while polling (one line per change when not on a terminal),
+    # the tutor phase named as such
+    assert r.stdout.count("λ=") >= 4 and "#" in r.stdout
+    assert "slope_deg=-11.25 " in r.stdout
+
+
+def test_sigterm_stops_the_demo_and_its_service_and_removes_the_temporary_folder(demo_run):
+    r = demo_run
+    assert r.page and r.health == 200, r.stdout[-3000:] + r.stderr[-3000:]
+    # the service (and its job processes) were running while the page was served ...
+    assert any("service.cli serve" in c for c in r.commands), r.commands
+    # ... SIGTERM to the demo stopped them all, and the demo ended normally after the jobs succeeded
+    assert r.left == set(), f"left behind: {r.left}"
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert "[demo] stopping the service" in r.stdout and "Traceback" not in r.stderr
+    assert not any(p.name.startswith("motionx-demo-") for p in r.tmp.iterdir()), list(r.tmp.iterdir())
+    # the service's data directory was named in the output, and is gone
+    used = r.stdout.split("(SQLite in ")[1].split(",")[0]
+    assert Path(used).parent == r.tmp and not Path(used).exists()
+
+
+def test_demo_replaces_an_earlier_runs_files_only(demo_run):
+    d = demo_run.out / "downhill"
+    assert not (d / "step_009_lambda_0.9000.motion.json").exists() and not (d / "step_009_lambda_0.9000.glb").exists()
+    assert not (d / "lambda_0.5000.motion.json").exists()
+    assert (d / "notes.txt").read_text() == "mine"
 
 
 def test_demo_files_are_what_they_claim(demo_run):
     from solver.export.clip import validate_clip
 
-    p, out = demo_run
-    assert p.returncode == 0, p.stderr[-3000:]
+    out = demo_run.out
+    summary = json.loads((out / "summary.json").read_text())
     for job in ("downhill", "curve"):
         d = out / job
-        motions = sorted(d.glob("lambda_*.motion.json"))
+        motions = sorted(d.glob("step_*_lambda_*.motion.json"))
         assert len(motions) >= 2
+        # one naming scheme with `motionx extrapolate`: step_NNN_lambda_L.<kind>, every kind per step
+        assert {p.name for p in d.iterdir() if p.name.startswith("step_")} == {
+            f"{m.name[: -len('.motion.json')]}.{kind}" for m in motions for kind in STEP_KINDS}
         lams = []
-        for mf in motions:
+        for i, mf in enumerate(motions):
             stem = mf.name[: -len(".motion.json")]
             m = motion_from_dict(json.loads(mf.read_text()))
             assert m.provenance["step"] == "extrapolate"
-            assert float(stem.split("_")[1]) == pytest.approx(m.provenance["lambda"], abs=1e-4)
+            _, step, _, lam = stem.split("_")
+            assert int(step) == i and float(lam) == pytest.approx(m.provenance["lambda"], abs=1e-4)
             lams.append(m.provenance["lambda"])
             clip = json.loads((d / f"{stem}.clip.json").read_text())
             validate_clip(clip)
@@ -79,12 +189,38 @@ def test_demo_files_are_what_they_claim(demo_run):
         assert lams == sorted(lams) and max(lams) == pytest.approx(1.0)
         # the last λ motion of the job stands on the target ground
         env = m.provenance["environment_values"]
-        target = json.loads((out / "summary.json").read_text())["jobs"]
-        want = next(j["target"] for j in target if j["name"] == job)
+        want = next(j["target"] for j in summary["jobs"] if j["name"] == job)
         for k, v in want.items():
             assert env[k] == pytest.approx(v)
         for png in ("progress.png", "final.grf.png", "final.residuals.png"):
             data = (d / png).read_bytes()
             assert data[:8] == PNG and len(data) > 5000, (job, png)
-        assert json.loads((d / "job.json").read_text())["status"] == "succeeded"
+        record = json.loads((d / "job.json").read_text())
+        assert record["status"] == "succeeded"
+        # progress.csv: the job's progress curve, the tutor phase first, as `extrapolate` writes it
+        with (d / "progress.csv").open() as f:
+            rows = list(csv.DictReader(f))
+        assert len(rows) == len(record["progress"]) == record["solves"] + 1
+        assert rows[0]["phase"] == "tutor" and {r["phase"] for r in rows[1:]} == {"extrapolate"}
+        key, value = next(iter(want.items()))
+        assert float(rows[-1][key]) == pytest.approx(value) and float(rows[-1]["lambda_reached"]) == 1.0
         motion_from_dict(json.loads((d / "tutor.motion.json").read_text()))
+
+
+def test_the_demo_clock_runs_during_the_tutor_phase():
+    """While the job makes its tutor (no progress point yet) its line says so and its time moves."""
+    from service.commands.demo import _bar, _Job
+
+    job = _Job("downhill", {"slope_deg": -11.25})
+    job.seen({"status": "queued", "progress": []})
+    assert job.elapsed == 0.0
+    job.seen({"status": "running", "progress": [], "steps": 0})
+    first = _bar(job)
+    time.sleep(0.25)
+    second = _bar(job)
+    assert " tutor " in first and first != second
+    assert 0.2 <= job.elapsed < 5.0
+    job.seen({"status": "succeeded", "progress": [], "steps": 4, "lam_reached": 1.0})
+    frozen = job.elapsed
+    time.sleep(0.1)
+    assert job.elapsed == frozen

@@ -342,6 +342,23 @@ def test_multipart_mocap_upload_deepmimic(api, shared_data):
     assert info["frames"] > 20 and info["coordinates"] > 16
     mf = api.a.get(info["links"]["motion_file"]).json()
     assert mf["provenance"]["step"] == "capture"
+    # what the input looks like: mass, stance intervals per foot, fit error (no plates: no implied mass)
+    inp = info["input"]
+    assert inp["format"] == "deepmimic" and inp["mass_kg"] == 45.0 and "mass_implied_kg" not in inp
+    assert inp["stances"]["right"] and inp["stances"]["left"] and inp["landmark_fit_error_mm"]["max"] < 1.0
+
+
+def test_multipart_upload_reports_plates_mass_and_names_the_mass_field(api, shared_data):
+    d = shared_data / "opensim_gait2354_subject01_treadmill"
+    names = ("subject01.osim", "subject01_walk1_ik.mot", "subject01_walk1_grf.mot", "subject01_walk1_grf.xml")
+    files = [("files", (n, (d / n).read_bytes())) for n in names]
+    r = api.a.post("/motions", files=files, data={"belt_speed": "1.13", "mass": "62"})
+    assert r.status_code == 201, r.text
+    inp = r.json()["input"]
+    assert inp["mass_kg"] == 62.0 and abs(inp["mass_implied_kg"] - 72.6) < 0.8
+    assert "differs from the 72.7 kg the force plates imply" in inp["mass_warning"]
+    bvh = [("files", ("walk.bvh", (shared_data / "cmu16_bvh" / "16_15_walk.bvh").read_bytes()))]
+    assert_problem(api.a.post("/motions", files=bvh), 422, "send the form field 'mass'")
 
 
 def test_multipart_mocap_upload_bad_trials(api, shared_data):

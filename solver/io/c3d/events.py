@@ -10,7 +10,7 @@ import numpy as np
 
 from solver.capture import MeasuredGRF
 from solver.io.c3d.plates import PlateSignal, _loading_periods
-from solver.io.c3d.reader import FEET, SIDES, G, _runs, _unit
+from solver.io.c3d.reader import FEET, SIDES, _runs, _unit
 
 log = logging.getLogger("solver.io.c3d")
 
@@ -418,48 +418,3 @@ def _feet_and_plates(signals: Sequence[PlateSignal], lm: Mapping[str, np.ndarray
                  "foot_off": [round(float(x), 3) for x in events[foot][1] + offsets[foot][1]],
                  "offsets_s": [round(float(x), 3) for x in offsets[foot]]} for foot in FEET}
     return _FeetResult(measured, contacts, periods_info, ev), assigned
-
-
-
-def _mass_from_plates(measured: MeasuredGRF, contacts: np.ndarray | None, times: np.ndarray) -> float | None:
-    """Mean vertical reaction / g over a whole stride (heel strike to heel strike) of complete GRF."""
-    if contacts is None:
-        return None
-    for foot in range(2):
-        c = contacts[2 * foot] | contacts[2 * foot + 1]
-        starts = [a for a, _ in _runs(c) if a > 0]
-        for a, b in zip(starts, starts[1:]):
-            if measured.valid[a:b + 1].all():
-                fz = measured.force[:, 2, a:b].sum(axis=0)
-                return float(np.mean(fz) / G)
-    return None
-
-
-
-
-def _mass_from_stances(plates: Sequence[PlateSignal], periods: Sequence[Mapping[str, Any]],
-                       events: Mapping[str, Mapping[str, list]], times: np.ndarray) -> tuple[float, str] | None:
-    """Without a complete stride of complete plates: over one stride each foot has exactly one
-    stance, so the vertical impulse of one whole stance of each foot (each on plates, inside the
-    trial) divided by the stride time (median time between strikes of a foot) is the stride's mean
-    vertical force, m g in steady walking."""
-    dt = times[1] - times[0]
-    impulse: dict[str, float] = {}
-    by_plate = {s.index: s for s in plates}
-    for p in periods:
-        foot = p["foot"]
-        if foot not in FEET or foot in impulse or p["start_split"] or p["end_split"]:
-            continue
-        if p["start"] <= times[0] + dt or p["end"] >= times[-1] - dt:
-            continue  # the stance is cut by the trial's ends
-        sig = by_plate[p["plate"]]
-        k = (sig.times >= p["start"]) & (sig.times <= p["end"])
-        rate = 1.0 / (sig.times[1] - sig.times[0])
-        impulse[foot] = float(np.sum(sig.force[2, k]) / rate)
-    strides = [b - a for foot in FEET for a, b in zip(events[foot]["foot_strike"], events[foot]["foot_strike"][1:])]
-    if len(impulse) < 2 or not strides:
-        return None
-    T_stride = float(np.median(strides))
-    return (impulse["right"] + impulse["left"]) / (G * T_stride), (
-        f"plates: one whole stance of each foot, {impulse['right'] + impulse['left']:.0f} N·s over a "
-        f"{T_stride:.3f} s stride / g")

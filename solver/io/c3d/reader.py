@@ -21,7 +21,8 @@ FEET = ("right", "left")
 
 
 class C3DError(InputError):
-    """The file cannot be turned into a trial (missing plates or markers, gaps, units, ...)."""
+    """The file cannot be turned into a trial (missing plates or markers, gaps, units, ...);
+    ``parameter`` names the argument that would fix it, when one would (e.g. "mass")."""
 
 
 # ----------------------------------------------------------------------------------------

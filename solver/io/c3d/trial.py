@@ -11,7 +11,7 @@ import numpy as np
 
 from solver.capture import Capture, GroundFrame
 from solver.io.c3d.axes import _axes_text, _detect_axes
-from solver.io.c3d.events import _feet_and_plates, _mass_from_plates, _mass_from_stances
+from solver.io.c3d.events import _feet_and_plates
 from solver.io.c3d.landmarks import _height_estimate, _landmarks
 from solver.io.c3d.markers import _Markers, parse_mapping, required_markers
 from solver.io.c3d.plates import PlateSignal, _plate_signals, _plate_specs
@@ -19,9 +19,6 @@ from solver.io.c3d.reader import FEET, C3DError, G, _mid, _param, _read_raw, _st
 from solver.io.track import SkeletonTrack
 
 log = logging.getLogger("solver.io.c3d")
-
-#: relative difference between the subject mass and the mass the plates imply above which a warning is logged
-MASS_MISMATCH = 0.05
 
 
 # ----------------------------------------------------------------------------------------
@@ -113,34 +110,39 @@ def read_c3d_trial(path: str | Path, *, mass: float | None = None, require_plate
         source["gait_events"] = feet.events
         if not any(p[2] in FEET for s in plates for p in s.periods):
             log.warning("%s: no foot lands on a force plate", name)
-    # subject mass: argument, file, plates (a complete stride, else one whole stance of each foot)
+    # subject mass: argument, file, what the plates imply (solver.io.mass: whole cycles of complete
+    # plates, else one whole stance of each foot over the stride time of the gait events)
     implied = None
     if measured is not None:
-        m_pl = _mass_from_plates(measured, contacts, times)
-        if m_pl is not None:
-            implied = (m_pl, "plates (mean vertical force over a stride / g)")
-        else:
-            implied = _mass_from_stances(plates, feet.periods, feet.events, times)
+        from solver.io.mass import implied_mass
+
+        strikes = [feet.events[f]["foot_strike"] for f in FEET]
+        strides = [b - a for s in strikes for a, b in zip(s[:-1], s[1:])]
+        implied = implied_mass(times, measured.force[:, 2], threshold=fz_threshold,
+                               stride_s=float(np.median(strides)) if strides else None)
     if mass is not None:
         m, how = float(mass), "argument"
     elif sp.mass is not None:
         m, how = sp.mass, "file"
     elif implied is not None:
-        m, how = implied
+        m, how = implied.kg, f"plates: {implied.method} over a {implied.cycle_s:.3f} s stride"
     else:
         raise C3DError(f"{name}: subject mass unknown: the file has no PROCESSING:Bodymass and the plates "
-                       "measure neither a complete stride nor one whole stance of each foot; pass mass=... "
-                       "(CLI: --mass KG)")
+                       "measure neither a whole cycle nor one whole stance of each foot",
+                       parameter="mass", unit="kg")
     if not 5.0 <= m <= 400.0:
         raise C3DError(f"{name}: implausible subject mass {m:g} kg")
     source["mass_from"] = how
     if implied is not None:
-        source["mass_implied_kg"] = round(float(implied[0]), 2)
-        source["mass_implied_from"] = implied[1]
-        if abs(m - implied[0]) > MASS_MISMATCH * implied[0]:
-            log.warning("%s: subject mass %.1f kg (%s) differs by %.0f %% from the %.1f kg the plates imply; the "
-                        "vertical force estimate scales with the mass (pass mass=... / --mass to choose)",
-                        name, m, how, 100 * (m / implied[0] - 1), implied[0])
+        from solver.io.mass import mass_warning
+
+        source["implied_mass"] = implied.as_dict()
+        source["mass_implied_kg"] = round(float(implied.kg), 2)
+        source["mass_implied_from"] = implied.method
+        warn = mass_warning(m, implied)
+        if warn:
+            source["mass_warning"] = warn
+            log.warning("%s: %s (mass from the %s; pass mass=... to choose)", name, warn, how)
     if measured is not None:
         peak = float(np.max(measured.force[:, 2].sum(axis=0)))
         if not 0.5 * m * G < peak < 5.0 * m * G:

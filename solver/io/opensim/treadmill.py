@@ -1,0 +1,80 @@
+"""Treadmill trials: the belt speed, and the Galilean shift to overground-equivalent kinematics.
+
+A constant-speed belt is an inertial frame: adding ``v·t`` along x to every landmark gives
+the kinematics of the same walk overground, with the same ground reactions.
+``GroundFrame.velocity`` records the shift so results map back onto the treadmill.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import numpy as np
+
+from solver.capture import GroundFrame
+from solver.io.opensim.base import OpenSimError
+from solver.io.track import SkeletonTrack
+
+log = logging.getLogger(__name__)
+
+
+def estimate_belt_speed(track: SkeletonTrack, *, stance: np.ndarray | None = None) -> float:
+    """Belt speed (m/s) of a treadmill trial: median backward speed of the stance foot.
+
+    The stance foot is, at each frame, the foot whose heel/mtp are lower (or ``stance``
+    (2, T) bool per foot when known, e.g. from force plates); its forward velocity is
+    -v_belt. Frames with the foot moving vertically faster than 0.1 m/s are skipped.
+    """
+    t = np.asarray(track.times, dtype=float)
+    if t.size < 5:
+        raise OpenSimError("estimate_belt_speed: at least 5 frames are needed")
+    vals = []
+    for k, s in enumerate("rl"):
+        p = 0.5 * (np.asarray(track.landmarks[f"heel_{s}"]) + np.asarray(track.landmarks[f"mtp_{s}"]))
+        v = np.gradient(p, t, axis=1)
+        other = "l" if s == "r" else "r"
+        po = 0.5 * (np.asarray(track.landmarks[f"heel_{other}"]) + np.asarray(track.landmarks[f"mtp_{other}"]))
+        if stance is not None:
+            on = np.asarray(stance, dtype=bool)[k]
+        else:
+            low = p[2] < np.nanpercentile(p[2], 5) + 0.03
+            on = low & (p[2] < po[2]) & (np.abs(v[2]) < 0.1)
+        vals.append(-v[0][on])
+    allv = np.concatenate(vals)
+    allv = allv[np.isfinite(allv)]
+    if allv.size < 3:
+        raise OpenSimError("estimate_belt_speed: no stance frames found (is this a walking trial?)")
+    return float(np.median(allv))
+
+
+def belt_shift(track: SkeletonTrack, belt_speed: float | str, grf, grf_xml) -> SkeletonTrack:
+    if isinstance(belt_speed, str):
+        if belt_speed != "auto":
+            raise OpenSimError(f"belt_speed must be a number (m/s) or 'auto', got {belt_speed!r}")
+        stance = None
+        if grf is not None:
+            from solver.io.opensim.external_loads import read_opensim_grf
+
+            g = read_opensim_grf(grf, grf_xml, times=track.times, frame=track.frame)
+            stance = g.force[:, 2] > 200.0
+        v = estimate_belt_speed(track, stance=stance)
+        how = "auto (stance-foot velocity)"
+    else:
+        v = float(belt_speed)
+        if not math.isfinite(v) or abs(v) > 10:
+            raise OpenSimError(f"belt_speed {belt_speed!r} m/s is not plausible")
+        how = "given"
+    t = np.asarray(track.times, dtype=float)
+    shift = np.stack([v * t, np.zeros_like(t), np.zeros_like(t)])
+    lm = {k: np.asarray(p) + shift for k, p in track.landmarks.items()}
+    f = track.frame
+    frame = GroundFrame(R=f.R, offset=f.offset, unit_m=f.unit_m, velocity=np.array([v, 0.0, 0.0]),
+                        axes=f.axes + "; treadmill frame moving at -velocity")
+    src = dict(track.source)
+    src["belt_speed_m_s"] = v
+    src["belt_speed_from"] = how
+    log.info("treadmill: belt speed %.3f m/s (%s): root shifted by v*t (overground-equivalent)", v, how)
+    return SkeletonTrack(times=track.times, landmarks=lm, orientations=track.orientations, frame=frame,
+                         mass=track.mass, height=track.height, segment_masses=track.segment_masses,
+                         measured=track.measured, contacts=track.contacts, source=src)
