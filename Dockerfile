@@ -4,7 +4,7 @@
 FROM node:20-slim AS web
 WORKDIR /web
 COPY service/web/package.json service/web/package-lock.json ./
-RUN npm ci --no-audit --no-fund
+RUN npm ci --no-audit --no-fund --ignore-scripts
 
 FROM python:3.11-slim
 
@@ -19,6 +19,7 @@ COPY mjcf ./mjcf
 COPY service ./service
 COPY worker ./worker
 COPY --from=web /web/node_modules/three ./service/web/node_modules/three
+COPY --from=web /web/node_modules/swagger-ui-dist ./service/web/node_modules/swagger-ui-dist
 RUN pip install .
 
 USER motionx

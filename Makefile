@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml
 # three.js for the web page (served locally by the API); skipped with a note when npm is missing
 $(WEB_STAMP): $(WEB)/package.json $(WEB)/package-lock.json
 	@if command -v npm >/dev/null 2>&1; then \
-	  cd $(WEB) && npm ci --no-audit --no-fund --loglevel=error && touch node_modules/.installed; \
+	  cd $(WEB) && npm ci --no-audit --no-fund --ignore-scripts --loglevel=error && touch node_modules/.installed; \
 	else echo "npm not found: the web page's 3D preview is disabled (install Node.js and npm)"; fi
 
 venv: $(STAMP) $(WEB_STAMP)

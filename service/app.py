@@ -15,11 +15,11 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.openapi.utils import get_openapi
 
 from service import problems
-from service.cache import BytesLRU
 from service.config import Settings, get_settings
 from service.db import get_database, upgrade
-from service.middleware import BodyLimitMiddleware
+from service.middleware import BodyLimitMiddleware, SecurityHeadersMiddleware, page_csp
 from service.runners import make_runner
+from service.work import Compute
 
 log = logging.getLogger(__name__)
 
@@ -54,20 +54,26 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         if s.auto_migrate:
             await run_in_threadpool(upgrade, s.sqlalchemy_url)
         app.state.db = get_database(s.sqlalchemy_url)
+        app.state.compute = Compute(s)
         app.state.runner = make_runner(s, app.state.db)
+        # the process pools' supervisor threads live until shutdown (see service.procpool)
+        app.state.compute.start()
         await run_in_threadpool(app.state.runner.start)
         task = asyncio.create_task(_sweeper(app, s.sweep_interval_s))
         try:
             yield
         finally:
             task.cancel()
-            app.state.runner.close()
+            await run_in_threadpool(app.state.runner.close)
+            await run_in_threadpool(app.state.compute.close)
 
     app = FastAPI(
         title="motionx",
         version="1.0.0",
         description=DESCRIPTION,
         lifespan=lifespan,
+        docs_url=None,  # /docs is served from local files (service/routes/docs.py), no CDN
+        redoc_url=None,
         responses={
             400: {"model": _problem_model(), "description": "malformed request (e.g. an unparsable body)"},
             401: {"model": _problem_model(), "description": "missing or invalid API key"},
@@ -76,17 +82,22 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     app.state.settings = app_settings
     app.state.owner_cache = {}
-    app.state.export_cache = BytesLRU()
     problems.install(app)
     app.add_middleware(BodyLimitMiddleware, max_bytes=app_settings.max_body_bytes)
 
-    from service.routes import health, jobs, motions, plots, web
+    from service.routes import docs, health, jobs, motions, plots, web
 
+    index = web.STATIC_DIR / "index.html"
+    app.add_middleware(SecurityHeadersMiddleware, page_policy=page_csp(index.read_text() if index.is_file() else ""))
     app.include_router(health.router)
     app.include_router(motions.router)
     app.include_router(jobs.router)
     app.include_router(plots.router)
+    app.include_router(docs.router)  # /docs: Swagger UI from local files
     app.include_router(web.router)  # the page at /ui/: public files, its API calls carry the key
+    app.state.route_methods = [(r.path_regex, frozenset(r.methods or ())) for router in
+                               (health.router, motions.router, jobs.router, plots.router, docs.router, web.router)
+                               for r in router.routes if hasattr(r, "path_regex")]
     app.openapi = lambda: _openapi(app)
     return app
 

