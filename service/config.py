@@ -58,7 +58,7 @@ class Settings(BaseSettings):
     # --- jobs ------------------------------------------------------------------------
     job_max_attempts: int = Field(3, ge=1, le=100, description="a job is given up (failed) after this many starts")
     job_lease_s: float = Field(
-        30.0, gt=0, description="a running job's lease; renewed every lease/4 (at most 5 s) while it runs, "
+        15.0, gt=0, description="a running job's lease; renewed every lease/4 (at most 5 s) while it runs, "
         "another attempt may take over after it expires"
     )
     job_memory_mb: float = Field(
@@ -68,13 +68,13 @@ class Settings(BaseSettings):
         10.0, gt=0, description="a job still inside a solve this long after a cancel or its time limit is "
         "stopped by its watchdog (status recorded, process replaced)"
     )
-    sweep_interval_s: float = Field(10.0, gt=0, description="how often the API re-dispatches stranded jobs")
+    sweep_interval_s: float = Field(5.0, gt=0, description="how often the API re-dispatches stranded jobs")
     redispatch_after_s: float | None = Field(
         None, description="re-dispatch a job still queued this long after its dispatch; "
         "default: visibility_timeout_s + 300"
     )
     redispatch_expired_s: float = Field(
-        5.0, ge=0, description="re-dispatch a running job whose lease expired this long ago (its worker died)"
+        2.0, ge=0, description="re-dispatch a running job whose lease expired this long ago (its worker died)"
     )
     redispatch_gap_s: float = Field(
         60.0, ge=0, description="at most one re-dispatch of a running job per this interval"

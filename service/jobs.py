@@ -278,8 +278,9 @@ def _run(db: Database, job_id: str, attempt: int, token: str, settings: Settings
     result = extrapolate(tutor, target, control, on_progress=on_progress, on_step=on_step,
                          should_cancel=should_cancel, problem=problem)
     status, message = result.status, result.message
-    if status == "canceled" and not hb.cancel_requested and time.monotonic() > deadline:
-        status, message = "failed", f"time limit of {settings.job_time_limit_s:g} s exceeded"
+    if status != "succeeded" and not hb.cancel_requested and time.monotonic() > deadline:
+        # stopped by the time limit: between steps, or inside a solve (IPOPT's max_wall_time)
+        status, message = "failed", f"time limit of {settings.job_time_limit_s:g} s exceeded ({result.message})"
     if status not in ("succeeded", "impasse", "canceled", "failed"):
         status, message = "failed", f"unexpected extrapolation status {result.status!r}: {result.message}"
     return status, message, dict(lam_reached=result.lam_reached, steps=len(result.steps), solves=result.solves)

@@ -479,8 +479,9 @@ def stranded_jobs(
     """Jobs nobody will run unless dispatched again: queued and never dispatched (or
     dispatched longer ago than ``queued_after`` s), or running with a lease expired for
     longer than ``running_after`` s (its process died: a broker would only redeliver it after
-    its visibility timeout). A running job is not dispatched again within ``redispatch_gap`` s
-    of its last dispatch (one new delivery at a time)."""
+    its visibility timeout). Once re-dispatched for an expired lease (dispatched after the lease
+    ended), a running job is not dispatched again within ``redispatch_gap`` s (one new delivery
+    at a time, while it waits for a free worker)."""
     t = now()
     q: Select = (
         select(JobRow.id)
@@ -490,7 +491,8 @@ def stranded_jobs(
                 (JobRow.status == "queued")
                 & (JobRow.dispatched_at.is_(None) | (JobRow.dispatched_at < t - queued_after)),
                 (JobRow.status == "running") & (JobRow.lease_until < t - running_after)
-                & (JobRow.dispatched_at.is_(None) | (JobRow.dispatched_at < t - redispatch_gap)),
+                & (JobRow.dispatched_at.is_(None) | (JobRow.dispatched_at < JobRow.lease_until)
+                   | (JobRow.dispatched_at < t - redispatch_gap)),
             ),
         )
         .order_by(JobRow.created_at)

@@ -269,3 +269,80 @@ def test_broker_down_at_submission_loses_nothing(tmp_path, redis_binary, tutor_m
             assert (done["status"], done["attempts"]) == ("succeeded", 1), done
     finally:
         st.stop()
+
+
+# --- defaults and orphans -------------------------------------------------------------------------
+
+
+def _children(pid: int) -> list[int]:
+    out = []
+    for d in os.listdir("/proc"):
+        if d.isdigit():
+            try:
+                with open(f"/proc/{d}/stat") as f:
+                    fields = f.read().rsplit(")", 1)[1].split()
+            except (FileNotFoundError, ProcessLookupError):
+                continue
+            if int(fields[1]) == pid and fields[0] != "Z":
+                out.append(int(d))
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+
+
+def test_worker_pool_processes_die_with_their_worker_and_are_capped(stack, client):
+    """SIGKILL of a worker's main process alone (not its process group): its pool processes
+    exit within about a second (they watch their parent), instead of living on as orphans that
+    finish jobs and idle. They run under the job memory cap (RLIMIT_AS, 2048 MB by default)."""
+    w = stack.worker_procs[0]
+    pool = _children(w.pid)
+    assert pool, "the worker has no pool process"
+    for pid in pool:
+        with open(f"/proc/{pid}/limits") as f:
+            line = next(x for x in f if x.startswith("Max address space"))
+        assert int(line.split()[3]) == 2048 * 1024 * 1024, line
+    os.kill(w.pid, signal.SIGKILL)
+    w.proc.wait(10)
+    deadline = time.monotonic() + 5
+    while [p for p in pool if _alive(p)] and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not [p for p in pool if _alive(p)]
+    stack.worker_procs.remove(w)
+    w.stop()
+    wait_worker_ready(stack.add_worker(), timeout=60)
+
+
+def test_celery_recovers_a_killed_worker_with_default_settings(tmp_path, redis_binary, tutor_motion_json,
+                                                               killable_reference):
+    """The probe: with Celery's default settings (visibility timeout 7200 s), a job whose worker
+    was SIGKILLed stayed 'running' for two hours. With the defaults now, the API's sweep
+    re-dispatches it once its lease (15 s) has expired, and another worker takes it over:
+    it ends exactly once, within a minute. (No timing setting is overridden here.)"""
+    st = Stack(data_dir=tmp_path, workers=2)
+    st.start()
+    try:
+        with httpx.Client(base_url=st.base_url, headers={"X-API-Key": st.api_keys}, timeout=30) as c:
+            mid = c.post("/motions", content=tutor_motion_json, headers={"content-type": "application/json"}).json()["id"]
+            job = c.post(f"/motions/{mid}/extrapolate", json=KILLABLE).json()
+            j = wait_job(c, job["id"], timeout=60, until=_running_with_steps(2))
+            assert j["status"] == "running"
+            pid = int(_job_row(st, job["id"]).lease_owner.split(":")[1])
+            victim = next(w for w in st.worker_procs if w.alive() and os.getpgid(pid) == w.pid)
+            victim.kill()
+            t0 = time.monotonic()
+            done = wait_job(c, job["id"], timeout=180)
+            recovery = time.monotonic() - t0
+            assert (done["status"], done["attempts"]) == ("succeeded", 2), done
+            assert recovery < 60, recovery
+            got = job_motions(c, job["id"])
+            assert [m["step"] for m in got] == list(range(len(got)))
+            assert same_motions(got, killable_reference)
+            print(f"recovered {recovery:.1f} s after the SIGKILL")
+    finally:
+        st.stop()
