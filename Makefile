@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.installed
 WEB    := service/web
 WEB_STAMP := $(WEB)/node_modules/.installed
 
-.PHONY: venv test bench demo clean reliability stack
+.PHONY: venv test bench demo clean reliability stack fuzz
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -33,6 +33,10 @@ bench: $(STAMP)
 
 reliability: $(STAMP)
 	MOTIONX_RELIABILITY_REPEAT=$${MOTIONX_RELIABILITY_REPEAT:-20} $(PY) -m pytest -q tests/service -k reliability
+
+# schemathesis' command line, every phase and check, >= FUZZ_CASES cases on SQLite then PostgreSQL; no 5xx
+fuzz: $(STAMP) $(WEB_STAMP)
+	$(PY) tests/service/fuzz.py --cases $${FUZZ_CASES:-10000}
 
 stack: $(STAMP) $(WEB_STAMP)
 	$(VENV)/bin/motionx stack --workers $${WORKERS:-2}

@@ -138,5 +138,56 @@ def _openapi(app: FastAPI) -> dict:
             for code, resp in op.get("responses", {}).items():
                 if code.startswith(("4", "5")) and "application/json" in resp.get("content", {}):
                     resp["content"] = {problems.MEDIA_TYPE: resp["content"]["application/json"]}
+    _add_links(schema)
+    body = schema["paths"].get("/motions", {}).get("post", {}).get("requestBody", {}).get("content", {})
+    if "application/json" in body:
+        body["application/json"]["example"] = _example_motion()
     app.openapi_schema = schema
     return schema
+
+
+def _example_motion() -> dict:
+    """A small valid upload for the documentation (a HalfBoy standing still for 1 s at 15 fps)."""
+    import numpy as np
+
+    from solver.character import reference
+    from solver.motion import Motion
+
+    ch = reference("halfboy")
+    q = np.zeros((ch.n, 16))
+    q[ch.index("root_tz")] = 0.9
+    d = Motion(character=ch, fps=15.0, q=q, reference_name="halfboy", provenance={"step": "capture"}).to_dict()
+    d["provenance"].pop("created", None)
+    return d
+
+
+#: OpenAPI links: where the id of a created motion or job can be used next (clients, and
+#: schemathesis' stateful phase, follow them)
+LINKS = {
+    ("/motions", "post", "201"): {
+        "GetMotion": ("/motions/{motion_id}", "get", "motion_id"),
+        "GetValidation": ("/motions/{motion_id}/validation", "get", "motion_id"),
+        "Extrapolate": ("/motions/{motion_id}/extrapolate", "post", "motion_id"),
+        "GrfPlot": ("/motions/{motion_id}/plots/grf.png", "get", "motion_id"),
+        "ResidualsPlot": ("/motions/{motion_id}/plots/residuals.png", "get", "motion_id"),
+    },
+    ("/motions/{motion_id}/extrapolate", "post", "202"): {
+        "GetJob": ("/jobs/{job_id}", "get", "job_id"),
+        "JobMotions": ("/jobs/{job_id}/motions", "get", "job_id"),
+        "CancelJob": ("/jobs/{job_id}/cancel", "post", "job_id"),
+        "ProgressPlot": ("/jobs/{job_id}/plots/progress.png", "get", "job_id"),
+    },
+}
+
+
+def _add_links(schema: dict) -> None:
+    paths = schema.get("paths", {})
+    for (path, method, code), links in LINKS.items():
+        resp = paths.get(path, {}).get(method, {}).get("responses", {}).get(code)
+        if resp is None:
+            continue
+        out = resp.setdefault("links", {})
+        for name, (target, tmethod, param) in links.items():
+            op_id = paths.get(target, {}).get(tmethod, {}).get("operationId")
+            if op_id:
+                out[name] = {"operationId": op_id, "parameters": {param: "$response.body#/id"}}

@@ -38,8 +38,10 @@ UPLOAD_BODY = {
                 "schema": {
                     "type": "object",
                     "required": ["files"],
+                    "additionalProperties": False,
                     "properties": {
                         "files": {"type": "array", "items": {"type": "string", "format": "binary"},
+                                  "minItems": 1, "maxItems": MAX_FILES,
                                   "description": "the trial: .osim + .mot (OpenSim), .c3d, .bvh or a DeepMimic .txt"},
                         "mass": {"type": "number", "minimum": 1, "maximum": 500,
                                  "description": "subject mass (kg): C3D without it, BVH"},
@@ -54,6 +56,7 @@ UPLOAD_BODY = {
 }
 
 FORMATS = ("json", "gltf", "glb", "bvh", "motion")
+MULTIPART_FIELDS = ("files", "mass", "belt_speed", "name")
 NAME_PATTERN = r"^[^\x00-\x1f\x7f]*$"
 _CONTROL = re.compile(r"[\x00-\x1f\x7f]")
 
@@ -120,6 +123,10 @@ async def upload_motion(
         elif ctype == "multipart/form-data":
             form = await request.form(max_files=MAX_FILES, max_fields=16)
             try:
+                unknown = sorted({k for k in form.keys() if k not in MULTIPART_FIELDS})
+                if unknown:
+                    raise UploadError(f"unknown form field(s) {clip(str(unknown), 120)}; the fields are "
+                                      f"{', '.join(MULTIPART_FIELDS)}")
                 files = [(f.filename or "", await f.read()) for f in form.getlist("files") if isinstance(f, UploadFile)]
                 mass, belt = _form_float(form, "mass"), _form_float(form, "belt_speed")
                 label = form.get("name")
