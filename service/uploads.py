@@ -212,6 +212,51 @@ def _without_paths(x: Any, tmp: str) -> Any:
     return x
 
 
+_BVH_FRAMES = re.compile(rb"^\s*Frames:\s*(\d+)", re.M)
+_BVH_TIME = re.compile(rb"^\s*Frame Time:\s*([-+0-9.eE]+)", re.M)
+
+
+def _seconds(x: float) -> str:
+    return f"{x:.6g} s"
+
+
+def _trial_extent(name: str, content: bytes) -> tuple[int | None, float | None]:
+    """(frames, seconds) a text trial file declares, read cheaply before the import (whose
+    cost grows with the frames); (None, None) when unknown (binary C3D: checked after)."""
+    low = name.lower()
+    try:
+        if low.endswith(".bvh"):
+            f, t = _BVH_FRAMES.search(content), _BVH_TIME.search(content)
+            if f and t:
+                n = int(f.group(1))
+                return n, n * float(t.group(1))
+        elif low.endswith((".txt", ".json")) and content.lstrip()[:1] == b"{":
+            frames = json.loads(content).get("Frames")  # DeepMimic: each frame starts with its duration
+            if isinstance(frames, list):
+                dts = [fr[0] for fr in frames[:-1] if isinstance(fr, list) and fr and isinstance(fr[0], (int, float))]
+                return len(frames), float(sum(abs(dt) for dt in dts))
+        elif low.endswith((".mot", ".sto")):
+            text = content.decode("utf-8", "replace")
+            body = text.split("endheader", 1)[1] if "endheader" in text else text
+            rows = [ln.split() for ln in body.strip().splitlines()[1:] if ln.strip()]
+            if len(rows) >= 2:
+                return None, abs(float(rows[-1][0]) - float(rows[0][0]))  # rows of forces can be 1 kHz
+    except (ValueError, IndexError, TypeError, RecursionError):
+        return None, None  # the importer names the problem
+    return None, None
+
+
+def _precheck_trial(names: list[str], files: list[tuple[str, bytes]]) -> None:
+    for name, (_, content) in zip(names, files):
+        frames, seconds = _trial_extent(name, content)
+        if frames is not None and frames > limits.MAX_CAPTURE_FRAMES:
+            raise UploadError(f"{name}: a capture has at most {limits.MAX_CAPTURE_FRAMES} frames, this one has "
+                              f"{frames}")
+        if seconds is not None and not seconds <= limits.MAX_CAPTURE_S * 1.01:
+            raise UploadError(f"{name}: a capture lasts at most {limits.MAX_CAPTURE_S:g} s, this one lasts "
+                              f"{_seconds(seconds)}")
+
+
 def motion_from_trial(files: list[tuple[str, bytes]], *, mass: float | None, belt_speed: float | None) -> Motion:
     """Mocap files (name, content) -> the raw capture as a Motion."""
     if not files:
@@ -231,6 +276,7 @@ def motion_from_trial(files: list[tuple[str, bytes]], *, mass: float | None, bel
     bad = [n for n in names if not n.lower().endswith(TRIAL_SUFFIXES)]
     if bad:
         raise UploadError(f"unsupported file type(s) {bad}; supported: {list(TRIAL_SUFFIXES)}")
+    _precheck_trial(names, files)
     try:
         from solver.io import load_trial
         from solver.pipeline import capture_motion

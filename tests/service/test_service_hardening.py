@@ -226,6 +226,20 @@ def test_an_oversized_motion_is_refused_quickly_without_echo(api):
     problem(upload(api.a, long.to_json()), 422, needle=f"at most {limits.MAX_CAPTURE_S:g} s")
 
 
+def test_an_oversized_trial_is_refused_before_its_import(api, shared_data):
+    """The probe's 90,000-frame DeepMimic trial cost 238 s of API CPU: the frames a text trial
+    declares are checked before the import (whose cost grows with them)."""
+    bvh = (shared_data / "cmu16_bvh" / "16_15_walk.bvh").read_bytes()
+    huge = bvh.replace(b"Frames:\t117", b"Frames:\t100000")
+    assert huge != bvh
+    r = api.a.post("/motions", files={"files": ("walk.bvh", huge)}, data={"mass": "70"})
+    problem(r, 422, needle=f"at most {limits.MAX_CAPTURE_FRAMES} frames")
+    assert r.elapsed.total_seconds() < 5
+    slow = bvh.replace(b"Frame Time:\t0.0333333", b"Frame Time:\t2.0")
+    problem(api.a.post("/motions", files={"files": ("walk.bvh", slow)}, data={"mass": "70"}), 422,
+            needle=f"at most {limits.MAX_CAPTURE_S:g} s")
+
+
 def test_a_tutor_longer_than_a_gait_cycle_is_refused(api):
     ok = upload(api.a, with_wrenches(limits.MAX_TUTOR_FRAMES, fps=30.0).to_json())
     assert ok.status_code == 201 and ok.json()["kind"] == "motion"
