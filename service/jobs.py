@@ -185,13 +185,14 @@ def execute_job(job_id: str, settings: Settings) -> str:
             raise
         except LimitError as e:
             status, message, extra = "failed", str(e), {}
-        except MemoryError:
-            log.error("job %s: out of memory", job_id)
-            cap = f" of {settings.job_memory_mb:g} MB" if settings.job_memory_mb else ""
-            status, message, extra = "failed", f"out of memory: the job needs more than its memory limit{cap}", {}
         except Exception as e:  # the job boundary: a failure becomes a status, never a crash
-            log.exception("job %s failed", job_id)
-            status, message, extra = "failed", f"{type(e).__name__}: {e}", {}
+            if isinstance(e, MemoryError) or "bad_alloc" in str(e):  # Python's, or C++'s inside CasADi
+                log.error("job %s: out of memory", job_id)
+                cap = f" of {settings.job_memory_mb:g} MB" if settings.job_memory_mb else ""
+                status, message, extra = "failed", f"out of memory: the job needs more than its memory limit{cap}", {}
+            else:
+                log.exception("job %s failed", job_id)
+                status, message, extra = "failed", f"{type(e).__name__}: {e}", {}
         if hb.lost:
             log.warning("job %s: lease lost (another attempt took over); result not recorded", job_id)
             return "lost"

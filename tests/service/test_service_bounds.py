@@ -17,51 +17,10 @@ import time
 
 import pytest
 from conftest import start_api_process
-from svc_util import CHEAP, KILLABLE, wait_job
+from svc_util import CHEAP, KILLABLE, address_space_limit, children, cmdline, wait_gone, wait_job
 
 TIME_LIMIT_S = 8.0
 GRACE_S = 1.0
-
-
-def alive(pid: int) -> bool:
-    """Exists and is not a zombie (a killed process waiting for its reaper is gone)."""
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
-    except (FileNotFoundError, ProcessLookupError):
-        return False
-
-
-def children(pid: int) -> list[int]:
-    """Live processes whose parent is ``pid``."""
-    out = []
-    for d in os.listdir("/proc"):
-        if d.isdigit():
-            try:
-                with open(f"/proc/{d}/stat") as f:
-                    fields = f.read().rsplit(")", 1)[1].split()
-            except (FileNotFoundError, ProcessLookupError):
-                continue
-            if int(fields[1]) == pid and fields[0] != "Z":
-                out.append(int(d))
-    return out
-
-
-def cmdline(pid: int) -> str:
-    try:
-        with open(f"/proc/{pid}/cmdline", "rb") as f:
-            return f.read().replace(b"\0", b" ").decode(errors="replace")
-    except FileNotFoundError:
-        return ""
-
-
-def address_space_limit(pid: int) -> int | None:
-    with open(f"/proc/{pid}/limits") as f:
-        for line in f:
-            if line.startswith("Max address space"):
-                v = line.split()[3]
-                return None if v == "unlimited" else int(v)
-    return None
 
 
 def long_tutor(tutor_json: str, frames: int = 116) -> str:
@@ -163,10 +122,7 @@ def test_no_process_outlives_motionx_serve(tmp_path, tutor_motion_json, sig):
         assert not [k for k in kids if "resource_tracker" in cmdline(k)]
         os.kill(a.proc.pid, sig)  # the main process only: not its process group
         a.proc.proc.wait(30)
-        deadline = time.monotonic() + 3.0
-        while [k for k in kids if alive(k)] and time.monotonic() < deadline:
-            time.sleep(0.05)
-        left = [(k, cmdline(k)) for k in kids if alive(k)]
+        left = [(k, cmdline(k)) for k in wait_gone(kids, timeout=3.0)]
         assert not left, left
     finally:
         a.close()

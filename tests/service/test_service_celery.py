@@ -25,7 +25,17 @@ import time
 import httpx
 import pytest
 from conftest import repeat_count
-from svc_util import CHEAP, KILLABLE, deepmimic_files, job_motions, same_motions, wait_job
+from svc_util import (
+    CHEAP,
+    KILLABLE,
+    address_space_limit,
+    children,
+    deepmimic_files,
+    job_motions,
+    same_motions,
+    wait_gone,
+    wait_job,
+)
 
 from service.db import get_database
 from service.models import JobRow, MotionRow
@@ -101,6 +111,16 @@ def _assert_exactly_once(stack, client, job_id, reference) -> dict:
         rows = s.query(MotionRow).filter(MotionRow.job_id == job_id).all()
     assert sorted(r.step for r in rows) == list(range(len(reference)))
     return job
+
+
+def _kill_worker_running(stack, client, job_id):
+    """Once the job has stored 2 steps, SIGKILL the whole worker (process group) running it."""
+    j = wait_job(client, job_id, timeout=60, until=_running_with_steps(2))
+    assert j["status"] == "running", "the job must still be running when its worker is killed"
+    pid = int(_job_row(stack, job_id).lease_owner.split(":")[1])
+    victim = next(w for w in stack.worker_procs if w.alive() and os.getpgid(pid) == w.pid)
+    victim.kill()
+    return victim
 
 
 def _running_with_steps(n):
@@ -197,12 +217,7 @@ def test_reliability_kill_whole_worker_mid_job(stack, client, tutor_id, killable
     """SIGKILL the whole worker (main process and pool): the unacknowledged job waits in
     Redis until the visibility timeout, then another worker runs it; exactly once."""
     job = client.post(f"/motions/{tutor_id}/extrapolate", json=KILLABLE).json()
-    j = wait_job(client, job["id"], timeout=60, until=_running_with_steps(2))
-    assert j["status"] == "running"
-    pid = int(_job_row(stack, job["id"]).lease_owner.split(":")[1])
-    victim = next(w for w in stack.worker_procs if w.alive() and os.getpgid(pid) == w.pid)
-    victim.kill()
-    stack.worker_procs.remove(victim)
+    stack.worker_procs.remove(_kill_worker_running(stack, client, job["id"]))
     t0 = time.monotonic()
     wait_worker_ready(stack.add_worker(), timeout=60)  # keep two workers for what follows
     done = wait_job(client, job["id"], timeout=int(STACK_ENV["MOTIONX_VISIBILITY_TIMEOUT_S"]) + 90)
@@ -274,45 +289,17 @@ def test_broker_down_at_submission_loses_nothing(tmp_path, redis_binary, tutor_m
 # --- defaults and orphans -------------------------------------------------------------------------
 
 
-def _children(pid: int) -> list[int]:
-    out = []
-    for d in os.listdir("/proc"):
-        if d.isdigit():
-            try:
-                with open(f"/proc/{d}/stat") as f:
-                    fields = f.read().rsplit(")", 1)[1].split()
-            except (FileNotFoundError, ProcessLookupError):
-                continue
-            if int(fields[1]) == pid and fields[0] != "Z":
-                out.append(int(d))
-    return out
-
-
-def _alive(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
-    except (FileNotFoundError, ProcessLookupError):
-        return False
-
-
 def test_worker_pool_processes_die_with_their_worker_and_are_capped(stack, client):
     """SIGKILL of a worker's main process alone (not its process group): its pool processes
     exit within about a second (they watch their parent), instead of living on as orphans that
     finish jobs and idle. They run under the job memory cap (RLIMIT_AS, 2048 MB by default)."""
     w = stack.worker_procs[0]
-    pool = _children(w.pid)
+    pool = children(w.pid)
     assert pool, "the worker has no pool process"
-    for pid in pool:
-        with open(f"/proc/{pid}/limits") as f:
-            line = next(x for x in f if x.startswith("Max address space"))
-        assert int(line.split()[3]) == 2048 * 1024 * 1024, line
+    assert {address_space_limit(p) for p in pool} == {2048 * 1024 * 1024}
     os.kill(w.pid, signal.SIGKILL)
     w.proc.wait(10)
-    deadline = time.monotonic() + 5
-    while [p for p in pool if _alive(p)] and time.monotonic() < deadline:
-        time.sleep(0.05)
-    assert not [p for p in pool if _alive(p)]
+    assert wait_gone(pool, timeout=5.0) == []
     stack.worker_procs.remove(w)
     w.stop()
     wait_worker_ready(stack.add_worker(), timeout=60)
@@ -330,11 +317,7 @@ def test_celery_recovers_a_killed_worker_with_default_settings(tmp_path, redis_b
         with httpx.Client(base_url=st.base_url, headers={"X-API-Key": st.api_keys}, timeout=30) as c:
             mid = c.post("/motions", content=tutor_motion_json, headers={"content-type": "application/json"}).json()["id"]
             job = c.post(f"/motions/{mid}/extrapolate", json=KILLABLE).json()
-            j = wait_job(c, job["id"], timeout=60, until=_running_with_steps(2))
-            assert j["status"] == "running"
-            pid = int(_job_row(st, job["id"]).lease_owner.split(":")[1])
-            victim = next(w for w in st.worker_procs if w.alive() and os.getpgid(pid) == w.pid)
-            victim.kill()
+            _kill_worker_running(st, c, job["id"])
             t0 = time.monotonic()
             done = wait_job(c, job["id"], timeout=180)
             recovery = time.monotonic() - t0

@@ -110,6 +110,19 @@ def _csp_violation(message, errors: list) -> None:
         errors.append(message.text)
 
 
+def _open(browser, width: int, height: int):
+    """A new context and page; the requests it makes, and its errors (uncaught exceptions and
+    Content-Security-Policy violations)."""
+    context = browser.new_context(viewport={"width": width, "height": height})
+    page = context.new_page()
+    page.set_default_timeout(TIMEOUT_MS)
+    requests, errors = [], []
+    page.on("request", lambda req: requests.append(req.url))
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.on("console", lambda m: _csp_violation(m, errors))
+    return context, page, requests, errors
+
+
 def wait_js(page, expression: str, timeout: float = 30.0) -> None:
     """Polls ``expression`` until it is truthy. (``page.wait_for_function`` evaluates its
     predicate with eval in the page, which the page's Content-Security-Policy forbids;
@@ -164,13 +177,7 @@ def test_page_and_vendor_files_are_served_locally(api):
 def test_page_shows_progress_and_renders_the_character(api, browser, tutor_id):
     if not THREE_DIR.is_dir():
         _missing("three.js is not installed: run `npm ci` in service/web")
-    context = browser.new_context(viewport={"width": 1400, "height": 1000})
-    page = context.new_page()
-    page.set_default_timeout(TIMEOUT_MS)
-    requests, errors = [], []
-    page.on("request", lambda req: requests.append(req.url))
-    page.on("pageerror", lambda e: errors.append(str(e)))
-    page.on("console", lambda m: _csp_violation(m, errors))
+    context, page, requests, errors = _open(browser, 1400, 1000)
     try:
         page.goto(f"{api.base_url}/ui/#key={KEY_A}")
         assert "key=" not in page.url  # taken from the fragment, then out of the address bar
@@ -288,13 +295,7 @@ def test_docs_page_is_swagger_ui_from_local_files(api, browser):
     for f in ("swagger-ui-bundle.js", "swagger-ui.css"):
         assert api.anon.get(f"/docs/static/{f}").status_code == 200
     assert api.anon.get("/docs/static/package.json").status_code == 404
-    context = browser.new_context(viewport={"width": 1200, "height": 900})
-    page = context.new_page()
-    page.set_default_timeout(TIMEOUT_MS)
-    requests, errors = [], []
-    page.on("request", lambda req: requests.append(req.url))
-    page.on("pageerror", lambda e: errors.append(str(e)))
-    page.on("console", lambda m: _csp_violation(m, errors))
+    context, page, requests, errors = _open(browser, 1200, 900)
     try:
         page.goto(f"{api.base_url}/docs")
         wait_js(page, "document.querySelectorAll('.opblock').length >= 10")
