@@ -123,14 +123,16 @@ def _child_main(argv: Sequence[str]) -> int:
             reply = (task_id, "err", MemoryError(f"out of memory{limit}"))
         except BaseException as e:  # the task's failure is the caller's to judge
             reply = (task_id, "err", e)
+        reply = (*reply, memory_error)  # the last field: this process exits after the reply
         try:
             conn_out.send(reply)
         except MemoryError:
             memory_error = True
-            conn_out.send((task_id, "err", MemoryError("out of memory while sending the result")))
+            conn_out.send((task_id, "err", MemoryError("out of memory while sending the result"), True))
         except Exception as e:  # an unpicklable result or exception: send what can be sent
             conn_out.send((task_id, "err", RemoteError(f"{type(reply[2]).__name__}: {reply[2]}"[:2000]
-                                                       if reply[1] == "err" else f"unpicklable result: {e}")))
+                                                       if reply[1] == "err" else f"unpicklable result: {e}"),
+                           memory_error))
         del reply
         if memory_error:
             return EXIT_AFTER_MEMORY_ERROR
@@ -355,7 +357,9 @@ class ProcPool:
             if msg[0] == "ready":
                 slot.ready = True
                 continue
-            task_id, kind, value = msg
+            task_id, kind, value, exiting = msg
+            if exiting:  # no new task for it: it ends, and the slot gets a new process
+                slot.ready = False
             task, slot.task = slot.task, None
             if task is None or task.id != task_id or task.future.done():
                 continue
