@@ -1,10 +1,10 @@
 # motionx: one image for the API (`motionx serve`) and the workers (`motionx worker`).
 
-# three.js for the web page, from npm (served by the API itself, no CDN)
+# three.js for the web page and Swagger UI for /docs, from npm (served by the API itself, no CDN)
 FROM node:20-slim AS web
 WORKDIR /web
 COPY service/web/package.json service/web/package-lock.json ./
-RUN npm ci --no-audit --no-fund
+RUN npm ci --no-audit --no-fund --ignore-scripts
 
 FROM python:3.11-slim
 
@@ -19,6 +19,7 @@ COPY mjcf ./mjcf
 COPY service ./service
 COPY worker ./worker
 COPY --from=web /web/node_modules/three ./service/web/node_modules/three
+COPY --from=web /web/node_modules/swagger-ui-dist ./service/web/node_modules/swagger-ui-dist
 RUN pip install .
 
 # the demo's walk (`motionx demo` in the image) with its origin and license notices; the

@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.installed
 WEB    := service/web
 WEB_STAMP := $(WEB)/node_modules/.installed
 
-.PHONY: venv test bench demo clean reliability stack
+.PHONY: venv test bench demo clean reliability stack fuzz
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml
 # three.js for the web page (served locally by the API); skipped with a note when npm is missing
 $(WEB_STAMP): $(WEB)/package.json $(WEB)/package-lock.json
 	@if command -v npm >/dev/null 2>&1; then \
-	  cd $(WEB) && npm ci --no-audit --no-fund --loglevel=error && touch node_modules/.installed; \
+	  cd $(WEB) && npm ci --no-audit --no-fund --ignore-scripts --loglevel=error && touch node_modules/.installed; \
 	else echo "npm not found: the web page's 3D preview is disabled (install Node.js and npm)"; fi
 
 venv: $(STAMP) $(WEB_STAMP)
@@ -33,6 +33,10 @@ bench: $(STAMP)
 
 reliability: $(STAMP)
 	MOTIONX_RELIABILITY_REPEAT=$${MOTIONX_RELIABILITY_REPEAT:-20} $(PY) -m pytest -q tests/service -k reliability
+
+# schemathesis' command line, every phase and check, >= FUZZ_CASES cases on SQLite then PostgreSQL; no 5xx
+fuzz: $(STAMP) $(WEB_STAMP)
+	$(PY) tests/service/fuzz.py --cases $${FUZZ_CASES:-10000}
 
 stack: $(STAMP) $(WEB_STAMP)
 	$(VENV)/bin/motionx stack --workers $${WORKERS:-2}

@@ -15,11 +15,11 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.openapi.utils import get_openapi
 
 from service import problems
-from service.cache import BytesLRU
 from service.config import Settings, get_settings
 from service.db import get_database, upgrade
-from service.middleware import BodyLimitMiddleware
+from service.middleware import BodyLimitMiddleware, SecurityHeadersMiddleware, page_csp
 from service.runners import make_runner
+from service.work import Compute
 
 log = logging.getLogger(__name__)
 
@@ -54,20 +54,26 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         if s.auto_migrate:
             await run_in_threadpool(upgrade, s.sqlalchemy_url)
         app.state.db = get_database(s.sqlalchemy_url)
+        app.state.compute = Compute(s)
         app.state.runner = make_runner(s, app.state.db)
+        # the process pools' supervisor threads live until shutdown (see service.procpool)
+        app.state.compute.start()
         await run_in_threadpool(app.state.runner.start)
         task = asyncio.create_task(_sweeper(app, s.sweep_interval_s))
         try:
             yield
         finally:
             task.cancel()
-            app.state.runner.close()
+            await run_in_threadpool(app.state.runner.close)
+            await run_in_threadpool(app.state.compute.close)
 
     app = FastAPI(
         title="motionx",
         version="1.0.0",
         description=DESCRIPTION,
         lifespan=lifespan,
+        docs_url=None,  # /docs is served from local files (service/routes/docs.py), no CDN
+        redoc_url=None,
         responses={
             400: {"model": _problem_model(), "description": "malformed request (e.g. an unparsable body)"},
             401: {"model": _problem_model(), "description": "missing or invalid API key"},
@@ -76,17 +82,22 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     app.state.settings = app_settings
     app.state.owner_cache = {}
-    app.state.export_cache = BytesLRU()
     problems.install(app)
     app.add_middleware(BodyLimitMiddleware, max_bytes=app_settings.max_body_bytes)
 
-    from service.routes import health, jobs, motions, plots, web
+    from service.routes import docs, health, jobs, motions, plots, web
 
+    index = web.STATIC_DIR / "index.html"
+    app.add_middleware(SecurityHeadersMiddleware, page_policy=page_csp(index.read_text() if index.is_file() else ""))
     app.include_router(health.router)
     app.include_router(motions.router)
     app.include_router(jobs.router)
     app.include_router(plots.router)
+    app.include_router(docs.router)  # /docs: Swagger UI from local files
     app.include_router(web.router)  # the page at /ui/: public files, its API calls carry the key
+    app.state.route_methods = [(r.path_regex, frozenset(r.methods or ())) for router in
+                               (health.router, motions.router, jobs.router, plots.router, docs.router, web.router)
+                               for r in router.routes if hasattr(r, "path_regex")]
     app.openapi = lambda: _openapi(app)
     return app
 
@@ -127,5 +138,56 @@ def _openapi(app: FastAPI) -> dict:
             for code, resp in op.get("responses", {}).items():
                 if code.startswith(("4", "5")) and "application/json" in resp.get("content", {}):
                     resp["content"] = {problems.MEDIA_TYPE: resp["content"]["application/json"]}
+    _add_links(schema)
+    body = schema["paths"].get("/motions", {}).get("post", {}).get("requestBody", {}).get("content", {})
+    if "application/json" in body:
+        body["application/json"]["example"] = _example_motion()
     app.openapi_schema = schema
     return schema
+
+
+def _example_motion() -> dict:
+    """A small valid upload for the documentation (a HalfBoy standing still for 1 s at 15 fps)."""
+    import numpy as np
+
+    from solver.character import reference
+    from solver.motion import Motion
+
+    ch = reference("halfboy")
+    q = np.zeros((ch.n, 16))
+    q[ch.index("root_tz")] = 0.9
+    d = Motion(character=ch, fps=15.0, q=q, reference_name="halfboy", provenance={"step": "capture"}).to_dict()
+    d["provenance"].pop("created", None)
+    return d
+
+
+#: OpenAPI links: where the id of a created motion or job can be used next (clients, and
+#: schemathesis' stateful phase, follow them)
+LINKS = {
+    ("/motions", "post", "201"): {
+        "GetMotion": ("/motions/{motion_id}", "get", "motion_id"),
+        "GetValidation": ("/motions/{motion_id}/validation", "get", "motion_id"),
+        "Extrapolate": ("/motions/{motion_id}/extrapolate", "post", "motion_id"),
+        "GrfPlot": ("/motions/{motion_id}/plots/grf.png", "get", "motion_id"),
+        "ResidualsPlot": ("/motions/{motion_id}/plots/residuals.png", "get", "motion_id"),
+    },
+    ("/motions/{motion_id}/extrapolate", "post", "202"): {
+        "GetJob": ("/jobs/{job_id}", "get", "job_id"),
+        "JobMotions": ("/jobs/{job_id}/motions", "get", "job_id"),
+        "CancelJob": ("/jobs/{job_id}/cancel", "post", "job_id"),
+        "ProgressPlot": ("/jobs/{job_id}/plots/progress.png", "get", "job_id"),
+    },
+}
+
+
+def _add_links(schema: dict) -> None:
+    paths = schema.get("paths", {})
+    for (path, method, code), links in LINKS.items():
+        resp = paths.get(path, {}).get(method, {}).get("responses", {}).get(code)
+        if resp is None:
+            continue
+        out = resp.setdefault("links", {})
+        for name, (target, tmethod, param) in links.items():
+            op_id = paths.get(target, {}).get(tmethod, {}).get("operationId")
+            if op_id:
+                out[name] = {"operationId": op_id, "parameters": {param: "$response.body#/id"}}

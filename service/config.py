@@ -58,16 +58,38 @@ class Settings(BaseSettings):
     # --- jobs ------------------------------------------------------------------------
     job_max_attempts: int = Field(3, ge=1, le=100, description="a job is given up (failed) after this many starts")
     job_lease_s: float = Field(
-        60.0, gt=0, description="a running job's lease; renewed while it runs, another attempt may take over after"
+        15.0, gt=0, description="a running job's lease; renewed every lease/4 (at most 5 s) while it runs, "
+        "another attempt may take over after it expires"
     )
-    sweep_interval_s: float = Field(30.0, gt=0, description="how often the API re-dispatches stranded jobs")
+    job_memory_mb: float = Field(
+        2048.0, ge=0, description="address-space cap (RLIMIT_AS) of each job process, MB; 0 = none"
+    )
+    job_stop_grace_s: float = Field(
+        10.0, gt=0, description="a job still inside a solve this long after a cancel or its time limit is "
+        "stopped by its watchdog (status recorded, process replaced)"
+    )
+    sweep_interval_s: float = Field(5.0, gt=0, description="how often the API re-dispatches stranded jobs")
     redispatch_after_s: float | None = Field(
-        None, description="re-dispatch a job still queued (or orphaned) this long after its dispatch; "
+        None, description="re-dispatch a job still queued this long after its dispatch; "
         "default: visibility_timeout_s + 300"
+    )
+    redispatch_expired_s: float = Field(
+        2.0, ge=0, description="re-dispatch a running job whose lease expired this long ago (its worker died)"
+    )
+    redispatch_gap_s: float = Field(
+        60.0, ge=0, description="at most one re-dispatch of a running job per this interval"
     )
     validate_steps: bool = Field(True, description="store the plausibility report (MuJoCo replay) of every λ optimum")
     default_character: str = "halfboy"
-    default_tutor_fps: float = Field(15.0, gt=0, le=240)
+    default_tutor_fps: float = Field(15.0, ge=5, le=30)
+
+    # --- the API's compute processes (uploads, exports, reports, plots) --------------------
+    compute_workers: int = Field(1, ge=0, le=64, description="compute processes of the API (0: its threads, "
+                                 "for debugging only)")
+    compute_timeout_s: float = Field(120.0, gt=0, description="time limit of one heavy request")
+    compute_memory_mb: float = Field(2048.0, ge=0, description="address-space cap of each compute process, MB")
+    compute_queue: int = Field(32, ge=0, description="heavy requests waiting beyond this get 429")
+    export_cache_bytes: int = Field(64 * 1024 * 1024, ge=0, description="in-memory cache of exports and plots")
 
     # --- HTTP ------------------------------------------------------------------------
     host: str = "127.0.0.1"
@@ -99,8 +121,9 @@ class Settings(BaseSettings):
 
     @property
     def hard_time_limit_s(self) -> float:
-        """Celery's hard time limit: a backstop after the job's own cooperative limit."""
-        return self.job_time_limit_s + max(5.0, 0.1 * self.job_time_limit_s)
+        """Celery's hard time limit: a backstop after the job's own limit and its watchdog
+        (which stops a job ``job_stop_grace_s`` past the limit and records it)."""
+        return self.job_time_limit_s + self.job_stop_grace_s + max(5.0, 0.1 * self.job_time_limit_s)
 
     @property
     def sqlalchemy_url(self) -> str:

@@ -5,11 +5,21 @@ renewed while it runs), makes the tutor when the source is a raw capture (stored
 own motion), runs the continuation and writes every progress record and every accepted
 λ optimum to SQL as it goes (optima upserted by (job, step), so a re-run after a crash
 rewrites the same rows). It never raises for a solver failure: that is a job status.
+
+Bounds (docs/service.md, "Limits"): the source motion must fit the method's limits
+(:mod:`service.limits`: a tutor is one gait cycle); every IPOPT solve of the extrapolation
+carries the job's time limit (``max_wall_time``); between λ steps the continuation checks
+cancel, lease and time limit; and the heartbeat thread is also a watchdog: a job still
+running ``job_stop_grace_s`` after a cancel or past its time limit — inside a solve, the tutor
+pipeline or anything else — has its status recorded and its process ended (the runner
+replaces the process). The job process's address space is capped by the runner
+(``MOTIONX_JOB_MEMORY_MB``: the LocalRunner's process pool, Celery's worker_process_init).
 """
 
 from __future__ import annotations
 
 import logging
+import math
 import os
 import socket
 import threading
@@ -19,8 +29,9 @@ from typing import Any
 
 from sqlalchemy.exc import DBAPIError
 
-from service import store
+from service import limits, store
 from service.config import Settings
+from service.limits import LimitError
 from service.db import Database, get_database
 
 log = logging.getLogger(__name__)
@@ -57,14 +68,33 @@ def holder_alive(token: str) -> bool:
         return True
 
 
+#: exit status of a job process ended by its watchdog
+HARD_STOP_EXIT = 86
+
+
 class Heartbeat:
     """Renews the job's lease from a thread; tells the job to stop when the lease is lost
-    or a cancel was requested (read by ``should_cancel`` between λ steps)."""
+    or a cancel was requested (read by ``should_cancel`` between λ steps).
 
-    def __init__(self, db: Database, job_id: str, token: str, lease_s: float) -> None:
+    It is also the job's watchdog: ``grace`` seconds after a cancel was seen, or after
+    ``deadline`` (monotonic), a job that has not stopped by itself is stopped here — its
+    terminal status recorded (fenced by the lease; the λ optima stored so far stay) and the
+    process ended with ``os._exit``. The job's own writes hold ``write_lock``, so the
+    watchdog never cuts one in half. A lost lease past ``grace`` ends the process without a
+    record (another attempt owns the job)."""
+
+    def __init__(self, db: Database, job_id: str, token: str, lease_s: float, *,
+                 deadline: float = math.inf, grace: float = 10.0, time_limit_s: float | None = None) -> None:
         self.db, self.job_id, self.token, self.lease_s = db, job_id, token, lease_s
+        self.deadline, self.grace, self.time_limit_s = deadline, grace, time_limit_s
         self.cancel_requested = False
         self.lost = False
+        self.write_lock = threading.Lock()
+        self.steps = 0  # λ optima stored by this attempt
+        self.lam_reached = 0.0
+        self.solves = 0
+        self._cancel_seen: float | None = None
+        self._lost_seen: float | None = None
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name=f"lease-{job_id}", daemon=True)
 
@@ -87,9 +117,42 @@ class Heartbeat:
         self.cancel_requested = lease.cancel_requested
 
     def _run(self) -> None:
-        interval = max(0.2, min(self.lease_s / 4.0, 5.0))
+        interval = max(0.2, min(self.lease_s / 4.0, 5.0, self.grace / 4.0))
         while not self._stop.wait(interval):
             self.beat()
+            self.watch()
+
+    def watch(self) -> None:
+        now = time.monotonic()
+        if self.cancel_requested and self._cancel_seen is None:
+            self._cancel_seen = now
+        if self.lost and self._lost_seen is None:
+            self._lost_seen = now
+        if self._lost_seen is not None and now - self._lost_seen > self.grace:
+            log.warning("job %s: lease lost and still running after %g s: ending the process", self.job_id,
+                        self.grace)
+            os._exit(HARD_STOP_EXIT)
+        if self._cancel_seen is not None and now - self._cancel_seen > self.grace:
+            self.hard_stop("canceled", f"canceled (stopped in the middle of a computation after {self.grace:g} s)")
+        elif now > self.deadline + self.grace:
+            limit = f"{self.time_limit_s:g} s" if self.time_limit_s is not None else "its time limit"
+            self.hard_stop("failed", f"time limit of {limit} exceeded (stopped in the middle of a computation)")
+
+    def hard_stop(self, status: str, message: str) -> None:
+        """Record ``status`` and end the process: the job did not stop by itself."""
+        got = self.write_lock.acquire(timeout=30.0)  # never released: the process ends below
+        try:
+            if not got:
+                raise TimeoutError("the job's own database write did not finish")
+            with self.db.write() as s:
+                store.finish_job(s, job_id=self.job_id, token=self.token, status=status, message=message,
+                                 lam_reached=self.lam_reached, steps=self.steps, solves=self.solves)
+            log.warning("job %s: %s; ending its process", self.job_id, message)
+        except Exception:  # the lease expires and the next attempt finds the cancel / time limit again
+            log.exception("job %s: could not record the hard stop", self.job_id)
+        finally:
+            logging.shutdown()
+            os._exit(HARD_STOP_EXIT)
 
 
 def _claim(db: Database, job_id: str, token: str, settings: Settings) -> store.Claim:
@@ -113,18 +176,27 @@ def execute_job(job_id: str, settings: Settings) -> str:
         log.info("job %s: %s, nothing to do", job_id, claim.outcome)
         return claim.outcome
     log.info("job %s: attempt %d (%s)", job_id, claim.attempt, token)
-    with Heartbeat(db, job_id, token, settings.job_lease_s) as hb:
+    deadline = time.monotonic() + settings.job_time_limit_s
+    with Heartbeat(db, job_id, token, settings.job_lease_s, deadline=deadline, grace=settings.job_stop_grace_s,
+                   time_limit_s=settings.job_time_limit_s) as hb:
         try:
             status, message, extra = _run(db, job_id, claim.attempt, token, settings, hb)
         except DBAPIError:  # the store itself is unreachable: not the job's fault, let the runner retry it
             raise
+        except LimitError as e:
+            status, message, extra = "failed", str(e), {}
         except Exception as e:  # the job boundary: a failure becomes a status, never a crash
-            log.exception("job %s failed", job_id)
-            status, message, extra = "failed", f"{type(e).__name__}: {e}", {}
+            if isinstance(e, MemoryError) or "bad_alloc" in str(e):  # Python's, or C++'s inside CasADi
+                log.error("job %s: out of memory", job_id)
+                cap = f" of {settings.job_memory_mb:g} MB" if settings.job_memory_mb else ""
+                status, message, extra = "failed", f"out of memory: the job needs more than its memory limit{cap}", {}
+            else:
+                log.exception("job %s failed", job_id)
+                status, message, extra = "failed", f"{type(e).__name__}: {e}", {}
         if hb.lost:
             log.warning("job %s: lease lost (another attempt took over); result not recorded", job_id)
             return "lost"
-        with db.write() as s:
+        with hb.write_lock, db.write() as s:
             ok = store.finish_job(s, job_id=job_id, token=token, status=status, message=message, **extra)
     return status if ok else "lost"
 
@@ -132,25 +204,28 @@ def execute_job(job_id: str, settings: Settings) -> str:
 def _run(db: Database, job_id: str, attempt: int, token: str, settings: Settings, hb: Heartbeat):
     from solver.continuation import StepControl, Target, extrapolate
     from solver.pipeline import jsonable
+    from solver.spacetime import SpacetimeProblem
 
     with db.read() as s:
         job = store.get_job(s, job_id=job_id, owner=None)
         source = store.get_motion(s, motion_id=job.motion_id, owner=None)
         spec, owner = dict(job.spec), job.owner
         kind, source_id = source.kind, source.id
+        limits.check_source(kind=kind, frames=source.frames, fps=source.fps, coordinates=source.n)
         motion = store.load_motion(source)
 
     t0 = time.monotonic()
-    deadline = t0 + settings.job_time_limit_s
+    deadline = hb.deadline
     seq = {"n": 0, "solves": 0}
 
     def record(phase: str, **kw: Any) -> None:
         if phase == "extrapolate":
             seq["solves"] += 1
-        with db.write() as s:
+        with hb.write_lock, db.write() as s:
             store.append_progress(s, job_id=job_id, attempt=attempt, seq=seq["n"], phase=phase,
                                   solves=seq["solves"], **kw)
         seq["n"] += 1
+        hb.solves = seq["solves"]
 
     if kind == "capture":
         tutor_opts = spec.get("tutor") or {}
@@ -170,12 +245,13 @@ def _run(db: Database, job_id: str, attempt: int, token: str, settings: Settings
                    status=f"tutor {res.status}")
             if res.status != "succeeded" or res.motion is None:
                 return "failed", f"tutor: {res.message or res.status}", {}
-            with db.write() as s:
+            with hb.write_lock, db.write() as s:
                 tutor_id = store.get_or_add_tutor(s, owner=owner, parent_id=source_id, tutor_key=tutor_key,
                                                   motion=res.motion).id
             tutor = res.motion
-        with db.write() as s:
+        with hb.write_lock, db.write() as s:
             store.set_tutor(s, job_id=job_id, token=token, tutor_motion_id=tutor_id)
+        limits.check_tutor(frames=tutor.T, fps=float(tutor.fps), coordinates=tutor.n, made=True)
     else:
         tutor = motion
 
@@ -189,18 +265,23 @@ def _run(db: Database, job_id: str, attempt: int, token: str, settings: Settings
 
     def on_step(step) -> None:
         validation = validation_report(step.motion) if settings.validate_steps else None
-        with db.write() as s:
+        with hb.write_lock, db.write() as s:
             store.save_step(s, job_id=job_id, owner=owner, step=step.step, lam=step.lam, motion=step.motion,
                             validation=validation)
+        hb.steps, hb.lam_reached = step.step + 1, float(step.lam)
 
     def should_cancel() -> bool:
         return hb.cancel_requested or hb.lost or time.monotonic() > deadline
 
+    # each IPOPT solve stops by itself at the job's time limit (IPOPT's own max_wall_time)
+    problem = SpacetimeProblem(tutor.character, tutor.T, tutor.fps, tutor.contacts,
+                               ipopt_options={"ipopt.max_wall_time": float(settings.job_time_limit_s)})
     result = extrapolate(tutor, target, control, on_progress=on_progress, on_step=on_step,
-                         should_cancel=should_cancel)
+                         should_cancel=should_cancel, problem=problem)
     status, message = result.status, result.message
-    if status == "canceled" and not hb.cancel_requested and time.monotonic() > deadline:
-        status, message = "failed", f"time limit of {settings.job_time_limit_s:g} s exceeded"
+    if status != "succeeded" and not hb.cancel_requested and time.monotonic() > deadline:
+        # stopped by the time limit: between steps, or inside a solve (IPOPT's max_wall_time)
+        status, message = "failed", f"time limit of {settings.job_time_limit_s:g} s exceeded ({result.message})"
     if status not in ("succeeded", "impasse", "canceled", "failed"):
         status, message = "failed", f"unexpected extrapolation status {result.status!r}: {result.message}"
     return status, message, dict(lam_reached=result.lam_reached, steps=len(result.steps), solves=result.solves)

@@ -8,11 +8,12 @@ internals — the traceback goes to the log).
 from __future__ import annotations
 
 import logging
+import re
 from typing import Any
 
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse
+from fastapi.responses import JSONResponse, Response
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 log = logging.getLogger(__name__)
@@ -60,6 +61,8 @@ def problem_response(
     status: int, detail: str, *, instance: str | None = None, type: str = "about:blank", title: str | None = None,
     headers: dict[str, str] | None = None, **extra: Any,
 ) -> JSONResponse:
+    if len(detail) > MAX_DETAIL:
+        detail = detail[: MAX_DETAIL - 1] + "…"
     body: dict[str, Any] = {"type": type, "title": title or TITLES.get(status, "Error"), "status": status,
                             "detail": detail}
     if instance:
@@ -68,13 +71,45 @@ def problem_response(
     return JSONResponse(body, status_code=status, media_type=MEDIA_TYPE, headers=headers)
 
 
+#: the longest ``detail`` sent: a message never repeats a large input
+MAX_DETAIL = 2000
+_IDS = {"motion": re.compile(r"m_[0-9a-f]{32}"), "job": re.compile(r"j_[0-9a-f]{32}")}
+
+
+def _short(ident: str, n: int = 80) -> str:
+    return ident if len(ident) <= n else ident[: n - 1] + "…"
+
+
 def not_found(what: str, ident: str) -> Problem:
-    return Problem(404, f"no {what} {ident!r} (or it belongs to another API key)", type=TYPE_BASE + "not-found")
+    return Problem(404, f"no {what} {_short(ident)!r} (or it belongs to another API key)",
+                   type=TYPE_BASE + "not-found")
+
+
+def known_id(what: str, ident: str) -> str:
+    """``ident`` if it has the form of a ``what`` id (m_…, j_…), else 404: malformed ids (NUL
+    bytes, 10 kB strings...) never reach the database."""
+    if not _IDS[what].fullmatch(ident):
+        raise not_found(what, ident)
+    return ident
 
 
 def _loc(loc: tuple | list) -> str:
-    parts = [str(p) for p in loc if p not in ("body",)] or [str(p) for p in loc]
-    return ".".join(parts)
+    parts = [_short(str(p), 60) for p in loc if p not in ("body",)] or [_short(str(p), 60) for p in loc]
+    return _short(".".join(parts), 200)
+
+
+def allowed_methods(request: Request) -> list[str]:
+    """The methods of all routes matching the request's path (Starlette answers a 405 with the
+    first route's only: ``OPTIONS /motions`` said ``Allow: POST`` although GET exists).
+    ``app.state.route_methods`` lists (path regex, methods) of every route (``create_app``)."""
+    path = request.url.path
+    methods: set[str] = set()
+    for regex, ms in getattr(request.app.state, "route_methods", ()):
+        if regex.match(path):
+            methods |= set(ms or ())
+    methods.discard("HEAD")  # implied by GET
+    order = ["GET", "POST", "PUT", "PATCH", "DELETE"]
+    return sorted(methods, key=lambda m: (order.index(m) if m in order else len(order), m))
 
 
 def install(app: FastAPI) -> None:
@@ -86,8 +121,8 @@ def install(app: FastAPI) -> None:
     @app.exception_handler(RequestValidationError)
     async def _validation(request: Request, exc: RequestValidationError):
         errors = [
-            {"loc": _loc(e.get("loc", ())), "msg": e.get("msg", ""), "type": e.get("type", "")}
-            for e in exc.errors()
+            {"loc": _loc(e.get("loc", ())), "msg": _short(str(e.get("msg", "")), 300), "type": e.get("type", "")}
+            for e in exc.errors()[:20]
         ]
         detail = "; ".join(f"{e['loc']}: {e['msg']}" if e["loc"] else e["msg"] for e in errors[:5]) or "invalid request"
         return problem_response(422, detail, instance=request.url.path, type=TYPE_BASE + "validation",
@@ -96,8 +131,14 @@ def install(app: FastAPI) -> None:
     @app.exception_handler(StarletteHTTPException)
     async def _http(request: Request, exc: StarletteHTTPException):
         detail = exc.detail if isinstance(exc.detail, str) else TITLES.get(exc.status_code, "Error")
-        return problem_response(exc.status_code, detail, instance=request.url.path,
-                                headers=getattr(exc, "headers", None))
+        headers = dict(getattr(exc, "headers", None) or {})
+        if exc.status_code == 405:  # the path exists: Allow lists every method of every route on it
+            allow = ", ".join(allowed_methods(request))
+            if request.method == "OPTIONS":
+                return Response(status_code=204, headers={"Allow": allow})
+            headers["Allow"] = allow
+            detail = f"{request.method} is not allowed here; allowed: {allow}"
+        return problem_response(exc.status_code, detail, instance=request.url.path, headers=headers or None)
 
     @app.exception_handler(Exception)
     async def _unexpected(request: Request, exc: Exception):

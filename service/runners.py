@@ -2,9 +2,9 @@
 
 Both call the same function, :func:`service.jobs.execute_job`:
 
-- :class:`LocalRunner` — a process pool inside the API process (the embedded default:
+- :class:`LocalRunner` — supervised job processes of the API process (the embedded default:
   nothing else to run). Jobs left queued or running by a previous API process are
-  resubmitted on start; a pool broken by a dying child is replaced.
+  resubmitted on start; a job whose process dies is resubmitted (its next attempt takes over).
 - :class:`CeleryRunner` — publishes the job id to Redis; ``motionx worker`` processes run it.
 
 ``sweep()`` (called periodically by the API) dispatches jobs nobody would otherwise run:
@@ -14,18 +14,23 @@ never dispatched (the broker was down at creation), or running with a lease long
 from __future__ import annotations
 
 import logging
-import multiprocessing
 import threading
-from concurrent.futures import Future, ProcessPoolExecutor
-from concurrent.futures.process import BrokenProcessPool
+from concurrent.futures import Future
 from typing import Protocol
 
 from service import store
 from service.config import Settings
 from service.db import Database
 from service.jobs import execute_job
+from service.procpool import ProcPool, TaskTimeout, WorkerLost
 
 log = logging.getLogger(__name__)
+
+#: imported by every job process before it takes work (and before its memory cap applies)
+JOB_MODULES = ("numpy", "casadi", "mujoco", "solver.pipeline", "solver.continuation", "mjcf.validate", "service.jobs")
+#: the supervisor kills a job's process this long after the hard time limit: the job's own
+#: watchdog (service.jobs.Heartbeat) should have stopped it well before
+JOB_KILL_MARGIN_S = 60.0
 
 
 class Runner(Protocol):
@@ -48,23 +53,26 @@ def _mark_dispatched(db: Database, job_id: str) -> None:
 
 
 class LocalRunner:
+    """Jobs in supervised child processes of the API (:class:`service.procpool.ProcPool`).
+
+    One process per concurrent job (``local_workers``), each with the job memory cap. A process
+    that dies fails only its own job's attempt: the job is resubmitted and the next attempt
+    takes over its lease at once (the holder is a dead process of this host). The processes
+    die with the API (SIGTERM, SIGINT or SIGKILL alike).
+    """
+
     name = "local"
 
     def __init__(self, settings: Settings, db: Database) -> None:
         self.settings, self.db = settings, db
         self._lock = threading.Lock()
-        self._pool: ProcessPoolExecutor | None = None
+        self._pool: ProcPool | None = None
         self._inflight: dict[str, Future] = {}
-        self._broken = False
-        self._recovery_pending = False
-
-    def _new_pool(self) -> ProcessPoolExecutor:
-        # spawn: the API process has threads (event loop, DB pool); forking it is unsafe
-        return ProcessPoolExecutor(self.settings.local_workers, mp_context=multiprocessing.get_context("spawn"))
 
     def start(self) -> None:
         with self._lock:
-            self._pool = self._new_pool()
+            self._pool = ProcPool("job", self.settings.local_workers, memory_mb=self.settings.job_memory_mb,
+                                  warm=JOB_MODULES).start()
         self.recover(all_unfinished=True)
 
     def submit(self, job_id: str) -> bool:
@@ -75,58 +83,50 @@ class LocalRunner:
             if fut is not None and not fut.done():
                 return True
             try:
-                fut = self._pool.submit(execute_job, job_id, self.settings)
-            except (BrokenProcessPool, RuntimeError):
-                self._broken = True
-                log.warning("local pool unusable; job %s waits for the next sweep", job_id)
+                fut = self._pool.submit(execute_job, job_id, self.settings, timeout=self.settings.hard_time_limit_s
+                                        + JOB_KILL_MARGIN_S)
+            except RuntimeError:  # closing
                 return False
             self._inflight[job_id] = fut
-            pool = self._pool
-        fut.add_done_callback(lambda f, j=job_id, p=pool: self._done(j, f, p))
+        fut.add_done_callback(lambda f, j=job_id: self._done(j, f))
         _mark_dispatched(self.db, job_id)
         return True
 
-    def _done(self, job_id: str, fut: Future, pool: ProcessPoolExecutor | None) -> None:
+    def _done(self, job_id: str, fut: Future) -> None:
         with self._lock:
             if self._inflight.get(job_id) is fut:
                 del self._inflight[job_id]
-            current = pool is self._pool
+            closing = self._pool is None
         exc = fut.exception() if not fut.cancelled() else None
-        if isinstance(exc, BrokenProcessPool) and current:
-            log.warning("local pool broken (a job process died) while running %s", job_id)
-            self._broken = True
-            self._recover_soon()
-        elif exc is not None:  # e.g. the database was unreachable: the sweep resubmits it
-            log.error("job %s raised in the pool: %r", job_id, exc)
+        if exc is None or closing:
+            return
+        if isinstance(exc, TaskTimeout):  # the job ignored its own limits: it ends here, failed
+            log.error("job %s: its process was killed past the hard time limit", job_id)
+            try:
+                with self.db.write() as s:
+                    store.fail_unfinished(s, job_id=job_id, message=f"time limit of "
+                                          f"{self.settings.job_time_limit_s:g} s exceeded (the job's process was "
+                                          "stopped)")
+            except Exception:
+                log.warning("job %s: could not record the time limit", job_id, exc_info=True)
+        elif isinstance(exc, WorkerLost):  # the process died: the next attempt takes over (attempts are capped)
+            log.warning("job %s: %s; resubmitting", job_id, exc)
+            self._resubmit_soon(job_id)
+        else:  # e.g. the database was unreachable: the sweep resubmits it
+            log.error("job %s raised in its process: %r", job_id, exc)
 
-    def _recover_soon(self, delay: float = 0.5) -> None:
-        """Replace a broken pool without waiting for the next sweep (once per breakage)."""
-        with self._lock:
-            if self._recovery_pending or self._pool is None:
-                return
-            self._recovery_pending = True
-
+    def _resubmit_soon(self, job_id: str, delay: float = 0.2) -> None:
         def run() -> None:
             try:
-                self.recover()
+                self.submit(job_id)
             except Exception:  # the periodic sweep tries again
-                log.warning("pool recovery failed", exc_info=True)
-            finally:
-                self._recovery_pending = False
+                log.warning("job %s: resubmission failed", job_id, exc_info=True)
 
         t = threading.Timer(delay, run)
         t.daemon = True
         t.start()
 
     def recover(self, *, all_unfinished: bool = False) -> list[str]:
-        old = None
-        with self._lock:
-            if self._broken and self._pool is not None:
-                old, self._pool, self._broken = self._pool, self._new_pool(), False
-                self._inflight.clear()
-                all_unfinished = True
-        if old is not None:
-            old.shutdown(wait=False, cancel_futures=True)
         big = 1e18
         with self.db.read() as s:
             ids = store.stranded_jobs(
@@ -147,15 +147,20 @@ class LocalRunner:
         return self.recover()
 
     def health(self) -> str:
-        return "broken" if self._broken else "ok"
+        pool = self._pool
+        return "ok" if pool is not None and pool.healthy() else "stopped"
+
+    def pids(self) -> list[int]:
+        pool = self._pool
+        return pool.pids() if pool is not None else []
 
     def close(self) -> None:
+        """Stop the job processes. Running jobs stay 'running': their holder is gone, so the
+        next start (or another API process's sweep, after the lease) resumes them."""
         with self._lock:
             pool, self._pool = self._pool, None
         if pool is not None:
-            pool.shutdown(wait=False, cancel_futures=True)
-            for p in list((getattr(pool, "_processes", None) or {}).values()):
-                p.terminate()  # running jobs stay 'running'; their lease expires and the next start resumes them
+            pool.close(timeout=5.0)
 
 
 class CeleryRunner:
@@ -182,9 +187,13 @@ class CeleryRunner:
         return True
 
     def sweep(self) -> list[str]:
+        """Dispatch again what Redis would only redeliver after its visibility timeout: a job
+        never dispatched (broker down), or running with an expired lease (its worker died; the
+        next attempt takes over the lease, so a late duplicate delivery is a no-op)."""
         with self.db.read() as s:
             ids = store.stranded_jobs(s, runner=self.name, queued_after=self.settings.redispatch_after,
-                                      running_after=self.settings.redispatch_after)
+                                      running_after=self.settings.redispatch_expired_s,
+                                      redispatch_gap=self.settings.redispatch_gap_s)
         done = [j for j in ids if self.submit(j)]
         if done:
             log.info("celery runner: re-dispatched %d stranded job(s)", len(done))

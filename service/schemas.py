@@ -6,6 +6,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from service.limits import MAX_TUTOR_FPS, MAX_TUTOR_FRAMES, MAX_TUTOR_S, MIN_TUTOR_FPS
 from solver.continuation import StepControl
 
 _SC = StepControl()
@@ -15,7 +16,9 @@ MotionKind = Literal["capture", "motion", "tutor", "step"]
 
 
 class Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+    """Request bodies: unknown fields refused, numbers finite and strict (``true`` or ``"5"`` is not a number)."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True)
 
 
 def _changes_something(schema: dict) -> None:
@@ -64,7 +67,9 @@ class TutorIn(Strict):
     """How the tutor is made when the source motion is a raw capture."""
 
     character: Literal["halfboy", "fullbody"] = "halfboy"
-    fps: float = Field(15.0, gt=0.0, le=240.0)
+    fps: float = Field(15.0, ge=MIN_TUTOR_FPS, le=MAX_TUTOR_FPS,
+                       description="frame rate of the tutor (one gait cycle of at most "
+                                   f"{MAX_TUTOR_FRAMES} frames and {MAX_TUTOR_S:g} s)")
 
 
 class ExtrapolateIn(Strict):
@@ -165,4 +170,5 @@ class Health(BaseModel):
     database: str
     runner: str
     broker: str | None = None
+    compute: str | None = None
     schema_revision: str | None = None

@@ -122,6 +122,19 @@ def add_motion(
     return row
 
 
+def add_encoded(session: Session, *, owner: str, encoded: Any, name: str = "") -> MotionRow:
+    """Store a motion validated and encoded elsewhere (``service.uploads.Encoded``: the API's
+    compute processes do that work, the API only inserts the row)."""
+    row = MotionRow(
+        id=new_id("m"), owner=owner, kind=encoded.kind, name=name, parent_id=None, created_at=now(),
+        character=encoded.character, n=encoded.n, frames=encoded.frames, fps=encoded.fps,
+        has_wrenches=encoded.has_wrenches, data=encoded.data, sha256=encoded.sha256,
+    )
+    session.add(row)
+    session.flush()
+    return row
+
+
 def get_motion(session: Session, *, motion_id: str, owner: str | None) -> MotionRow | None:
     """The motion, if it exists and belongs to ``owner`` (None = any owner: internal use)."""
     row = session.get(MotionRow, motion_id)
@@ -448,12 +461,27 @@ def finish_job(
     return True
 
 
+def fail_unfinished(session: Session, *, job_id: str, message: str) -> bool:
+    """Mark a job failed unless it already ended (a runner's last word on a job whose
+    process it had to kill)."""
+    t = now()
+    r = session.execute(
+        update(JobRow).where(JobRow.id == job_id, JobRow.status.in_(("queued", "running")))
+        .values(status="failed", message=message[:4000], finished_at=t, updated_at=t, lease_until=None)
+    )
+    return r.rowcount == 1
+
+
 def stranded_jobs(
-    session: Session, *, runner: str, queued_after: float, running_after: float, limit: int = 100
+    session: Session, *, runner: str, queued_after: float, running_after: float, limit: int = 100,
+    redispatch_gap: float = 0.0,
 ) -> list[str]:
     """Jobs nobody will run unless dispatched again: queued and never dispatched (or
     dispatched longer ago than ``queued_after`` s), or running with a lease expired for
-    longer than ``running_after`` s (its process died and no broker will redeliver it)."""
+    longer than ``running_after`` s (its process died: a broker would only redeliver it after
+    its visibility timeout). Once re-dispatched for an expired lease (dispatched after the lease
+    ended), a running job is not dispatched again within ``redispatch_gap`` s (one new delivery
+    at a time, while it waits for a free worker)."""
     t = now()
     q: Select = (
         select(JobRow.id)
@@ -462,7 +490,9 @@ def stranded_jobs(
             or_(
                 (JobRow.status == "queued")
                 & (JobRow.dispatched_at.is_(None) | (JobRow.dispatched_at < t - queued_after)),
-                (JobRow.status == "running") & (JobRow.lease_until < t - running_after),
+                (JobRow.status == "running") & (JobRow.lease_until < t - running_after)
+                & (JobRow.dispatched_at.is_(None) | (JobRow.dispatched_at < JobRow.lease_until)
+                   | (JobRow.dispatched_at < t - redispatch_gap)),
             ),
         )
         .order_by(JobRow.created_at)

@@ -1,30 +1,45 @@
-"""Turning an upload into a :class:`~solver.motion.Motion` (validated synchronously).
+"""Turning an upload into a stored motion: parsing, validation, encoding.
+
+These functions run in the API's compute processes (:mod:`service.work`), never on its
+event loop, each with a time and memory limit; they return an :class:`Encoded` motion (the
+compressed motion file and the columns of its row), so the API process only stores it.
 
 - ``application/json``: a motion file v1. Non-finite numbers (``NaN``, ``Infinity``,
-  ``1e999``) and ragged arrays are refused with a message naming where.
+  ``1e999``), integer literals of more than ``MAX_INT_DIGITS`` digits, nesting deeper than
+  ``MAX_JSON_DEPTH`` and ragged arrays are refused with a message naming where.
 - ``multipart/form-data``: a mocap trial, read by ``solver.io.load_trial`` (OpenSim
   .osim + .mot, C3D with ``mass``, BVH, DeepMimic), kept as a raw capture
   (``solver.pipeline.capture_motion``); the extrapolation job makes its tutor.
 
-Every failure raises :class:`UploadError` (→ 422) with a message naming the problem.
+Sizes are checked against :mod:`service.limits` before the expensive steps, physical ranges
+by :mod:`solver.motion` and :mod:`solver.character`. Every failure raises
+:class:`UploadError` (→ 422) with a message that names the problem and never echoes the input
+(nor a server path).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import math
+import os
 import re
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from service import limits
+from service.limits import LimitError, clip
 from solver.motion import Motion, MotionError, motion_from_dict
 
 log = logging.getLogger(__name__)
 
 TRIAL_SUFFIXES = (".osim", ".mot", ".sto", ".trc", ".xml", ".c3d", ".bvh", ".txt", ".json")
 MAX_FILES = 8
+#: characters refused in names (SQL text columns, exports): control characters
+_CONTROL = re.compile(r"[\x00-\x1f\x7f]")
 
 
 class UploadError(ValueError):
@@ -35,11 +50,45 @@ class ImporterUnavailable(RuntimeError):
     pass
 
 
+@dataclass(frozen=True)
+class Encoded:
+    """A validated motion, ready to store (``service.store.add_encoded``)."""
+
+    kind: str  # capture | motion
+    character: str
+    n: int
+    frames: int
+    fps: float
+    has_wrenches: bool
+    data: bytes  # zlib-compressed motion file v1
+    sha256: str  # of the uncompressed JSON
+    input: dict | None = None  # uploaded trials: the input summary (``input_summary``) for the response
+
+
+def encode(motion: Motion) -> Encoded:
+    from service.store import encode_motion
+
+    data, digest = encode_motion(motion)
+    return Encoded(kind=classify(motion), character=motion.reference_name or motion.character.name, n=motion.n,
+                   frames=motion.T, fps=float(motion.fps), has_wrenches=motion.wrenches is not None, data=data,
+                   sha256=digest)
+
+
+# --- JSON ---------------------------------------------------------------------------------
+
+
 def _finite_float(s: str) -> float:
     v = float(s)
     if not math.isfinite(v):
-        raise UploadError(f"number {s!r} is not finite (JSON numbers must be finite)")
+        raise UploadError(f"number {clip(s, 40)!r} is not finite (JSON numbers must be finite)")
     return v
+
+
+def _bounded_int(s: str) -> int:
+    if len(s.lstrip("-")) > limits.MAX_INT_DIGITS:
+        raise UploadError(f"an integer literal has {len(s.lstrip('-'))} digits; at most {limits.MAX_INT_DIGITS} "
+                          "are allowed")
+    return int(s)
 
 
 def _no_constant(name: str) -> Any:
@@ -52,9 +101,14 @@ def parse_json(body: bytes) -> Any:
     except UnicodeDecodeError:
         raise UploadError("the body is not UTF-8 text") from None
     try:
-        return json.loads(text, parse_float=_finite_float, parse_constant=_no_constant)
+        d = json.loads(text, parse_float=_finite_float, parse_int=_bounded_int, parse_constant=_no_constant)
     except json.JSONDecodeError as e:
-        raise UploadError(f"not valid JSON: {e}") from None
+        raise UploadError(f"not valid JSON: {e.msg} (line {e.lineno}, column {e.colno})") from None
+    except RecursionError:
+        raise UploadError(f"the JSON nests too deeply (at most {limits.MAX_JSON_DEPTH} levels)") from None
+    if not limits.json_depth_ok(d):
+        raise UploadError(f"the JSON nests too deeply (at most {limits.MAX_JSON_DEPTH} levels)")
+    return d
 
 
 def _check_rows(rows: Any, width: int, where: str, what: str) -> None:
@@ -66,9 +120,44 @@ def _check_rows(rows: Any, width: int, where: str, what: str) -> None:
             raise UploadError(f"{where}[{i}] has {got} values, expected {width} ({what})")
 
 
+def _check_sizes(d: dict) -> None:
+    """The limits, before the schema validation (whose cost grows with the arrays)."""
+    frames, coords = d.get("frames"), d.get("coordinates")
+    if isinstance(frames, list) and len(frames) > limits.MAX_CAPTURE_FRAMES:  # the duration: once fps is checked
+        raise UploadError(f"a motion has at most {limits.MAX_CAPTURE_FRAMES} frames, this one has {len(frames)}")
+    if isinstance(coords, list) and len(coords) > limits.MAX_COORDINATES:
+        raise UploadError(f"a character has at most {limits.MAX_COORDINATES} coordinates, this one has {len(coords)}")
+    ch = d.get("character")
+    definition = ch.get("definition") if isinstance(ch, dict) else None
+    if isinstance(definition, dict):
+        for key, cap in (("segments", limits.MAX_SEGMENTS), ("contacts", limits.MAX_CONTACT_POINTS),
+                         ("feet", 2)):
+            v = definition.get(key)
+            if isinstance(v, list) and len(v) > cap:
+                raise UploadError(f"character.definition.{key} has {len(v)} entries; at most {cap}")
+
+
+def check_motion(motion: Motion) -> None:
+    """Limits and names of a motion about to be stored (uploads and imports alike)."""
+    ch = motion.character
+    try:
+        limits.check_motion(frames=motion.T, fps=float(motion.fps), coordinates=motion.n,
+                            segments=len(ch.segments), contacts=len(ch.contacts))
+    except LimitError as e:
+        raise UploadError(str(e)) from None
+    names = [("character name", ch.name)] + [("segment name", s.name) for s in ch.segments]
+    names += [("coordinate name", c) for c in ch.coordinate_names] + [("contact point name", c.name)
+                                                                        for c in ch.contacts]
+    for what, nm in names:
+        if not nm or len(nm) > limits.MAX_NAME_CHARS or _CONTROL.search(nm):
+            raise UploadError(f"{what} {clip(nm, 60)!r} must be 1 to {limits.MAX_NAME_CHARS} characters without "
+                              "control characters")
+
+
 def motion_from_upload(d: Any) -> Motion:
     """A motion file v1 (already parsed) -> Motion, with shape errors named precisely."""
     if isinstance(d, dict):
+        _check_sizes(d)
         coords = d.get("coordinates")
         if isinstance(coords, list):
             _check_rows(d.get("frames"), len(coords), "frames", "one per coordinate")
@@ -80,11 +169,18 @@ def motion_from_upload(d: Any) -> Motion:
             for foot in ("right", "left"):
                 _check_rows(w["feet"].get(foot), 6, f"wrenches.feet.{foot}", "mx, my, mz, fx, fy, fz")
     try:
-        return motion_from_dict(d)
+        motion = motion_from_dict(d)
     except MotionError as e:
-        raise UploadError(str(e)) from None
-    except (ValueError, TypeError, KeyError) as e:
-        raise UploadError(f"invalid motion file: {e}") from None
+        raise UploadError(clip(str(e), 500)) from None
+    except (ValueError, TypeError, KeyError, OverflowError) as e:
+        raise UploadError(clip(f"invalid motion file: {e}", 500)) from None
+    check_motion(motion)
+    return motion
+
+
+def motion_upload(body: bytes) -> Encoded:
+    """``POST /motions`` with a motion file v1: the body -> a validated, encoded motion."""
+    return encode(motion_from_upload(parse_json(body)))
 
 
 def classify(motion: Motion) -> str:
@@ -95,12 +191,59 @@ def classify(motion: Motion) -> str:
     return "motion"
 
 
+# --- mocap trials ---------------------------------------------------------------------------
+
 _SAFE = re.compile(r"[^A-Za-z0-9._-]+")
 
 
 def _safe_name(name: str, i: int) -> str:
     base = _SAFE.sub("_", Path(name or f"file{i}").name).strip("._") or f"file{i}"
     return base[:120]
+
+
+_BVH_FRAMES = re.compile(rb"^\s*Frames:\s*(\d+)", re.M)
+_BVH_TIME = re.compile(rb"^\s*Frame Time:\s*([-+0-9.eE]+)", re.M)
+
+
+def _seconds(x: float) -> str:
+    return f"{x:.6g} s"
+
+
+def _trial_extent(name: str, content: bytes) -> tuple[int | None, float | None]:
+    """(frames, seconds) a text trial file declares, read cheaply before the import (whose
+    cost grows with the frames); (None, None) when unknown (binary C3D: checked after)."""
+    low = name.lower()
+    try:
+        if low.endswith(".bvh"):
+            f, t = _BVH_FRAMES.search(content), _BVH_TIME.search(content)
+            if f and t:
+                n = int(f.group(1))
+                return n, n * float(t.group(1))
+        elif low.endswith((".txt", ".json")) and content.lstrip()[:1] == b"{":
+            frames = json.loads(content).get("Frames")  # DeepMimic: each frame starts with its duration
+            if isinstance(frames, list):
+                dts = [fr[0] for fr in frames[:-1] if isinstance(fr, list) and fr and isinstance(fr[0], (int, float))]
+                return len(frames), float(sum(abs(dt) for dt in dts))
+        elif low.endswith((".mot", ".sto")):
+            text = content.decode("utf-8", "replace")
+            body = text.split("endheader", 1)[1] if "endheader" in text else text
+            rows = [ln.split() for ln in body.strip().splitlines()[1:] if ln.strip()]
+            if len(rows) >= 2:
+                return None, abs(float(rows[-1][0]) - float(rows[0][0]))  # rows of forces can be 1 kHz
+    except (ValueError, IndexError, TypeError, RecursionError):
+        return None, None  # the importer names the problem
+    return None, None
+
+
+def _precheck_trial(names: list[str], files: list[tuple[str, bytes]]) -> None:
+    for name, (_, content) in zip(names, files):
+        frames, seconds = _trial_extent(name, content)
+        if frames is not None and frames > limits.MAX_CAPTURE_FRAMES:
+            raise UploadError(f"{name}: a capture has at most {limits.MAX_CAPTURE_FRAMES} frames, this one has "
+                              f"{frames}")
+        if seconds is not None and not seconds <= limits.MAX_CAPTURE_S * 1.01:
+            raise UploadError(f"{name}: a capture lasts at most {limits.MAX_CAPTURE_S:g} s, this one lasts "
+                              f"{_seconds(seconds)}")
 
 
 def motion_from_trial(files: list[tuple[str, bytes]], *, mass: float | None, belt_speed: float | None) -> Motion:
@@ -112,14 +255,17 @@ def motion_from_trial(files: list[tuple[str, bytes]], *, mass: float | None, bel
     for v, name in ((mass, "mass"), (belt_speed, "belt_speed")):
         if v is not None and not math.isfinite(v):
             raise UploadError(f"{name} must be finite")
-    if mass is not None and not mass > 0:
-        raise UploadError("mass must be positive (kg)")
+    if mass is not None and not 1.0 <= mass <= 500.0:
+        raise UploadError(f"mass must be a subject's mass in kg (1 to 500), got {mass:g}")
+    if belt_speed is not None and not abs(belt_speed) <= 20.0:
+        raise UploadError(f"belt_speed must be a treadmill speed in m/s (at most 20), got {belt_speed:g}")
     names = [_safe_name(n, i) for i, (n, _) in enumerate(files)]
     if len(set(names)) != len(names):
         raise UploadError(f"file names must be distinct, got {names}")
     bad = [n for n in names if not n.lower().endswith(TRIAL_SUFFIXES)]
     if bad:
         raise UploadError(f"unsupported file type(s) {bad}; supported: {list(TRIAL_SUFFIXES)}")
+    _precheck_trial(names, files)
     try:
         from solver.io import load_trial
         from solver.pipeline import capture_motion
@@ -134,10 +280,22 @@ def motion_from_trial(files: list[tuple[str, bytes]], *, mass: float | None, bel
         try:
             capture = load_trial(paths, mass=mass, belt_speed=belt_speed)
             motion = capture_motion(capture)
+        except MemoryError:
+            raise
         except Exception as e:  # the parsing boundary: whatever a reader trips on is bad input
             log.info("trial import failed: %s", e, exc_info=True)
-            raise UploadError(f"could not import the trial: {client_message(e, tmp)}") from None
-        return motion.evolve(provenance={**motion.provenance, "input": input_summary(capture, tmp)})
+            raise UploadError(clip(f"could not import the trial: {client_message(e, tmp)}", 500)) from None
+        summary = input_summary(capture, tmp)
+        motion = motion.evolve(provenance={**_hide_paths(dict(motion.provenance), tmp), "input": summary})
+    check_motion(motion)
+    return motion
+
+
+def trial_upload(files: list[tuple[str, bytes]], mass: float | None, belt_speed: float | None) -> Encoded:
+    """``POST /motions`` with a multipart trial: files -> the validated, encoded raw capture,
+    with the input summary (``Encoded.input``) the upload response shows."""
+    motion = motion_from_trial(files, mass=mass, belt_speed=belt_speed)
+    return dataclasses.replace(encode(motion), input=(motion.provenance or {}).get("input"))
 
 
 #: importer parameters (``solver.io.errors.InputError.parameter``) -> how a client sends them
@@ -146,7 +304,7 @@ FORM_FIELDS = {"mass": "send the form field 'mass' (kg)", "belt_speed": "send th
 
 def _hide_folder(text: str, tmp: str) -> str:
     """``text`` without the server's temporary folder (the client's file names stay)."""
-    for folder in {tmp, str(Path(tmp).resolve())}:
+    for folder in {tmp, os.path.realpath(tmp)}:
         text = text.replace(folder + "/", "").replace(folder, "<upload>")
     return text
 
@@ -169,12 +327,15 @@ def input_summary(capture: Any, tmp: str) -> dict | None:
 
     try:
         return _hide_paths(jsonable(describe(capture)), tmp)
+    except MemoryError:
+        raise
     except Exception:  # noqa: BLE001 - a description must never fail an upload that imported
         log.warning("could not describe the uploaded trial", exc_info=True)
         return None
 
 
 def _hide_paths(obj: Any, tmp: str) -> Any:
+    """Provenance, summaries: every string without the server's temporary folder."""
     if isinstance(obj, str):
         return _hide_folder(obj, tmp)
     if isinstance(obj, dict):

@@ -31,9 +31,46 @@ from solver import spatial as sp
 
 GRAVITY = 9.81
 
+#: Physical ranges checked at construction (a human-sized rigid multibody, with wide margins):
+#: a segment weighs at most MAX_SEGMENT_MASS kg; lengths (offsets, centres of mass, bones,
+#: contact points, foot boxes, height) stay within MAX_LENGTH_M metres. A segment that moves
+#: (has DOF) has a positive mass and a positive-definite inertia: a massless moving body has
+#: no dynamics (MuJoCo refuses it). Every inertia satisfies the triangle inequality of
+#: principal moments (I1 + I2 >= I3), as any physical rigid body does.
+MAX_SEGMENT_MASS = 1000.0
+MAX_LENGTH_M = 10.0
+#: relative tolerance of the inertia checks (rounding in files written with few digits)
+INERTIA_RTOL = 1e-6
+
 
 class CharacterError(ValueError):
     """A character description is inconsistent (unknown names, bad numbers...)."""
+
+
+def _within(name: str, what: str, values: np.ndarray, limit: float, unit: str) -> None:
+    big = float(np.max(np.abs(values))) if np.size(values) else 0.0
+    if big > limit:
+        raise CharacterError(f"{name}: {what} {big:.6g} {unit} is outside the physical range (at most {limit:g} {unit})")
+
+
+def check_inertia(name: str, mass: float, inertia: np.ndarray, *, moving: bool) -> None:
+    """Physical rigid-body inertia (about the centre of mass): symmetric, principal moments
+    non-negative and obeying the triangle inequality; positive definite for a moving body."""
+    if not np.allclose(inertia, inertia.T, atol=1e-12):
+        raise CharacterError(f"segment {name!r}: inertia must be symmetric")
+    ev = np.linalg.eigvalsh(0.5 * (inertia + inertia.T))
+    scale = max(float(np.max(np.abs(ev))), 1e-300)
+    tol = INERTIA_RTOL * scale
+    if ev[0] < -tol:
+        raise CharacterError(f"segment {name!r}: inertia must be positive semi-definite "
+                             f"(principal moments {', '.join(f'{v:.6g}' for v in ev)} kg*m^2)")
+    if ev[0] + ev[1] < ev[2] - tol:
+        raise CharacterError(f"segment {name!r}: principal moments {', '.join(f'{v:.6g}' for v in ev)} kg*m^2 "
+                             "violate the triangle inequality (I1 + I2 >= I3) of a rigid body")
+    if moving and not (mass > 0 and ev[0] > 0):
+        raise CharacterError(f"segment {name!r} moves (it has DOF) but has no mass or a singular inertia "
+                             f"(mass {mass:g} kg, smallest principal moment {ev[0]:.6g} kg*m^2); "
+                             "a moving segment needs a positive mass and inertia")
 
 
 def _ro(a: Sequence[float] | np.ndarray, shape: tuple[int, ...], allow_inf: bool = False) -> np.ndarray:
@@ -96,8 +133,15 @@ class Segment:
         object.__setattr__(self, "dofs", tuple(self.dofs))
         if not (np.isfinite(self.mass) and self.mass >= 0):
             raise CharacterError(f"segment {self.name!r}: mass must be finite and >= 0")
-        if not np.allclose(self.inertia, self.inertia.T, atol=1e-12):
-            raise CharacterError(f"segment {self.name!r}: inertia must be symmetric")
+        if self.mass > MAX_SEGMENT_MASS:
+            raise CharacterError(f"segment {self.name!r}: mass {self.mass:.6g} kg is outside the physical range "
+                                 f"(at most {MAX_SEGMENT_MASS:g} kg)")
+        for what, v in (("offset", self.offset), ("centre of mass", self.com), ("length", self.length),
+                        ("radius", self.radius)):
+            if not np.all(np.isfinite(v)):
+                raise CharacterError(f"segment {self.name!r}: {what} must be finite")
+            _within(f"segment {self.name!r}", what, np.asarray(v, dtype=float), MAX_LENGTH_M, "m")
+        check_inertia(self.name, float(self.mass), self.inertia, moving=bool(self.dofs))
 
     @property
     def marker(self) -> np.ndarray:
@@ -116,6 +160,7 @@ class ContactPoint:
         object.__setattr__(self, "position", _ro(self.position, (3,)))
         if self.side not in ("right", "left"):
             raise CharacterError(f"contact point {self.name!r}: side must be 'right' or 'left'")
+        _within(f"contact point {self.name!r}", "position", self.position, MAX_LENGTH_M, "m")
 
 
 @dataclass(frozen=True, eq=False)
@@ -132,6 +177,8 @@ class FootBox:
         object.__setattr__(self, "half", _ro(self.half, (3,)))
         if np.any(self.half <= 0):
             raise CharacterError(f"foot box {self.side}: half extents must be positive")
+        _within(f"foot box {self.side}", "centre", self.center, MAX_LENGTH_M, "m")
+        _within(f"foot box {self.side}", "half extent", self.half, MAX_LENGTH_M, "m")
 
 
 @dataclass(frozen=True, eq=False)
@@ -174,6 +221,8 @@ class Character:
                 raise CharacterError(f"foot box on unknown segment {f.segment!r}")
         if not self.segments[0].dofs:
             raise CharacterError("the root segment needs its 6 DOF")
+        if not (math.isfinite(self.height) and 0.0 <= self.height <= MAX_LENGTH_M):
+            raise CharacterError(f"height {self.height!r} m is outside the physical range [0, {MAX_LENGTH_M:g}] m")
 
     # --- basic facts --------------------------------------------------------------
     @cached_property

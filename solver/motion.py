@@ -18,7 +18,7 @@ from dataclasses import dataclass, field, replace
 from datetime import datetime, timezone
 from functools import cache
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -30,6 +30,15 @@ FEET = ("right", "left")
 WRENCH_ORDER = ("mx", "my", "mz", "fx", "fy", "fz")
 SCHEMA_PATH = Path(__file__).with_name("schemas") / "motion-v1.schema.json"
 MAX_FRAMES = 100_000
+#: Physical ranges checked at construction (generous for human motion capture, tight enough
+#: that every derived quantity — velocities, exports in cm, residuals — stays finite):
+#: sampling rate, slide coordinates (m), hinge coordinates (rad, unwrapped turns allowed),
+#: contact forces (N) and their moments about the world origin (N*m).
+MIN_FPS, MAX_FPS = 1.0, 10_000.0
+MAX_SLIDE_M = 10_000.0
+MAX_HINGE_RAD = 10_000.0
+MAX_FORCE_N = 1.0e6
+MAX_MOMENT_NM = 1.0e10
 
 
 class MotionError(ValueError):
@@ -66,6 +75,9 @@ class Motion:
     def __post_init__(self) -> None:
         if not (isinstance(self.fps, (int, float)) and math.isfinite(self.fps) and self.fps > 0):
             raise MotionError(f"fps must be a positive finite number, got {self.fps!r}")
+        if not MIN_FPS <= self.fps <= MAX_FPS:
+            raise MotionError(f"fps {self.fps:.6g} is outside the physical range [{MIN_FPS:g}, {MAX_FPS:g}] "
+                              "frames per second")
         q = np.asarray(self.q, dtype=float)
         n = self.character.n
         if q.ndim != 2 or q.shape[0] != n:
@@ -79,6 +91,7 @@ class Motion:
             raise MotionError(
                 f"coordinate {self.character.coordinate_names[bad[0]]!r} is not finite at frame {bad[1]}"
             )
+        _check_ranges(self.character, q)
         object.__setattr__(self, "q", _frozen(q))
         T = q.shape[1]
         if self.contacts is not None:
@@ -93,6 +106,11 @@ class Motion:
                 raise MotionError(f"wrenches must have shape (2 feet, 6, T={T}), got {w.shape}")
             if not np.all(np.isfinite(w)):
                 raise MotionError("contact wrenches must be finite")
+            for rows, limit, what in ((slice(3, 6), MAX_FORCE_N, "force (N)"),
+                                      (slice(0, 3), MAX_MOMENT_NM, "moment about the origin (N*m)")):
+                big = float(np.max(np.abs(w[:, rows, :]))) if w.size else 0.0
+                if big > limit:
+                    raise MotionError(f"contact {what} {big:.6g} is outside the physical range (at most {limit:g})")
             object.__setattr__(self, "wrenches", _frozen(w))
         object.__setattr__(self, "provenance", dict(self.provenance))
         if self.report is not None:
@@ -190,21 +208,69 @@ class Motion:
         return motion_from_dict(data)
 
 
+def _check_ranges(character: Character, q: np.ndarray) -> None:
+    """Coordinates within physical ranges: slides in metres, hinges in radians."""
+    kinds = [d.kind for s in character.segments for d in s.dofs]
+    for kind, limit, unit in (("slide", MAX_SLIDE_M, "m"), ("hinge", MAX_HINGE_RAD, "rad")):
+        rows = [i for i, k in enumerate(kinds) if k == kind]
+        if not rows:
+            continue
+        a = np.abs(q[rows])
+        if float(a.max()) > limit:
+            i, t = np.unravel_index(int(np.argmax(a)), a.shape)
+            raise MotionError(f"coordinate {character.coordinate_names[rows[i]]!r} = {q[rows[i], t]:.6g} {unit} at frame "
+                              f"{t} is outside the physical range (|{kind}| at most {limit:g} {unit})")
+
+
 @cache
 def schema() -> dict:
     return json.loads(SCHEMA_PATH.read_text())
 
 
-def validate_schema(d: Any) -> None:
-    """Check a motion file's structure against the published JSON Schema."""
-    import jsonschema
+@cache
+def _validator():
+    """jsonschema-rs when installed (a 3,600-frame file in ~6 ms instead of ~2.7 s), else jsonschema."""
+    try:
+        import jsonschema_rs
 
-    validator = jsonschema.Draft202012Validator(schema())
-    errors = sorted(validator.iter_errors(d), key=lambda e: list(e.absolute_path))
+        return "rs", jsonschema_rs.validator_for(schema())
+    except ImportError:
+        import jsonschema
+
+        return "py", jsonschema.Draft202012Validator(schema())
+
+
+def _schema_value(path: Sequence[Any]) -> Any:
+    node: Any = schema()
+    for p in path:
+        try:
+            node = node[p]
+        except (KeyError, IndexError, TypeError):
+            return None
+    return node
+
+
+def validate_schema(d: Any) -> None:
+    """Check a motion file's structure against the published JSON Schema. The message names
+    where and which rule, and never repeats a large part of the input."""
+    kind, validator = _validator()
+    errors = []
+    for e in validator.iter_errors(d):
+        if kind == "rs":
+            path, keyword, value = list(e.instance_path), (list(e.schema_path) or [""])[-1], None
+            value = _schema_value(list(e.schema_path))
+        else:
+            path, keyword, value = list(e.absolute_path), e.validator, e.validator_value
+        errors.append((path, str(keyword), value, e.message))
+        if len(errors) >= 50:
+            break
     if errors:
-        e = errors[0]
-        where = "/".join(str(p) for p in e.absolute_path) or "(top level)"
-        raise MotionError(f"motion file invalid at {where}: {e.message}")
+        path, keyword, value, message = min(errors, key=lambda x: [str(p) for p in x[0]])
+        where = "/".join(str(p) for p in path) or "(top level)"
+        if len(message) > 200:  # the validator quoted the (large) value: name the rule instead
+            rule = json.dumps(value, separators=(",", ":")) if value is not None else ""
+            message = f"does not satisfy {keyword!r}" + (f" {rule[:80]}" if rule else "")
+        raise MotionError(f"motion file invalid at {where}: {message}")
 
 
 def motion_from_dict(d: Any) -> Motion:

@@ -11,11 +11,15 @@ Start a worker with ``motionx worker`` (it calls :func:`create_celery` and
 
 from __future__ import annotations
 
+import os
+
 from celery import Celery
+from celery.signals import worker_process_init
 from sqlalchemy.exc import DBAPIError
 
 from service.config import Settings
 from service.jobs import execute_job
+from service.procpool import die_with_parent, limit_memory
 
 TASK_NAME = "motionx.run_job"
 
@@ -58,9 +62,22 @@ def celery_config(settings: Settings) -> dict:
     )
 
 
+def init_job_process(settings: Settings) -> None:
+    """In each pool process: die with the worker (no orphan when the worker is SIGKILLed:
+    its pool processes would finish their job and idle on) and cap the address space like
+    the LocalRunner's job processes. (No PR_SET_PDEATHSIG here: billiard may fork from a
+    thread that ends before the worker does.)"""
+    die_with_parent(os.getppid(), pdeathsig=False)
+    limit_memory(settings.job_memory_mb or None)
+
+
 def create_celery(settings: Settings) -> Celery:
     app = Celery("motionx", set_as_current=False)
     app.conf.update(celery_config(settings))
+
+    @worker_process_init.connect(weak=False)
+    def _init(**_kw) -> None:
+        init_job_process(settings)
 
     @app.task(name=TASK_NAME, acks_late=True, reject_on_worker_lost=True, **RETRY_ON_DB_ERRORS)
     def run_job(job_id: str) -> str:

@@ -12,12 +12,13 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse, StreamingResponse
 from sqlalchemy.exc import IntegrityError
 
-from service import store
+from service import limits, store
 from service.config import Settings
 from service.db import Database
 from service.deps import app_settings, get_db, get_owner, get_runner
 from service.models import TERMINAL
-from service.problems import Problem, not_found
+from service.limits import LimitError
+from service.problems import Problem, known_id, not_found
 from service.runners import Runner
 from service.schemas import ExtrapolateIn, JobOut, JobPage, MotionPage
 from service.views import job_out, motion_out, progress_out
@@ -31,6 +32,7 @@ IDEMPOTENCY_KEY = Header(
 
 
 def _job(db: Database, job_id: str, owner: str) -> dict:
+    known_id("job", job_id)
     with db.read() as s:
         job = store.get_job(s, job_id=job_id, owner=owner)
         if job is None:
@@ -50,8 +52,16 @@ def _accepted(out: dict, replayed: bool = False) -> JSONResponse:
     status_code=202,
     response_model=JobOut,
     summary="start an extrapolation job (a raw capture gets its tutor first)",
+    description="The source is a motion with contact wrenches (used as the tutor: one gait cycle, at most "
+                f"{limits.MAX_TUTOR_FRAMES} frames and {limits.MAX_TUTOR_S:g} s) or a raw capture (the job cuts one "
+                "cycle and makes its tutor first). Schema-valid requests are refused with 422 when the target or "
+                "the step control is inconsistent (e.g. eps above delta0), when the source motion is beyond these "
+                "limits, or when an Idempotency-Key is reused with another request.",
     responses={202: {"headers": {"Location": {"schema": {"type": "string"}}}},
-               404: {"description": "no such motion for this key"}},
+               404: {"description": "no such motion for this key"},
+               409: {"description": "concurrent requests with the same Idempotency-Key: retry"},
+               422: {"description": "inconsistent target or step control, a source motion beyond the limits, "
+                                    "or an Idempotency-Key reused with another request"}},
 )
 def extrapolate(
     motion_id: str,
@@ -64,6 +74,7 @@ def extrapolate(
 ) -> JSONResponse:
     from solver.continuation import StepControl, Target
 
+    known_id("motion", motion_id)
     try:  # the solver's own checks, so a job never starts with a target it refuses
         Target(**body.target.model_dump())
         StepControl(**body.control.model_dump())
@@ -74,8 +85,14 @@ def extrapolate(
     for _ in range(3):
         try:
             with db.write() as s:
-                if store.get_motion(s, motion_id=motion_id, owner=owner) is None:
+                source = store.get_motion(s, motion_id=motion_id, owner=owner)
+                if source is None:
                     raise not_found("motion", motion_id)
+                try:  # the method's bounds: a tutor is one gait cycle (service.limits)
+                    limits.check_source(kind=source.kind, frames=source.frames, fps=source.fps,
+                                        coordinates=source.n)
+                except LimitError as e:
+                    raise Problem(422, str(e), type="https://motionx.dev/problems/limit") from None
                 existing = None
                 if idempotency_key is not None:
                     existing = store.find_idempotent(s, owner=owner, key=idempotency_key, request_hash=request_hash)
@@ -132,6 +149,7 @@ def job_motions(
     settings: Settings = Depends(app_settings),
 ) -> JSONResponse:
     limit = limit or settings.page_size
+    known_id("job", job_id)
     with db.read() as s:
         if store.get_job(s, job_id=job_id, owner=owner) is None:
             raise not_found("job", job_id)
@@ -148,6 +166,7 @@ def job_motions(
              responses={404: {"description": "no such job for this key"},
                         409: {"description": "the job has already finished"}})
 def cancel_job(job_id: str, owner: str = Depends(get_owner), db: Database = Depends(get_db)) -> JSONResponse:
+    known_id("job", job_id)
     with db.write() as s:
         job = store.get_job(s, job_id=job_id, owner=owner)
         if job is None:
@@ -175,6 +194,8 @@ async def job_events(
     db: Database = Depends(get_db),
     settings: Settings = Depends(app_settings),
 ) -> StreamingResponse:
+    known_id("job", job_id)
+
     def snapshot(after_seq: int, after_step: int, attempt: int):
         with db.read() as s:
             job = store.get_job(s, job_id=job_id, owner=owner)

@@ -1,8 +1,14 @@
-"""/motions: upload, fetch (several formats), validation report."""
+"""/motions: upload, fetch (several formats), validation report.
+
+The heavy parts (parsing and validating an upload, exports, the plausibility report) run in
+the API's compute processes (:mod:`service.work`), never on the event loop.
+"""
 
 from __future__ import annotations
 
 import math
+import re
+import zlib
 from typing import Any, Literal
 
 from fastapi import APIRouter, Depends, Query, Request
@@ -10,22 +16,16 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse, Response
 from starlette.datastructures import UploadFile
 
-from service import store
-from service.config import Settings
+from service import limits, store, uploads, work
 from service.db import Database
 from service.deps import app_settings, get_db, get_owner
-from service.problems import Problem, not_found
+from service.limits import clip
+from service.problems import Problem, known_id, not_found
+from service.config import Settings
 from service.schemas import MotionOut, MotionPage
-from service.uploads import (
-    MAX_FILES,
-    ImporterUnavailable,
-    UploadError,
-    classify,
-    motion_from_trial,
-    motion_from_upload,
-    parse_json,
-)
+from service.uploads import MAX_FILES, Encoded, ImporterUnavailable, UploadError
 from service.views import motion_out
+from service.work import Compute
 
 router = APIRouter(tags=["motions"])
 
@@ -38,12 +38,16 @@ UPLOAD_BODY = {
                 "schema": {
                     "type": "object",
                     "required": ["files"],
+                    "additionalProperties": False,
                     "properties": {
                         "files": {"type": "array", "items": {"type": "string", "format": "binary"},
+                                  "minItems": 1, "maxItems": MAX_FILES,
                                   "description": "the trial: .osim + .mot (OpenSim), .c3d, .bvh or a DeepMimic .txt"},
-                        "mass": {"type": "number", "exclusiveMinimum": 0, "description": "subject mass (kg), C3D"},
-                        "belt_speed": {"type": "number", "description": "treadmill belt speed (m/s)"},
-                        "name": {"type": "string", "maxLength": 200},
+                        "mass": {"type": "number", "minimum": 1, "maximum": 500,
+                                 "description": "subject mass (kg): C3D without it, BVH"},
+                        "belt_speed": {"type": "number", "minimum": -20, "maximum": 20,
+                                       "description": "treadmill belt speed (m/s)"},
+                        "name": {"type": "string", "maxLength": 200, "pattern": "^[^\\x00-\\x1f\\x7f]*$"},
                     },
                 }
             },
@@ -52,6 +56,9 @@ UPLOAD_BODY = {
 }
 
 FORMATS = ("json", "gltf", "glb", "bvh", "motion")
+MULTIPART_FIELDS = ("files", "mass", "belt_speed", "name")
+NAME_PATTERN = r"^[^\x00-\x1f\x7f]*$"
+_CONTROL = re.compile(r"[\x00-\x1f\x7f]")
 
 
 def _form_float(form, key: str) -> float | None:
@@ -63,15 +70,23 @@ def _form_float(form, key: str) -> float | None:
     try:
         x = float(v)
     except ValueError:
-        raise UploadError(f"{key} must be a number, got {v[:40]!r}") from None
+        raise UploadError(f"{key} must be a number, got {clip(v, 40)!r}") from None
     if not math.isfinite(x):
         raise UploadError(f"{key} must be finite")
     return x
 
 
-def _store_motion(db: Database, owner: str, motion, name: str) -> dict:
+def _label(v: object) -> str:
+    if not isinstance(v, str):
+        raise UploadError("name must be text, not a file")
+    if len(v) > limits.MAX_NAME_CHARS or _CONTROL.search(v):
+        raise UploadError(f"name must be at most {limits.MAX_NAME_CHARS} characters without control characters")
+    return v
+
+
+def _store_motion(db: Database, owner: str, encoded: Encoded, name: str) -> dict:
     with db.write() as s:
-        row = store.add_motion(s, owner=owner, motion=motion, kind=classify(motion), name=name)
+        row = store.add_encoded(s, owner=owner, encoded=encoded, name=name)
         return motion_out(row)
 
 
@@ -80,43 +95,56 @@ def _store_motion(db: Database, owner: str, motion, name: str) -> dict:
     status_code=201,
     response_model=MotionOut,
     summary="upload a motion (motion file v1 JSON) or a mocap trial (multipart)",
+    description="The upload is parsed and validated in the server's compute processes (time and memory limits). "
+                "Schema-valid uploads are refused with 422 when the data is inconsistent (frame widths, unknown "
+                "joints, a character that is not physical) or beyond the limits of docs/service.md (a capture "
+                f"lasts at most {limits.MAX_CAPTURE_S:g} s and {limits.MAX_CAPTURE_FRAMES} frames, "
+                f"{limits.MAX_COORDINATES} coordinates).",
     openapi_extra=UPLOAD_BODY,
     responses={201: {"headers": {"Location": {"schema": {"type": "string"}}}},
                413: {"description": "body too large"}, 415: {"description": "unsupported content type"},
+               422: {"description": "invalid upload: malformed, inconsistent, not physical, or beyond the limits"},
+               429: {"description": "the server is busy with heavy requests: retry after Retry-After seconds"},
                501: {"description": "importer not available"}},
 )
 async def upload_motion(
     request: Request,
-    name: str = Query("", max_length=200, description="a label for the motion"),
+    name: str = Query("", max_length=limits.MAX_NAME_CHARS, pattern=NAME_PATTERN,
+                      description="a label for the motion"),
     owner: str = Depends(get_owner),
     db: Database = Depends(get_db),
 ) -> Response:
     ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
+    compute: Compute = request.app.state.compute
     try:
         if ctype == "application/json" or ctype.endswith("+json"):
             body = await request.body()
-            motion = await run_in_threadpool(lambda: motion_from_upload(parse_json(body)))
+            encoded = await compute.run(uploads.motion_upload, body, what="the upload")
         elif ctype == "multipart/form-data":
             form = await request.form(max_files=MAX_FILES, max_fields=16)
             try:
+                unknown = sorted({k for k in form.keys() if k not in MULTIPART_FIELDS})
+                if unknown:
+                    raise UploadError(f"unknown form field(s) {clip(str(unknown), 120)}; the fields are "
+                                      f"{', '.join(MULTIPART_FIELDS)}")
                 files = [(f.filename or "", await f.read()) for f in form.getlist("files") if isinstance(f, UploadFile)]
                 mass, belt = _form_float(form, "mass"), _form_float(form, "belt_speed")
                 label = form.get("name")
-                if isinstance(label, str) and label:
-                    name = label[:200]
+                if label is not None:
+                    name = _label(label)
             finally:
                 await form.close()
-            motion = await run_in_threadpool(lambda: motion_from_trial(files, mass=mass, belt_speed=belt))
+            encoded = await compute.run(uploads.trial_upload, files, mass, belt, what="the trial import")
         else:
-            raise Problem(415, f"unsupported content type {ctype or '(none)'!r}: send application/json "
+            raise Problem(415, f"unsupported content type {clip(ctype, 60) or '(none)'!r}: send application/json "
                           "(motion file v1) or multipart/form-data (mocap trial)")
     except UploadError as e:
         raise Problem(422, str(e)) from None
     except ImporterUnavailable as e:
         raise Problem(501, str(e)) from None
-    out = await run_in_threadpool(_store_motion, db, owner, motion, name)
+    out = await run_in_threadpool(_store_motion, db, owner, encoded, name)
     if ctype == "multipart/form-data":
-        out["input"] = (motion.provenance or {}).get("input")
+        out["input"] = encoded.input
     return JSONResponse(out, status_code=201, headers={"Location": out["links"]["self"]})
 
 
@@ -136,7 +164,10 @@ def list_motions(
     return dict(items=items, total=total, limit=limit, next=nxt)
 
 
-def _option(v: str) -> Any:
+def _option(k: str, v: str) -> Any:
+    if len(k) > 64 or len(v) > 256 or _CONTROL.search(k + v):
+        raise Problem(422, f"exporter option {clip(k, 40)!r}: names and values are at most 64 and 256 "
+                      "characters without control characters")
     lv = v.strip().lower()
     if lv in ("true", "false"):
         return lv == "true"
@@ -151,7 +182,7 @@ def _option(v: str) -> Any:
     except ValueError:
         return v
     if not math.isfinite(x):
-        raise Problem(422, f"option value {v!r} is not finite")
+        raise Problem(422, f"option value {clip(v, 40)!r} is not finite")
     return x
 
 
@@ -161,12 +192,17 @@ def _option(v: str) -> Any:
             "(format=motion)",
     description="Other query parameters are the exporter's options (docs/export.md), e.g. `y_up=true`, "
                 "`decimals=3` (json), `units=m` (bvh), `meshes=false` (gltf, glb), `binary=false` (gltf: "
-                "the .gltf JSON with its buffer embedded, model/gltf+json, instead of the binary .glb).",
+                "the .gltf JSON with its buffer embedded, model/gltf+json, instead of the binary .glb). "
+                "An option the exporter does not know, or a value it refuses, gets 422. Exports are computed "
+                "in the server's compute processes and cached by content.",
     responses={200: {"content": {"application/json": {}, "model/gltf+json": {}, "model/gltf-binary": {},
                                  "text/plain": {}}},
-               404: {"description": "no such motion for this key"}, 501: {"description": "exporter not available"}},
+               404: {"description": "no such motion for this key"},
+               422: {"description": "an exporter option it does not know or a value it refuses"},
+               429: {"description": "the server is busy with heavy requests: retry after Retry-After seconds"},
+               501: {"description": "exporter not available"}},
 )
-def get_motion(
+async def get_motion(
     motion_id: str,
     request: Request,
     format: Literal["json", "gltf", "glb", "bvh", "motion"] = Query(
@@ -175,63 +211,61 @@ def get_motion(
     owner: str = Depends(get_owner),
     db: Database = Depends(get_db),
 ) -> Response:
-    options = {k: _option(v) for k, v in request.query_params.items() if k != "format"}
+    known_id("motion", motion_id)
+    options = {k: _option(k, v) for k, v in request.query_params.items() if k != "format"}
     if format == "motion" and options:
-        raise Problem(422, f"format=motion takes no options, got {sorted(options)}")
-    cache = request.app.state.export_cache
-    with db.read() as s:
-        row = store.get_motion(s, motion_id=motion_id, owner=owner)
-        if row is None:
-            raise not_found("motion", motion_id)
-        key = (row.sha256, format, tuple(sorted((k, repr(v)) for k, v in options.items())))
-        hit = cache.get(key)
-        if hit is not None:
-            return Response(hit[0], media_type=hit[1])
-        data = store.motion_json(row)
+        raise Problem(422, f"format=motion takes no options, got {clip(str(sorted(options)), 200)}")
+    compute: Compute = request.app.state.compute
+
+    def load() -> tuple[str, bytes]:
+        with db.read() as s:
+            row = store.get_motion(s, motion_id=motion_id, owner=owner)
+            if row is None:
+                raise not_found("motion", motion_id)
+            return row.sha256, row.data
+
+    sha, data = await run_in_threadpool(load)
+    key = (sha, format, tuple(sorted((k, repr(v)) for k, v in options.items())))
     if format == "motion":
-        cache.put(key, data, "application/json")
-        return Response(data, media_type="application/json")
-    try:
-        from solver.export import ExportError, export_motion, media_type
-    except ImportError as e:
-        raise Problem(501, f"exporters are not available in this build ({e})") from None
-    import json
-
-    from solver.motion import motion_from_dict
-
-    motion = motion_from_dict(json.loads(data))
-    try:
-        out = export_motion(motion, format, **options)
-        mt = media_type(format, **options)
-    except ImportError as e:
-        raise Problem(501, f"format {format!r} is not available in this build ({e})") from None
-    except ExportError as e:
-        raise Problem(422, str(e)) from None
-    body = out.encode("utf-8") if isinstance(out, str) else out
-    cache.put(key, body, mt)
+        hit = compute.cache.get(key)
+        body = hit[0] if hit is not None else await run_in_threadpool(zlib.decompress, data)
+        compute.cache.put(key, body, "application/json")
+        return Response(body, media_type="application/json")
+    body, mt = await compute.cached(key, work.export, data, format, options, what=f"the {format} export")
     return Response(body, media_type=mt)
 
 
 @router.get(
     "/motions/{motion_id}/validation",
     summary="plausibility report of a motion (MuJoCo replay included)",
-    responses={404: {"description": "no such motion for this key"}, 501: {"description": "validator not available"}},
+    description="Stored with the motion: λ optima get it from their job; for uploads it is computed on the first "
+                "request (in the server's compute processes) and stored.",
+    responses={404: {"description": "no such motion for this key"},
+               429: {"description": "the server is busy with heavy requests: retry after Retry-After seconds"},
+               501: {"description": "validator not available"}},
 )
-def get_validation(motion_id: str, owner: str = Depends(get_owner), db: Database = Depends(get_db)) -> dict:
-    with db.read() as s:
-        row = store.get_motion(s, motion_id=motion_id, owner=owner)
-        if row is None:
-            raise not_found("motion", motion_id)
-        if row.validation is not None:
-            return row.validation
-        motion = store.load_motion(row)
-    try:
-        from mjcf.validate import validate  # noqa: F401
-    except ImportError as e:
-        raise Problem(501, f"the validator is not available in this build ({e})") from None
-    from service.jobs import validation_report
+async def get_validation(motion_id: str, request: Request, owner: str = Depends(get_owner),
+                         db: Database = Depends(get_db)) -> dict:
+    known_id("motion", motion_id)
 
-    report = validation_report(motion)
-    with db.write() as s:
-        store.set_validation(s, motion_id=motion_id, report=report)
+    def load() -> tuple[dict | None, bytes | None]:
+        with db.read() as s:
+            row = store.get_motion(s, motion_id=motion_id, owner=owner)
+            if row is None:
+                raise not_found("motion", motion_id)
+            if row.validation is not None:
+                return row.validation, None
+            return None, row.data
+
+    report, data = await run_in_threadpool(load)
+    if report is not None:
+        return report
+    compute: Compute = request.app.state.compute
+    report = await compute.single(("validation", motion_id), work.validation, data, what="the plausibility report")
+
+    def save() -> None:
+        with db.write() as s:
+            store.set_validation(s, motion_id=motion_id, report=report)
+
+    await run_in_threadpool(save)
     return report

@@ -42,6 +42,8 @@ router = APIRouter(include_in_schema=False)
 
 def _file(root: Path, rel: str, cache: str) -> FileResponse:
     """``root/rel`` if it is a regular file inside ``root`` with a known type, else 404."""
+    if len(rel) > 300 or any(ord(c) < 32 or ord(c) == 127 for c in rel):  # e.g. /ui/%00.js
+        raise Problem(404, "no such file")
     path = (root / rel).resolve()
     media_type = MEDIA_TYPES.get(path.suffix)
     if media_type is None or not path.is_relative_to(root.resolve()) or not path.is_file():

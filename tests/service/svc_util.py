@@ -80,3 +80,62 @@ def tutor_json(shared_data) -> str:
     res = make_tutor(capture_motion(load_trial([d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt"])))
     assert res.status == "succeeded", res.message
     return res.motion.to_json()
+
+
+# --- processes (Linux /proc): what outlives what ----------------------------------------------
+
+
+def alive(pid: int) -> bool:
+    """A process that exists and is not a zombie (a killed child awaiting its reaper is gone)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+
+
+def children(pid: int) -> list[int]:
+    """Live processes whose parent is ``pid``."""
+    import os
+
+    out = []
+    for d in os.listdir("/proc"):
+        if d.isdigit():
+            try:
+                with open(f"/proc/{d}/stat") as f:
+                    fields = f.read().rsplit(")", 1)[1].split()
+            except (FileNotFoundError, ProcessLookupError):
+                continue
+            if int(fields[1]) == pid and fields[0] != "Z":
+                out.append(int(d))
+    return out
+
+
+def wait_gone(pids, timeout: float = 5.0) -> list[int]:
+    """Waits until none of ``pids`` is alive; returns those still alive at the deadline."""
+    import time
+
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if not [p for p in pids if alive(p)]:
+            return []
+        time.sleep(0.05)
+    return [p for p in pids if alive(p)]
+
+
+def cmdline(pid: int) -> str:
+    try:
+        with open(f"/proc/{pid}/cmdline", "rb") as f:
+            return f.read().replace(b"\0", b" ").decode(errors="replace")
+    except FileNotFoundError:
+        return ""
+
+
+def address_space_limit(pid: int) -> int | None:
+    """The soft RLIMIT_AS of a process, bytes (None: unlimited)."""
+    with open(f"/proc/{pid}/limits") as f:
+        for line in f:
+            if line.startswith("Max address space"):
+                v = line.split()[3]
+                return None if v == "unlimited" else int(v)
+    return None

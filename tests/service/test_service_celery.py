@@ -25,7 +25,17 @@ import time
 import httpx
 import pytest
 from conftest import repeat_count
-from svc_util import CHEAP, KILLABLE, deepmimic_files, job_motions, same_motions, wait_job
+from svc_util import (
+    CHEAP,
+    KILLABLE,
+    address_space_limit,
+    children,
+    deepmimic_files,
+    job_motions,
+    same_motions,
+    wait_gone,
+    wait_job,
+)
 
 from service.db import get_database
 from service.models import JobRow, MotionRow
@@ -36,7 +46,8 @@ REPEAT = repeat_count(2)
 # are 1 h / 2 h): the job time limit stays well above the test jobs (1-4 s).
 STACK_ENV = {
     "MOTIONX_JOB_LEASE_S": "3",
-    "MOTIONX_JOB_TIME_LIMIT_S": "12",
+    "MOTIONX_JOB_TIME_LIMIT_S": "10",
+    "MOTIONX_JOB_STOP_GRACE_S": "2",  # Celery's hard limit: 10 + 2 + 5 = 17 s, under the visibility timeout
     "MOTIONX_VISIBILITY_TIMEOUT_S": "18",
     "MOTIONX_UNACKED_RESTORE_INTERVAL_S": "1",
     "MOTIONX_UNACKED_RESTORE_THROTTLE": "1",
@@ -100,6 +111,16 @@ def _assert_exactly_once(stack, client, job_id, reference) -> dict:
         rows = s.query(MotionRow).filter(MotionRow.job_id == job_id).all()
     assert sorted(r.step for r in rows) == list(range(len(reference)))
     return job
+
+
+def _kill_worker_running(stack, client, job_id):
+    """Once the job has stored 2 steps, SIGKILL the whole worker (process group) running it."""
+    j = wait_job(client, job_id, timeout=60, until=_running_with_steps(2))
+    assert j["status"] == "running", "the job must still be running when its worker is killed"
+    pid = int(_job_row(stack, job_id).lease_owner.split(":")[1])
+    victim = next(w for w in stack.worker_procs if w.alive() and os.getpgid(pid) == w.pid)
+    victim.kill()
+    return victim
 
 
 def _running_with_steps(n):
@@ -196,12 +217,7 @@ def test_reliability_kill_whole_worker_mid_job(stack, client, tutor_id, killable
     """SIGKILL the whole worker (main process and pool): the unacknowledged job waits in
     Redis until the visibility timeout, then another worker runs it; exactly once."""
     job = client.post(f"/motions/{tutor_id}/extrapolate", json=KILLABLE).json()
-    j = wait_job(client, job["id"], timeout=60, until=_running_with_steps(2))
-    assert j["status"] == "running"
-    pid = int(_job_row(stack, job["id"]).lease_owner.split(":")[1])
-    victim = next(w for w in stack.worker_procs if w.alive() and os.getpgid(pid) == w.pid)
-    victim.kill()
-    stack.worker_procs.remove(victim)
+    stack.worker_procs.remove(_kill_worker_running(stack, client, job["id"]))
     t0 = time.monotonic()
     wait_worker_ready(stack.add_worker(), timeout=60)  # keep two workers for what follows
     done = wait_job(client, job["id"], timeout=int(STACK_ENV["MOTIONX_VISIBILITY_TIMEOUT_S"]) + 90)
@@ -266,5 +282,50 @@ def test_broker_down_at_submission_loses_nothing(tmp_path, redis_binary, tutor_m
             st.redis.start()
             done = wait_job(c, r.json()["id"], timeout=120)
             assert (done["status"], done["attempts"]) == ("succeeded", 1), done
+    finally:
+        st.stop()
+
+
+# --- defaults and orphans -------------------------------------------------------------------------
+
+
+def test_worker_pool_processes_die_with_their_worker_and_are_capped(stack, client):
+    """SIGKILL of a worker's main process alone (not its process group): its pool processes
+    exit within about a second (they watch their parent), instead of living on as orphans that
+    finish jobs and idle. They run under the job memory cap (RLIMIT_AS, 2048 MB by default)."""
+    w = stack.worker_procs[0]
+    pool = children(w.pid)
+    assert pool, "the worker has no pool process"
+    assert {address_space_limit(p) for p in pool} == {2048 * 1024 * 1024}
+    os.kill(w.pid, signal.SIGKILL)
+    w.proc.wait(10)
+    assert wait_gone(pool, timeout=5.0) == []
+    stack.worker_procs.remove(w)
+    w.stop()
+    wait_worker_ready(stack.add_worker(), timeout=60)
+
+
+def test_celery_recovers_a_killed_worker_with_default_settings(tmp_path, redis_binary, tutor_motion_json,
+                                                               killable_reference):
+    """The probe: with Celery's default settings (visibility timeout 7200 s), a job whose worker
+    was SIGKILLed stayed 'running' for two hours. With the defaults now, the API's sweep
+    re-dispatches it once its lease (15 s) has expired, and another worker takes it over:
+    it ends exactly once, within a minute. (No timing setting is overridden here.)"""
+    st = Stack(data_dir=tmp_path, workers=2)
+    st.start()
+    try:
+        with httpx.Client(base_url=st.base_url, headers={"X-API-Key": st.api_keys}, timeout=30) as c:
+            mid = c.post("/motions", content=tutor_motion_json, headers={"content-type": "application/json"}).json()["id"]
+            job = c.post(f"/motions/{mid}/extrapolate", json=KILLABLE).json()
+            _kill_worker_running(st, c, job["id"])
+            t0 = time.monotonic()
+            done = wait_job(c, job["id"], timeout=180)
+            recovery = time.monotonic() - t0
+            assert (done["status"], done["attempts"]) == ("succeeded", 2), done
+            assert recovery < 60, recovery
+            got = job_motions(c, job["id"])
+            assert [m["step"] for m in got] == list(range(len(got)))
+            assert same_motions(got, killable_reference)
+            print(f"recovered {recovery:.1f} s after the SIGKILL")
     finally:
         st.stop()

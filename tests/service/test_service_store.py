@@ -184,6 +184,24 @@ def test_stranded_jobs(db):
         ids = store.stranded_jobs(s, runner="celery", queued_after=3600, running_after=0.0, limit=10**6)
         assert dead in ids
         assert never not in store.stranded_jobs(s, runner="local", queued_after=0, running_after=0, limit=10**6)
+    # dispatched before its lease expired (the original delivery): re-dispatched at once, whatever
+    # the gap; once re-dispatched for this expiry, not again within the gap
+    with db.read() as s:
+        assert dead in store.stranded_jobs(s, runner="celery", queued_after=3600, running_after=0.0,
+                                           redispatch_gap=3600, limit=10**6)
+    with db.write() as s:
+        store.mark_dispatched(s, job_id=dead)
+    with db.read() as s:
+        assert dead not in store.stranded_jobs(s, runner="celery", queued_after=3600, running_after=0.0,
+                                               redispatch_gap=3600, limit=10**6)
+        assert dead in store.stranded_jobs(s, runner="celery", queued_after=3600, running_after=0.0,
+                                           redispatch_gap=0.0, limit=10**6)
+    with db.write() as s:  # a fail_unfinished is final
+        assert store.fail_unfinished(s, job_id=dead, message="stopped")
+        assert not store.fail_unfinished(s, job_id=dead, message="again")
+    with db.read() as s:
+        assert dead not in store.stranded_jobs(s, runner="celery", queued_after=0, running_after=0, limit=10**6)
+        assert store.get_job(s, job_id=dead, owner=None).status == "failed"
 
 
 def test_concurrent_claims_only_one_wins(db):

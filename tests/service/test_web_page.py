@@ -19,7 +19,7 @@ import os
 import re
 import shutil
 from pathlib import Path
-from urllib.parse import urljoin
+from urllib.parse import urljoin, urlparse
 
 import numpy as np
 import pytest
@@ -104,6 +104,38 @@ def _state(page) -> dict:
     return page.evaluate("JSON.parse(JSON.stringify(window.motionx.state))")
 
 
+def _csp_violation(message, errors: list) -> None:
+    """The browser reports what the page's Content-Security-Policy blocked on the console."""
+    if message.type == "error" and "Content Security Policy" in message.text:
+        errors.append(message.text)
+
+
+def _open(browser, width: int, height: int):
+    """A new context and page; the requests it makes, and its errors (uncaught exceptions and
+    Content-Security-Policy violations)."""
+    context = browser.new_context(viewport={"width": width, "height": height})
+    page = context.new_page()
+    page.set_default_timeout(TIMEOUT_MS)
+    requests, errors = [], []
+    page.on("request", lambda req: requests.append(req.url))
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.on("console", lambda m: _csp_violation(m, errors))
+    return context, page, requests, errors
+
+
+def wait_js(page, expression: str, timeout: float = 30.0) -> None:
+    """Polls ``expression`` until it is truthy. (``page.wait_for_function`` evaluates its
+    predicate with eval in the page, which the page's Content-Security-Policy forbids;
+    ``page.evaluate`` goes through the DevTools protocol.)"""
+    import time
+
+    deadline = time.monotonic() + timeout
+    while not page.evaluate(expression):
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout:g} s waiting for {expression}")
+        time.sleep(0.1)
+
+
 # ------------------------------------------------------------------ without a browser
 
 def test_page_and_vendor_files_are_served_locally(api):
@@ -145,12 +177,7 @@ def test_page_and_vendor_files_are_served_locally(api):
 def test_page_shows_progress_and_renders_the_character(api, browser, tutor_id):
     if not THREE_DIR.is_dir():
         _missing("three.js is not installed: run `npm ci` in service/web")
-    context = browser.new_context(viewport={"width": 1400, "height": 1000})
-    page = context.new_page()
-    page.set_default_timeout(TIMEOUT_MS)
-    requests, errors = [], []
-    page.on("request", lambda req: requests.append(req.url))
-    page.on("pageerror", lambda e: errors.append(str(e)))
+    context, page, requests, errors = _open(browser, 1400, 1000)
     try:
         page.goto(f"{api.base_url}/ui/#key={KEY_A}")
         assert "key=" not in page.url  # taken from the fragment, then out of the address bar
@@ -162,7 +189,7 @@ def test_page_shows_progress_and_renders_the_character(api, browser, tutor_id):
         page.click(f'#job-list button[data-id="{job_id}"]')
         job = wait_job(api.a, job_id, timeout=60)
         assert job["status"] == "succeeded", job
-        page.wait_for_function(f"window.motionx.state.jobStatus === 'succeeded' && "
+        wait_js(page, f"window.motionx.state.jobStatus === 'succeeded' && "
                                f"window.motionx.state.progressPoints === {len(job['progress'])} && "
                                f"window.motionx.state.jobMotions.length === {job['steps']}")
         assert page.text_content("#job-status") == "succeeded"
@@ -174,7 +201,7 @@ def test_page_shows_progress_and_renders_the_character(api, browser, tutor_id):
         last = page.locator("#job-motions button").last
         assert last.text_content().startswith("λ = 1")
         last.click()
-        page.wait_for_function("(s => s.previewReady && (s.grfLoaded || s.grfError) && s.validation)"
+        wait_js(page, "(s => s.previewReady && (s.grfLoaded || s.grfError) && s.validation)"
                                "(window.motionx.state)")
         state = _state(page)
         assert state["previewError"] is None and state["grfError"] is None, state
@@ -198,7 +225,7 @@ def test_page_shows_progress_and_renders_the_character(api, browser, tutor_id):
         assert hidden.std() > 2, "no ground grid"
 
         SCREENSHOT.parent.mkdir(parents=True, exist_ok=True)
-        page.wait_for_function("window.motionx.state.residualsLoaded || window.motionx.state.residualsError")
+        wait_js(page, "window.motionx.state.residualsLoaded || window.motionx.state.residualsError")
         page.screenshot(path=str(SCREENSHOT), full_page=True)
 
         # everything came from the API's own host
@@ -226,14 +253,15 @@ def test_page_without_three_says_so_and_keeps_working(api, browser, tutor_id):
     page.set_default_timeout(TIMEOUT_MS)
     errors = []
     page.on("pageerror", lambda e: errors.append(str(e)))
+    page.on("console", lambda m: _csp_violation(m, errors))
     try:
         page.goto(f"{api.base_url}/ui/")
         page.fill("#key-input", KEY_A)
         page.click("#key-form button[type=submit]")
         page.click(f'#job-list button[data-id="{job_id}"]')
-        page.wait_for_function("window.motionx.state.jobMotions.length > 0 && window.motionx.state.progressPoints > 0")
+        wait_js(page, "window.motionx.state.jobMotions.length > 0 && window.motionx.state.progressPoints > 0")
         page.locator("#job-motions button").first.click()
-        page.wait_for_function("(s => s.previewError && s.validation && (s.grfLoaded || s.grfError))"
+        wait_js(page, "(s => s.previewError && s.validation && (s.grfLoaded || s.grfError))"
                                "(window.motionx.state)")
         assert _state(page)["previewError"] == PREVIEW_UNAVAILABLE
         assert page.locator("#viewer-message").is_visible()
@@ -242,11 +270,39 @@ def test_page_without_three_says_so_and_keeps_working(api, browser, tutor_id):
         assert "plausible" in page.text_content("#validation")
 
         page.click(f'#motion-list button[data-id="{capture.json()["id"]}"]')
-        page.wait_for_function("(s => s.grfError && s.validation)(window.motionx.state)")
+        wait_js(page, "(s => s.grfError && s.validation)(window.motionx.state)")
         assert api.a.get(f"/motions/{capture.json()['id']}/plots/grf.png").status_code // 100 == 4
         assert page.locator("#grf-message").is_visible() and not page.locator("#grf-img").is_visible()
         assert page.text_content("#grf-message") == f"No plot: {_state(page)['grfError']}"
         assert "not plausible" in page.text_content("#validation")
         assert not errors, errors
+    finally:
+        context.close()
+
+
+def test_docs_page_is_swagger_ui_from_local_files(api, browser):
+    """/docs: Swagger UI from swagger-ui-dist (npm), every request to the API's own host, no
+    Content-Security-Policy violation, and the operations of the OpenAPI document listed."""
+    r = api.anon.get("/docs")
+    assert r.status_code == 200 and r.headers["content-type"].startswith("text/html")
+    for h in ("content-security-policy", "x-content-type-options", "x-frame-options"):
+        assert h in r.headers, h
+    assert "script-src 'self'" in r.headers["content-security-policy"]
+    assert not re.findall(r"https?://", r.text)  # no CDN
+    if not (STATIC_DIR.parent / "node_modules" / "swagger-ui-dist").is_dir():
+        assert "npm ci" in r.text
+        _missing("swagger-ui-dist is not installed: run `npm ci` in service/web")
+    for f in ("swagger-ui-bundle.js", "swagger-ui.css"):
+        assert api.anon.get(f"/docs/static/{f}").status_code == 200
+    assert api.anon.get("/docs/static/package.json").status_code == 404
+    context, page, requests, errors = _open(browser, 1200, 900)
+    try:
+        page.goto(f"{api.base_url}/docs")
+        wait_js(page, "document.querySelectorAll('.opblock').length >= 10")
+        text = page.text_content("#swagger-ui")
+        assert "/motions/{motion_id}/extrapolate" in text and "motionx" in text
+        assert not errors, errors
+        hosts = {urlparse(u).netloc for u in requests if urlparse(u).scheme in ("http", "https")}
+        assert hosts == {urlparse(api.base_url).netloc}, hosts
     finally:
         context.close()
