@@ -1,7 +1,7 @@
 """Plausibility of a motion, with the root residual recomputed independently by MuJoCo.
 
-MuJoCo replay: the motion's coordinates (velocities and accelerations by the same central
-differences) go through ``mj_inverse`` on the MJCF generated from the motion's character,
+MuJoCo replay: the motion's coordinates, velocities and accelerations at its dynamics samples
+(``solver.trajectory``: frames and midpoints of its spline, or central differences) go through ``mj_inverse`` on the MJCF generated from the motion's character,
 with the contact wrenches applied to the feet (``mj_applyFT``). What the six root joints
 still need is the residual wrench; it must vanish, and agree with ours.
 """
@@ -13,23 +13,22 @@ from typing import Any
 import numpy as np
 
 from mjcf.replay import MujocoReplay
-from solver.kinematics import finite_differences
 from solver.motion import FEET, Motion
 from solver.plausibility import Tolerances, about_root, environment_of, report, root_residual
+from solver.trajectory import dynamics_samples
 
 
 def mujoco_residual(motion: Motion) -> np.ndarray:
-    """(6, T-2) residual root wrench from MuJoCo, moment about the root position."""
+    """(6, S) residual root wrench from MuJoCo at the dynamics samples, moment about the root position."""
     env = environment_of(motion)
     ch = motion.character
     replay = MujocoReplay.create(ch, env["gravity"])
-    q = motion.q
-    qd, qdd = finite_differences(q, motion.dt)
+    s = dynamics_samples(motion)
     fext = None
-    if motion.wrenches is not None:
-        fext = {ch.foot(side).segment: motion.wrenches[k][:, 1:-1] for k, side in enumerate(FEET)}
-    _, h0 = replay.inverse(q[:, 1:-1], qd, qdd, fext)
-    return about_root(h0, q[:, 1:-1])
+    if s.wrenches is not None:
+        fext = {ch.foot(side).segment: s.wrenches[k] for k, side in enumerate(FEET)}
+    _, h0 = replay.inverse(s.q, s.qd, s.qdd, fext)
+    return about_root(h0, s.q)
 
 
 def validate(motion: Motion, tol: Tolerances = Tolerances()) -> dict[str, Any]:

@@ -316,18 +316,19 @@ def grf_png(motion) -> bytes:
 
 @dataclass(frozen=True, eq=False)
 class ResidualSeries:
-    """Per interior frame (central differences), the root residual of the equations of
+    """At the motion's dynamics samples (frames and midpoints of its spline, or interior frames
+    by central differences: ``solver.trajectory``), the root residual of the equations of
     motion: h0(q, q̇, q̈, g) − Σ contact wrenches, moment about the root position.
 
     ``ours`` from our RNEA (``solver.plausibility.root_residual``), ``mujoco`` from MuJoCo's
-    ``mj_inverse`` replay (``mjcf.validate.mujoco_residual``), both (6, T-2) as (moment; force).
+    ``mj_inverse`` replay (``mjcf.validate.mujoco_residual``), both (6, S) as (moment; force).
     ``*_force_rel`` is the largest force component / body weight per frame, ``*_moment_rel``
     the largest moment component / (body weight × leg length): their maxima over the
     frames are the plausibility report's ``max_force_rel_weight`` and
     ``max_moment_rel_weight_leg``.
     """
 
-    time: np.ndarray  # (T-2,) s
+    time: np.ndarray  # (S,) s
     ours: np.ndarray
     mujoco: np.ndarray
     weight_N: float
@@ -359,7 +360,9 @@ def residual_series(motion) -> ResidualSeries:
     motion = _motion_with_wrenches(motion)
     ours = root_residual(motion, environment_of(motion)["gravity"])
     mj = mujoco_residual(motion)
-    return ResidualSeries(time=motion.times[1:-1], ours=ours, mujoco=mj, weight_N=body_weight(motion),
+    from solver.trajectory import dynamics_samples
+
+    return ResidualSeries(time=dynamics_samples(motion).time, ours=ours, mujoco=mj, weight_N=body_weight(motion),
                           leg_m=standing_leg_length(motion.character))
 
 
@@ -391,7 +394,8 @@ def residuals_png(motion, tolerance: float = 1e-6) -> bytes:
         ax.grid(alpha=0.3, which="major")
     handles, labels = axes[0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=8, frameon=False)
-    axes[-1].set_xlabel("time (s), interior frames")
+    axes[-1].set_xlabel("time (s), frames and midpoints" if motion.interpolation == "cubic-spline"
+                        else "time (s), interior frames")
     fig.suptitle(f"root residual of the equations of motion: h0 − Σ contact wrenches\n{motion_caption(motion)}",
                  fontsize=10)
     fig.tight_layout(rect=(0, 0.05, 1, 1))

@@ -1,13 +1,18 @@
 """Motions: immutable (character, fps, Q n×T, contact schedule, contact wrenches) values.
 
-The *motion file v1* (JSON; schema in ``solver/schemas/motion-v1.schema.json``) stores one
-motion, self-contained: the character is either a reference name or its full
+The *motion file v2* (JSON; schema in ``solver/schemas/motion-v2.schema.json``, which also
+reads version 1 files) stores one motion, self-contained: the character is either a reference name or its full
 description (characters scaled to a subject are not reference characters).
 
 Contact wrenches are per foot and frame, spatial forces in the **world frame** (Z up),
 ordered (mx, my, mz, fx, fy, fz), the moment taken **about the world origin** — the
 convention of the dynamics (SPEC 4.7): the sum of the two feet's wrenches equals the
 root wrench h0 of a plausible motion.
+
+Version 2 adds ``trajectory``: how the motion continues between its frames (see
+``solver.trajectory``): the optimizer's motions are C² cubic splines through their frames
+(periodic for a gait cycle), whose equations of motion hold at the frames and midpoints;
+version 1 files mean central differences.
 """
 
 from __future__ import annotations
@@ -25,10 +30,10 @@ import numpy as np
 from solver.character import REFERENCE, Character, CharacterError, character_from_dict, character_to_dict, reference
 
 FORMAT = "motionx.motion"
-VERSION = 1
+VERSION = 2
 FEET = ("right", "left")
 WRENCH_ORDER = ("mx", "my", "mz", "fx", "fy", "fz")
-SCHEMA_PATH = Path(__file__).with_name("schemas") / "motion-v1.schema.json"
+SCHEMA_PATH = Path(__file__).with_name("schemas") / "motion-v2.schema.json"
 MAX_FRAMES = 100_000
 #: Physical ranges checked at construction (generous for human motion capture, tight enough
 #: that every derived quantity — velocities, exports in cm, residuals — stays finite):
@@ -71,6 +76,10 @@ class Motion:
     provenance: Mapping[str, Any] = field(default_factory=dict)
     report: Mapping[str, Any] | None = None
     reference_name: str | None = None  # set when ``character`` is an unmodified reference character
+    #: how the motion continues between frames (``solver.trajectory``): "central-differences"
+    #: (file v1, captures) or "cubic-spline" (the spacetime optimizer's C² spline)
+    interpolation: str = "central-differences"
+    cyclic: bool = False  # a gait cycle: frames T-2, T-1 repeat frames 0, 1 (under the cycle's transform)
 
     def __post_init__(self) -> None:
         if not (isinstance(self.fps, (int, float)) and math.isfinite(self.fps) and self.fps > 0):
@@ -112,6 +121,11 @@ class Motion:
                 if big > limit:
                     raise MotionError(f"contact {what} {big:.6g} is outside the physical range (at most {limit:g})")
             object.__setattr__(self, "wrenches", _frozen(w))
+        if self.interpolation not in ("central-differences", "cubic-spline"):
+            raise MotionError(f"unknown interpolation {self.interpolation!r}")
+        if self.cyclic and T < 5:
+            raise MotionError(f"a cyclic motion needs at least 5 frames, got {T}")
+        object.__setattr__(self, "cyclic", bool(self.cyclic))
         object.__setattr__(self, "provenance", dict(self.provenance))
         if self.report is not None:
             object.__setattr__(self, "report", dict(self.report))
@@ -149,7 +163,7 @@ class Motion:
         """A new motion with some fields replaced (motions are immutable)."""
         return replace(self, **changes)
 
-    # --- motion file v1 -------------------------------------------------------------
+    # --- motion file v2 -------------------------------------------------------------
     def to_dict(self) -> dict:
         ch = self.character
         d: dict[str, Any] = {
@@ -164,6 +178,7 @@ class Motion:
             "coordinates": list(ch.coordinate_names),
             "units": {"slide": "m", "hinge": "rad"},
             "frames": self.q.T.tolist(),
+            "trajectory": {"interpolation": self.interpolation, "cyclic": bool(self.cyclic)},
         }
         if self.contacts is not None:
             d["contacts"] = {
@@ -316,7 +331,9 @@ def motion_from_dict(d: Any) -> Motion:
             wrenches = np.stack([np.asarray(w["feet"][f], dtype=float).T for f in FEET])
         except ValueError:
             raise MotionError("wrenches.feet must hold one 6-vector per frame for each foot") from None
+    traj = (d.get("trajectory") or {}) if d.get("version") == 2 else {}
     return Motion(
         character=ch, fps=float(d["fps"]), q=q, contacts=contacts, wrenches=wrenches,
         provenance=d.get("provenance", {}), report=d.get("report"), reference_name=ref,
+        interpolation=traj.get("interpolation", "central-differences"), cyclic=bool(traj.get("cyclic", False)),
     )

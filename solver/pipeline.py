@@ -146,12 +146,22 @@ def simplify(capture_character: Character, q_capture: np.ndarray, synthesis: Cha
 
 def correct(synthesis: Character, q_sim: np.ndarray, contacts: np.ndarray, fps: float, *,
             init_wrenches: np.ndarray | None, env: Environment = Environment(),
-            weights: Weights = Weights(), max_iter: int = 1000) -> SolveResult:
+            weights: Weights = Weights(), max_iter: int = 1000, heading_change: float | None = None) -> SolveResult:
     """Table 5.3: physically plausible motion closest to the simplified one (the tutor)."""
     problem = problem_for(synthesis, q_sim.shape[1], fps, contacts)
     return problem.solve(q_sim, init_q=q_sim, init_wrenches=init_wrenches, env=env, weights=weights,
-                         max_iter=max_iter)
+                         max_iter=max_iter, heading_change=heading_change)
 
+
+def tutor_heading_change(q: np.ndarray) -> float:
+    """The tutor's heading change over its cycle (rad): the capture's, or exactly 0 for a walk
+    that turns less than ``STRAIGHT_WALK_DEG`` (a straight walk's drift is not a curve)."""
+    dpsi = float(q[3, -2] - q[3, 0])
+    return 0.0 if abs(math.degrees(dpsi)) < STRAIGHT_WALK_DEG else dpsi
+
+
+#: a captured cycle turning less than this (degrees) becomes a straight tutor
+STRAIGHT_WALK_DEG = 10.0
 
 _PROBLEMS: dict[tuple, SpacetimeProblem] = {}
 _MAX_CACHED = 8
@@ -253,11 +263,15 @@ def make_tutor(
     t = time.perf_counter()
     env = Environment()
     attempts = []
-    res = correct(syn, q_sim, contacts, fps, init_wrenches=w0, env=env, max_iter=max_iter)
+    dpsi = tutor_heading_change(q_sim)
+    stats["heading_change_deg"] = {"capture": math.degrees(float(q_sim[3, -2] - q_sim[3, 0])),
+                                   "tutor": math.degrees(dpsi)}
+    res = correct(syn, q_sim, contacts, fps, init_wrenches=w0, env=env, max_iter=max_iter, heading_change=dpsi)
     attempts.append({"init": "estimated wrenches", "status": res.status, "iterations": res.iterations,
                      "time_s": res.wall_time})
     if not res.success:
-        res2 = correct(syn, q_sim, contacts, fps, init_wrenches=None, env=env, max_iter=max_iter)
+        res2 = correct(syn, q_sim, contacts, fps, init_wrenches=None, env=env, max_iter=max_iter,
+                       heading_change=dpsi)
         attempts.append({"init": "zero wrenches", "status": res2.status, "iterations": res2.iterations,
                          "time_s": res2.wall_time})
         res = res2 if res2.success else res
@@ -280,13 +294,14 @@ def make_tutor(
     stats["marker_distance_to_capture_mm"] = {"mean": 1e3 * float(dist.mean()), "max": 1e3 * float(dist.max())}
     stats["marker_distance_to_simplified_mm"] = 1e3 * res.marker_rms
     tutor = Motion(
-        syn, fps, res.q, contacts=contacts, wrenches=res.wrenches,
+        syn, fps, res.q, contacts=contacts, wrenches=res.wrenches, interpolation="cubic-spline", cyclic=True,
         provenance=jsonable({
             "step": "tutor",
             "source": src_prov,
             "frame": _shifted_frame(capture.frame, stats.get("contact_plane_shift_mm", 0.0) / 1e3).to_dict(),
             "lambda": 0.0,
             "environment": env.to_dict(),
+            "heading_change_deg": math.degrees(dpsi),
             "solver": {"name": "ipopt", "status": res.status, "iterations": res.iterations,
                        "time_s": res.wall_time},
             "pipeline": stats,

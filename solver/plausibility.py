@@ -1,8 +1,9 @@
 """Plausibility report of a motion (SPEC §9): how well it satisfies the constraints of §6.
 
-Residuals are measured at the interior frames (where central differences define q̈):
-the root residual is h0(q, q̇, q̈, g) minus the sum of the contact wrenches — zero for a
-physically plausible motion. Moments are reported about the root (pelvis) position of
+Residuals are measured where the motion's own trajectory defines q̇ and q̈
+(``solver.trajectory.dynamics_samples``: frames and midpoints of the C² cubic spline for the
+optimizer's motions, interior frames by central differences for file v1): the root residual is
+h0(q, q̇, q̈, g) minus the sum of the contact wrenches — zero for a physically plausible motion. Moments are reported about the root (pelvis) position of
 each frame, so they do not depend on where the world origin is.
 """
 
@@ -14,8 +15,9 @@ from typing import Any, Mapping
 import numpy as np
 
 from solver.dynamics import rnea
-from solver.kinematics import contact_points, finite_differences, segment_frames, standing_leg_length
+from solver.kinematics import contact_points, segment_frames, standing_leg_length
 from solver.motion import FEET, Motion
+from solver.trajectory import dynamics_samples
 
 
 @dataclass(frozen=True)
@@ -36,13 +38,12 @@ def environment_of(motion: Motion) -> dict:
 
 
 def root_residual(motion: Motion, gravity: Any) -> np.ndarray:
-    """(6, T-2): h0 − Σ wrenches at the interior frames, moment about the root position."""
-    q = motion.q
-    qd, qdd = finite_differences(q, motion.dt)
-    h0 = rnea(motion.character, q[:, 1:-1], qd, qdd, np.asarray(gravity, dtype=float)).h0
-    if motion.wrenches is not None:
-        h0 = h0 - motion.wrenches[:, :, 1:-1].sum(axis=0)
-    return about_root(h0, q[:, 1:-1])
+    """(6, S): h0 − Σ wrenches at the motion's dynamics samples, moment about the root position."""
+    s = dynamics_samples(motion)
+    h0 = rnea(motion.character, s.q, s.qd, s.qdd, np.asarray(gravity, dtype=float)).h0
+    if s.wrenches is not None:
+        h0 = h0 - s.wrenches.sum(axis=0)
+    return about_root(h0, s.q)
 
 
 def about_root(wrench: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -76,7 +77,8 @@ def report(motion: Motion, tol: Tolerances = Tolerances()) -> dict:
             "max_force_rel_weight": float(np.abs(res[3:]).max() / weight),
             "max_moment_rel_weight_leg": float(np.abs(res[:3]).max() / (weight * leg)),
             "about": "root position of each frame",
-            "frames": "interior (central differences)",
+            "frames": ("frames and midpoints (C2 cubic spline)" if motion.interpolation == "cubic-spline"
+                       else "interior (central differences)"),
         },
         "tolerances": asdict(tol),
     }

@@ -1,0 +1,17 @@
+"""Spacetime optimization of a motion (SPEC §6) with CasADi + IPOPT: a realistic transcription
+(C² cubic spline, dynamics at frames and midpoints) of named terms with exact sparse derivatives.
+
+* ``types``: Environment, Weights, Realism bounds, SolveResult, IPOPT defaults;
+* ``frame``: the generic functions of a frame, a pair of frames, a spline segment;
+* ``derivatives``: the mapped-derivative scatter engine;
+* ``problem``: the NLP of one structure, re-solved with new parameters.
+"""
+
+from solver.spacetime.derivatives import MAP_THREADS
+from solver.spacetime.frame import FrameFunctions, frame_functions
+from solver.spacetime.problem import MARKER_SCALE, ROOT_PERIODIC, SpacetimeProblem
+from solver.spacetime.types import (DEFAULT_IPOPT, STANDARD_GRAVITY, SUCCESS_STATUSES, Environment, Realism,
+                                    SolveResult, Weights)
+
+__all__ = ["DEFAULT_IPOPT", "MAP_THREADS", "MARKER_SCALE", "ROOT_PERIODIC", "STANDARD_GRAVITY", "SUCCESS_STATUSES",
+           "Environment", "FrameFunctions", "Realism", "SolveResult", "SpacetimeProblem", "Weights", "frame_functions"]

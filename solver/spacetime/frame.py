@@ -1,0 +1,243 @@
+"""Generic functions of one frame, one pair of frames or one spline segment (built once per
+character), with their exact derivatives: the building blocks of the spacetime NLP.
+
+Wrenches are scaled (force / body weight W, moment / (W × leg length L)) and taken about a
+per-frame reference point on the ground under each foot, so they are O(1).
+
+The trajectory is the C² cubic spline through the frames (``solver.trajectory``): with knot
+velocities v, the segment [a, b] of duration h is the Hermite cubic of (q_a, v_a, q_b, v_b).
+"""
+
+from __future__ import annotations
+
+import time
+import weakref
+
+import casadi as ca
+import numpy as np
+
+from solver import spatial as sp
+from solver.character import Character
+from solver.dynamics import casadi_functions
+from solver.kinematics import forward_kinematics, marker_points, markers, point_world, standing_leg_length
+from solver.motion import FEET
+from solver.spacetime.derivatives import jacobian, lagrangian_hessian
+from solver.spacetime.types import STANDARD_GRAVITY, Realism
+
+FOOT_ROWS = 11  # per foot: friction cone, 6 CoP half-spaces, 2 torsion, 2 free-moment cap
+CONE_EPS = 1e-4  # smoothing of the friction cone's norm (scaled force units)
+
+
+def rz(turn, v):
+    """Rotate the 3-vector ``v`` about the vertical by ``turn`` (symbolic)."""
+    c, s = ca.cos(turn), ca.sin(turn)
+    return ca.vertcat(c * v[0] - s * v[1], s * v[0] + c * v[1], v[2])
+
+
+class FrameFunctions:
+    """Generic SX functions and their derivatives for one character."""
+
+    #: name -> (number of variable inputs, number of them the Hessian involves)
+    VARS = {"cost": (1, 1), "z": (1, 1), "slip": (2, 2), "feet": (2, 2), "seg": (6, 4), "c2": (5, 5),
+            "jerk": (4, 4), "wrate": (2, 2), "frate": (2, 2), "smooth": (3, 3)}
+
+    def __init__(self, character: Character, realism: Realism = Realism()) -> None:
+        t0 = time.perf_counter()
+        ch = self.character = character
+        self.realism = realism
+        n = self.n = ch.n
+        model = ch.model
+        self.n_markers = len(marker_points(ch))
+        P = self.P = len(ch.contacts)
+        self.weight_scale = ch.total_mass * STANDARD_GRAVITY
+        self.length_scale = standing_leg_length(ch)
+        self.moment_scale = self.weight_scale * self.length_scale
+
+        q = ca.SX.sym("q", n)
+        pose = forward_kinematics(ch, q)
+        mk = markers(ch, q)
+        pts = []
+        for c in ch.contacts:
+            b, pb = model.point_on_body(c.segment, c.position)
+            pts.append(ca.vertcat(*point_world(pose, b, pb)))
+        self.kin = ca.Function("kin", [q], [mk, ca.vertcat(*pts) if pts else ca.SX(0, 1)])
+
+        # objective of a frame: wts = (markers, singularity, coordinates prior)
+        gm = ca.SX.sym("gm", 3 * self.n_markers)
+        wts = ca.SX.sym("wts", 3)
+        gq = ca.SX.sym("gq", n)
+        cost = wts[0] * ca.sumsqr(mk - gm) + wts[2] * ca.sumsqr(q[6:] - gq[6:])
+        sing = list(ch.singular_dofs)
+        if sing:
+            cost += wts[1] * sum((1 - ca.cos(2 * q[i])) / 2 for i in sing)
+        self.n_sing = len(sing)
+        self.cost = ca.Function("cost", [q, gm, gq, wts], [cost])
+        self.marker_cost = ca.Function("marker_cost", [q, gm], [ca.sumsqr(mk - gm)])
+
+        self.has_contacts = P > 0 and len(ch.feet) == 2
+        if self.has_contacts:
+            self._contact_functions(q, pose, pts)
+            self._segment_functions()
+        self.derivatives = {name: (lagrangian_hessian(fn, self.VARS[name][1]), jacobian(fn, self.VARS[name][0]))
+                            for name, fn in self.functions().items()}
+        self.build_time = time.perf_counter() - t0
+
+    def functions(self) -> dict[str, ca.Function]:
+        out = {"cost": self.cost}
+        if self.has_contacts:
+            out.update({"z": self.z, "slip": self.slip, "feet": self.feet, "seg": self.seg, "c2": self.c2,
+                        "jerk": self.jerk, "wrate": self.wrate, "frate": self.frate,
+                        "smooth": self.smooth})
+        return out
+
+    # --- contact rows ---------------------------------------------------------------------
+    def _foot_indices(self) -> None:
+        ch = self.character
+        self.heel_of: dict[str, int] = {}
+        self.toe_of: dict[str, int] = {}
+        for side in FEET:
+            idx = [j for j, c in enumerate(ch.contacts) if c.side == side]
+            if len(idx) != 2:
+                raise ValueError(f"the {side} foot needs exactly two contact points (heel, toe)")
+            xs = [ch.contacts[j].position[0] for j in idx]
+            self.heel_of[side] = idx[int(np.argmin(xs))]
+            self.toe_of[side] = idx[int(np.argmax(xs))]
+
+    def _contact_functions(self, q: ca.SX, pose, pts: list) -> None:
+        ch = self.character
+        model = ch.model
+        rl = self.realism
+        self._foot_indices()
+        self.z = ca.Function("z", [q], [ca.vertcat(*[p[2] for p in pts])])
+
+        # no slip between consecutive frames (x, y of pinned points; the toe's sideways
+        # component when the heel is pinned too), and no spin of each foot about the vertical
+        qb = ca.SX.sym("qb", ch.n)
+        pose_b = forward_kinematics(ch, qb)
+        pts_b = self.kin(qb)[1]
+        rows = [pts_b[3 * j : 3 * j + 2] - pts[j][:2] for j in range(self.P)]
+        for side in FEET:
+            h, t = self.heel_of[side], self.toe_of[side]
+            axis = pts[t][:2] - pts[h][:2]
+            perp = ca.vertcat(-axis[1], axis[0]) / ca.sqrt(ca.sumsqr(axis))
+            rows.append(ca.dot(pts_b[3 * t : 3 * t + 2] - pts[t][:2], perp))
+        for side in FEET:  # z of the rotation vector of R_b R_aᵀ (world): sin of the turn about the vertical
+            body = model.seg_body[ch.foot(side).segment]
+            Ra, Rb = pose.rot[body], pose_b.rot[body]
+            m10 = sum(Rb[1][k] * Ra[0][k] for k in range(3))
+            m01 = sum(Rb[0][k] * Ra[1][k] for k in range(3))
+            rows.append((m10 - m01) / 2)
+        self.slip = ca.Function("slip", [q, qb], [ca.vertcat(*rows)])  # 2P + 4 rows
+
+        # feet: friction cone, CoP box, torsional friction, free-moment cap; support (last row)
+        w = ca.SX.sym("w", 12)
+        mu = ca.SX.sym("mu")
+        ref = ca.SX.sym("ref", 4)
+        L = self.length_scale
+        rows = []
+        for k, side in enumerate(FEET):
+            foot = ch.foot(side)
+            body = model.seg_body[foot.segment]
+            rot_box = model.seg_rot[foot.segment]
+            center = model.seg_pos[foot.segment] + rot_box @ foot.center
+            r_box = sp.matmul(pose.rot[body], sp.const_mat(rot_box))
+            R = ca.vertcat(*[ca.horzcat(*r_box[i]) for i in range(3)])
+            pc = ca.vertcat(*point_world(pose, body, center))
+            wk = w[6 * k : 6 * k + 6]
+            ns, fs = wk[:3], wk[3:]
+            nmom = ns * self.moment_scale
+            fz = fs[2] * self.weight_scale
+            rows.append(mu * fs[2] - ca.sqrt(fs[0] ** 2 + fs[1] ** 2 + CONE_EPS**2))
+            fu = ca.vertcat(fz * ref[2 * k] - nmom[1], fz * ref[2 * k + 1] + nmom[0], 0)
+            local = ca.mtimes(R.T, fu - fz * pc) / self.weight_scale
+            for kk in range(3):
+                rows.append(foot.half[kk] * fs[2] - local[kk])
+                rows.append(foot.half[kk] * fs[2] + local[kk])
+            # free moment at the CoP times f_z: τ f_z = n·f (moment about a ground point), scaled by W·M
+            nf = ca.dot(ns, fs)
+            rho = rl.torsion_radius_fraction * 2 * float(np.max(foot.half[:2]))
+            ktor = rl.torsion_margin * rho / L
+            rows += [ktor * mu * fs[2] ** 2 - nf, ktor * mu * fs[2] ** 2 + nf]
+            cap = rl.free_moment_cap / L
+            rows += [cap * fs[2] - nf, cap * fs[2] + nf]
+        rows.append(rl.support_max - w[5] - w[11])
+        self.feet = ca.Function("feet", [q, w, mu, ref], [ca.vertcat(*rows)])  # 2 * FOOT_ROWS + 1
+
+    # --- spline segments --------------------------------------------------------------------
+    def _segment_functions(self) -> None:
+        n = self.n
+        h0fn = casadi_functions(self.character)["h0"]
+        qa, va, qb, vb = (ca.SX.sym(s, n) for s in ("qa", "va", "qb", "vb"))
+        wa, wb = ca.SX.sym("wa", 12), ca.SX.sym("wb", 12)
+        g, h, turn = ca.SX.sym("g", 3), ca.SX.sym("h"), ca.SX.sym("turn")
+        ra, rb = ca.SX.sym("ra", 4), ca.SX.sym("rb", 4)
+        anc_a, anc_b = ca.SX.sym("anc_a", 3), ca.SX.sym("anc_b", 3)
+        M, W = self.moment_scale, self.weight_scale
+
+        def ground(wv, ref, tr):
+            """Total ground wrench about the origin (moment, force) of both feet, turned by tr."""
+            n_o, f_o = ca.SX.zeros(3), ca.SX.zeros(3)
+            for k in range(2):
+                wk = wv[6 * k : 6 * k + 6]
+                nk, fk = rz(tr, wk[:3]) * M, rz(tr, wk[3:]) * W
+                r = ca.vertcat(ref[2 * k], ref[2 * k + 1], 0)
+                n_o += nk + ca.cross(r, fk)
+                f_o += fk
+            return n_o, f_o
+
+        def residual(h0, n_g, f_g, anchor):
+            dn, df = h0[:3] - n_g, h0[3:] - f_g
+            return ca.vertcat((dn - ca.cross(anchor, df)) / M, df / W)
+
+        acc_a = 6 * (qb - qa) / h**2 - (4 * va + 2 * vb) / h
+        qm = (qa + qb) / 2 + h * (va - vb) / 8
+        vm = 1.5 * (qb - qa) / h - (va + vb) / 4
+        am = (vb - va) / h
+        na, fa = ground(wa, ra, 0)
+        nb, fb = ground(wb, rb, turn)
+        out = ca.vertcat(residual(h0fn(qa, va, acc_a, g), na, fa, anc_a),
+                         residual(h0fn(qm, vm, am, g), (na + nb) / 2, (fa + fb) / 2, (anc_a + anc_b) / 2))
+        self.seg = ca.Function("seg", [qa, va, qb, vb, wa, wb, g, h, ra, rb, anc_a, anc_b, turn], [out])
+
+        # C² continuity at a knot: v_{k-1} + 4 v_k + v_{k+1} = 3 (q_{k+1} - q_{k-1}) / h
+        qm_, qp_, vm_, v0_, vp_ = (ca.SX.sym(s, n) for s in ("qm", "qp", "vm", "v0", "vp"))
+        self.c2 = ca.Function("c2", [qm_, qp_, vm_, v0_, vp_, h], [(vm_ + 4 * v0_ + vp_) * h - 3 * (qp_ - qm_)])
+
+        # jerk of the rotations over a segment (constant on a cubic), × h³: rad
+        wj = ca.SX.sym("wj")
+        jerk = 12 * (qa - qb) + 6 * h * (va + vb)
+        self.jerk = ca.Function("jerk", [qa, va, qb, vb, h, wj], [wj * ca.sumsqr(jerk[3:])])
+
+        # change of each foot's (scaled) wrench between frames, and of the total ground force
+        ww = ca.SX.sym("ww")
+        dw = ca.vertcat(*[rz(turn, wb[3 * i : 3 * i + 3]) - wa[3 * i : 3 * i + 3] for i in range(4)])
+        self.wrate = ca.Function("wrate", [wa, wb, turn, ww], [ww * ca.sumsqr(dw)])
+        dF = rz(turn, wb[3:6] + wb[9:12]) - (wa[3:6] + wa[9:12])
+        self.frate = ca.Function("frate", [wa, wb, turn], [ca.sumsqr(dF)])
+
+        # second difference over three frames of the total ground force and of its moment about
+        # the centre of mass (per-frame parameter): whole-body Newton–Euler from positions sees
+        # m (a_{k-1} - 2 a_k + a_{k+1}) / 6 between the spline's accelerations and the positions'
+        # second differences, so these must stay small for the motion to be realistic
+        wc, rc = ca.SX.sym("wc", 12), ca.SX.sym("rc", 4)
+        com_a, com_b, com_c = ca.SX.sym("com_a", 3), ca.SX.sym("com_b", 3), ca.SX.sym("com_c", 3)
+        ta, tc = ca.SX.sym("ta"), ca.SX.sym("tc")
+        tot = []
+        for wv, ref, tr, com in ((wa, ra, ta, com_a), (wb, rb, 0, com_b), (wc, rc, tc, com_c)):
+            n_o, f_o = ground(wv, ref, tr)
+            tot.append((n_o - ca.cross(com, f_o), f_o))
+        d2n = (tot[0][0] - 2 * tot[1][0] + tot[2][0]) / M
+        d2f = (tot[0][1] - 2 * tot[1][1] + tot[2][1]) / W
+        self.smooth = ca.Function("smooth", [wa, wb, wc, ra, rb, rc, com_a, com_b, com_c, ta, tc],
+                                  [ca.vertcat(ca.sumsqr(d2f), ca.sumsqr(d2n))])
+
+
+_FRAME_CACHE: "weakref.WeakKeyDictionary[Character, FrameFunctions]" = weakref.WeakKeyDictionary()
+
+
+def frame_functions(character: Character) -> FrameFunctions:
+    ff = _FRAME_CACHE.get(character)
+    if ff is None:
+        ff = FrameFunctions(character)
+        _FRAME_CACHE[character] = ff
+    return ff

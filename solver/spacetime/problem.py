@@ -1,0 +1,605 @@
+"""The spacetime NLP of one structure (SPEC §6, eq. 5.29), transcribed so that the physics
+holds along the motion, not only at the frames; re-solved with new parameter values.
+
+Structure: character, number of frames T, frame rate, contact schedule, dynamics on/off.
+Parameters: guide markers and coordinates, gravity, friction, weights, the cycle's heading
+change Δψ, per-frame reference points of the contact wrenches.
+
+**Transcription** (docs/spacetime.md). The motion is the C² cubic spline through its frames
+(periodic over the gait cycle): the knot velocities v are variables, tied to the coordinates by
+the spline's banded continuity equations. The whole-body equations of motion hold at every
+frame and at every midpoint between frames (ground wrench at a midpoint: the mean of its
+frames'). A frame-to-frame zig-zag is thus seen by the dynamics between the frames, and cannot
+be balanced by zig-zagging forces: the ground wrenches change by bounded amounts per frame,
+with a cost on their change, and the coordinates' jerk has a small cost.
+
+Variables: q (n × T, with the two overlap frames of the cycle eliminated for joints, root
+height, pitch and roll), v (same, yaw rate included), and one scaled wrench per foot at the
+frames 1..T−2. Constraints:
+
+* joint limits (bounds); the cycle: yaw[T−2] = yaw[0] + Δψ exactly (the curve is a constraint),
+  horizontal displacement and velocity periodic in the walker's heading frame;
+* contacts: active points on the ground, inactive above; pinned points do not slide; a foot in
+  contact does not spin about the vertical faster than ``Realism.spin_rate_deg_s``;
+* feet in contact: friction cone, CoP in the foot box, torsional friction |τ| ≤ 0.95 μ ρ f_z
+  and |τ| ≤ 0.025 BW·m; total normal force ≤ 1.95 BW; total ground force change per frame
+  bounded; a foot not in contact carries nothing (bounds);
+* equations of motion at the frames 1..T−2 and the midpoints after them (one cycle of each).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from typing import Any, Mapping
+
+import casadi as ca
+import numpy as np
+
+from solver.character import Character
+from solver.kinematics import contact_points, markers
+from solver.motion import FEET, foot_schedule_of
+from solver.spacetime.derivatives import Term, assemble
+from solver.spacetime.frame import FOOT_ROWS, frame_functions
+from solver.spacetime.types import (DEFAULT_IPOPT, SUCCESS_STATUSES, Environment, SolveResult, Weights)
+from solver.trajectory import spline_velocities
+
+log = logging.getLogger(__name__)
+
+#: root coordinates that repeat over a cycle (root_tz, pitch, roll); x, y, yaw: under the cycle's transform
+ROOT_PERIODIC = (2, 4, 5)
+YAW = 3
+MARKER_SCALE = 0.01  # m: the objective is in units of (1 cm)²
+P_LAYOUT = ("gm", "gq", "g", "mu", "wts", "ref", "anchor", "dpsi", "com")
+
+
+def _heading(vx, vy, psi):
+    c, s = ca.cos(psi), ca.sin(psi)
+    return ca.vertcat(c * vx + s * vy, -s * vx + c * vy)
+
+
+def _cyclic_root_function(dynamics: bool) -> ca.Function:
+    """Rows tying frames T−2, T−1 to frames 0, 1 for x, y, yaw (and their velocities)."""
+    z = ca.SX.sym("z", 20 if dynamics else 12)
+    dpsi = ca.SX.sym("dpsi")
+    xa, ya, yaw = z[0:4], z[4:8], z[8:12]  # frames (0, 1, T−2, T−1)
+    rows = [_heading(xa[3] - xa[2], ya[3] - ya[2], yaw[2]) - _heading(xa[1] - xa[0], ya[1] - ya[0], yaw[0])]
+    if dynamics:
+        vx, vy = z[12:16], z[16:20]
+        rows += [yaw[2] - yaw[0] - dpsi, yaw[3] - yaw[1] - dpsi,
+                 _heading(vx[2], vy[2], yaw[2]) - _heading(vx[0], vy[0], yaw[0]),
+                 _heading(vx[3], vy[3], yaw[3]) - _heading(vx[1], vy[1], yaw[1])]
+    else:  # kinematic fit: the yaw rate repeats, the turn follows the capture
+        rows.append((yaw[3] - yaw[2]) - (yaw[1] - yaw[0]))
+    return ca.Function("cyc", [z, dpsi], [ca.vertcat(*rows)])
+
+
+class SpacetimeProblem:
+    """The NLP of SPEC 5.29 for one structure; solve it many times with new parameters."""
+
+    def __init__(self, character: Character, T: int, fps: float, contacts: np.ndarray | None, *,
+                 cyclic: bool = True, dynamics: bool = True, ipopt_options: Mapping[str, Any] | None = None) -> None:
+        t0 = time.perf_counter()
+        self.character = character
+        self.T = Tn = int(T)
+        self.fps = float(fps)
+        self.dt = 1.0 / self.fps
+        self.cyclic, self.dynamics = bool(cyclic), bool(dynamics)
+        n = self.n = character.n
+        if Tn < 5:
+            raise ValueError(f"too few frames for a spacetime problem: {T}")
+        if not self.cyclic:
+            raise ValueError("the spacetime problem transcribes a gait cycle: cyclic=True")
+        ff = self.ff = frame_functions(character)
+        if dynamics:
+            if not ff.has_contacts:
+                raise ValueError("the character needs heel/toe contact points and a foot box on both feet")
+            if contacts is None:
+                raise ValueError("a dynamic spacetime problem needs a contact schedule")
+            contacts = np.asarray(contacts, dtype=bool)
+            if contacts.shape != (ff.P, Tn):
+                raise ValueError(f"contact schedule must be ({ff.P}, {Tn}), got {contacts.shape}")
+            if not (np.array_equal(contacts[:, Tn - 2], contacts[:, 0])
+                    and np.array_equal(contacts[:, Tn - 1], contacts[:, 1])):
+                raise ValueError("a cyclic contact schedule must repeat frames 1-2 in its last two frames")
+        self.contacts = None if contacts is None else contacts.copy()
+        self.weight_scale, self.moment_scale = ff.weight_scale, ff.moment_scale
+        self.n_markers = ff.n_markers
+
+        # --- variable layout: q, then v, then wrenches --------------------------------------
+        periodic = np.zeros(n, dtype=bool)
+        periodic[6:] = True
+        periodic[list(ROOT_PERIODIC)] = True
+        self.periodic = periodic
+        k = 0
+        self._q_index, k = self._index(periodic, k)
+        self.nq_vars = k
+        v_periodic = periodic.copy()
+        v_periodic[YAW] = True
+        self._v_index, k = self._index(v_periodic, k) if dynamics else (np.zeros((n, 0), dtype=int), k)
+        self.nv_vars = k - self.nq_vars
+        self.eom_frames = list(range(1, Tn - 1)) if dynamics else []
+        self._w_index = (k + np.arange(12 * len(self.eom_frames))).reshape(len(self.eom_frames), 12).T
+        k += 12 * len(self.eom_frames)
+        self.nx = k
+        self.distinct_frames = list(range(Tn - 2))
+
+        x = self._x = ca.MX.sym("x", self.nx)
+        nm3 = 3 * ff.n_markers
+        sizes = {"gm": nm3 * Tn, "gq": n * Tn, "g": 3, "mu": 1, "wts": 6, "ref": 4 * Tn, "anchor": 3 * Tn, "dpsi": 1,
+                 "com": 3 * Tn}
+        self._p_layout, off = {}, 0
+        for name in P_LAYOUT:
+            self._p_layout[name] = (off, sizes[name])
+            off += sizes[name]
+        p = ca.MX.sym("p", off)
+
+        def par(name: str, shape: tuple[int, int] | None = None) -> ca.MX:
+            o, s = self._p_layout[name]
+            return ca.reshape(p[o : o + s], *shape) if shape else p[o : o + s]
+
+        GM, GQ = par("gm", (nm3, Tn)), par("gq", (n, Tn))
+        grav, mu, wts, dpsi = par("g"), par("mu"), par("wts"), par("dpsi")
+        REF, ANCHOR = par("ref", (4, Tn)), par("anchor", (3, Tn))
+        self._COM = par("com", (3, Tn))
+        qi, vi = self._q_index, self._v_index
+        self._terms: list[Term] = []
+        self._g_parts: list[ca.MX] = []
+        self._lbg: list[np.ndarray] = []
+        self._ubg: list[np.ndarray] = []
+        self._groups: dict[str, list[int]] = {}
+        self._ng = 0
+
+        # --- objective ---------------------------------------------------------------------
+        cw = ca.repmat(ca.vertcat(wts[0], wts[1], wts[3]), 1, Tn)
+        self._cost(Term("cost", ff.cost, 1, qi, [GM, GQ, cw], derivatives=ff.derivatives["cost"], cost=True))
+        self._cyclic_root(x, dpsi)
+        if dynamics:
+            self._dynamic_terms(x, grav, mu, wts, dpsi, REF, ANCHOR)
+        objective = sum(ca.sum2(t_.outputs(x)) for t_ in self._terms if t_.cost)
+        extra = []
+        if self.nx > self.nq_vars + self.nv_vars:  # wrench regularization
+            xw = x[self.nq_vars + self.nv_vars:]
+            objective = objective + wts[2] * ca.sumsqr(xw)
+            nw = xw.shape[0]
+            extra.append((lambda lam_f, nw=nw: ca.repmat(2 * lam_f * wts[2], 1, nw),
+                          np.arange(self.nq_vars + self.nv_vars, self.nx)))
+        g = ca.vertcat(*self._g_parts) if self._g_parts else ca.MX(0, 1)
+        self.ng = int(g.shape[0])
+        self._lbg_a = np.concatenate(self._lbg) if self._lbg else np.zeros(0)
+        self._ubg_a = np.concatenate(self._ubg) if self._ubg else np.zeros(0)
+        self._jac, self._hess, self.hessian_nnz, self.jacobian_nnz = assemble(self._terms, x, p, g, self.nx,
+                                                                                self.ng, extra)
+        self._nlp = {"x": x, "p": p, "f": objective, "g": g}
+        Q = ca.reshape(x[qi.ravel(order="F").tolist()], n, Tn)
+        self._fg = ca.Function("fg", [x, p], [objective, g, ca.sum2(ff.marker_cost.map(Tn)(Q, GM))])
+        self._base_options = dict(DEFAULT_IPOPT)
+        if ipopt_options:
+            self._base_options.update(ipopt_options)
+        self._solver_cache: dict[tuple, ca.Function] = {}
+        self.build_time = time.perf_counter() - t0
+        log.info("spacetime NLP: %d variables, %d constraints, built in %.2f s", self.nx, self.ng, self.build_time)
+
+    # --- construction helpers ---------------------------------------------------------------
+    def _index(self, periodic: np.ndarray, k: int) -> tuple[np.ndarray, int]:
+        """(n, T) variable index; periodic rows share frames T−2, T−1 with frames 0, 1."""
+        Tn = self.T
+        idx = np.zeros((self.n, Tn), dtype=int)
+        for i in range(self.n):
+            nfree = Tn - 2 if periodic[i] else Tn
+            idx[i] = k + np.array([t if t < nfree else t - (Tn - 2) for t in range(Tn)])
+            k += nfree
+        return idx, k
+
+    def _cost(self, term: Term) -> None:
+        self._terms.append(term)
+
+    def _rows(self, term: Term, sel: list[tuple[int, int]], lo, hi, group: str | None = None) -> None:
+        """Constraint rows ``sel`` (call, row) of ``term`` with bounds ``lo``, ``hi``."""
+        term.selected = sel
+        self._terms.append(term)
+        if not sel:
+            return
+        out = term.outputs(self._x)
+        rows_out = term.fn.size1_out(0)
+        expr = ca.vec(out)[[c * rows_out + r for c, r in sel]]
+        term.g_offset = self._ng
+        self._g_parts.append(expr)
+        self._lbg.append(np.broadcast_to(np.asarray(lo, dtype=float), (len(sel),)).copy())
+        self._ubg.append(np.broadcast_to(np.asarray(hi, dtype=float), (len(sel),)).copy())
+        self._groups.setdefault(group or term.name, []).extend(range(self._ng, self._ng + len(sel)))
+        self._ng += len(sel)
+
+    def _cyclic_root(self, x: ca.MX, dpsi: ca.MX) -> None:
+        Tn, qi, vi = self.T, self._q_index, self._v_index
+        fr = [0, 1, Tn - 2, Tn - 1]
+        parts = [qi[0, fr], qi[1, fr], qi[YAW, fr]]
+        if self.dynamics:
+            parts += [vi[0, fr], vi[1, fr]]
+        fn = _cyclic_root_function(self.dynamics)
+        rows = fn.size1_out(0)
+        self._rows(Term("cyc", fn, 1, np.concatenate(parts)[:, None], [dpsi]), [(0, r) for r in range(rows)], 0.0, 0.0,
+                   "cyclic_root")
+
+    def _wrench_columns(self, frames: list[int]) -> np.ndarray:
+        """(12, len(frames)) wrench variable indices; frame T−1 is frame 1 (turned by Δψ)."""
+        cols = [self._w_index[:, (1 if t == self.T - 1 else t) - 1] for t in frames]
+        return np.stack(cols, axis=1)
+
+    def _dynamic_terms(self, x, grav, mu, wts, dpsi, REF, ANCHOR) -> None:
+        ff, Tn, qi, vi = self.ff, self.T, self._q_index, self._v_index
+        A = self.contacts
+        B = self.foot_contact()
+        h = self.dt
+        frames = self.distinct_frames
+        D = ff.derivatives
+        # contact heights
+        sel, hi = [], []
+        for c, t in enumerate(frames):
+            for j in range(ff.P):
+                sel.append((c, j))
+                hi.append(0.0 if A[j, t] else math.inf)
+        self._rows(Term("z", ff.z, 1, qi[:, frames], [], derivatives=D["z"]), sel, 0.0, np.array(hi), "contact")
+        # no slip, no spin between consecutive frames
+        pairs = frames
+        sel, lo, hi = [], [], []
+        spin = math.sin(math.radians(ff.realism.spin_rate_deg_s) * h)
+        for c, t in enumerate(pairs):
+            for s_i, side in enumerate(FEET):
+                hh, toe = ff.heel_of[side], ff.toe_of[side]
+                heel_pinned, toe_pinned = A[hh, t] and A[hh, t + 1], A[toe, t] and A[toe, t + 1]
+                rows = []
+                if heel_pinned:
+                    rows += [2 * hh, 2 * hh + 1]
+                if toe_pinned and heel_pinned:
+                    rows.append(2 * ff.P + s_i)
+                elif toe_pinned:
+                    rows += [2 * toe, 2 * toe + 1]
+                sel += [(c, r) for r in rows]
+                lo += [0.0] * len(rows)
+                hi += [0.0] * len(rows)
+                if B[s_i, t] and B[s_i, t + 1] and not (heel_pinned and toe_pinned):
+                    sel.append((c, 2 * ff.P + 2 + s_i))
+                    lo.append(-spin)
+                    hi.append(spin)
+        nxt = [t + 1 for t in pairs]
+        self._rows(Term("slip", ff.slip, 2, np.vstack([qi[:, pairs], qi[:, nxt]]), [], derivatives=D["slip"]),
+                   sel, np.array(lo), np.array(hi), "no_slip")
+        # feet in contact: cone, CoP, torsion, free-moment cap; support
+        E = self.eom_frames
+        W = self._wrench_columns(E)
+        sel = []
+        for c, t in enumerate(E):
+            for k_ in range(2):
+                if B[k_, t]:
+                    sel += [(c, FOOT_ROWS * k_ + r) for r in range(FOOT_ROWS)]
+            if B[:, t].any():
+                sel.append((c, 2 * FOOT_ROWS))
+        self._rows(Term("feet", ff.feet, 2, np.vstack([qi[:, E], W]), [ca.repmat(mu, 1, len(E)), REF[:, E]],
+                        derivatives=D["feet"]), sel, 0.0, math.inf)
+        # spline continuity at the knots 1..T−2
+        K = list(range(1, Tn - 1))
+        km, kp = [t - 1 for t in K], [t + 1 for t in K]
+        self._rows(Term("c2", ff.c2, 5, np.vstack([qi[:, km], qi[:, kp], vi[:, km], vi[:, K], vi[:, kp]]),
+                        [ca.DM.ones(1, len(K)) * h], derivatives=D["c2"]),
+                   [(c, r) for c in range(len(K)) for r in range(self.n)], 0.0, 0.0, "spline")
+        # equations of motion on the segments [k, k+1], k = 1..T−2: at frame k and the midpoint
+        Wb = self._wrench_columns(kp)
+        turn = ca.horzcat(ca.DM.zeros(1, len(K) - 1), dpsi)
+        zseg = np.vstack([qi[:, K], vi[:, K], qi[:, kp], vi[:, kp], W, Wb])
+        seg_params = [ca.repmat(grav, 1, len(K)), ca.DM.ones(1, len(K)) * h, REF[:, K], REF[:, kp],
+                      ANCHOR[:, K], ANCHOR[:, kp], turn]
+        self._rows(Term("seg", ff.seg, 6, zseg, seg_params, derivatives=D["seg"]),
+                   [(c, r) for c in range(len(K)) for r in range(12)], 0.0, 0.0, "eom")
+        # realism: bounded change of the total ground force per frame; costs on wrench change and jerk
+        fr = ff.realism.force_rate * h
+        self._rows(Term("frate", ff.frate, 2, np.vstack([W, Wb]), [turn], derivatives=D["frate"]),
+                   [(c, 0) for c in range(len(K))], -math.inf, fr * fr, "force_rate")
+        # realism: small second differences of the total ground wrench (frames k−1, k, k+1)
+        rl = ff.realism
+        s15 = (15.0 * h) ** 2
+        Wm = self._wrench_columns([T_ if T_ > 0 else Tn - 2 for T_ in km])  # frame 0 is frame T−2 turned back
+        ta = ca.horzcat(-dpsi, ca.DM.zeros(1, len(K) - 1))
+        sm_params = [REF[:, km], REF[:, K], REF[:, kp], self._COM[:, km], self._COM[:, K], self._COM[:, kp], ta, turn]
+        self._rows(Term("smooth", ff.smooth, 3, np.vstack([Wm, W, Wb]), sm_params, derivatives=D["smooth"]),
+                   [(c, r) for c in range(len(K)) for r in range(2)], -math.inf,
+                   np.tile([(rl.force_curvature * s15) ** 2, (rl.moment_curvature * s15) ** 2], len(K)),
+                   "smooth_ground_wrench")
+        self._cost(Term("wrate", ff.wrate, 2, np.vstack([W, Wb]), [turn, ca.repmat(wts[4], 1, len(K))],
+                        derivatives=D["wrate"], cost=True))
+        self._cost(Term("jerk", ff.jerk, 4, np.vstack([qi[:, K], vi[:, K], qi[:, kp], vi[:, kp]]),
+                        [ca.DM.ones(1, len(K)) * h, ca.repmat(wts[5], 1, len(K))], derivatives=D["jerk"], cost=True))
+
+    # --- packing ---------------------------------------------------------------------------
+    def foot_contact(self) -> np.ndarray:
+        if self.contacts is None:
+            return np.zeros((2, self.T), dtype=bool)
+        return foot_schedule_of(self.character, self.contacts)
+
+    def guide_markers(self, guide_q: np.ndarray) -> np.ndarray:
+        mk = markers(self.character, np.asarray(guide_q, dtype=float))  # (nm, 3, T)
+        return mk.reshape(self.n_markers * 3, self.T)
+
+    @staticmethod
+    def _pack(index: np.ndarray, a: np.ndarray, size: int, offset: int) -> np.ndarray:
+        out = np.zeros(size)
+        out[index - offset] = a  # overlap frames write the same entry; frames 0/1 win below
+        out[index[:, :2] - offset] = a[:, :2]
+        return out
+
+    def pack_q(self, q: np.ndarray) -> np.ndarray:
+        return self._pack(self._q_index, q, self.nq_vars, 0)
+
+    def unpack_q(self, x: np.ndarray) -> np.ndarray:
+        return np.asarray(x)[self._q_index]
+
+    def pack_v(self, v: np.ndarray) -> np.ndarray:
+        return self._pack(self._v_index, v, self.nv_vars, self.nq_vars)
+
+    def unpack_v(self, x: np.ndarray) -> np.ndarray:
+        return np.asarray(x)[self._v_index]
+
+    def ref_points(self, q: np.ndarray) -> np.ndarray:
+        """Per-frame (x, y) under each foot: the mean of its contact points, on the ground."""
+        cp = contact_points(self.character, q)  # (P, 3, T)
+        ref = np.zeros((4, self.T))
+        for k, side in enumerate(FEET):
+            idx = [j for j, c in enumerate(self.character.contacts) if c.side == side]
+            ref[2 * k : 2 * k + 2] = cp[idx, :2, :].mean(axis=0)
+        return ref
+
+    def anchor_points(self, q: np.ndarray) -> np.ndarray:
+        a = np.zeros((3, self.T))
+        a[:2] = q[:2]
+        return a
+
+    def pack_wrenches(self, wrenches: np.ndarray | None, ref: np.ndarray) -> np.ndarray:
+        x = np.zeros(12 * len(self.eom_frames))
+        if wrenches is None:
+            return x
+        base = self.nq_vars + self.nv_vars
+        for c, t in enumerate(self.eom_frames):
+            for k in range(2):
+                n0, f = wrenches[k, :3, t], wrenches[k, 3:, t]
+                r = np.array([ref[2 * k, t], ref[2 * k + 1, t], 0.0])
+                x[self._w_index[6 * k : 6 * k + 6, c] - base] = np.r_[(n0 - np.cross(r, f)) / self.moment_scale,
+                                                                      f / self.weight_scale]
+        return x
+
+    def unpack_wrenches(self, x: np.ndarray, ref: np.ndarray, dpsi: float) -> np.ndarray:
+        """World wrenches about the origin (2, 6, T); frames 0 and T−1 are frames T−2 and 1
+        under the cycle's turn, about their own reference points."""
+        out = np.zeros((2, 6, self.T))
+        x = np.asarray(x).ravel()
+        Tn = self.T
+
+        def put(t: int, c: int, turn: float) -> None:
+            cz, sz = math.cos(turn), math.sin(turn)
+            R = np.array([[cz, -sz, 0.0], [sz, cz, 0.0], [0.0, 0.0, 1.0]])
+            for k in range(2):
+                w = x[self._w_index[6 * k : 6 * k + 6, c]]
+                n_r, f = R @ (w[:3] * self.moment_scale), R @ (w[3:] * self.weight_scale)
+                r = np.array([ref[2 * k, t], ref[2 * k + 1, t], 0.0])
+                out[k, :3, t] = n_r + np.cross(r, f)
+                out[k, 3:, t] = f
+
+        for c, t in enumerate(self.eom_frames):
+            put(t, c, 0.0)
+        if self.eom_frames:
+            put(0, Tn - 3, -dpsi)
+            put(Tn - 1, 0, dpsi)
+        return out
+
+    def bounds(self, locks: Mapping[int, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
+        lbx = np.full(self.nx, -np.inf)
+        ubx = np.full(self.nx, np.inf)
+        lo, hi = self.character.lower, self.character.upper
+        for i in range(self.n):
+            idx = np.unique(self._q_index[i])
+            lbx[idx], ubx[idx] = lo[i], hi[i]
+        for i, v in (locks or {}).items():
+            idx = np.unique(self._q_index[i])
+            lbx[idx] = ubx[idx] = v
+            if self.dynamics:
+                vidx = np.unique(self._v_index[i])
+                lbx[vidx] = ubx[vidx] = 0.0
+        B = self.foot_contact()
+        for c, t in enumerate(self.eom_frames):
+            for k in range(2):
+                idx = self._w_index[6 * k : 6 * k + 6, c]
+                if not B[k, t]:
+                    lbx[idx] = ubx[idx] = 0.0
+                else:
+                    lbx[idx[5]] = 0.0  # f_z >= 0
+        return lbx, ubx
+
+    def com_points(self, q: np.ndarray) -> np.ndarray:
+        """(3, T) whole-body centre of mass of each frame."""
+        from solver.kinematics import segment_frames
+
+        ch = self.character
+        R, P = segment_frames(ch, q)
+        m = np.array([s.mass for s in ch.segments])
+        X = P + np.einsum("sijt,sj->sit", R, np.array([s.com for s in ch.segments]))
+        return (m[:, None, None] * X).sum(axis=0) / m.sum()
+
+    def parameters(self, guide_markers: np.ndarray, guide_q: np.ndarray, env: Environment, weights: Weights,
+                   ref: np.ndarray, anchor: np.ndarray, dpsi: float, com: np.ndarray | None = None) -> np.ndarray:
+        nT = self.T
+        K = max(len(self.eom_frames), 1)
+        wts = [weights.direction / (self.n_markers * nT * MARKER_SCALE**2),
+               weights.singularity / (max(self.ff.n_sing, 1) * nT * MARKER_SCALE**2),
+               weights.wrench / K,
+               weights.coordinates / (max(self.n - 6, 1) * nT),  # (0.1 rad)² per coordinate = 0.01
+               weights.wrench_rate / K,
+               weights.jerk / (max(self.n - 3, 1) * K)]
+        return np.concatenate([
+            np.asarray(guide_markers, dtype=float).ravel(order="F"),
+            np.asarray(guide_q, dtype=float).ravel(order="F"),
+            np.asarray(env.gravity, dtype=float), [float(env.friction)], wts,
+            ref.ravel(order="F"), anchor.ravel(order="F"), [float(dpsi)],
+            (np.zeros((3, nT)) if com is None else com).ravel(order="F"),
+        ])
+
+    # --- solve -----------------------------------------------------------------------------
+    def solve(
+        self,
+        guide_q: np.ndarray | None,
+        *,
+        guide_markers: np.ndarray | None = None,
+        env: Environment = Environment(),
+        weights: Weights = Weights(),
+        heading_change: float | None = None,
+        init_q: np.ndarray | None = None,
+        init_wrenches: np.ndarray | None = None,
+        lam_x0: np.ndarray | None = None,
+        lam_g0: np.ndarray | None = None,
+        max_iter: int = 500,
+        locks: Mapping[int, float] | None = None,
+        warm: bool = False,
+        ipopt_options: Mapping[str, Any] | None = None,
+        should_stop: Any = None,
+    ) -> SolveResult:
+        """Solve at the given parameters. ``heading_change`` Δψ (rad): yaw[T−2] − yaw[0] of the
+        optimum (default: the initial motion's). ``should_stop()`` is polled at every iteration
+        (IPOPT stops with ``User_Requested_Stop``)."""
+        if guide_markers is None:
+            if guide_q is None:
+                raise ValueError("give a guide motion or guide markers")
+            guide_q = np.asarray(guide_q, dtype=float)
+            if guide_q.shape != (self.n, self.T):
+                raise ValueError(f"guide must be ({self.n}, {self.T}), got {guide_q.shape}")
+            guide_markers = self.guide_markers(guide_q)
+        guide_markers = np.asarray(guide_markers, dtype=float)
+        if guide_markers.shape != (3 * self.n_markers, self.T):
+            raise ValueError(f"guide markers must be ({3 * self.n_markers}, {self.T}), got {guide_markers.shape}")
+        if init_q is None:
+            if guide_q is None:
+                raise ValueError("give an initial motion")
+            init_q = guide_q
+        q0 = np.asarray(init_q, dtype=float)
+        if q0.shape != (self.n, self.T) or not np.all(np.isfinite(q0)):
+            raise ValueError(f"initial motion must be finite with shape ({self.n}, {self.T})")
+        dpsi = float(q0[YAW, -2] - q0[YAW, 0]) if heading_change is None else float(heading_change)
+        if not math.isfinite(dpsi):
+            raise ValueError("the heading change must be finite")
+        gq = q0 if guide_q is None else guide_q  # coordinates prior: the guide's, else the start's
+        ref = self.ref_points(q0) if self.dynamics else np.zeros((4, self.T))
+        anchor = self.anchor_points(q0)
+        p = self.parameters(guide_markers, gq, env, weights, ref, anchor, dpsi,
+                            self.com_points(q0) if self.dynamics else None)
+        parts = [self.pack_q(q0)]
+        if self.dynamics:
+            parts += [self.pack_v(spline_velocities(q0, self.dt)), self.pack_wrenches(init_wrenches, ref)]
+        x0 = np.concatenate(parts)
+        lbx, ubx = self.bounds(locks)
+        x0 = np.clip(x0, lbx, ubx)
+        args: dict[str, Any] = dict(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=self._lbg_a, ubg=self._ubg_a)
+        opts: dict[str, Any] = {"ipopt.max_iter": int(max_iter)}
+        if warm and lam_x0 is not None and lam_g0 is not None:
+            args["lam_x0"], args["lam_g0"] = lam_x0, lam_g0
+            opts.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-4,
+                         "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_bound_frac": 1e-6,
+                         "ipopt.warm_start_slack_bound_push": 1e-6, "ipopt.warm_start_slack_bound_frac": 1e-6,
+                         "ipopt.warm_start_mult_bound_push": 1e-6})
+        if ipopt_options:
+            opts.update(ipopt_options)
+        solver = self._solver_for(opts, should_stop is not None)
+        _STOP.check = should_stop
+        t0 = time.perf_counter()
+        try:
+            sol = solver(**args)
+        finally:
+            _STOP.check = None
+        wall = time.perf_counter() - t0
+        stats = solver.stats()
+        status = str(stats.get("return_status", "unknown"))
+        x = np.asarray(sol["x"]).ravel()
+        q = self.unpack_q(x)
+        wr = self.unpack_wrenches(x, ref, dpsi) if self.dynamics else None
+        obj, gval, mk_sum = (np.asarray(v).ravel() for v in self._fg(x, p))
+        viol = 0.0
+        if self.ng:
+            viol = float(np.max(np.maximum(self._lbg_a - gval, 0) + np.maximum(gval - self._ubg_a, 0)))
+        return SolveResult(
+            success=bool(stats.get("success", False)) and status in SUCCESS_STATUSES,
+            status=status, iterations=int(stats.get("iter_count", -1)), wall_time=wall, q=q, wrenches=wr,
+            objective=float(obj[0]), marker_rms=math.sqrt(max(float(mk_sum[0]), 0.0) / (self.n_markers * self.T)),
+            lam_x=np.asarray(sol["lam_x"]).ravel(), lam_g=np.asarray(sol["lam_g"]).ravel(), max_violation=viol,
+            stats={"n_variables": self.nx, "n_constraints": self.ng, "build_time": self.build_time},
+            v=self.unpack_v(x) if self.dynamics else None, heading_change=dpsi,
+        )
+
+    def _solver_for(self, opts: Mapping[str, Any], stoppable: bool) -> ca.Function:
+        """IPOPT options are fixed per solver instance: one instance per option set, all
+        sharing the same pre-built derivative functions (cheap to create)."""
+        key = tuple(sorted((k, str(v)) for k, v in opts.items())) + (("stoppable", stoppable),)
+        solver = self._solver_cache.get(key)
+        if solver is None:
+            full = dict(self._base_options)
+            full.update(opts)
+            full["hess_lag"] = self._hess
+            if self.ng:
+                full["jac_g"] = self._jac
+            if stoppable:
+                full["iteration_callback"] = _STOP_CALLBACK.get(self.nx, self.ng)
+            solver = ca.nlpsol("spacetime", "ipopt", self._nlp, full)
+            self._solver_cache[key] = solver
+        return solver
+
+
+class _StopFlag:
+    check: Any = None
+
+
+_STOP = _StopFlag()
+
+
+class _Stop(ca.Callback):
+    """IPOPT iteration callback: returning 1 stops the solve (User_Requested_Stop)."""
+
+    def __init__(self, name: str, nx: int, ng: int) -> None:
+        ca.Callback.__init__(self)
+        self.nx, self.ng = nx, ng
+        self.construct(name, {})
+
+    def get_n_in(self):
+        return ca.nlpsol_n_out()
+
+    def get_n_out(self):
+        return 1
+
+    def get_name_in(self, i):
+        return ca.nlpsol_out(i)
+
+    def get_name_out(self, i):
+        return "ret"
+
+    def get_sparsity_in(self, i):
+        name = ca.nlpsol_out(i)
+        if name == "f":
+            return ca.Sparsity.scalar()
+        if name in ("x", "lam_x"):
+            return ca.Sparsity.dense(self.nx)
+        if name in ("g", "lam_g"):
+            return ca.Sparsity.dense(self.ng)
+        return ca.Sparsity(0, 0)
+
+    def eval(self, arg):
+        check = _STOP.check
+        return [1 if check is not None and check() else 0]
+
+
+class _StopCallbacks:
+    def __init__(self) -> None:
+        self._made: dict[tuple[int, int], _Stop] = {}
+
+    def get(self, nx: int, ng: int) -> _Stop:
+        key = (nx, ng)
+        if key not in self._made:  # kept alive: IPOPT holds a reference to the callback
+            self._made[key] = _Stop(f"stop_{nx}_{ng}", nx, ng)
+        return self._made[key]
+
+
+_STOP_CALLBACK = _StopCallbacks()

@@ -1,0 +1,99 @@
+"""Values of the spacetime problem: environment, weights, realism bounds, solve result."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+import numpy as np
+
+STANDARD_GRAVITY = 9.81  # m/s², the tutor's gravity unless the capture says otherwise
+
+DEFAULT_IPOPT = {
+    "ipopt.print_level": 0,
+    "print_time": False,
+    "ipopt.sb": "yes",
+    "ipopt.mu_strategy": "adaptive",
+    "ipopt.tol": 1e-7,
+    "ipopt.constr_viol_tol": 1e-9,
+    "ipopt.acceptable_iter": 0,  # never stop on the looser "acceptable" criterion
+    "ipopt.linear_solver": "mumps",
+    "ipopt.mumps_pivot_order": 5,  # METIS: the least fill-in on the spline transcription's KKT systems
+    "error_on_fail": False,
+}
+SUCCESS_STATUSES = ("Solve_Succeeded",)
+
+
+@dataclass(frozen=True)
+class Environment:
+    gravity: tuple[float, float, float] = (0.0, 0.0, -STANDARD_GRAVITY)
+    friction: float = 1.0
+
+    def to_dict(self) -> dict:
+        return {"gravity": [float(g) for g in self.gravity], "friction": float(self.friction)}
+
+    @staticmethod
+    def from_dict(d: Mapping[str, Any] | None) -> "Environment":
+        if not d:
+            return Environment()
+        g = tuple(float(x) for x in d.get("gravity", (0.0, 0.0, -STANDARD_GRAVITY)))
+        return Environment(g, float(d.get("friction", 1.0)))  # type: ignore[arg-type]
+
+
+@dataclass(frozen=True)
+class Weights:
+    direction: float = 1.0  # η_dir: marker distance to the guide, per (1 cm)²
+    singularity: float = 1e-5  # η_sing
+    #: [beyond] tiny weight on the squared contact wrenches (scaled by body weight and leg
+    #: length): in double support only their sum is constrained, so without it the split
+    #: is a flat direction of the NLP and IPOPT's tail convergence crawls.
+    wrench: float = 1e-4
+    #: [beyond] weak prior toward the guide's joint coordinates (not the root): one marker per
+    #: segment leaves some rotations unobserved. 0.1 rad weighs like 1 mm of marker distance.
+    coordinates: float = 1.0
+    #: [realism] squared change of each foot's wrench between frames (scaled): the double-support
+    #: split and the free moment may not flip from frame to frame
+    wrench_rate: float = 1.0
+    #: [realism] squared jerk of the rotations (the spline's third derivative × h³, rad): no
+    #: frame-to-frame zig-zag of a coordinate that the markers hardly see
+    jerk: float = 1e-3
+
+
+@dataclass(frozen=True)
+class Realism:
+    """Bounds of the realistic transcription, each inside the validator's limit
+    (``solver.realism``) by a margin so that an optimum is never on the edge of a check."""
+
+    torsion_radius_fraction: float = 0.1  # ρ = foot length / 10 (torsional friction radius)
+    torsion_margin: float = 0.95  # |τ| ≤ 0.95 μ ρ f_z
+    free_moment_cap: float = 0.025  # |τ| ≤ 0.025 BW·m (validator: 0.03)
+    support_max: float = 1.95  # total normal force ≤ 1.95 BW (validator: 2)
+    force_rate: float = 10.5  # |ΔF_total| ≤ 10.5 BW/s between frames (validator: 12 BW/s, 0.8 BW at 15 fps)
+    #: second differences of the total ground wrench over three frames at 15 fps (scaled by
+    #: (15 h)² at other rates): force (BW), moment about the centre of mass (BW × leg length);
+    #: whole-body Newton–Euler from positions sees a sixth of them (validator: 0.08 / 0.04)
+    force_curvature: float = 0.42
+    moment_curvature: float = 0.16
+    spin_rate_deg_s: float = 60.0  # a foot in contact turns ≤ 60°/s about the vertical (validator: 75)
+
+
+@dataclass(frozen=True, eq=False)
+class SolveResult:
+    """Outcome of one NLP solve. ``success`` False: ``q``/``wrenches`` are the last iterate,
+    kept apart for diagnosis — never to be used as a solution."""
+
+    success: bool
+    status: str
+    iterations: int
+    wall_time: float
+    q: np.ndarray
+    wrenches: np.ndarray | None  # (2, 6, T) world frame about the origin
+    objective: float
+    marker_rms: float  # m, RMS marker distance to the guide
+    lam_x: np.ndarray | None
+    lam_g: np.ndarray | None
+    max_violation: float  # largest constraint violation (scaled units)
+    stats: Mapping[str, Any] = field(default_factory=dict)
+    v: np.ndarray | None = None  # (n, T) knot velocities of the spline (dynamic problems)
+    heading_change: float = math.nan  # rad, the cycle's yaw change Δψ imposed
