@@ -186,17 +186,34 @@ def _motion(tutor: Motion, lam: float, target: Target, env: Environment, values:
         "solver": {"name": "ipopt", "status": res.status, "iterations": res.iterations,
                    "time_s": round(res.wall_time, 6), "marker_rms_to_guide_mm": 1e3 * res.marker_rms},
     }
-    m = Motion(tutor.character, tutor.fps, res.q, contacts=tutor.contacts, wrenches=res.wrenches, provenance=prov)
+    prov["heading_change_deg"] = math.degrees(res.heading_change)
+    m = Motion(tutor.character, tutor.fps, res.q, contacts=tutor.contacts, wrenches=res.wrenches, provenance=prov,
+               interpolation="cubic-spline", cyclic=True)
     return m.evolve(report=report(m))
 
 
-def _predict(history: list[_State], lam_try: float, secant: bool) -> tuple[np.ndarray, np.ndarray]:
-    last = history[-1].res
+def tutor_heading_change(tutor: Motion) -> float:
+    """The tutor's heading change over its cycle (rad), as its optimizer imposed it."""
+    deg = tutor.provenance.get("heading_change_deg")
+    if isinstance(deg, (int, float)) and math.isfinite(deg):
+        return math.radians(float(deg))
+    return float(tutor.q[3, -2] - tutor.q[3, 0])
+
+
+def _predict(history: list[_State], lam_try: float, secant: bool,
+             guide: Callable[[float], np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Initial motion at λ_try: the new guide plus the previous optimum's deviation from its
+    own guide (the guide carries the bend and tilt of the homotopy; the deviation carries what
+    the physics added), extrapolated along the secant of the last two deviations."""
+    b = history[-1]
+    dev_b = b.res.q - guide(b.lam)
     if not secant or len(history) < 2:
-        return last.q, last.wrenches
-    a, b = history[-2], history[-1]
+        return guide(lam_try) + dev_b, b.res.wrenches
+    a = history[-2]
     s = (lam_try - b.lam) / (b.lam - a.lam)
-    return b.res.q + s * (b.res.q - a.res.q), b.res.wrenches + s * (b.res.wrenches - a.res.wrenches)
+    dev_a = a.res.q - guide(a.lam)
+    return (guide(lam_try) + dev_b + s * (dev_b - dev_a),
+            b.res.wrenches + s * (b.res.wrenches - a.res.wrenches))
 
 
 class _Walk:
@@ -212,6 +229,16 @@ class _Walk:
         self.records: list[ProgressRecord] = []
         self.steps: list[StepResult] = []
         self.solves = 0
+        self.dpsi0 = tutor_heading_change(tutor)
+        self._guides: dict[float, np.ndarray] = {}
+
+    def guide(self, lam: float) -> np.ndarray:
+        g = self._guides.get(lam)
+        if g is None:
+            if len(self._guides) > 8:
+                self._guides.pop(next(iter(self._guides)))
+            g = self._guides[lam] = guide_at(self.tutor.q, self.target, lam)
+        return g
 
     def record(self, lam: float, values: Mapping[str, float], res: SolveResult | None, accepted: bool, status: str,
                reached: float) -> None:
@@ -241,7 +268,7 @@ class _Walk:
               restart_mu: float | None = None) -> tuple[SolveResult | None, bool, str, Environment, dict]:
         env, values = environment_at(self.env0, self.target, lam)
         if guide is None:
-            guide = guide_at(self.tutor.q, self.target, lam)
+            guide = self.guide(lam)
         warm = warm_from is not None and warm_from.lam_x is not None
         opts = None
         if restart_mu is not None:  # mu_init only acts with the monotone barrier strategy
@@ -249,7 +276,9 @@ class _Walk:
             if not warm:
                 opts.update({"ipopt.bound_push": 1e-6, "ipopt.bound_frac": 1e-6})
         try:
+            dpsi = self.dpsi0 + lam * math.radians(self.target.curve_deg)
             res = self.prob.solve(guide, env=env, init_q=init[0], init_wrenches=init[1], max_iter=max_iter,
+                                  heading_change=dpsi, should_stop=self.should_cancel,
                                   lam_x0=warm_from.lam_x if warm else None,
                                   lam_g0=warm_from.lam_g if warm else None, warm=warm, ipopt_options=opts)
         except RuntimeError as e:  # a numerical failure inside the solver is a status, not a crash
@@ -282,7 +311,7 @@ class _Walk:
                 return self.finish("impasse", lam, f"solve budget exhausted ({c.max_solves} solves)")
             delta = min(delta, lam_end - lam)
             lam_try = lam_end if lam_end - (lam + delta) < 1e-9 else lam + delta
-            init = _predict(history, lam_try, secant=adaptive and c.predictor == "secant")
+            init = _predict(history, lam_try, adaptive and c.predictor == "secant", self.guide)
             # the thesis's baseline restarts from the previous optimum (primal only);
             # the adaptive controller may also warm-start the multipliers
             growing = delta > last_step * (1 + 1e-9)
@@ -362,6 +391,8 @@ def extrapolate(
         return walk.run([_State(lam0, stored)], lam_end)
     base = walk.base()
     if base is None:
+        if should_cancel is not None and should_cancel():
+            return walk.finish("canceled", 0.0, "canceled")
         return walk.finish("failed", 0.0, "the base problem did not converge to a plausible motion")
     return walk.run([base], lam_end)
 

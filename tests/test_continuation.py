@@ -82,14 +82,21 @@ def test_impasse_and_cancel_are_results_not_errors(tutor):
     res = extrapolate(tutor, Target(slope_deg=5.0), StepControl(max_iter=2, delta0=0.2, eps=0.1))
     assert res.status == "impasse" and res.lam_reached == 0.0 and "impasse" in res.message
     assert len(res.steps) == 1  # the base problem's optimum is kept
+    # cancel between steps: the optima found so far are kept
+    steps = []
+    res = extrapolate(tutor, Target(slope_deg=5.0), StepControl(), on_step=steps.append,
+                      should_cancel=lambda: len(steps) >= 2)
+    assert res.status == "canceled" and 0.0 < res.lam_reached < 1.0 and len(res.steps) == 2
+    # cancel inside a solve: IPOPT's iteration callback stops it at once (no step is stored)
     calls = []
 
     def cancel() -> bool:
         calls.append(1)
-        return len(calls) > 1
+        return len(calls) > 3
 
     res = extrapolate(tutor, Target(slope_deg=5.0), StepControl(), should_cancel=cancel)
-    assert res.status == "canceled" and 0.0 < res.lam_reached < 1.0
+    assert res.status == "canceled" and res.lam_reached == 0.0 and not res.steps
+    assert res.records[-1].status == "User_Requested_Stop" and res.records[-1].iterations < 5
 
 
 def test_thesis_controller_and_motion_at(tutor):

