@@ -289,8 +289,19 @@ class _Walk:
         return res, ok, res.status, env, values
 
     def base(self) -> _State | None:
-        """The base problem (λ = 0): guide = tutor, started from the tutor."""
+        """The base problem (λ = 0): guide = tutor. A tutor made by this transcription (a cyclic
+        cubic-spline motion whose report says plausible) is its own optimum up to the weak
+        priors and is taken as it is; an older tutor is re-solved from itself."""
         tut = self.tutor
+        if (tut.interpolation == "cubic-spline" and tut.cyclic and tut.report is not None
+                and tut.report.get("plausible")):
+            env, values = environment_at(self.env0, self.target, 0.0)
+            res = SolveResult(True, "tutor", 0, 0.0, tut.q, tut.wrenches, math.nan, 0.0, None, None, 0.0,
+                              heading_change=self.dpsi0)
+            ok = self.accept(0.0, env, values, res)
+            self.record(0.0, values, res, ok, "tutor", 0.0)
+            if ok:
+                return _State(0.0, res)
         res, ok, status, env, values = self.solve(0.0, (tut.q, tut.wrenches), None,
                                                   max(self.control.max_iter, 500), guide=tut.q)
         ok = ok and self.accept(0.0, env, values, res)  # type: ignore[arg-type]

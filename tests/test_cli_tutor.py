@@ -105,7 +105,7 @@ def test_extrapolate_writes_every_lambda_progress_and_summary(tutor_file, tmp_pa
     assert lams == sorted(lams) and lams[0] == 0.0 and lams[-1] == 1.0
     with (out / "progress.csv").open() as f:
         rows = list(csv.DictReader(f))
-    assert len(rows) == summary["solves"]
+    assert len(rows) == summary["solves"] + 1  # λ = 0 is the tutor itself (a record, no solve)
     assert {"phase", "wall_time_s", "lambda", "slope_deg", "iterations", "accepted"} <= set(rows[0])
     assert float(rows[-1]["slope_deg"]) == pytest.approx(-8.0)
     assert (out / "progress.png").stat().st_size > 1000

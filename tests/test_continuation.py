@@ -41,7 +41,8 @@ def test_uphill_slope_reaches_the_target_and_every_step_is_plausible(tutor):
                       on_step=steps.append)
     assert res.status == "succeeded" and res.lam_reached == 1.0
     assert [s.lam for s in res.steps] == sorted(s.lam for s in res.steps) and res.steps[0].lam == 0.0
-    assert len(steps) == len(res.steps) and len(records) == res.solves
+    assert len(steps) == len(res.steps) and len(records) == res.solves + 1
+    assert records[0].status == "tutor" and records[0].lam == 0.0  # λ = 0 is the tutor itself: no solve
     assert all(r1.wall_time <= r2.wall_time for r1, r2 in zip(records, records[1:]))
     for s in res.steps:
         rep = s.motion.report
@@ -87,7 +88,7 @@ def test_impasse_and_cancel_are_results_not_errors(tutor):
     res = extrapolate(tutor, Target(slope_deg=5.0), StepControl(), on_step=steps.append,
                       should_cancel=lambda: len(steps) >= 2)
     assert res.status == "canceled" and 0.0 < res.lam_reached < 1.0 and len(res.steps) == 2
-    # cancel inside a solve: IPOPT's iteration callback stops it at once (no step is stored)
+    # cancel inside a solve: IPOPT's iteration callback stops it at once (only λ = 0 is stored)
     calls = []
 
     def cancel() -> bool:
@@ -95,7 +96,7 @@ def test_impasse_and_cancel_are_results_not_errors(tutor):
         return len(calls) > 3
 
     res = extrapolate(tutor, Target(slope_deg=5.0), StepControl(), should_cancel=cancel)
-    assert res.status == "canceled" and res.lam_reached == 0.0 and not res.steps
+    assert res.status == "canceled" and res.lam_reached == 0.0 and [s.lam for s in res.steps] == [0.0]
     assert res.records[-1].status == "User_Requested_Stop" and res.records[-1].iterations < 5
 
 

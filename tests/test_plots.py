@@ -189,7 +189,11 @@ def test_grf_and_residuals_refuse_a_motion_without_wrenches(tutor):
 def test_residual_series_of_plausible_motions_is_below_tolerance_and_is_the_reports(tutor, continuation):
     for m in (tutor, continuation[1].steps[-1].motion):
         s = residual_series(m)
-        assert s.time.shape == (m.T - 2,) and s.ours.shape == s.mujoco.shape == (6, m.T - 2)
+        # the motion's dynamics samples: every frame of the cycle and the midpoint after it
+        S = 2 * (m.T - 2)
+        assert s.time.shape == (S,) and s.ours.shape == s.mujoco.shape == (6, S)
+        np.testing.assert_allclose(s.time[::2], m.times[1:-1])
+        np.testing.assert_allclose(s.time[1::2], m.times[1:-1] + 0.5 * m.dt)
         assert s.ours_force_rel.max() < 1e-6 and s.ours_moment_rel.max() < 1e-6
         assert s.mujoco_force_rel.max() < 1e-6 and s.mujoco_moment_rel.max() < 1e-6
         assert np.abs(s.mujoco - s.ours)[3:].max() < 1e-9 * s.weight_N  # MuJoCo agrees, frame by frame
@@ -201,9 +205,11 @@ def test_residual_series_of_plausible_motions_is_below_tolerance_and_is_the_repo
 
 
 def test_residual_series_sees_missing_ground_reaction(tutor):
-    """10 % less ground reaction: the residual force per frame is exactly the 10 % taken away."""
+    """10 % less ground reaction: the residual force per sample is exactly the 10 % taken away."""
+    from solver.trajectory import dynamics_samples
+
     base, weak = residual_series(tutor), residual_series(tutor.evolve(wrenches=0.9 * tutor.wrenches))
-    missing = 0.1 * tutor.wrenches[:, 3:, 1:-1].sum(axis=0)
+    missing = 0.1 * dynamics_samples(tutor).wrenches[:, 3:].sum(axis=0)
     np.testing.assert_allclose(weak.ours[3:] - base.ours[3:], missing, atol=1e-8)
     np.testing.assert_allclose(weak.mujoco[3:], weak.ours[3:], atol=1e-8)
     assert weak.ours_force_rel.min() > 1e-3
