@@ -343,8 +343,8 @@ def requested_heading(motion: Motion) -> tuple[float | None, str]:
 def _item(value: float, limit: float, unit: str, what: str, *, warning: bool = False, at_least: bool = False
           ) -> dict[str, Any]:
     ok = value >= limit if at_least else value <= limit
-    return {"value": float(value), "limit": float(limit), "unit": unit, "passed": bool(ok),
-            "severity": "warning" if warning else "failure", "what": what}
+    return {"value": float(value), "limit": float(limit), "bound": "min" if at_least else "max", "unit": unit,
+            "passed": bool(ok), "severity": "warning" if warning else "failure", "what": what}
 
 
 def realism_report(motion: Motion, gravity: Any, mu: float, weight: float, leg: float,
@@ -433,7 +433,7 @@ def problem_lines(rep: dict[str, Any]) -> list[str]:
     out = []
     for name, c in rep.get("checks", {}).items():
         if not c["passed"]:
-            rel = "<" if c["limit"] and c["value"] < c["limit"] else ">"
+            rel = "<" if c.get("bound") == "min" else ">"
             out.append(f"realism {c['severity']}: {name} {c['value']:.3g} {c['unit']} {rel} limit {c['limit']:.3g} "
                        f"({c['what']})")
     return out
