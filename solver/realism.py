@@ -322,16 +322,22 @@ def foot_spin(motion: Motion, weight: float, lim: RealismLimits) -> dict[str, An
 
 
 def requested_heading(motion: Motion) -> tuple[float | None, str]:
-    """Heading change over the cycle the motion was asked for (deg), and where it comes from."""
+    """Heading change over the cycle the motion was asked for (deg, left positive) and where the
+    request was read, in this order: ``provenance.heading_change_requested_deg`` (what the
+    optimizer constrained); the continuation's ``environment_values.curve_deg`` (or
+    ``target.curve_deg`` × ``lambda``), plus the tutor's own heading change when the provenance
+    records it as ``tutor_heading_change_deg``; a tutor's ``heading_change_deg``."""
     prov = motion.provenance
+    if prov.get("heading_change_requested_deg") is not None:
+        return float(prov["heading_change_requested_deg"]), "provenance.heading_change_requested_deg"
+    base = float(prov.get("tutor_heading_change_deg") or 0.0)
+    extra = " + tutor_heading_change_deg" if prov.get("tutor_heading_change_deg") is not None else ""
     ev = prov.get("environment_values") or {}
     if isinstance(ev, dict) and ev.get("curve_deg") is not None:
-        return float(ev["curve_deg"]) + float(prov.get("tutor_heading_change_deg") or 0.0), \
-            "provenance.environment_values.curve_deg"
+        return float(ev["curve_deg"]) + base, "provenance.environment_values.curve_deg" + extra
     tgt = prov.get("target") or {}
     if isinstance(tgt, dict) and tgt.get("curve_deg") is not None and prov.get("lambda") is not None:
-        return float(tgt["curve_deg"]) * float(prov["lambda"]) + float(prov.get("tutor_heading_change_deg") or 0.0), \
-            "provenance.target.curve_deg × lambda"
+        return float(tgt["curve_deg"]) * float(prov["lambda"]) + base, "provenance.target.curve_deg × lambda" + extra
     if prov.get("heading_change_deg") is not None:
         return float(prov["heading_change_deg"]), "provenance.heading_change_deg"
     return None, ""
