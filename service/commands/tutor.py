@@ -61,12 +61,20 @@ def _tutor_summary(out: dict) -> str:
              f"at {out['fps']:g} fps (one gait cycle)",
              f"  {'plausible' if out['plausible'] else 'NOT plausible'}: root residual "
              f"{out['root_residual_rel_weight']:.1e} x body weight (tolerance 1e-6), MuJoCo's replay agrees to "
-             f"{out['mujoco_agreement_rel_weight']:.1e}"]
+             f"{out['mujoco_agreement_rel_weight']:.1e}{_realism_words(out)}"]
     md = st.get("marker_distance_to_capture_mm") or {}
     if md:
         lines.append(f"  distance to the capture: markers {md['mean']:.1f} mm on average, {md['max']:.1f} mm at most")
     lines.append(f"  next: motionx extrapolate {out['out']} --slope DEG (or --curve DEG) --out DIR")
     return "\n".join(lines)
+
+
+def _realism_words(out: dict) -> str:
+    """'; realism passed' or '; realism: N checks failed' (``motionx validate`` shows the figures)."""
+    if "realism_failed" not in out:
+        return ""
+    n = len(out["realism_failed"])
+    return "; realism passed" if not n else f"; realism: {n} check{'s' if n > 1 else ''} failed"
 
 
 def cmd_tutor(args: argparse.Namespace) -> int:
@@ -98,7 +106,8 @@ def cmd_tutor(args: argparse.Namespace) -> int:
     out.update({"out": args.out, "character": res.motion.character.name, "fps": res.motion.fps,
                 "frames": res.motion.T, "coordinates": res.motion.n, "plausible": rep["plausible"],
                 "root_residual_rel_weight": rep["root_residual"]["max_force_rel_weight"],
-                "mujoco_agreement_rel_weight": rep["mujoco_replay"]["agreement_force_rel_weight"]})
+                "mujoco_agreement_rel_weight": rep["mujoco_replay"]["agreement_force_rel_weight"],
+                "realism_failed": (rep.get("realism") or {}).get("failed", [])})
     print(json.dumps(out) if args.json else _tutor_summary(out))
     return 0 if rep["plausible"] else 1
 
@@ -208,7 +217,7 @@ def _extrapolate_summary(summary: dict, out: Path) -> str:
         lines.append(f"  final motion {final['file']}: λ = {final['lambda']:.4f}{reached}, "
                      f"{'plausible' if final['plausible'] else 'NOT plausible'} (root residual "
                      f"{final['root_residual_rel_weight']:.1e} x body weight, MuJoCo's replay agrees to "
-                     f"{final['mujoco_agreement_rel_weight']:.1e})")
+                     f"{final['mujoco_agreement_rel_weight']:.1e}{_realism_words(final)})")
     lines.append(f"  wrote {out}/: step_NNN_lambda_L.motion.json per λ, progress.csv, progress.png, summary.json"
                  + (", grf.png, residuals.png" if final else ""))
     return "\n".join(lines)
@@ -258,6 +267,7 @@ def cmd_extrapolate(args: argparse.Namespace) -> int:
                  "root_residual_rel_weight": rep["root_residual"]["max_force_rel_weight"],
                  "mujoco_root_residual_rel_weight": rep["mujoco_replay"]["max_force_rel_weight"],
                  "mujoco_agreement_rel_weight": rep["mujoco_replay"]["agreement_force_rel_weight"],
+                 "realism_failed": (rep.get("realism") or {}).get("failed", []),
                  "environment": last.motion.provenance.get("environment_values"),
                  "plots": list(write_motion_plots(last.motion, out).values())}
     summary = {
