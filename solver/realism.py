@@ -184,24 +184,38 @@ def momentum_from_positions(motion: Motion) -> dict[str, np.ndarray]:
 
 def newton_euler(motion: Motion, gravity: np.ndarray, weight: float, leg: float,
                  cyc: Cycle | None) -> dict[str, Any]:
-    """Per-frame and whole-cycle errors of Newton–Euler from positions (frames 1..T-2)."""
+    """Per-frame and whole-cycle errors of Newton–Euler from positions (frames 1..T-2).
+
+    The momenta are means over each frame interval (differences of positions), so their
+    difference across frame t is exactly the impulse of the external forces weighted by the hat
+    function of frames t-1..t+1; with the wrenches linear between the frames (as the refinement
+    assumes) that is (G_{t-1} + 4 G_t + G_{t+1}) / 6 — no discretization error in the
+    comparison. (Open motions: the end frames 1 and T-2 use G_t alone.) The point comparison
+    (G_t alone everywhere) is reported too."""
     mom = momentum_from_positions(motion)
     dt, M, c = motion.dt, float(mom["mass"]), mom["com"]
-    W = motion.wrenches[:, :, 1:-1].sum(axis=0)  # (6, T-2)
-    ground = _about(W, c[:, 1:-1])
+    W = motion.wrenches.sum(axis=0)  # (6, T)
+    if cyc is not None:  # the overlap frames as the cycle's transform of frames T-2 and 1
+        W = np.concatenate([cyc.apply_wrench(W[:, -2:-1], -1), W[:, 1:-1], cyc.apply_wrench(W[:, 1:2], 1)], axis=1)
+    G = _about(W, c)
+    G[3:] += M * gravity[:, None]  # (moment about the COM; force incl. gravity), (6, T)
+    hat = (G[:, :-2] + 4.0 * G[:, 1:-1] + G[:, 2:]) / 6.0
+    if cyc is None:
+        hat[:, [0, -1]] = G[:, [1, -2]]
     dP = (mom["P"][:, 1:] - mom["P"][:, :-1]) / dt
     dL = (mom["L"][:, 1:] - mom["L"][:, :-1]) / dt
-    ferr = dP - (ground[3:] + M * gravity[:, None])
-    merr = dL - ground[:3]
-    fr = np.linalg.norm(ferr, axis=0) / weight
-    mr = np.linalg.norm(merr, axis=0) / (weight * leg)
+    err = np.vstack([dL, dP]) - hat
+    fr = np.linalg.norm(err[3:], axis=0) / weight
+    mr = np.linalg.norm(err[:3], axis=0) / (weight * leg)
+    point = np.linalg.norm(dP - G[3:, 1:-1], axis=0) / weight
+    ground = hat
     dur = (motion.T - 2) * dt
-    impulse = (ground[3:] + M * gravity[:, None]).sum(axis=1) * dt
+    impulse = ground[3:].sum(axis=1) * dt
     dmom = mom["P"][:, -1] - mom["P"][:, 0]
     ang_impulse = ground[:3].sum(axis=1) * dt
     dang = mom["L"][:, -1] - mom["L"][:, 0]
     out = {
-        "force_rel_weight": fr, "moment_rel_weight_leg": mr,
+        "force_rel_weight": fr, "moment_rel_weight_leg": mr, "point_force_rel_weight": point,
         "worst_force_frame": int(np.argmax(fr)) + 1, "worst_moment_frame": int(np.argmax(mr)) + 1,
         "cycle_force_rel_weight": float(np.linalg.norm(impulse - dmom) / (weight * dur)),
         "cycle_moment_rel_weight_leg": float(np.linalg.norm(ang_impulse - dang) / (weight * leg * dur)),
