@@ -396,17 +396,21 @@ def realism_report(motion: Motion, gravity: Any, mu: float, weight: float, leg: 
                                     f"root residual force on a spline at {lim.refine}× the frame rate")
     checks["refined_moment"] = _item(rf["moment_rel_weight_leg"].max(), lim.refine_moment, "BW·leg",
                                      f"root residual moment on a spline at {lim.refine}× the frame rate")
-    to = torsion(motion, mu, weight, lim)
-    checks["torsional_friction"] = _item(to["max_excess_rel_weight_m"], 0.0, "BW·m",
-                                         f"free moment beyond μ·ρ·f_z (ρ = foot length × {lim.torsion_radius:g})")
-    checks["free_moment"] = _item(to["max_free_moment_rel_weight_m"], lim.torsion_abs, "BW·m",
-                                  "largest free moment at a centre of pressure")
-    checks["unloaded_foot_moment"] = _item(to["max_unloaded_free_moment_Nm"] / weight,
-                                           mu * min(to["radius_m"]) * lim.unloaded, "BW·m",
-                                           f"free moment of a foot carrying < {lim.unloaded:g} BW")
-    sp = foot_spin(motion, weight, lim)
-    checks["foot_spin"] = _item(sp["max_turn_deg_per_s"], lim.spin_rate, "deg/s",
-                                f"turn about the normal of a foot loaded > {lim.spin_load:g} BW at both frames")
+    feet = len(motion.character.feet) == 2
+    to = torsion(motion, mu, weight, lim) if feet else None
+    if to is None:
+        out["notes"].append("the character has no foot boxes: torsional friction and foot spin not checked")
+    else:
+        checks["torsional_friction"] = _item(to["max_excess_rel_weight_m"], 0.0, "BW·m",
+                                             f"free moment beyond μ·ρ·f_z (ρ = foot length × {lim.torsion_radius:g})")
+        checks["free_moment"] = _item(to["max_free_moment_rel_weight_m"], lim.torsion_abs, "BW·m",
+                                      "largest free moment at a centre of pressure")
+        checks["unloaded_foot_moment"] = _item(to["max_unloaded_free_moment_Nm"] / weight,
+                                               mu * min(to["radius_m"]) * lim.unloaded, "BW·m",
+                                               f"free moment of a foot carrying < {lim.unloaded:g} BW")
+        sp = foot_spin(motion, weight, lim)
+        checks["foot_spin"] = _item(sp["max_turn_deg_per_s"], lim.spin_rate, "deg/s",
+                                    f"turn about the normal of a foot loaded > {lim.spin_load:g} BW at both frames")
     W, idx = frame_wrenches(motion, cyc)
     F = W[:, 3:].sum(axis=0)
     checks["total_ground_force"] = _item(np.linalg.norm(F, axis=0).max() / weight, lim.total_force, "BW",
@@ -437,7 +441,7 @@ def realism_report(motion: Motion, gravity: Any, mu: float, weight: float, leg: 
         "refinement": {"factor": lim.refine, "worst_force_time_frames": rf["worst_force_time_frames"],
                        "worst_moment_time_frames": rf["worst_moment_time_frames"],
                        "max_force_between_frames_rel_weight": rf["max_force_between_frames"]},
-        "torsion": to, "foot_spin": sp,
+        "torsion": to, "foot_spin": sp if feet else None,
         "ground_force_rel_weight": (np.linalg.norm(F, axis=0) / weight).tolist(),
         "joint_speed_deg_s": dict(zip([motion.coordinate_names[i] for i in hinge], speeds.tolist())),
     }

@@ -11,6 +11,7 @@ residual is exactly zero, the new checks must see it.
 from __future__ import annotations
 
 import json
+import zlib
 import math
 
 import numpy as np
@@ -218,6 +219,8 @@ def test_body_spinning_at_a_constant_rate_keeps_its_angular_momentum():
     assert ne["force_rel_weight"].max() < 1e-12 and ne["moment_rel_weight_leg"].max() < 1e-12
     rf = refinement(m, np.zeros(3), ch.total_mass * 9.81, 1.0, None, 6)
     assert rf["force_rel_weight"].max() < 1e-9 and rf["moment_rel_weight_leg"].max() < 1e-9
+    r = realism(m, g=np.zeros(3))  # no feet: the contact checks are skipped, and say so
+    assert r["passed"] and "foot_spin" not in r["checks"] and any("no foot boxes" in n for n in r["notes"])
 
 
 def test_whole_body_turning_rigidly_keeps_its_vertical_angular_momentum():
@@ -321,6 +324,20 @@ def test_report_section_is_json_and_fast():
     assert rep["realism"]["passed"] and rep["realism"]["limits"] == RealismLimits().__dict__
     assert all(k in rep["checks"] for k in ("realism_newton_force", "realism_refined_force", "realism_foot_spin"))
     assert rep["realism"]["time_s"] < 1.0
+
+
+def test_job_and_motion_api_validation_carries_the_realism_section():
+    """The report a job stores for every λ optimum and ``GET /motions/{id}/validation`` returns."""
+    from service import work
+    from service.jobs import validation_report
+
+    jit = zigzag(smooth_walk())
+    rep = validation_report(jit)
+    assert rep["plausible"] is False and rep["checks"]["root_force"] and rep["checks"]["mujoco_agrees"]
+    assert "refined_force" in rep["realism"]["failed"] and rep["checks"]["realism_refined_force"] is False
+    json.dumps(rep, allow_nan=False)
+    stored = zlib.compress(jit.to_json().encode())  # how the store keeps a motion
+    assert work.validation(stored)["realism"]["failed"] == rep["realism"]["failed"]
 
 
 # --- motionx validate ----------------------------------------------------------------------------------------
