@@ -295,22 +295,36 @@ def free_moments(motion: Motion) -> np.ndarray:
 
 
 def torsion(motion: Motion, mu: float, weight: float, lim: RealismLimits) -> dict[str, Any]:
+    """Free moments against torsional friction (frames 1..T-2), and the whole moment of an
+    unloaded foot about its centre on the ground (``moment_room_m``: the lever a foot of that
+    size can give its load — half its length plus the torsion radius)."""
+    ch = motion.character
     frames = slice(1, motion.T - 1)
+    W = motion.wrenches[:, :, frames]
     tau = free_moments(motion)[:, frames]
-    fz = motion.wrenches[:, 5, frames]
-    nz = motion.wrenches[:, 2, frames]
-    rho = np.array([lim.torsion_radius * foot_length(motion, side) for side in FEET])[:, None]
+    fz, nz = W[:, 5], W[:, 2]
+    length = np.array([foot_length(motion, side) for side in FEET])[:, None]
+    rho = lim.torsion_radius * length
     bound = mu * rho * np.maximum(fz, 0.0)
     tau_abs = np.where(np.isnan(tau), np.abs(nz), np.abs(tau))  # no normal force: any moment is free
-    with np.errstate(divide="ignore", invalid="ignore"):
-        excess = np.where(tau_abs > 0, (tau_abs - bound) / weight, 0.0)
+    excess = np.where(tau_abs > 0, (tau_abs - bound) / weight, 0.0)
     unloaded = fz < lim.unloaded * weight
+    names = [sg.name for sg in ch.segments]
+    rots, poss = segment_frames(ch, motion.q[:, frames])
+    n_centre = np.empty(fz.shape)
+    for k, side in enumerate(FEET):
+        foot = ch.foot(side)
+        i = names.index(foot.segment)
+        p = poss[i] + np.einsum("ijt,j->it", rots[i], foot.center)
+        p[2] = 0.0
+        n_centre[k] = np.linalg.norm(_about(W[k], p)[:3], axis=0)
     return {
-        "max_free_moment_Nm": float(np.nanmax(tau_abs)) if tau_abs.size else 0.0,
-        "max_free_moment_rel_weight_m": float(np.nanmax(tau_abs) / weight) if tau_abs.size else 0.0,
-        "max_excess_rel_weight_m": float(max(0.0, np.nanmax(excess))) if excess.size else 0.0,
-        "max_unloaded_free_moment_Nm": float(np.nanmax(tau_abs[unloaded])) if unloaded.any() else 0.0,
+        "max_free_moment_Nm": float(tau_abs.max()),
+        "max_free_moment_rel_weight_m": float(tau_abs.max() / weight),
+        "max_excess_rel_weight_m": float(max(0.0, excess.max())),
+        "max_unloaded_moment_Nm": float(n_centre[unloaded].max()) if unloaded.any() else 0.0,
         "radius_m": [float(r) for r in rho[:, 0]],
+        "moment_room_m": float((0.5 * length + mu * rho).max()),
     }
 
 
@@ -405,9 +419,9 @@ def realism_report(motion: Motion, gravity: Any, mu: float, weight: float, leg: 
                                              f"free moment beyond μ·ρ·f_z (ρ = foot length × {lim.torsion_radius:g})")
         checks["free_moment"] = _item(to["max_free_moment_rel_weight_m"], lim.torsion_abs, "BW·m",
                                       "largest free moment at a centre of pressure")
-        checks["unloaded_foot_moment"] = _item(to["max_unloaded_free_moment_Nm"] / weight,
-                                               mu * min(to["radius_m"]) * lim.unloaded, "BW·m",
-                                               f"free moment of a foot carrying < {lim.unloaded:g} BW")
+        checks["unloaded_foot_moment"] = _item(to["max_unloaded_moment_Nm"] / weight,
+                                               to["moment_room_m"] * lim.unloaded, "BW·m",
+                                               f"moment about its centre of a foot carrying < {lim.unloaded:g} BW")
         sp = foot_spin(motion, weight, lim)
         checks["foot_spin"] = _item(sp["max_turn_deg_per_s"], lim.spin_rate, "deg/s",
                                     f"turn about the normal of a foot loaded > {lim.spin_load:g} BW at both frames")
