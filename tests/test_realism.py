@@ -265,6 +265,10 @@ def test_free_moment_beyond_torsional_friction_and_on_an_unloaded_foot_fail():
     W[0, 2] -= 1.0
     r = realism(m.evolve(wrenches=W))
     assert {"unloaded_foot_moment", "torsional_friction"} <= set(r["failed"])
+    W[1, 2], W[0, 2] = 0.0, W[0, 2] + 1.0
+    W[1, 0] += 2.0  # a tilting moment of 2 N·m with no load: not torsion, still a moment from nothing
+    W[0, 0] -= 2.0
+    assert realism(m.evolve(wrenches=W))["failed"] == ["unloaded_foot_moment"]
 
 
 def test_heading_change_is_checked_against_the_request():
