@@ -351,23 +351,28 @@ def foot_spin(motion: Motion, weight: float, lim: RealismLimits) -> dict[str, An
 
 def requested_heading(motion: Motion) -> tuple[float | None, str]:
     """Heading change over the cycle the motion was asked for (deg, left positive) and where the
-    request was read, in this order: ``provenance.heading_change_requested_deg`` (what the
-    optimizer constrained); the continuation's ``environment_values.curve_deg`` (or
-    ``target.curve_deg`` × ``lambda``), plus the tutor's own heading change when the provenance
-    records it as ``tutor_heading_change_deg``; a tutor's ``heading_change_deg``."""
+    request was read, first found of: ``provenance.heading_change_requested_deg``; the
+    continuation's ``environment_values.curve_deg`` (λ·curve) plus the tutor's own heading change
+    ``tutor_heading_change_deg`` when both are recorded; ``heading_change_deg`` (the heading the
+    optimizer was asked for: a tutor's, or the tutor's + λ·curve of a λ optimum); the
+    continuation's λ·curve alone (``environment_values.curve_deg``, else ``target.curve_deg`` ×
+    ``lambda``), which assumes a straight tutor."""
     prov = motion.provenance
+    ev = prov.get("environment_values") if isinstance(prov.get("environment_values"), dict) else {}
+    tgt = prov.get("target") if isinstance(prov.get("target"), dict) else {}
+    curve, where = None, ""
+    if ev.get("curve_deg") is not None:
+        curve, where = float(ev["curve_deg"]), "provenance.environment_values.curve_deg"
+    elif tgt.get("curve_deg") is not None and prov.get("lambda") is not None:
+        curve, where = float(tgt["curve_deg"]) * float(prov["lambda"]), "provenance.target.curve_deg × lambda"
     if prov.get("heading_change_requested_deg") is not None:
         return float(prov["heading_change_requested_deg"]), "provenance.heading_change_requested_deg"
-    base = float(prov.get("tutor_heading_change_deg") or 0.0)
-    extra = " + tutor_heading_change_deg" if prov.get("tutor_heading_change_deg") is not None else ""
-    ev = prov.get("environment_values") or {}
-    if isinstance(ev, dict) and ev.get("curve_deg") is not None:
-        return float(ev["curve_deg"]) + base, "provenance.environment_values.curve_deg" + extra
-    tgt = prov.get("target") or {}
-    if isinstance(tgt, dict) and tgt.get("curve_deg") is not None and prov.get("lambda") is not None:
-        return float(tgt["curve_deg"]) * float(prov["lambda"]) + base, "provenance.target.curve_deg × lambda" + extra
+    if curve is not None and prov.get("tutor_heading_change_deg") is not None:
+        return curve + float(prov["tutor_heading_change_deg"]), where + " + tutor_heading_change_deg"
     if prov.get("heading_change_deg") is not None:
         return float(prov["heading_change_deg"]), "provenance.heading_change_deg"
+    if curve is not None:
+        return curve, where + " (a straight tutor assumed)"
     return None, ""
 
 

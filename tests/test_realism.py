@@ -279,6 +279,14 @@ def test_heading_change_is_checked_against_the_request():
     assert realism(m)["passed"]
     r = realism(smooth_walk(curve_deg=45.0, provenance={}))
     assert "heading" not in r["checks"] and any("no requested curve" in n for n in r["notes"])
+    # a λ optimum of a tutor that itself turns 5°: λ·curve + the tutor's turn
+    both = {"environment_values": {"curve_deg": 40.0}, "tutor_heading_change_deg": 5.0, "heading_change_deg": 45.0}
+    assert realism(smooth_walk(curve_deg=45.0, provenance=both))["passed"]
+    both["tutor_heading_change_deg"] = 0.0  # the recorded parts disagree with the motion's turn
+    r = realism(smooth_walk(curve_deg=45.0, provenance=both))
+    assert r["failed"] == ["heading"] and "tutor_heading_change_deg" in r["checks"]["heading"]["what"]
+    r = realism(smooth_walk(curve_deg=45.0, provenance={"heading_change_deg": 44.5}))  # what the optimizer was asked
+    assert r["passed"] and r["checks"]["heading"]["value"] == pytest.approx(0.5, abs=1e-9)
 
 
 def test_ground_force_limits():
