@@ -4,10 +4,6 @@ Residuals are measured at the interior frames (where central differences define 
 the root residual is h0(q, q̇, q̈, g) minus the sum of the contact wrenches — zero for a
 physically plausible motion. Moments are reported about the root (pelvis) position of
 each frame, so they do not depend on where the world origin is.
-
-The ``realism`` section (:mod:`solver.realism`) adds checks that do not share the
-optimizer's discretization (Newton–Euler from positions, inverse dynamics between the
-frames, torsional friction, foot spin, ranges); its failures are part of ``plausible``.
 """
 
 from __future__ import annotations
@@ -109,6 +105,9 @@ def report(motion: Motion, tol: Tolerances = Tolerances(), realism: RealismLimit
         checks["contacts"] = False
     failed = [k for k, v in checks.items() if not v]
     problems += [f"{k} out of tolerance" for k in failed if k not in ("wrenches", "contacts")]
+    # the realism section (solver.realism): checks that do not share the optimizer's discretization
+    # (Newton–Euler from positions, inverse dynamics between the frames, torsional friction, foot
+    # spin, ranges); its failures are part of ``plausible``
     real = realism_report(motion, g, mu, weight, leg, realism)
     out["realism"] = real
     for name, c in real.get("checks", {}).items():
