@@ -93,7 +93,7 @@ def test_smooth_motion_passes_and_its_zigzag_that_the_old_validator_accepts_fail
     rs = realism(smooth)
     assert rs["passed"] and not rs["warnings"], rs["failed"]
     c = rs["checks"]
-    assert c["newton_force"]["value"] < 0.01 and c["newton_moment"]["value"] < 0.01  # 15 fps differences of a smooth walk
+    assert c["newton_force"]["value"] < 0.01 and c["newton_moment"]["value"] < 0.01  # differences of a smooth walk
     assert c["refined_force"]["value"] < 0.01 and c["cycle_impulse"]["value"] < 1e-4
 
     jit = zigzag(smooth)
