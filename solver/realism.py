@@ -59,6 +59,7 @@ class RealismLimits:
     refine_moment: float = 0.04  # BW·leg
     torsion_radius: float = 0.1  # ρ / foot length: |τ_free| ≤ μ ρ f_z
     torsion_abs: float = 0.03  # BW·m
+    torsion_tol: float = 1e-4  # BW·m: numerical tolerance of the excess (the friction cone's is 1e-4 BW)
     unloaded: float = 0.02  # BW: a foot below this carries (almost) no moment
     spin_load: float = 0.10  # BW: a foot above this at both frames is "loaded"
     spin_rate: float = 75.0  # deg/s about the ground normal (5° per frame at 15 fps)
@@ -420,7 +421,7 @@ def realism_report(motion: Motion, gravity: Any, mu: float, weight: float, leg: 
     if to is None:
         out["notes"].append("the character has no foot boxes: torsional friction and foot spin not checked")
     else:
-        checks["torsional_friction"] = _item(to["max_excess_rel_weight_m"], 0.0, "BW·m",
+        checks["torsional_friction"] = _item(to["max_excess_rel_weight_m"], lim.torsion_tol, "BW·m",
                                              f"free moment beyond μ·ρ·f_z (ρ = foot length × {lim.torsion_radius:g})")
         checks["free_moment"] = _item(to["max_free_moment_rel_weight_m"], lim.torsion_abs, "BW·m",
                                       "largest free moment at a centre of pressure")
