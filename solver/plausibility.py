@@ -17,6 +17,7 @@ import numpy as np
 from solver.dynamics import rnea
 from solver.kinematics import contact_points, segment_frames, standing_leg_length
 from solver.motion import FEET, Motion
+from solver.realism import RealismLimits, problem_lines, realism_report
 from solver.trajectory import dynamics_samples
 
 
@@ -53,7 +54,7 @@ def about_root(wrench: np.ndarray, q: np.ndarray) -> np.ndarray:
     return out
 
 
-def report(motion: Motion, tol: Tolerances = Tolerances()) -> dict:
+def report(motion: Motion, tol: Tolerances = Tolerances(), realism: RealismLimits = RealismLimits()) -> dict:
     ch = motion.character
     env = environment_of(motion)
     g = np.asarray(env["gravity"], dtype=float)
@@ -105,8 +106,18 @@ def report(motion: Motion, tol: Tolerances = Tolerances()) -> dict:
         problems.append("no contact schedule")
         checks["contacts"] = False
     failed = [k for k, v in checks.items() if not v]
+    problems += [f"{k} out of tolerance" for k in failed if k not in ("wrenches", "contacts")]
+    # the realism section (solver.realism): checks that do not share the optimizer's discretization
+    # (Newton–Euler from positions, inverse dynamics between the frames, torsional friction, foot
+    # spin, ranges); its failures are part of ``plausible``
+    real = realism_report(motion, g, mu, weight, leg, realism)
+    out["realism"] = real
+    for name, c in real.get("checks", {}).items():
+        if c["severity"] == "failure":
+            checks[f"realism_{name}"] = c["passed"]
+    failed = [k for k, v in checks.items() if not v]
     out["checks"] = checks
-    out["problems"] = problems + [f"{k} out of tolerance" for k in failed if k not in ("wrenches", "contacts")]
+    out["problems"] = problems + problem_lines(real)
     out["plausible"] = not failed
     return out
 
@@ -163,6 +174,9 @@ def _contact_checks(motion: Motion, mu: float, weight: float) -> dict:
 
 def summary(rep: Mapping[str, Any]) -> str:
     r = rep["root_residual"]
+    real = rep.get("realism") or {}
+    failed = real.get("failed") or []
     return (f"plausible={rep['plausible']} root residual {r['max_force_N']:.2e} N / {r['max_moment_Nm']:.2e} N·m "
             f"(rel {r['max_force_rel_weight']:.1e}), slip {rep.get('slip_mm', float('nan')):.3f} mm, "
-            f"penetration {rep.get('penetration_mm', float('nan')):.3f} mm")
+            f"penetration {rep.get('penetration_mm', float('nan')):.3f} mm, realism "
+            + ("passed" if real.get("passed") else f"failed ({', '.join(failed) or 'not checked'})"))

@@ -66,7 +66,7 @@ def test_tutor_writes_a_plausible_motion_file(tutor_file):
 
 
 def test_validate_reports_and_flags_implausible_motions(tutor_file, tmp_path):
-    r = motionx("validate", tutor_file)
+    r = motionx("validate", tutor_file, "--json")
     assert r.returncode == 0, r.stderr
     rep = json.loads(r.stdout)
     assert rep["plausible"] and rep["mujoco_replay"]["max_force_rel_weight"] < 1e-6
@@ -74,7 +74,7 @@ def test_validate_reports_and_flags_implausible_motions(tutor_file, tmp_path):
     m = Motion.load(tutor_file)
     weak = m.evolve(wrenches=0.9 * m.wrenches, report=None)
     weak.save(tmp_path / "weak.json")
-    r = motionx("validate", tmp_path / "weak.json")
+    r = motionx("validate", tmp_path / "weak.json", "--json")
     assert r.returncode == 1
     rep = json.loads(r.stdout)
     assert not rep["plausible"] and rep["root_residual"]["max_force_rel_weight"] > 1e-3

@@ -61,12 +61,20 @@ def _tutor_summary(out: dict) -> str:
              f"at {out['fps']:g} fps (one gait cycle)",
              f"  {'plausible' if out['plausible'] else 'NOT plausible'}: root residual "
              f"{out['root_residual_rel_weight']:.1e} x body weight (tolerance 1e-6), MuJoCo's replay agrees to "
-             f"{out['mujoco_agreement_rel_weight']:.1e}"]
+             f"{out['mujoco_agreement_rel_weight']:.1e}{_realism_words(out)}"]
     md = st.get("marker_distance_to_capture_mm") or {}
     if md:
         lines.append(f"  distance to the capture: markers {md['mean']:.1f} mm on average, {md['max']:.1f} mm at most")
     lines.append(f"  next: motionx extrapolate {out['out']} --slope DEG (or --curve DEG) --out DIR")
     return "\n".join(lines)
+
+
+def _realism_words(out: dict) -> str:
+    """'; realism passed' or '; realism: N checks failed' (``motionx validate`` shows the figures)."""
+    if "realism_failed" not in out:
+        return ""
+    n = len(out["realism_failed"])
+    return "; realism passed" if not n else f"; realism: {n} check{'s' if n > 1 else ''} failed"
 
 
 def cmd_tutor(args: argparse.Namespace) -> int:
@@ -98,7 +106,8 @@ def cmd_tutor(args: argparse.Namespace) -> int:
     out.update({"out": args.out, "character": res.motion.character.name, "fps": res.motion.fps,
                 "frames": res.motion.T, "coordinates": res.motion.n, "plausible": rep["plausible"],
                 "root_residual_rel_weight": rep["root_residual"]["max_force_rel_weight"],
-                "mujoco_agreement_rel_weight": rep["mujoco_replay"]["agreement_force_rel_weight"]})
+                "mujoco_agreement_rel_weight": rep["mujoco_replay"]["agreement_force_rel_weight"],
+                "realism_failed": (rep.get("realism") or {}).get("failed", [])})
     print(json.dumps(out) if args.json else _tutor_summary(out))
     return 0 if rep["plausible"] else 1
 
@@ -113,8 +122,44 @@ def cmd_validate(args: argparse.Namespace) -> int:
     motion = load_motion(args.motion)
     tol = Tolerances(residual=args.residual_tol) if args.residual_tol else Tolerances()
     rep = validate(motion, tol)
-    print(json.dumps(rep, indent=2 if args.pretty else None))
+    if args.json or args.pretty:
+        print(json.dumps(rep, indent=2 if args.pretty else None))
+    else:
+        print(_validate_summary(rep, args.motion))
     return 0 if rep["plausible"] else 1
+
+
+def _validate_summary(rep: dict, path) -> str:
+    """The plausibility report for a person: the verdict, the checks at the frames in one line,
+    then every realism check with its figure and limit (failures first), warnings and notes."""
+    r, mj = rep["root_residual"], rep.get("mujoco_replay") or {}
+    head = (f"{path}: {'plausible' if rep['plausible'] else 'NOT plausible'} ({rep['character']}, "
+            f"{rep['frames']} frames at {rep['fps']:g} fps)")
+    frames = [f"root residual {max(r['max_force_rel_weight'], r['max_moment_rel_weight_leg']):.1e} x body weight "
+              f"(tolerance {rep['tolerances']['residual']:g})"]
+    if mj:
+        frames.append(f"MuJoCo's replay agrees to {mj['agreement_force_rel_weight']:.1e}")
+    if "slip_mm" in rep:
+        frames.append(f"slip {rep['slip_mm']:.2f} mm, penetration {rep['penetration_mm']:.2f} mm")
+    other = [k for k, v in rep["checks"].items() if not v and not k.startswith("realism_")]
+    frames.append("contact checks ok" if not other else "failed: " + ", ".join(other))
+    lines = [head, "  at the frames: " + "; ".join(frames)]
+    real = rep.get("realism") or {}
+    checks = real.get("checks") or {}
+    if checks:
+        failed = real.get("failed") or []
+        lines.append(f"  realism (between the frames, {1e3 * real.get('time_s', 0.0):.0f} ms): "
+                     + (f"{len(failed)} of {sum(c['severity'] == 'failure' for c in checks.values())} checks failed"
+                        if failed else "every check passed"))
+        order = sorted(checks.items(), key=lambda kv: (kv[1]["passed"], kv[1]["severity"] != "failure"))
+        for name, c in order:
+            mark = ("ok  " if c["passed"] else ("FAIL" if c["severity"] == "failure" else "warn"))
+            rel = ">=" if c.get("bound") == "min" else "<="
+            lines.append(f"    {mark} {name:22s} {c['value']:9.3g} {c['unit']:6s} (limit {rel} {c['limit']:.3g}): "
+                         f"{c['what']}")
+    for note in real.get("notes") or []:
+        lines.append(f"  note: {note}")
+    return "\n".join(lines)
 
 
 # --- extrapolate --------------------------------------------------------------------------
@@ -172,7 +217,7 @@ def _extrapolate_summary(summary: dict, out: Path) -> str:
         lines.append(f"  final motion {final['file']}: λ = {final['lambda']:.4f}{reached}, "
                      f"{'plausible' if final['plausible'] else 'NOT plausible'} (root residual "
                      f"{final['root_residual_rel_weight']:.1e} x body weight, MuJoCo's replay agrees to "
-                     f"{final['mujoco_agreement_rel_weight']:.1e})")
+                     f"{final['mujoco_agreement_rel_weight']:.1e}{_realism_words(final)})")
     lines.append(f"  wrote {out}/: step_NNN_lambda_L.motion.json per λ, progress.csv, progress.png, summary.json"
                  + (", grf.png, residuals.png" if final else ""))
     return "\n".join(lines)
@@ -222,6 +267,7 @@ def cmd_extrapolate(args: argparse.Namespace) -> int:
                  "root_residual_rel_weight": rep["root_residual"]["max_force_rel_weight"],
                  "mujoco_root_residual_rel_weight": rep["mujoco_replay"]["max_force_rel_weight"],
                  "mujoco_agreement_rel_weight": rep["mujoco_replay"]["agreement_force_rel_weight"],
+                 "realism_failed": (rep.get("realism") or {}).get("failed", []),
                  "environment": last.motion.provenance.get("environment_values"),
                  "plots": list(write_motion_plots(last.motion, out).values())}
     summary = {
@@ -317,9 +363,13 @@ motion's grf.png and residuals.png. Exit status 0 for `succeeded` and `impasse`.
     s = add_command(sub, "validate", "plausibility report of a motion file (MuJoCo replay included)", """\
 Check a motion file against the equations of motion: root residual (ours and MuJoCo's
 mj_inverse replay on the motion's MJCF), foot slip, penetration, friction cone, centre of
-pressure. Prints the report as JSON; exit status 1 when the motion is not plausible.""")
+pressure, and the realism checks that hold between the frames (whole-body Newton-Euler
+from positions, inverse dynamics on a 6x finer spline, torsional friction, foot spin,
+ground force ranges, heading). Prints a summary (--json: the report as JSON); exit status 1
+when the motion is not plausible.""")
     s.add_argument("motion", metavar="MOTION.json", help="motion file v1 (JSON)")
     s.add_argument("--residual-tol", type=_finite("--residual-tol"), default=None, metavar="R",
                    help="root residual tolerance relative to body weight (default: 1e-6)")
-    s.add_argument("--pretty", action="store_true", help="indent the JSON")
+    s.add_argument("--json", action="store_true", help="print the report as one JSON object instead of a summary")
+    s.add_argument("--pretty", action="store_true", help="print the report as indented JSON")
     s.set_defaults(func=cmd_validate)

@@ -378,6 +378,14 @@ function renderValidation(r) {
     row('min normal force (N)', fmt(r.min_normal_force_N), '', mark('normal_force')),
     row('CoP outside the foot (mm)', sci(r.cop_outside_mm), fmt(tol.cop_mm), mark('cop')),
   );
+  // realism checks (solver.realism): physics between the frames, each with its limit; warnings do not fail
+  for (const [name, c] of Object.entries((r.realism && r.realism.checks) || {})) {
+    const warn = c.severity === 'warning';
+    rows.push(row(`realism: ${name.replaceAll('_', ' ')} (${c.unit})`, fmt(c.value),
+      `${c.bound === 'min' ? '≥' : '≤'} ${fmt(c.limit)}`,
+      h('td', { class: c.passed ? 'check-yes' : (warn ? '' : 'check-no'), title: c.what },
+        c.passed ? '✓' : (warn ? '!' : '✗'))));
+  }
   const env = r.environment || {};
   if (env.gravity) rows.push(row('gravity (m/s²)', env.gravity.map((g) => fmt(g)).join(', '), '', h('td')));
   if (env.friction !== undefined) rows.push(row('friction', fmt(env.friction), '', h('td')));
