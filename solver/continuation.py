@@ -187,6 +187,7 @@ def _motion(tutor: Motion, lam: float, target: Target, env: Environment, values:
                    "time_s": round(res.wall_time, 6), "marker_rms_to_guide_mm": 1e3 * res.marker_rms},
     }
     prov["heading_change_deg"] = math.degrees(res.heading_change)
+    prov["tutor_heading_change_deg"] = math.degrees(tutor_heading_change(tutor))
     m = Motion(tutor.character, tutor.fps, res.q, contacts=tutor.contacts, wrenches=res.wrenches, provenance=prov,
                interpolation="cubic-spline", cyclic=True)
     return m.evolve(report=report(m))

@@ -38,7 +38,7 @@ class FrameFunctions:
     """Generic SX functions and their derivatives for one character."""
 
     #: name -> (number of variable inputs, number of them the Hessian involves)
-    VARS = {"cost": (1, 1), "z": (1, 1), "slip": (2, 2), "feet": (2, 2), "seg": (6, 4), "c2": (5, 5),
+    VARS = {"cost": (1, 1), "acc": (3, 3), "z": (1, 1), "slip": (2, 2), "feet": (2, 2), "seg": (6, 4), "c2": (5, 5),
             "jerk": (4, 4), "wrate": (2, 2), "frate": (2, 2), "smooth": (3, 3)}
 
     def __init__(self, character: Character, realism: Realism = Realism()) -> None:
@@ -73,6 +73,9 @@ class FrameFunctions:
         self.n_sing = len(sing)
         self.cost = ca.Function("cost", [q, gm, gq, wts], [cost])
         self.marker_cost = ca.Function("marker_cost", [q, gm], [ca.sumsqr(mk - gm)])
+        # kinematic fit: squared second difference of the rotations over three frames (rad)
+        qm_, qp_, ws_ = ca.SX.sym("qm", n), ca.SX.sym("qp", n), ca.SX.sym("ws")
+        self.acc = ca.Function("acc", [qm_, q, qp_, ws_], [ws_ * ca.sumsqr((qm_ - 2 * q + qp_)[3:])])
 
         self.has_contacts = P > 0 and len(ch.feet) == 2
         if self.has_contacts:
@@ -83,7 +86,7 @@ class FrameFunctions:
         self.build_time = time.perf_counter() - t0
 
     def functions(self) -> dict[str, ca.Function]:
-        out = {"cost": self.cost}
+        out = {"cost": self.cost, "acc": self.acc}
         if self.has_contacts:
             out.update({"z": self.z, "slip": self.slip, "feet": self.feet, "seg": self.seg, "c2": self.c2,
                         "jerk": self.jerk, "wrate": self.wrate, "frate": self.frate,

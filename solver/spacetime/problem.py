@@ -125,7 +125,7 @@ class SpacetimeProblem:
 
         x = self._x = ca.MX.sym("x", self.nx)
         nm3 = 3 * ff.n_markers
-        sizes = {"gm": nm3 * Tn, "gq": n * Tn, "g": 3, "mu": 1, "wts": 6, "ref": 4 * Tn, "anchor": 3 * Tn, "dpsi": 1,
+        sizes = {"gm": nm3 * Tn, "gq": n * Tn, "g": 3, "mu": 1, "wts": 7, "ref": 4 * Tn, "anchor": 3 * Tn, "dpsi": 1,
                  "com": 3 * Tn}
         self._p_layout, off = {}, 0
         for name in P_LAYOUT:
@@ -155,6 +155,10 @@ class SpacetimeProblem:
         self._cyclic_root(x, dpsi)
         if dynamics:
             self._dynamic_terms(x, grav, mu, wts, dpsi, REF, ANCHOR)
+        else:
+            K = list(range(1, Tn - 1))
+            self._cost(Term("acc", ff.acc, 3, np.vstack([qi[:, [t - 1 for t in K]], qi[:, K], qi[:, [t + 1 for t in K]]]),
+                            [ca.repmat(wts[6], 1, len(K))], derivatives=ff.derivatives["acc"], cost=True))
         objective = sum(ca.sum2(t_.outputs(x)) for t_ in self._terms if t_.cost)
         extra = []
         if self.nx > self.nq_vars + self.nv_vars:  # wrench regularization
@@ -431,7 +435,8 @@ class SpacetimeProblem:
                weights.wrench / K,
                weights.coordinates / (max(self.n - 6, 1) * nT),  # (0.1 rad)² per coordinate = 0.01
                weights.wrench_rate / K,
-               weights.jerk / (max(self.n - 3, 1) * K)]
+               weights.jerk / (max(self.n - 3, 1) * K),
+               weights.smoothness / (max(self.n - 3, 1) * max(nT - 2, 1))]
         return np.concatenate([
             np.asarray(guide_markers, dtype=float).ravel(order="F"),
             np.asarray(guide_q, dtype=float).ravel(order="F"),

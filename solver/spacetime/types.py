@@ -57,7 +57,11 @@ class Weights:
     wrench_rate: float = 1.0
     #: [realism] squared jerk of the rotations (the spline's third derivative × h³, rad): no
     #: frame-to-frame zig-zag of a coordinate that the markers hardly see
-    jerk: float = 1e-3
+    jerk: float = 1.0
+    #: [realism] kinematic fit (simplification) only: squared second difference of the rotations
+    #: between frames (rad): a rotation the markers do not see (axial rotation of a straight arm)
+    #: stays smooth instead of taking any value frame by frame
+    smoothness: float = 0.01
 
 
 @dataclass(frozen=True)
