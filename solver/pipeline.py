@@ -153,11 +153,13 @@ def correct(synthesis: Character, q_sim: np.ndarray, contacts: np.ndarray, fps: 
                          max_iter=max_iter, heading_change=heading_change)
 
 
-def tutor_heading_change(q: np.ndarray) -> float:
-    """The tutor's heading change over its cycle (rad): the capture's, or exactly 0 for a walk
-    that turns less than ``STRAIGHT_WALK_DEG`` (a straight walk's drift is not a curve)."""
-    dpsi = float(q[3, -2] - q[3, 0])
-    return 0.0 if abs(math.degrees(dpsi)) < STRAIGHT_WALK_DEG else dpsi
+def tutor_heading_change(q_capture: np.ndarray, q_simplified: np.ndarray) -> float:
+    """The tutor's heading change over its cycle (rad): the simplified motion's (the cyclic fit
+    to the capture's markers), or exactly 0 when the captured cycle turns less than
+    ``STRAIGHT_WALK_DEG`` (a straight walk's drift is not a curve)."""
+    if abs(math.degrees(float(q_capture[3, -2] - q_capture[3, 0]))) < STRAIGHT_WALK_DEG:
+        return 0.0
+    return float(q_simplified[3, -2] - q_simplified[3, 0])
 
 
 #: a captured cycle turning less than this (degrees) becomes a straight tutor
@@ -263,8 +265,9 @@ def make_tutor(
     t = time.perf_counter()
     env = Environment()
     attempts = []
-    dpsi = tutor_heading_change(q_sim)
-    stats["heading_change_deg"] = {"capture": math.degrees(float(q_sim[3, -2] - q_sim[3, 0])),
+    dpsi = tutor_heading_change(q_cap, q_sim)
+    stats["heading_change_deg"] = {"capture": math.degrees(float(q_cap[3, -2] - q_cap[3, 0])),
+                                   "simplified": math.degrees(float(q_sim[3, -2] - q_sim[3, 0])),
                                    "tutor": math.degrees(dpsi)}
     res = correct(syn, q_sim, contacts, fps, init_wrenches=w0, env=env, max_iter=max_iter, heading_change=dpsi)
     attempts.append({"init": "estimated wrenches", "status": res.status, "iterations": res.iterations,

@@ -181,3 +181,11 @@ def test_guide_at_composes_curve_then_slope(tutor):
     g = guide_at(tutor.q, tgt, 0.5)
     expected = slope(curve(tutor.q, math.radians(15.0)), math.radians(5.0))
     assert np.allclose(g, expected)
+
+
+def test_impossible_slope_ends_in_an_impasse_and_keeps_only_realistic_motions(tutor):
+    """An 80° slope cannot be walked: the walk stops at the last realistic λ, as an impasse, and
+    every stored optimum passes the realism checks (a coarser ε keeps the test short)."""
+    res = extrapolate(tutor, Target(slope_deg=80.0), StepControl(eps=0.05, max_iter=100))
+    assert res.status == "impasse" and 0.0 < res.lam_reached < 0.8, (res.status, res.lam_reached)
+    assert all(s.motion.report["plausible"] and s.motion.report["realism"]["passed"] for s in res.steps)

@@ -64,12 +64,14 @@ def _cyclic_root_function(dynamics: bool) -> ca.Function:
     z = ca.SX.sym("z", 20 if dynamics else 12)
     dpsi = ca.SX.sym("dpsi")
     xa, ya, yaw = z[0:4], z[4:8], z[8:12]  # frames (0, 1, T−2, T−1)
-    rows = [_heading(xa[3] - xa[2], ya[3] - ya[2], yaw[2]) - _heading(xa[1] - xa[0], ya[1] - ya[0], yaw[0]),
-            yaw[2] - yaw[0] - dpsi, yaw[3] - yaw[1] - dpsi]
-    if dynamics:
+    rows = [_heading(xa[3] - xa[2], ya[3] - ya[2], yaw[2]) - _heading(xa[1] - xa[0], ya[1] - ya[0], yaw[0])]
+    if dynamics:  # the heading change over the cycle is exact
         vx, vy = z[12:16], z[16:20]
-        rows += [_heading(vx[2], vy[2], yaw[2]) - _heading(vx[0], vy[0], yaw[0]),
+        rows += [yaw[2] - yaw[0] - dpsi, yaw[3] - yaw[1] - dpsi,
+                 _heading(vx[2], vy[2], yaw[2]) - _heading(vx[0], vy[0], yaw[0]),
                  _heading(vx[3], vy[3], yaw[3]) - _heading(vx[1], vy[1], yaw[1])]
+    else:  # kinematic fit: the yaw rate repeats, the turn follows the capture's markers
+        rows.append((yaw[3] - yaw[2]) - (yaw[1] - yaw[0]))
     return ca.Function("cyc", [z, dpsi], [ca.vertcat(*rows)])
 
 

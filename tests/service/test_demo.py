@@ -200,7 +200,8 @@ def test_demo_files_are_what_they_claim(demo_run):
         # progress.csv: the job's progress curve, the tutor phase first, as `extrapolate` writes it
         with (d / "progress.csv").open() as f:
             rows = list(csv.DictReader(f))
-        assert len(rows) == len(record["progress"]) == record["solves"] + 1
+        # + the tutor phase and λ = 0 (the tutor itself: a record, no solve)
+        assert len(rows) == len(record["progress"]) == record["solves"] + 2
         assert rows[0]["phase"] == "tutor" and {r["phase"] for r in rows[1:]} == {"extrapolate"}
         key, value = next(iter(want.items()))
         assert float(rows[-1][key]) == pytest.approx(value) and float(rows[-1]["lambda_reached"]) == 1.0

@@ -80,7 +80,9 @@ def test_cancel_is_honoured_inside_a_solve(capped, long_id, tutor_id):
     done = wait_job(capped.a, job["id"], timeout=30)
     took = time.monotonic() - t0
     assert done["status"] == "canceled", done
-    assert "stopped in the middle" in done["message"], done  # by the watchdog, not between two λ steps
+    # inside the base problem's solve: IPOPT's iteration callback stops it at its next iteration
+    # ("canceled"), or the watchdog ends the process after the grace ("stopped in the middle")
+    assert done["message"] == "canceled" or "stopped in the middle" in done["message"], done
     assert took < GRACE_S + 5, took
     # the job's process was replaced: the next job runs
     nxt = capped.a.post(f"/motions/{tutor_id}/extrapolate", json=CHEAP).json()
