@@ -89,7 +89,8 @@ wrap around with that offset and every frame is defined.
 Package layout: ``common`` (status codes, the estimate, input checks, derivatives),
 ``geometry`` (pose, screws, foot boxes, CoP projection), ``qp`` (the per-frame QP core),
 ``nested`` (the thesis's reference form), ``smoothing`` (the temporal prior), ``estimator``
-(:func:`estimate_contact_wrenches`), ``trial`` (filter, schedule, :func:`estimate_capture`).
+(:func:`estimate_contact_wrenches`), ``lateral`` (the total's lateral force from the centre of mass
+low-passed across the walk), ``trial`` (filter, schedule, :func:`estimate_capture`).
 """
 
 from solver.contact.common import (
@@ -108,13 +109,14 @@ from solver.contact.estimator import estimate_contact_wrenches
 from solver.contact.trial import (
     CONTACT_SOURCES,
     DEFAULT_CUTOFF_HZ,
+    DEFAULT_LATERAL_HZ,
     TrialEstimate,
     estimate_capture,
     foot_schedule,
     lowpass_kinematics,
 )
 
-__all__ = ["COP_MIN_FZ", "CONTACT_SOURCES", "DEFAULT_CUTOFF_HZ", "DEFAULT_FRICTION", "DEFAULT_PENETRATION",
+__all__ = ["COP_MIN_FZ", "CONTACT_SOURCES", "DEFAULT_CUTOFF_HZ", "DEFAULT_FRICTION", "DEFAULT_LATERAL_HZ", "DEFAULT_PENETRATION",
            "DEFAULT_REGULARIZATION", "METHODS", "ContactError", "ContactEstimate", "Status", "Support", "TrialEstimate",
            "cop_and_free_moment", "estimate_capture", "estimate_contact_wrenches", "foot_schedule",
            "lowpass_kinematics"]

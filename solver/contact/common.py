@@ -94,6 +94,7 @@ class ContactEstimate:
     method: str
     cyclic: bool = False
     smoothing_hz: float | None = None
+    lateral_hz: float | None = None  # the total's lateral force from the centre of mass low-passed here
     cop: np.ndarray = field(init=False)
     free_moment: np.ndarray = field(init=False)
 
@@ -127,6 +128,7 @@ class ContactEstimate:
             "frames": self.T,
             "method": self.method,
             "smoothing_hz": self.smoothing_hz,
+            "lateral_hz": self.lateral_hz,
             **{f"support_{s.name.lower()}": int(np.sum(self.support == s)) for s in Support},
             **{f"status_{s.name.lower()}": int(np.sum(self.status == s)) for s in Status},
             "max_cop_violation_m": float(np.nanmax(self.cop_violation)) if np.any(self.defined) else None,
