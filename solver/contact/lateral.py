@@ -16,18 +16,26 @@ the total, and so its free moment and the CoP's forward position, are untouched)
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
 import numpy as np
 
 from solver.contact.common import _derivatives
 
 
+@lru_cache(maxsize=32)
+def _butter(cutoff_hz: float, fps: float) -> np.ndarray:
+    from scipy.signal import butter
+
+    return butter(2, cutoff_hz, btype="low", fs=fps, output="sos")
+
+
 def _lowpass(x: np.ndarray, fps: float, cutoff_hz: float, cyclic: bool) -> np.ndarray:
     """Zero-phase 2nd-order Butterworth forwards and backwards (the kinematics' filter, odd extension over
     3 periods of the cut-off; a cyclic signal x[-1] = x[0] + offset filtered as the periodic signal)."""
-    from scipy.signal import butter, sosfiltfilt
+    from scipy.signal import sosfiltfilt
 
-    sos = butter(2, cutoff_hz, btype="low", fs=fps, output="sos")
+    sos = _butter(float(cutoff_hz), float(fps))
     T = x.shape[-1]
     if cyclic:
         P = T - 1
