@@ -24,7 +24,7 @@ from solver.contact.common import (
     _derivatives,
 )
 from solver.contact.correction import centre_of_mass, correct_double, correct_single, foot_rows
-from solver.contact.geometry import _cop_violation, _dense_pose, _project_cop
+from solver.contact.geometry import _cop_violation, _dense_pose, _Pose, _project_cop
 from solver.contact.lateral import lateral_correction
 from solver.contact.qp import _qp_batch, _QPBatch, _solve_batch
 from solver.contact.smoothing import _smooth_split, _timeline
@@ -115,8 +115,9 @@ def estimate_contact_wrenches(
         # every frame's pose (the filter needs the ends), the estimator's frames taken from it
         pose_all = _dense_pose(character, q, full=True)
         com_all = centre_of_mass(character, pose_all)
-        pose = pose_all.take(frames)
-        com = com_all[:, frames]
+        sl = slice(int(frames[0]), int(frames[-1]) + 1)  # the frames are consecutive: views, no copies
+        pose = _Pose(pose_all.rot[sl], pose_all.pos[sl])
+        com = com_all[:, sl]
         df, _ = lateral_correction(com_all, h0[3:], float(np.sum(character.model.mass)), float(fps),
                                    float(lateral_hz), cyclic)
         # a force df at the centre of mass: moment com × df about the origin (the wrench convention of h0)
