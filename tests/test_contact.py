@@ -827,6 +827,22 @@ def test_lateral_axis_is_across_the_progression():
     com[1] = np.linspace(0, 0.3, 10)  # walking diagonally
     np.testing.assert_allclose(lateral_axis(com), [-np.sqrt(0.5), np.sqrt(0.5), 0.0])
     assert np.allclose(lateral_axis(np.zeros((3, 10))), [0, 1, 0])  # in place: world y
+    a = np.linspace(0, np.pi / 2, 40)  # a 90° turn (radius 2 m): no single lateral axis
+    assert lateral_axis(np.stack([2 * np.sin(a), 2 - 2 * np.cos(a), np.ones(40)])) is None
+
+
+def test_a_turning_walk_keeps_the_inverse_dynamics_lateral_force():
+    ch = C.capture_full(H_SUBJ, M_SUBJ)
+    T, fps = 121, 60.0
+    q, _ = _swaying_motion(ch, T=T, fps=fps)
+    a = np.linspace(0, np.pi / 2, T)
+    q[ch.index("root_tx")] += 1.5 * np.sin(a)
+    q[ch.index("root_ty")] += 1.5 * (1 - np.cos(a))
+    fc = np.ones((2, T), bool)
+    est = estimate_contact_wrenches(ch, q, fps, fc, lateral_hz=4.0)
+    ref = estimate_contact_wrenches(ch, q, fps, fc)
+    assert est.lateral_hz is None
+    np.testing.assert_array_equal(est.total, ref.total)
 
 
 def test_the_low_passed_lateral_force_follows_the_plates_better_on_every_shared_trial(trials):

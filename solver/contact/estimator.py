@@ -25,7 +25,7 @@ from solver.contact.common import (
 )
 from solver.contact.correction import centre_of_mass, correct_double, correct_single, foot_rows
 from solver.contact.geometry import _cop_violation, _dense_pose, _Pose, _project_cop
-from solver.contact.lateral import lateral_correction
+from solver.contact.lateral import MAX_TURN_DEG, lateral_correction
 from solver.contact.qp import _qp_batch, _QPBatch, _solve_batch
 from solver.contact.smoothing import _smooth_split, _timeline
 from solver.dynamics import DEFAULT_GRAVITY, rnea
@@ -69,7 +69,8 @@ def estimate_contact_wrenches(
     moment), double support as ``False``.
     ``lateral_hz``: the total's lateral force (across the mean progression) taken from the centre of
     mass low-passed at this cut-off, the difference applied at the centre of mass
-    (:mod:`solver.contact.lateral`; None: the inverse dynamics' own, the thesis).
+    (:mod:`solver.contact.lateral`; None: the inverse dynamics' own, the thesis). A walk that turns by
+    more than 30° keeps the inverse dynamics' (the estimate's ``lateral_hz`` is then None).
     """
     if method not in METHODS:
         raise ContactError(f"unknown method {method!r}; use one of {METHODS}")
@@ -118,12 +119,18 @@ def estimate_contact_wrenches(
         sl = slice(int(frames[0]), int(frames[-1]) + 1)  # the frames are consecutive: views, no copies
         pose = _Pose(pose_all.rot[sl], pose_all.pos[sl])
         com = com_all[:, sl]
-        df, _ = lateral_correction(com_all, h0[3:], float(np.sum(character.model.mass)), float(fps),
-                                   float(lateral_hz), cyclic)
-        # a force df at the centre of mass: moment com × df about the origin (the wrench convention of h0)
-        h0 = h0.copy()
-        h0[3:] += df
-        h0[:3] += np.cross(com.T, df.T).T
+        lat = lateral_correction(com_all, h0[3:], float(np.sum(character.model.mass)), float(fps),
+                                 float(lateral_hz), cyclic)
+        if lat is None:
+            log.info("contact estimation: the walk turns (> %g°): no single lateral axis, the inverse dynamics' "
+                     "lateral force kept", MAX_TURN_DEG)
+            lateral_hz = None
+        else:
+            # a force df at the centre of mass: moment com × df about the origin (the wrench convention of h0)
+            df = lat[0]
+            h0 = h0.copy()
+            h0[3:] += df
+            h0[:3] += np.cross(com.T, df.T).T
     else:
         pose = _dense_pose(character, qf, full=full)
         com = centre_of_mass(character, pose) if mode == "com" else None

@@ -49,24 +49,43 @@ def _lowpass(x: np.ndarray, fps: float, cutoff_hz: float, cyclic: bool) -> np.nd
     return sosfiltfilt(sos, x, padtype="odd", padlen=padlen)
 
 
-def lateral_axis(com: np.ndarray) -> np.ndarray:
+MAX_TURN_DEG = 30.0  # a walk whose heading turns more than this has no single lateral axis
+
+
+def heading_change(com: np.ndarray) -> float:
+    """Degrees the centre of mass's horizontal heading turns from the clip's first quarter to its last
+    (chords over each quarter; 0 when it hardly moves)."""
+    T = com.shape[1]
+    k = max(1, T // 4)
+    a, b = com[:2, k] - com[:2, 0], com[:2, -1] - com[:2, -1 - k]
+    if not (np.hypot(*a) > 0.02 and np.hypot(*b) > 0.02):
+        return 0.0
+    return float(np.degrees(np.arctan2(a[0] * b[1] - a[1] * b[0], a @ b)))
+
+
+def lateral_axis(com: np.ndarray) -> np.ndarray | None:
     """Unit horizontal vector across the mean progression (z × the mean horizontal COM velocity); world y
-    when the centre of mass hardly progresses (in place)."""
+    when the centre of mass hardly progresses (in place); None when the walk turns (more than
+    ``MAX_TURN_DEG``: no single axis is lateral throughout)."""
     d = np.asarray(com[:2, -1] - com[:2, 0], dtype=float)
     n = float(np.hypot(*d))
     if not n > 0.05:  # < 5 cm over the whole clip: no progression to speak of
         return np.array([0.0, 1.0, 0.0])
+    if abs(heading_change(com)) > MAX_TURN_DEG:
+        return None
     return np.array([-d[1] / n, d[0] / n, 0.0])
 
 
 def lateral_correction(com: np.ndarray, total_force: np.ndarray, mass: float, fps: float, lateral_hz: float,
-                       cyclic: bool) -> tuple[np.ndarray, np.ndarray]:
+                       cyclic: bool) -> tuple[np.ndarray, np.ndarray] | None:
     """The force (3, N) to add at the centre of mass at the estimator's frames so that the total's lateral
-    force is the low-passed centre of mass's, and the lateral axis (3,).
+    force is the low-passed centre of mass's, and the lateral axis (3,); None for a turning walk.
 
     ``com`` (3, T) the centre of mass at every frame of the (filtered) motion, ``total_force`` (3, N) the
     total ground force at the estimator's frames (those of ``_derivatives``)."""
     e = lateral_axis(com)
+    if e is None:
+        return None
     y = e @ com  # (T,) lateral coordinate
     yf = _lowpass(y, fps, lateral_hz, cyclic)
     _, _, ydd = _derivatives(yf[None, :], 1.0 / fps, cyclic)
