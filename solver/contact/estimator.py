@@ -26,7 +26,7 @@ from solver.contact.common import (
 from solver.contact.correction import centre_of_mass, correct_double, correct_single, foot_rows
 from solver.contact.geometry import _cop_violation, _dense_pose, _Pose, _project_cop
 from solver.contact.lateral import MAX_TURN_DEG, lateral_correction
-from solver.contact.qp import _qp_batch, _QPBatch, _solve_batch
+from solver.contact.qp import _qp_batch, _QPBatch, _relax_frame, _solve_batch
 from solver.contact.smoothing import _smooth_split, _timeline
 from solver.dynamics import DEFAULT_GRAVITY, rnea
 from solver.motion import FEET
@@ -171,7 +171,7 @@ def estimate_contact_wrenches(
         opts = dict(friction=friction, penetration=penetration, regularization=regularization, effort=effort)
         pose_ds = pose.take(ds)
         batch = _qp_batch(character, pose_ds, tau0[:, ds], c[:, ds], **opts)
-        y, st_ds, rows = _solve_batch(batch, method)
+        y, st_ds, rows = _solve_batch(batch, method, defer_relaxation=mode == "com")
         if mode == "com" and np.any(st_ds == Status.RELAXED):
             # no split exists: the least force at the centre of mass that makes one exist, then the split
             j = np.flatnonzero(st_ds == Status.RELAXED)
@@ -190,6 +190,12 @@ def estimate_contact_wrenches(
                 tol = 1e-7 * np.maximum(np.abs(sub.c[:, 5]), 1.0)
                 for k, i in enumerate(jm):
                     rows[i] = (sub.G[k], sub.h[k] + np.maximum(sub.G[k] @ y_c[moved][k] - sub.h[k], 0.0) + tol[k])
+            for i in j[~moved]:  # no correction found: the least relaxation of the frame's rows (the thesis's)
+                sol, rows[i] = _relax_frame(batch, i, method)
+                if sol is None:
+                    st_ds[i] = Status.FAILED
+                else:
+                    y[i] = sol
         if smoothing_hz is not None:
             y = _smooth_split(batch, y, rows, ds, _timeline(character, pose, w_right_exact, cyclic),
                               float(fps) / (2.0 * math.pi * float(smoothing_hz)))
