@@ -76,7 +76,8 @@ class ContactEstimate:
 
     ``wrenches`` (2, 6, T): feet (right, left), world frame, (moment about the world
     origin; force) — the :class:`~solver.motion.Motion` convention. ``total`` (6, T) is
-    c = h0. ``support`` and ``status`` hold :class:`Support` / :class:`Status` codes per
+    c = h0 (with ``lateral_hz``: its lateral force from the low-passed centre of mass, the difference
+    a force through the centre of mass). ``support`` and ``status`` hold :class:`Support` / :class:`Status` codes per
     frame. ``cop`` (2, 3, T) on the ground (NaN for a foot carrying less than ``COP_MIN_FZ``),
     ``free_moment`` (2, T) about the vertical at the CoP (0 there), ``cop_violation`` (2, T)
     metres outside the contact polygon (0 inside; NaN where undefined). The free moment is the
