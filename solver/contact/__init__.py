@@ -81,6 +81,14 @@ impact reaches the filtered accelerations). The ground can only push inside the 
 polygon: such a frame gets the nearest CoP in the polygon, with c's force and c's free moment
 (status ``PROJECTED``); the moment it cannot explain stays in ``total − Σ wrenches``.
 
+Lateral force from the centre of mass (``lateral_hz``, **[beyond]**; off by default here, 4 Hz in
+:func:`estimate_capture`). Across the walking direction the body's acceleration is a step-frequency
+sway, but the inverse dynamics of 6 Hz joint angles give it 4-8 Hz pelvis and trunk ringing the
+plates do not have. The total's lateral force is replaced by M ÿ of the centre of mass's lateral
+coordinate low-passed at ``lateral_hz``, the difference a force through the centre of mass (the
+moment about the centre of mass unchanged); a walk turning by more than 30° keeps the inverse
+dynamics' (``solver.contact.lateral``, docs/grf.md).
+
 Accelerations are central differences (SPEC 3.7-3.8), undefined at the first and last
 frames of a non-cyclic motion (status ``UNDEFINED``, NaN). With ``cyclic=True`` the last
 frame must close the cycle (the first pose one period later, root advanced): differences
