@@ -113,7 +113,8 @@ def cmd_grf(args: argparse.Namespace) -> int:
         raise CliError(f"--smoothing must be >= 0 Hz (0 = one QP per frame), got {args.smoothing}")
     smoothing = "cutoff" if args.smoothing is None else (args.smoothing or None)
     if args.lateral is not None and not (math.isfinite(args.lateral) and args.lateral >= 0):
-        raise CliError(f"--lateral must be >= 0 Hz (0 = the inverse dynamics' own lateral force), got {args.lateral}")
+        raise CliError(f"--lateral must be >= 0 Hz (0 = the inverse dynamics' own lateral force), "
+                       f"got {args.lateral}")
     lateral = "default" if args.lateral is None else (args.lateral or None)
     t0 = time.perf_counter()
     try:

@@ -91,8 +91,8 @@ def estimate_contact_wrenches(
             raise ContactError("smoothing_hz goes with method='qp' (the nested form is the thesis's per-frame "
                                "reference)")
     q, fc, g = _check_inputs(character, q, fps, foot_contact, gravity)
-    if lateral_hz is not None and not (isinstance(lateral_hz, (int, float, np.floating)) and math.isfinite(lateral_hz)
-                                       and 0 < lateral_hz < fps / 2):
+    if lateral_hz is not None and not (isinstance(lateral_hz, (int, float, np.floating))
+                                       and math.isfinite(lateral_hz) and 0 < lateral_hz < fps / 2):
         raise ContactError(f"lateral_hz must be a frequency in (0, fps/2) (Hz) or None, got {lateral_hz!r}")
     T = q.shape[1]
     effort = None
