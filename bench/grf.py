@@ -62,7 +62,8 @@ def run() -> dict:
         fc = foot_schedule(tr.contacts, ch)
         res: dict = {"character": ch.name, "coordinates": ch.n, "frames": cap.T, "import_s": round(t_import, 3)}
         res["filter_ms"] = 1e3 * best_time(lambda: lowpass_kinematics(ch, cap.q, fps), 5)
-        opts = {"smoothing_hz": tr.estimate.smoothing_hz, "project_cop": True}  # estimate_capture's defaults
+        opts = {"smoothing_hz": tr.estimate.smoothing_hz, "lateral_hz": tr.estimate.lateral_hz,
+                "project_cop": True}  # estimate_capture's defaults
         t1 = best_time(lambda: estimate_contact_wrenches(ch, tr.q, fps, fc, **opts), 7)
         res["estimate_ms"] = 1e3 * t1
         res["frames_per_s"] = cap.T / t1

@@ -46,8 +46,14 @@ def _is_zero(x: Scalar) -> bool:
 
 
 def add(a: Scalar, b: Scalar) -> Scalar:
-    if type(a) is _ARRAY and type(b) is _ARRAY:  # the numeric batch: nothing to fold
-        return a + b
+    ta, tb = type(a), type(b)
+    if ta is _ARRAY:  # the numeric batch: nothing to fold but a constant 0
+        if tb is _ARRAY:
+            return a + b
+        if tb is float:
+            return a if b == 0.0 else a + b
+    elif tb is _ARRAY and ta is float:
+        return b if a == 0.0 else a + b
     if _is_zero(a):
         return b
     if _is_zero(b):
@@ -72,8 +78,14 @@ def neg(a: Scalar) -> Scalar:
 
 
 def mul(a: Scalar, b: Scalar) -> Scalar:
-    if type(a) is _ARRAY and type(b) is _ARRAY:
-        return a * b
+    ta, tb = type(a), type(b)
+    if ta is _ARRAY:
+        if tb is _ARRAY:
+            return a * b
+        if tb is float:  # the numeric batch times a model constant: the same folding, fewer checks
+            return 0.0 if b == 0.0 else (a if b == 1.0 else (-a if b == -1.0 else a * b))
+    elif tb is _ARRAY and ta is float:
+        return 0.0 if a == 0.0 else (b if a == 1.0 else (-b if a == -1.0 else a * b))
     if _is_zero(a) or _is_zero(b):
         return 0.0
     if _is_const(a):

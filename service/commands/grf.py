@@ -112,13 +112,17 @@ def cmd_grf(args: argparse.Namespace) -> int:
     if args.smoothing is not None and not (math.isfinite(args.smoothing) and args.smoothing >= 0):
         raise CliError(f"--smoothing must be >= 0 Hz (0 = one QP per frame), got {args.smoothing}")
     smoothing = "cutoff" if args.smoothing is None else (args.smoothing or None)
+    if args.lateral is not None and not (math.isfinite(args.lateral) and args.lateral >= 0):
+        raise CliError(f"--lateral must be >= 0 Hz (0 = the inverse dynamics' own lateral force), "
+                       f"got {args.lateral}")
+    lateral = "default" if args.lateral is None else (args.lateral or None)
     t0 = time.perf_counter()
     try:
         cap = _load(args)
         t1 = time.perf_counter()
         tr = estimate_capture(cap, cutoff_hz=args.cutoff or None, contacts=args.contacts, method=args.method,
                               cyclic=True if args.cyclic else None, smoothing_hz=smoothing,
-                              project_cop=not args.exact_single_support)
+                              project_cop=not args.exact_single_support, lateral_hz=lateral)
     except errors as e:
         msg = import_message(e)
         c3d = args.c3d or any(Path(p).suffix.lower() == ".c3d" for p in _files(args))
@@ -319,6 +323,9 @@ The trial is given as for `motionx tutor` (its files); --osim/--coordinates, --c
     s.add_argument("--smoothing", type=float, default=None, metavar="HZ",
                    help="temporal prior on the double-support split, as a cut-off (default: the --cutoff; "
                         "0 = one QP per frame, the thesis; qp method only)")
+    s.add_argument("--lateral", type=float, default=None, metavar="HZ",
+                   help="the total's lateral force from the centre of mass low-passed at this cut-off (default: "
+                        "4 Hz when under --cutoff; 0 = the inverse dynamics' own, the thesis)")
     s.add_argument("--exact-single-support", action="store_true",
                    help="the foot takes the total wrench exactly even when its CoP falls outside the foot "
                         "(the thesis); default: a total no foot can take is corrected by the least force through "

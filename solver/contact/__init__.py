@@ -81,6 +81,14 @@ impact reaches the filtered accelerations). The ground can only push inside the 
 polygon: such a frame gets the nearest CoP in the polygon, with c's force and c's free moment
 (status ``PROJECTED``); the moment it cannot explain stays in ``total − Σ wrenches``.
 
+Lateral force from the centre of mass (``lateral_hz``, **[beyond]**; off by default here, 4 Hz in
+:func:`estimate_capture`). Across the walking direction the body's acceleration is a step-frequency
+sway, but the inverse dynamics of 6 Hz joint angles give it 4-8 Hz pelvis and trunk ringing the
+plates do not have. The total's lateral force is replaced by M ÿ of the centre of mass's lateral
+coordinate low-passed at ``lateral_hz``, the difference a force through the centre of mass (the
+moment about the centre of mass unchanged); a walk turning by more than 30° keeps the inverse
+dynamics' (``solver.contact.lateral``, docs/grf.md).
+
 Accelerations are central differences (SPEC 3.7-3.8), undefined at the first and last
 frames of a non-cyclic motion (status ``UNDEFINED``, NaN). With ``cyclic=True`` the last
 frame must close the cycle (the first pose one period later, root advanced): differences
@@ -89,7 +97,8 @@ wrap around with that offset and every frame is defined.
 Package layout: ``common`` (status codes, the estimate, input checks, derivatives),
 ``geometry`` (pose, screws, foot boxes, CoP projection), ``qp`` (the per-frame QP core),
 ``nested`` (the thesis's reference form), ``smoothing`` (the temporal prior), ``estimator``
-(:func:`estimate_contact_wrenches`), ``trial`` (filter, schedule, :func:`estimate_capture`).
+(:func:`estimate_contact_wrenches`), ``lateral`` (the total's lateral force from the centre of mass
+low-passed across the walk), ``trial`` (filter, schedule, :func:`estimate_capture`).
 """
 
 from solver.contact.common import (
@@ -108,13 +117,14 @@ from solver.contact.estimator import estimate_contact_wrenches
 from solver.contact.trial import (
     CONTACT_SOURCES,
     DEFAULT_CUTOFF_HZ,
+    DEFAULT_LATERAL_HZ,
     TrialEstimate,
     estimate_capture,
     foot_schedule,
     lowpass_kinematics,
 )
 
-__all__ = ["COP_MIN_FZ", "CONTACT_SOURCES", "DEFAULT_CUTOFF_HZ", "DEFAULT_FRICTION", "DEFAULT_PENETRATION",
-           "DEFAULT_REGULARIZATION", "METHODS", "ContactError", "ContactEstimate", "Status", "Support", "TrialEstimate",
-           "cop_and_free_moment", "estimate_capture", "estimate_contact_wrenches", "foot_schedule",
-           "lowpass_kinematics"]
+__all__ = ["COP_MIN_FZ", "CONTACT_SOURCES", "DEFAULT_CUTOFF_HZ", "DEFAULT_FRICTION", "DEFAULT_LATERAL_HZ",
+           "DEFAULT_PENETRATION", "DEFAULT_REGULARIZATION", "METHODS", "ContactError", "ContactEstimate", "Status",
+           "Support", "TrialEstimate", "cop_and_free_moment", "estimate_capture", "estimate_contact_wrenches",
+           "foot_schedule", "lowpass_kinematics"]

@@ -76,7 +76,8 @@ class ContactEstimate:
 
     ``wrenches`` (2, 6, T): feet (right, left), world frame, (moment about the world
     origin; force) — the :class:`~solver.motion.Motion` convention. ``total`` (6, T) is
-    c = h0. ``support`` and ``status`` hold :class:`Support` / :class:`Status` codes per
+    c = h0 (with ``lateral_hz``: its lateral force from the low-passed centre of mass, the difference
+    a force through the centre of mass). ``support`` and ``status`` hold :class:`Support` / :class:`Status` codes per
     frame. ``cop`` (2, 3, T) on the ground (NaN for a foot carrying less than ``COP_MIN_FZ``),
     ``free_moment`` (2, T) about the vertical at the CoP (0 there), ``cop_violation`` (2, T)
     metres outside the contact polygon (0 inside; NaN where undefined). The free moment is the
@@ -94,6 +95,7 @@ class ContactEstimate:
     method: str
     cyclic: bool = False
     smoothing_hz: float | None = None
+    lateral_hz: float | None = None  # the total's lateral force from the centre of mass low-passed here
     cop: np.ndarray = field(init=False)
     free_moment: np.ndarray = field(init=False)
 
@@ -127,6 +129,7 @@ class ContactEstimate:
             "frames": self.T,
             "method": self.method,
             "smoothing_hz": self.smoothing_hz,
+            "lateral_hz": self.lateral_hz,
             **{f"support_{s.name.lower()}": int(np.sum(self.support == s)) for s in Support},
             **{f"status_{s.name.lower()}": int(np.sum(self.status == s)) for s in Status},
             "max_cop_violation_m": float(np.nanmax(self.cop_violation)) if np.any(self.defined) else None,

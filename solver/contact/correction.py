@@ -29,9 +29,10 @@ def centre_of_mass(character: Character, pose: _Pose) -> np.ndarray:
     """Whole-body centre of mass (3, N) from a pose of every body (``_dense_pose(..., full=True)``)."""
     model = character.model
     m = np.asarray(model.mass, dtype=float)
-    c = np.array([np.asarray(x, dtype=float) for x in model.com])  # (n, 3) body coordinates
-    pts = pose.pos + np.einsum("nbij,bj->nbi", pose.rot, c)  # (N, n, 3)
-    return (np.einsum("b,nbi->in", m, pts)) / m.sum()
+    b = np.flatnonzero(m > 0)  # the bodies with mass (a joint's intermediate bodies have none)
+    c = np.array([np.asarray(model.com[k], dtype=float) for k in b])  # (k, 3) body coordinates
+    pts = pose.pos[:, b] + np.einsum("nbij,bj->nbi", pose.rot[:, b], c)  # (N, k, 3)
+    return (np.einsum("b,nbi->in", m[b], pts)) / m.sum()
 
 
 def foot_rows(character: Character, pose: _Pose, side: str, penetration: float,

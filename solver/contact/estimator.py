@@ -24,8 +24,9 @@ from solver.contact.common import (
     _derivatives,
 )
 from solver.contact.correction import centre_of_mass, correct_double, correct_single, foot_rows
-from solver.contact.geometry import _cop_violation, _dense_pose, _project_cop
-from solver.contact.qp import _qp_batch, _QPBatch, _solve_batch
+from solver.contact.geometry import _cop_violation, _dense_pose, _Pose, _project_cop
+from solver.contact.lateral import MAX_TURN_DEG, lateral_correction
+from solver.contact.qp import _qp_batch, _QPBatch, _relax_frame, _solve_batch
 from solver.contact.smoothing import _smooth_split, _timeline
 from solver.dynamics import DEFAULT_GRAVITY, rnea
 from solver.motion import FEET
@@ -50,6 +51,7 @@ def estimate_contact_wrenches(
     effort_coordinates: Sequence[str] | None = None,
     smoothing_hz: float | None = None,
     project_cop: bool | str = False,
+    lateral_hz: float | None = None,
 ) -> ContactEstimate:
     """Ground reaction wrench of each foot at every frame, from kinematics alone.
 
@@ -65,6 +67,10 @@ def estimate_contact_wrenches(
     single support ``PROJECTED``, double support ``RELAXED`` with its CoPs in the feet);
     ``"cop"`` single-support CoPs moved to the nearest point of the foot (same force and free
     moment), double support as ``False``.
+    ``lateral_hz``: the total's lateral force (across the mean progression) taken from the centre of
+    mass low-passed at this cut-off, the difference applied at the centre of mass
+    (:mod:`solver.contact.lateral`; None: the inverse dynamics' own, the thesis). A walk that turns by
+    more than 30° keeps the inverse dynamics' (the estimate's ``lateral_hz`` is then None).
     """
     if method not in METHODS:
         raise ContactError(f"unknown method {method!r}; use one of {METHODS}")
@@ -85,6 +91,9 @@ def estimate_contact_wrenches(
             raise ContactError("smoothing_hz goes with method='qp' (the nested form is the thesis's per-frame "
                                "reference)")
     q, fc, g = _check_inputs(character, q, fps, foot_contact, gravity)
+    if lateral_hz is not None and not (isinstance(lateral_hz, (int, float, np.floating))
+                                       and math.isfinite(lateral_hz) and 0 < lateral_hz < fps / 2):
+        raise ContactError(f"lateral_hz must be a frequency in (0, fps/2) (Hz) or None, got {lateral_hz!r}")
     T = q.shape[1]
     effort = None
     if effort_coordinates is not None:
@@ -102,6 +111,29 @@ def estimate_contact_wrenches(
     qf = q[:, frames]
     res = rnea(character, qf, qd, qdd, g)
     tau0, h0 = np.asarray(res.tau), np.asarray(res.h0)
+    full = mode == "com" or lateral_hz is not None
+    if lateral_hz is not None:
+        # every frame's pose (the filter needs the ends), the estimator's frames taken from it
+        pose_all = _dense_pose(character, q, full=True)
+        com_all = centre_of_mass(character, pose_all)
+        sl = slice(int(frames[0]), int(frames[-1]) + 1)  # the frames are consecutive: views, no copies
+        pose = _Pose(pose_all.rot[sl], pose_all.pos[sl])
+        com = com_all[:, sl]
+        lat = lateral_correction(com_all, h0[3:], float(np.sum(character.model.mass)), float(fps),
+                                 float(lateral_hz), cyclic)
+        if lat is None:
+            log.info("contact estimation: the walk turns (> %g°): no single lateral axis, the inverse dynamics' "
+                     "lateral force kept", MAX_TURN_DEG)
+            lateral_hz = None
+        else:
+            # a force df at the centre of mass: moment com × df about the origin (the wrench convention of h0)
+            df = lat[0]
+            h0 = h0.copy()
+            h0[3:] += df
+            h0[:3] += np.cross(com.T, df.T).T
+    else:
+        pose = _dense_pose(character, qf, full=full)
+        com = centre_of_mass(character, pose) if mode == "com" else None
 
     wrenches = np.full((2, 6, T), np.nan)
     total = np.full((6, T), np.nan)
@@ -115,10 +147,8 @@ def estimate_contact_wrenches(
     w[1][:, left] = h0[:, left]
     st[right | left] = Status.SINGLE
     ds = np.flatnonzero(sup == Support.DOUBLE)
-    pose = _dense_pose(character, qf, full=mode == "com")
     c = h0  # the total each split must sum to (corrected where no split exists, mode "com")
     if mode == "com":
-        com = centre_of_mass(character, pose)
         c = h0.copy()
         for s, mask in ((0, right), (1, left)):
             k = np.flatnonzero(mask)
@@ -141,7 +171,7 @@ def estimate_contact_wrenches(
         opts = dict(friction=friction, penetration=penetration, regularization=regularization, effort=effort)
         pose_ds = pose.take(ds)
         batch = _qp_batch(character, pose_ds, tau0[:, ds], c[:, ds], **opts)
-        y, st_ds, rows = _solve_batch(batch, method)
+        y, st_ds, rows = _solve_batch(batch, method, defer_relaxation=mode == "com")
         if mode == "com" and np.any(st_ds == Status.RELAXED):
             # no split exists: the least force at the centre of mass that makes one exist, then the split
             j = np.flatnonzero(st_ds == Status.RELAXED)
@@ -160,6 +190,12 @@ def estimate_contact_wrenches(
                 tol = 1e-7 * np.maximum(np.abs(sub.c[:, 5]), 1.0)
                 for k, i in enumerate(jm):
                     rows[i] = (sub.G[k], sub.h[k] + np.maximum(sub.G[k] @ y_c[moved][k] - sub.h[k], 0.0) + tol[k])
+            for i in j[~moved]:  # no correction found: the least relaxation of the frame's rows (the thesis's)
+                sol, rows[i] = _relax_frame(batch, i, method)
+                if sol is None:
+                    st_ds[i] = Status.FAILED
+                else:
+                    y[i] = sol
         if smoothing_hz is not None:
             y = _smooth_split(batch, y, rows, ds, _timeline(character, pose, w_right_exact, cyclic),
                               float(fps) / (2.0 * math.pi * float(smoothing_hz)))
@@ -182,7 +218,8 @@ def estimate_contact_wrenches(
                  "total corrected at the centre of mass" if mode == "com" else "relaxed")
     return ContactEstimate(wrenches=wrenches, total=total, support=support, status=status,
                            cop_violation=viol, fps=float(fps), method=method, cyclic=bool(cyclic),
-                           smoothing_hz=None if smoothing_hz is None else float(smoothing_hz))
+                           smoothing_hz=None if smoothing_hz is None else float(smoothing_hz),
+                           lateral_hz=None if lateral_hz is None else float(lateral_hz))
 
 
 

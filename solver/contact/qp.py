@@ -183,9 +183,33 @@ def _relaxation(batch: _QPBatch, i: int) -> np.ndarray | None:
 
 
 
-def _solve_batch(batch: _QPBatch, method: str) -> tuple[np.ndarray, np.ndarray, list]:
+def _relax_frame(batch: _QPBatch, i: int, method: str) -> tuple[np.ndarray | None, tuple | None]:
+    """Frame i with no feasible split: the least relaxation of its rows, then the split under them
+    ((y, (G, h) relaxed rows), or (None, None) when that fails)."""
+    scale = max(abs(batch.c[i, 5]), 1.0)
+    s = _relaxation(batch, i)
+    if s is None:
+        log.warning("contact QP: relaxation failed at double-support frame %d", i)
+        return None, None
+    Gb, hb = _bounds(batch, i)
+    G_rel = np.vstack([batch.G[i], Gb])
+    h_rel = np.concatenate([batch.h[i] + s + 1e-7 * scale, hb])
+    if method == "qp":
+        sol = _solve_qp(batch.P[i], batch.q[i], G_rel, h_rel)
+    else:
+        sol = _nested(batch.P[i], batch.q[i], G_rel, h_rel, scale)
+    if sol is None:
+        log.warning("contact QP: relaxed problem failed at double-support frame %d", i)
+        return None, None
+    return sol, (G_rel, h_rel)
+
+
+def _solve_batch(batch: _QPBatch, method: str, defer_relaxation: bool = False
+                 ) -> tuple[np.ndarray, np.ndarray, list]:
     """Solve every frame: (y (N, 6) about r, status (N,), the constraint rows (G, h) each frame's
-    solution satisfies — the relaxed rows for a relaxed frame, None for a failed one)."""
+    solution satisfies — the relaxed rows for a relaxed frame, None for a failed one).
+    ``defer_relaxation``: a frame with no feasible split is left ``RELAXED`` with y = NaN and its own rows,
+    for the caller (which corrects its total, or calls :func:`_relax_frame`)."""
     N = batch.P.shape[0]
     y = np.full((N, 6), np.nan)
     status = np.full(N, Status.FAILED, dtype=np.int8)
@@ -206,30 +230,15 @@ def _solve_batch(batch: _QPBatch, method: str) -> tuple[np.ndarray, np.ndarray, 
             sol = _solve_qp(batch.P[i], batch.q[i], batch.G[i], batch.h[i])
         else:
             sol = _nested(batch.P[i], batch.q[i], batch.G[i], batch.h[i], scale[i])
-        st = Status.OPTIMAL
-        if sol is None or np.any(batch.G[i] @ sol > batch.h[i] + 1e3 * tol[i]):
-            s = _relaxation(batch, i)
-            if s is None:
-                log.warning("contact QP: relaxation failed at double-support frame %d", i)
-                rows[i] = None
-                continue
-            Gb, hb = _bounds(batch, i)
-            G_rel = np.vstack([batch.G[i], Gb])
-            h_rel = np.concatenate([batch.h[i] + s + 1e-7 * scale[i], hb])
-            if method == "qp":
-                sol = _solve_qp(batch.P[i], batch.q[i], G_rel, h_rel)
-            else:
-                sol = _nested(batch.P[i], batch.q[i], G_rel, h_rel, scale[i])
-            st = Status.RELAXED
-            rows[i] = (G_rel, h_rel)
-            if sol is None:
-                log.warning("contact QP: relaxed problem failed at double-support frame %d", i)
-                rows[i] = None
-                continue
-        y[i] = sol
-        status[i] = st
+        if sol is not None and not np.any(batch.G[i] @ sol > batch.h[i] + 1e3 * tol[i]):
+            y[i], status[i] = sol, Status.OPTIMAL
+            continue
+        if defer_relaxation:
+            status[i] = Status.RELAXED
+            continue
+        sol, rows[i] = _relax_frame(batch, i, method)
+        if sol is not None:
+            y[i], status[i] = sol, Status.RELAXED
     for i in np.flatnonzero(status == Status.FAILED):
         rows[i] = None
     return y, status, rows
-
-
