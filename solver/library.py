@@ -139,15 +139,16 @@ def check_cells(cells: Sequence[Cell]) -> None:
 
 
 def order(cells: Sequence[Cell]) -> list[Cell]:
-    """Dispatch order: nearest the tutor first (largest relative offset per axis), so the cells
-    whose rays pass through them find them solved."""
+    """Dispatch order: nearest the tutor first (largest relative offset over the axes, then their
+    sum), so the cells whose rays pass through them find them solved."""
     spans = {}
     for c in cells:
         for (k, _), o in zip(c.params, c.offset()):
             spans[k] = max(spans.get(k, 0.0), abs(o))
 
-    def size(c: Cell) -> tuple[float, str]:
-        return (max((abs(o) / spans[k] if spans[k] else 0.0) for (k, _), o in zip(c.params, c.offset())), c.key)
+    def size(c: Cell) -> tuple[float, float, str]:
+        rel = [abs(o) / spans[k] if spans[k] else 0.0 for (k, _), o in zip(c.params, c.offset())]
+        return max(rel), sum(rel), c.key
 
     return sorted(cells, key=size)
 
@@ -164,7 +165,8 @@ def on_ray(cell: Cell, other: Cell, lam: float) -> float | None:
     na = math.sqrt(sum(x * x for x in a))
     if na == 0.0:
         return None
-    t = sum(x * y for x, y in zip(pa, a)) / (na * na)
+    i = max(range(len(a)), key=lambda k: abs(a[k]))  # t from the largest component: exact ratios stay exact
+    t = pa[i] / a[i]
     resid = math.sqrt(sum((x - t * y) ** 2 for x, y in zip(pa, a)))
     if resid > RAY_TOLERANCE * max(na, 1.0) or not 0.0 <= t < 1.0 - 1e-12:
         return None
