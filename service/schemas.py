@@ -198,8 +198,21 @@ class LibraryTargetIn(Strict):
     speed_scale: float | None = Field(None, gt=0.0, le=5.0)
 
 
+def _grid_or_targets(schema: dict) -> None:
+    for k in ("grid", "targets"):  # present means not null
+        prop = schema["properties"][k]
+        if "anyOf" in prop:
+            (only,) = [x for x in prop.pop("anyOf") if x.get("type") != "null"]
+            prop.update(only)
+        prop.pop("default", None)
+    schema["oneOf"] = [{"required": ["grid"], "not": {"required": ["targets"]}},
+                       {"required": ["targets"], "not": {"required": ["grid"]}}]
+
+
 class LibraryIn(Strict):
     """A motion library: a ``grid`` or an explicit list of ``targets`` (exactly one of them)."""
+
+    model_config = ConfigDict(json_schema_extra=_grid_or_targets)
 
     grid: GridIn | None = None
     targets: list[LibraryTargetIn] | None = Field(None, min_length=1, max_length=125)
@@ -208,8 +221,9 @@ class LibraryIn(Strict):
 
     @model_validator(mode="after")
     def _one(self) -> LibraryIn:
-        if (self.grid is None) == (self.targets is None):
-            raise ValueError("give either grid or targets")
+        given = self.model_fields_set & {"grid", "targets"}
+        if len(given) != 1 or (self.grid is None and self.targets is None):
+            raise ValueError("give either grid or targets (one of them, not null)")
         return self
 
 

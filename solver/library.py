@@ -118,6 +118,8 @@ def list_cells(targets: Sequence[Mapping[str, float]]) -> list[Cell]:
     if len(targets) > MAX_CELLS:
         raise LibraryError(f"{len(targets)} targets; a library has at most {MAX_CELLS}")
     used = [a for a in AXES if any(a in t for t in targets)]
+    if not used:
+        raise LibraryError("the targets give no axis: each needs slope_deg, curve_deg (or speed_scale)")
     for t in targets:
         for a in t:
             _check_axis(a)
