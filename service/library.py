@@ -131,6 +131,7 @@ def library_out(session, row: LibraryRow) -> dict:
         "cells": cells,
         "links": {"self": f"/libraries/{row.id}", "cancel": f"/libraries/{row.id}/cancel",
                   "manifest": f"/libraries/{row.id}/manifest", "glb": f"/libraries/{row.id}/library.glb",
+                  "events": f"/libraries/{row.id}/events",
                   "source": f"/motions/{row.motion_id}"},
     }
 

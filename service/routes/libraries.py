@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from fastapi import APIRouter, Depends, Query, Request
 from fastapi.concurrency import run_in_threadpool
-from fastapi.responses import JSONResponse, Response
+from fastapi.responses import JSONResponse, Response, StreamingResponse
 
 from service import library, limits, store, work
 from service.config import Settings
@@ -167,3 +167,61 @@ async def get_library_glb(library_id: str, request: Request, owner: str = Depend
     body, mt = await compute.cached(key, work.library_glb, [(k, d) for k, _, d in items], grid,
                                     what="the library GLB")
     return Response(body, media_type=mt)
+
+
+@router.get(
+    "/libraries/{library_id}/events",
+    summary="Server-Sent Events: a cell's status or λ reached changed (cell), the library's progress (status); "
+            "ends when the library does",
+    responses={200: {"content": {"text/event-stream": {}}}, 404: {"description": "no such library for this key"}},
+)
+async def library_events(
+    library_id: str,
+    request: Request,
+    owner: str = Depends(get_owner),
+    db: Database = Depends(get_db),
+    settings: Settings = Depends(app_settings),
+) -> StreamingResponse:
+    import asyncio
+    import json
+    import time
+
+    known_id("library", library_id)
+
+    def snapshot() -> dict | None:
+        with db.read() as s:
+            row = store.get_library(s, library_id=library_id, owner=owner)
+            return library.library_out(s, row) if row is not None else None
+
+    if await run_in_threadpool(snapshot) is None:
+        raise not_found("library", library_id)
+
+    def sse(event: str, data: dict) -> str:
+        return f"event: {event}\ndata: {json.dumps(data, separators=(',', ':'))}\n\n"
+
+    async def stream():
+        seen: dict[str, tuple] = {}
+        last = None
+        deadline = time.monotonic() + settings.sse_max_s
+        while time.monotonic() < deadline:
+            lib = await run_in_threadpool(snapshot)
+            if lib is None:
+                return
+            for c in lib["cells"]:
+                key = (c["status"], c["lam_reached"], c["steps"], c["attempts"])
+                if seen.get(c["key"]) != key:
+                    seen[c["key"]] = key
+                    yield sse("cell", c)
+            state = (lib["status"], lib["progress"]["done"], round(lib["progress"]["fraction"], 6))
+            if state != last:
+                last = state
+                yield sse("status", {k: lib[k] for k in ("id", "status", "progress", "cancel_requested")})
+            if lib["status"] in TERMINAL:
+                yield sse("end", {"status": lib["status"]})
+                return
+            if await request.is_disconnected():
+                return
+            await asyncio.sleep(settings.sse_poll_s)
+
+    return StreamingResponse(stream(), media_type="text/event-stream",
+                             headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"})

@@ -195,3 +195,28 @@ def test_unknown_ids_and_other_owners_get_404(lib_api, grid_library):
     assert lib_api.a.post("/motions/m_" + "0" * 32 + "/library", json=GRID).status_code == 404
     page = lib_api.a.get("/libraries").json()
     assert lib["id"] in [x["id"] for x in page["items"]]
+
+
+def test_events_stream_every_cell_until_the_library_ends(lib_api, tutor_id):
+    r = lib_api.a.post(f"/motions/{tutor_id}/library", json={"grid": {"curve_deg": [-10.0, 10.0]}})
+    lid = r.json()["id"]
+    events = []
+    with lib_api.a.stream("GET", f"/libraries/{lid}/events", timeout=120) as resp:
+        assert resp.headers["content-type"].startswith("text/event-stream")
+        ev = None
+        for line in resp.iter_lines():
+            if line.startswith("event: "):
+                ev = line[7:]
+            elif line.startswith("data: "):
+                events.append((ev, json.loads(line[6:])))
+                if ev == "end":
+                    break
+    kinds = [e for e, _ in events]
+    assert kinds[-1] == "end" and events[-1][1]["status"] == "succeeded"
+    final = lib_api.a.get(f"/libraries/{lid}").json()
+    for c in final["cells"]:  # each cell's last event is its final state
+        last = [d for e, d in events if e == "cell" and d["key"] == c["key"]][-1]
+        assert last["status"] == "succeeded" and last["lam_reached"] == 1.0
+    done = [d["progress"]["done"] for e, d in events if e == "status"]
+    assert done == sorted(done) and done[-1] == 2  # overall progress never goes back
+    assert lib_api.a.get(f"/libraries/l_{'0' * 32}/events").status_code == 404
