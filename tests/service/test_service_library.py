@@ -220,3 +220,22 @@ def test_events_stream_every_cell_until_the_library_ends(lib_api, tutor_id):
     done = [d["progress"]["done"] for e, d in events if e == "status"]
     assert done == sorted(done) and done[-1] == 2  # overall progress never goes back
     assert lib_api.a.get(f"/libraries/l_{'0' * 32}/events").status_code == 404
+
+
+def test_a_cell_at_impasse_keeps_its_last_realistic_lambda_and_is_marked(lib_api, tutor_id):
+    """Slope 60° with coarse steps (Algorithm 3, Δ0 = 0.25, ε = 0.125): the cell stops at an
+    impasse part-way; the library says so, and the cell's clip is its last optimum."""
+    body = {"targets": [{"slope_deg": 60.0}], "control": {"method": "thesis", "delta0": 0.25, "eps": 0.125,
+                                                            "max_iter": 60}}
+    r = lib_api.a.post(f"/motions/{tutor_id}/library", json=body)
+    lib, _ = wait_library(lib_api.a, r.json()["id"], timeout=180)
+    (cell,) = lib["cells"]
+    assert lib["status"] == "impasse" and cell["status"] == "impasse" and cell["at_impasse"]
+    assert 0.0 < cell["lam_reached"] < 1.0 and "impasse" in cell["message"]
+    (e,) = lib_api.a.get(lib["links"]["manifest"]).json()["cells"]
+    assert e["at_impasse"] and e["clip_lambda"] == e["lambda_reached"] == cell["lam_reached"]
+    assert e["realism"]["plausible"] and e["cycle"]["slope_deg"] == pytest.approx(60.0 * cell["lam_reached"])
+    clip = lib_api.a.get(e["files"]["clip"]).json()
+    assert clip["game"]["loop"]["seamless"]
+    glb = lib_api.a.get(lib["links"]["glb"])
+    assert glb.status_code == 200 and b"slope60" in glb.content[:20000]  # its animation is in the GLB
