@@ -69,7 +69,7 @@ def warm_start(db: Database, job_id: str, ref: dict):
         if me is None:
             return None
         best = None
-        for j, step, lam, plausible in store.stored_optima(s, job_ids=list(cells)):
+        for j, step, lam, plausible, _ in store.stored_optima(s, job_ids=list(cells)):
             if plausible is False:
                 continue
             t = L.on_ray(me, cells[j], lam)
@@ -87,9 +87,11 @@ def warm_start(db: Database, job_id: str, ref: dict):
     return ws, motion, validation, j, step
 
 
-def _cell_view(c: dict, job: JobRow | None) -> dict:
+def _cell_view(c: dict, job: JobRow | None, clip: tuple | None) -> dict:
     status = job.status if job is not None else "failed"
     return {
+        "clip_motion_id": clip[4] if clip else None, "clip_lam": clip[2] if clip else None,
+        "plausible": clip[3] if clip else None,
         "key": c["key"], "parameters": c["parameters"], "job_id": c["job_id"], "status": status,
         "at_impasse": status == "impasse", "lam_reached": job.lam_reached if job else 0.0,
         "steps": job.steps if job else 0, "solves": job.solves if job else 0,
@@ -115,7 +117,11 @@ def status_of(cells: list[dict], cancel_requested: bool) -> str:
 def library_out(session, row: LibraryRow) -> dict:
     """The library as the API shows it: status, overall progress, every cell's status and λ."""
     jobs = store.library_jobs(session, library=row)
-    cells = [_cell_view(c, jobs.get(c["job_id"])) for c in row.spec.get("cells", [])]
+    clip: dict[str, tuple] = {}  # job id -> its last realistic optimum (the highest step not marked implausible)
+    for o in store.stored_optima(session, job_ids=list(jobs)):
+        if o[3] is not False and (o[0] not in clip or o[1] > clip[o[0]][1]):
+            clip[o[0]] = o
+    cells = [_cell_view(c, jobs.get(c["job_id"]), clip.get(c["job_id"])) for c in row.spec.get("cells", [])]
     frac = [1.0 if c["status"] in TERMINAL else float(c["lam_reached"]) for c in cells]
     counts = {s: sum(1 for c in cells if c["status"] == s) for s in ("queued", "running", *sorted(TERMINAL))}
     finished = [jobs[c["job_id"]].finished_at for c in cells if c["job_id"] in jobs and jobs[c["job_id"]].finished_at]

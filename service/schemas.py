@@ -232,6 +232,9 @@ LibraryStatus = Literal["queued", "running", "succeeded", "failed", "canceled", 
 
 class LibraryCellOut(BaseModel):
     key: str
+    clip_motion_id: str | None = Field(description="the cell's clip: its last realistic λ optimum")
+    clip_lam: float | None
+    plausible: bool | None = Field(description="the clip's plausibility verdict (null: not checked)")
     parameters: dict[str, float]
     job_id: str
     status: JobStatus

@@ -547,13 +547,13 @@ def library_jobs(session: Session, *, library: LibraryRow) -> dict[str, JobRow]:
     return {j.id: j for j in session.scalars(select(JobRow).where(JobRow.id.in_(ids)))} if ids else {}
 
 
-def stored_optima(session: Session, *, job_ids: Sequence[str]) -> list[tuple[str, int, float, bool | None]]:
-    """(job id, step, λ, plausible) of every stored λ optimum of these jobs (no motion data)."""
+def stored_optima(session: Session, *, job_ids: Sequence[str]) -> list[tuple[str, int, float, bool | None, str]]:
+    """(job id, step, λ, plausible, motion id) of every stored λ optimum of these jobs (no motion data)."""
     if not job_ids:
         return []
-    q = select(MotionRow.job_id, MotionRow.step, MotionRow.lam, MotionRow.plausible).where(
+    q = select(MotionRow.job_id, MotionRow.step, MotionRow.lam, MotionRow.plausible, MotionRow.id).where(
         MotionRow.job_id.in_(list(job_ids)))
-    return [(j, int(st), float(lam), p) for j, st, lam, p in session.execute(q)]
+    return [(j, int(st), float(lam), p, mid) for j, st, lam, p, mid in session.execute(q)]
 
 
 def step_row(session: Session, *, job_id: str, step: int) -> MotionRow | None:

@@ -79,6 +79,8 @@ def test_grid_library_completes_with_one_job_per_cell(lib_api, grid_library):
         assert [m["step"] for m in steps] == list(range(job["steps"]))  # every optimum once, in order
         lams = [m["lam"] for m in steps]
         assert lams == sorted(lams) and lams[-1] == 1.0
+        # the cell's clip: its last optimum, checked plausible by the job (MuJoCo replay included)
+        assert c["clip_motion_id"] == steps[-1]["id"] and c["clip_lam"] == 1.0 and c["plausible"] is True
     p = lib["progress"]
     assert p["done"] == p["succeeded"] == 4 and p["fraction"] == 1.0
     # progress was honest: monotone per cell and overall, never done before every cell was

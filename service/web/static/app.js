@@ -372,9 +372,11 @@ function cellButton(cell) {
     title: `${cell.key}: ${cell.status}, λ reached ${fmt(lam, 4)}, ${cell.solves} solves${cell.message ? ` — ${cell.message}` : ''}`,
     onclick: () => selectCell(cell),
   };
-  const what = cell.status === 'impasse' ? `impasse λ ${fmt(lam, 2)}` : cell.status === 'succeeded' ? 'λ 1 ✓'
+  const what = cell.status === 'impasse' ? `impasse λ ${fmt(lam, 2)}` : cell.status === 'succeeded' ? 'λ 1'
     : cell.status === 'running' ? `λ ${fmt(lam, 2)}` : cell.status;
-  const button = h('button', attrs, what);
+  // realism of the cell's clip: ✓ plausible, ✗ not, nothing when unchecked or no clip yet
+  const mark = cell.plausible === true ? ' ✓' : cell.plausible === false ? ' ✗' : '';
+  const button = h('button', attrs, what + mark);
   if (cell.status === 'running') { // shade: λ reached (CSSOM, which the page's style-src allows)
     const pct = Math.round(100 * lam);
     button.style.background = `linear-gradient(90deg, #9cc3e8 ${pct}%, #eef1f4 ${pct}%)`;
@@ -448,7 +450,7 @@ async function selectCell(cell) {
       items.push(...page.items);
       url = page.next;
     }
-    const clip = items.filter((m) => m.plausible !== false).pop();
+    const clip = items.find((m) => m.id === cell.clip_motion_id) || items.filter((m) => m.plausible !== false).pop();
     if (!clip) {
       noteError('cell', new Error(`cell ${cell.key} has no motion yet`));
       return;
