@@ -142,22 +142,13 @@ def library_out(session, row: LibraryRow) -> dict:
     }
 
 
-def clip_row(session, job_id: str):
-    """The cell's clip: its last realistic stored optimum (the highest step not marked implausible)."""
-    rows = store.job_motions(session, job_id=job_id, limit=100_000)
-    for r in reversed(rows):
-        if r.plausible is not False:
-            return r
-    return None
-
-
 def clips(session, row: LibraryRow) -> list[tuple[dict, Any]]:
-    """(cell view, clip MotionRow or None) per cell."""
-    out = []
+    """(cell view, clip MotionRow or None) per cell: the clip is the cell's last realistic λ optimum
+    (the highest step not marked implausible; see :func:`library_out`)."""
+    from service.models import MotionRow
+
     view = library_out(session, row)
-    for c in view["cells"]:
-        out.append((c, clip_row(session, c["job_id"]) if c["steps"] else None))
-    return out
+    return [(c, session.get(MotionRow, c["clip_motion_id"]) if c["clip_motion_id"] else None) for c in view["cells"]]
 
 
 def manifest(session, row: LibraryRow) -> dict:
