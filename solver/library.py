@@ -108,7 +108,8 @@ def grid_cells(axes: Mapping[str, Sequence[float]]) -> list[Cell]:
     n = math.prod(len(axes[a]) for a in names)
     if n > MAX_CELLS:
         raise LibraryError(f"the grid has {n} cells; a library has at most {MAX_CELLS}")
-    return [Cell(tuple(zip(names, (float(v) for v in combo)))) for combo in itertools.product(*(axes[a] for a in names))]
+    combos = itertools.product(*(axes[a] for a in names))
+    return [Cell(tuple(zip(names, (float(v) for v in combo)))) for combo in combos]
 
 
 def list_cells(targets: Sequence[Mapping[str, float]]) -> list[Cell]:

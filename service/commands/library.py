@@ -58,8 +58,10 @@ class _Bar:
 
     def cell(self, r, i: int, n: int) -> None:
         self.done = i
+        warm = (f", warm start λ={r.warm_start.lam:.2f} from {r.warm_start.source_cell}"
+                if r.warm_start else "")
         text = (f"cell {i}/{n} {r.cell.key}: {r.status} λ={r.lam_reached:.3f} ({r.solves} solves, "
-                f"{r.wall_time_s:.1f} s{', warm start λ=%.2f from %s' % (r.warm_start.lam, r.warm_start.source_cell) if r.warm_start else ''})")
+                f"{r.wall_time_s:.1f} s{warm})")
         if self.tty:
             sys.stderr.write("\r" + text + " " * 20 + "\n")
             self.draw("", 0.0)

@@ -66,8 +66,9 @@ def loop_frames(motion: Motion) -> int:
     """P: the frame one cycle after frame 0 (T - 2 for the solver's cyclic motions), or the last
     frame when the motion is not cyclic."""
     T = motion.T
-    cyclic = motion.contacts is not None and T >= 5 and np.array_equal(motion.contacts[:, T - 2], motion.contacts[:, 0]) \
-        and np.array_equal(motion.contacts[:, T - 1], motion.contacts[:, 1])
+    c = motion.contacts
+    cyclic = (c is not None and T >= 5 and np.array_equal(c[:, T - 2], c[:, 0])
+              and np.array_equal(c[:, T - 1], c[:, 1]))
     return T - 2 if cyclic else T - 1
 
 

@@ -59,7 +59,8 @@ def test_killing_a_worker_mid_library_loses_no_cell_and_duplicates_none(stack, c
     lid = lib["id"]
 
     def cell_with_steps(lib):
-        return any(c["status"] == "running" and c["steps"] >= 2 for c in lib["cells"]) or lib["status"] not in ("queued", "running")
+        busy = any(c["status"] == "running" and c["steps"] >= 2 for c in lib["cells"])
+        return busy or lib["status"] not in ("queued", "running")
 
     mid, _ = wait_library(client, lid, timeout=120, until=cell_with_steps)
     assert mid["status"] == "running", "the library must still be running when the worker is killed"
