@@ -211,6 +211,14 @@ def realism(report: Mapping[str, Any] | None) -> dict[str, Any] | None:
     mj = report.get("mujoco_replay")
     if isinstance(mj, Mapping):
         out["mujoco_root_residual_rel_weight"] = mj.get("max_force_rel_weight")
+    real = report.get("realism")  # the realism validator's section, when the report has one
+    if isinstance(real, Mapping) and isinstance(real.get("checks"), Mapping):
+        out["realism"] = {
+            "passed": real.get("passed"), "failed": list(real.get("failed") or []),
+            "warnings": list(real.get("warnings") or []),
+            "checks": {k: {f: c.get(f) for f in ("value", "limit", "unit", "passed", "severity")}
+                       for k, c in real["checks"].items() if isinstance(c, Mapping)},
+        }
     return out
 
 

@@ -143,3 +143,16 @@ def test_cli_library_mistakes_are_one_line_errors(tutor, tmp_path, args, words):
     tutor.save(tut)
     code, _, err = run("library", tut, *[a.replace("{tmp}", str(tmp_path)) for a in args])
     assert code == 2 and words in err.strip().splitlines()[-1], err  # argparse adds its usage above
+
+
+def test_realism_figures_are_the_reports_own():
+    rep = {"plausible": False, "root_residual": {"max_force_rel_weight": 2e-9, "max_moment_rel_weight_leg": 1e-9},
+           "slip_mm": 0.1, "penetration_mm": 0.0, "friction_cone_excess_N": 0.0, "cop_outside_mm": 0.0,
+           "problems": ["realism failure: foot_spin"], "mujoco_replay": {"max_force_rel_weight": 3e-9},
+           "realism": {"passed": False, "failed": ["foot_spin"], "warnings": [],
+                       "checks": {"foot_spin": {"value": 90.0, "limit": 30.0, "unit": "deg/s", "passed": False,
+                                                "severity": "failure", "what": "…"}}}}
+    r = L.realism(rep)
+    assert r["plausible"] is False and r["root_residual_rel_weight"] == 2e-9 and r["mujoco_root_residual_rel_weight"] == 3e-9
+    assert r["realism"]["failed"] == ["foot_spin"] and r["realism"]["checks"]["foot_spin"]["value"] == 90.0
+    assert L.realism(None) is None
