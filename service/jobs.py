@@ -269,8 +269,8 @@ def _run(db: Database, job_id: str, attempt: int, token: str, settings: Settings
     def on_step(step) -> None:
         validation = validation_report(step.motion) if settings.validate_steps else None
         with hb.write_lock, db.write() as s:
-            store.save_step(s, job_id=job_id, owner=owner, step=step.step + offset, lam=step.lam, motion=step.motion,
-                            validation=validation)
+            store.save_step(s, job_id=job_id, owner=owner, step=step.step + offset, lam=step.lam,
+                            motion=step.motion, validation=validation)
         hb.steps, hb.lam_reached = step.step + offset + 1, float(step.lam)
 
     def should_cancel() -> bool:
@@ -280,7 +280,7 @@ def _run(db: Database, job_id: str, attempt: int, token: str, settings: Settings
     problem = SpacetimeProblem(tutor.character, tutor.T, tutor.fps, tutor.contacts,
                                ipopt_options={"ipopt.max_wall_time": float(settings.job_time_limit_s)})
     result = extrapolate(tutor, target, control, on_progress=on_progress, on_step=on_step,
-                         should_cancel=should_cancel, problem=problem, **({"start": start} if start else {}))
+                         should_cancel=should_cancel, problem=problem, start=start)
     status, message = result.status, result.message
     if status != "succeeded" and not hb.cancel_requested and time.monotonic() > deadline:
         # stopped by the time limit: between steps, or inside a solve (IPOPT's max_wall_time)
