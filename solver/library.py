@@ -34,6 +34,10 @@ AXES = ("slope_deg", "curve_deg", "speed_scale")
 SHORT = {"slope_deg": "slope", "curve_deg": "curve", "speed_scale": "speed"}
 #: most cells one library may have
 MAX_CELLS = 125
+#: axes whose homotopy is linear in λ (checked by tests/test_library.py): only these carry warm
+#: starts part-way along a ray; an axis not listed (speed_scale until its homotopy is checked)
+#: shares only the base problem (λ = 0)
+LINEAR_AXES = frozenset({"slope_deg", "curve_deg"})
 #: two rays are the same when their directions differ by less than this (relative)
 RAY_TOLERANCE = 1e-9
 
@@ -164,6 +168,8 @@ def on_ray(cell: Cell, other: Cell, lam: float) -> float | None:
         return None
     if lam == 0.0:
         return 0.0  # the base problem: the same for every target
+    if any(k not in LINEAR_AXES and (x != 0.0 or y != 0.0) for (k, _), x, y in zip(cell.params, a, b)):
+        return None
     pa = [lam * x for x in b]
     na = math.sqrt(sum(x * x for x in a))
     if na == 0.0:

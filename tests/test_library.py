@@ -74,6 +74,9 @@ def test_on_ray_finds_stored_optima_on_a_cells_homotopy():
     assert L.on_ray(inner, outer, 1.0) is None  # beyond the target
     assert L.on_ray(outer, other, 0.0) == 0.0  # the base problem is everyone's
     assert L.on_ray(outer, outer, 0.75) == pytest.approx(0.75)  # its own optimum: resume
+    # an axis not known to be linear in λ (speed_scale) shares only the base problem
+    fast, faster = L.Cell((("speed_scale", 1.2),)), L.Cell((("speed_scale", 1.4),))
+    assert L.on_ray(faster, fast, 1.0) is None and L.on_ray(faster, fast, 0.0) == 0.0
     ws = L.best_start(outer, [(other, 1.0), (inner, 0.6), (inner, 1.0), (other, 0.0)])
     assert ws == L.WarmStart(0.5, inner.key, 1.0)
 
