@@ -17,7 +17,7 @@ import time
 from datetime import datetime, timezone
 from pathlib import Path
 
-SECTIONS = ["dynamics", "grf", "tutor", "continuation", "service"]
+SECTIONS = ["dynamics", "grf", "tutor", "continuation", "service", "library"]
 
 
 def main() -> int:

@@ -85,18 +85,20 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     problems.install(app)
     app.add_middleware(BodyLimitMiddleware, max_bytes=app_settings.max_body_bytes)
 
-    from service.routes import docs, health, jobs, motions, plots, web
+    from service.routes import docs, health, jobs, libraries, motions, plots, web
 
     index = web.STATIC_DIR / "index.html"
     app.add_middleware(SecurityHeadersMiddleware, page_policy=page_csp(index.read_text() if index.is_file() else ""))
     app.include_router(health.router)
     app.include_router(motions.router)
     app.include_router(jobs.router)
+    app.include_router(libraries.router)
     app.include_router(plots.router)
     app.include_router(docs.router)  # /docs: Swagger UI from local files
     app.include_router(web.router)  # the page at /ui/: public files, its API calls carry the key
     app.state.route_methods = [(r.path_regex, frozenset(r.methods or ())) for router in
-                               (health.router, motions.router, jobs.router, plots.router, docs.router, web.router)
+                               (health.router, motions.router, jobs.router, libraries.router, plots.router, docs.router,
+                                              web.router)
                                for r in router.routes if hasattr(r, "path_regex")]
     app.openapi = lambda: _openapi(app)
     return app

@@ -257,6 +257,9 @@ def _run(db: Database, job_id: str, attempt: int, token: str, settings: Settings
 
     target = Target(**spec["target"])
     control = StepControl(**spec.get("control", {}))
+    start, offset = None, 0
+    if spec.get("library"):  # a library cell: start from the best stored optimum (service.library)
+        start, offset = _cell_start(db, job_id, spec["library"], owner, target, hb)
 
     def on_progress(rec) -> None:
         record("extrapolate", wall_time=rec.wall_time, lam=rec.lam, lam_reached=rec.lam_reached,
@@ -266,9 +269,9 @@ def _run(db: Database, job_id: str, attempt: int, token: str, settings: Settings
     def on_step(step) -> None:
         validation = validation_report(step.motion) if settings.validate_steps else None
         with hb.write_lock, db.write() as s:
-            store.save_step(s, job_id=job_id, owner=owner, step=step.step, lam=step.lam, motion=step.motion,
-                            validation=validation)
-        hb.steps, hb.lam_reached = step.step + 1, float(step.lam)
+            store.save_step(s, job_id=job_id, owner=owner, step=step.step + offset, lam=step.lam,
+                            motion=step.motion, validation=validation)
+        hb.steps, hb.lam_reached = step.step + offset + 1, float(step.lam)
 
     def should_cancel() -> bool:
         return hb.cancel_requested or hb.lost or time.monotonic() > deadline
@@ -277,14 +280,37 @@ def _run(db: Database, job_id: str, attempt: int, token: str, settings: Settings
     problem = SpacetimeProblem(tutor.character, tutor.T, tutor.fps, tutor.contacts,
                                ipopt_options={"ipopt.max_wall_time": float(settings.job_time_limit_s)})
     result = extrapolate(tutor, target, control, on_progress=on_progress, on_step=on_step,
-                         should_cancel=should_cancel, problem=problem)
+                         should_cancel=should_cancel, problem=problem, start=start)
     status, message = result.status, result.message
     if status != "succeeded" and not hb.cancel_requested and time.monotonic() > deadline:
         # stopped by the time limit: between steps, or inside a solve (IPOPT's max_wall_time)
         status, message = "failed", f"time limit of {settings.job_time_limit_s:g} s exceeded ({result.message})"
     if status not in ("succeeded", "impasse", "canceled", "failed"):
         status, message = "failed", f"unexpected extrapolation status {result.status!r}: {result.message}"
-    return status, message, dict(lam_reached=result.lam_reached, steps=len(result.steps), solves=result.solves)
+    lam_reached = max(result.lam_reached, start[0]) if start else result.lam_reached
+    return status, message, dict(lam_reached=lam_reached, steps=len(result.steps) + offset, solves=result.solves)
+
+
+def _cell_start(db: Database, job_id: str, ref: dict, owner: str, target, hb: Heartbeat):
+    """A library cell's warm start: the stored optimum furthest along its homotopy, stored as
+    the cell's step 0 (its provenance says where it came from). Returns (start, step offset)."""
+    from service import library
+
+    found = library.warm_start(db, job_id, ref)
+    if found is None:
+        return None, 0
+    ws, motion, validation, src_job, src_step = found
+    prov = dict(motion.provenance)
+    prov.update({"lambda": ws.lam, "target": {k: getattr(target, k) for k in target.__dataclass_fields__},
+                 "warm_start": {"lam": ws.lam, "source_cell": ws.source_cell, "source_lam": ws.source_lam,
+                                "source_job": src_job, "source_step": src_step}})
+    motion = motion.evolve(provenance=prov)
+    with hb.write_lock, db.write() as s:
+        store.save_step(s, job_id=job_id, owner=owner, step=0, lam=ws.lam, motion=motion, validation=validation)
+    hb.steps, hb.lam_reached = 1, ws.lam
+    log.info("job %s: warm start at λ = %.4f from cell %s (λ = %.4f)", job_id, ws.lam, ws.source_cell,
+             ws.source_lam)
+    return (ws.lam, motion), 1
 
 
 def _tutor_iterations(stats: Any) -> int:

@@ -112,3 +112,19 @@ class IdempotencyRow(Base):
     request_hash: Mapped[str] = mapped_column(String(64))
     job_id: Mapped[str] = mapped_column(String(40), ForeignKey("jobs.id", ondelete="CASCADE"))
     created_at: Mapped[float] = mapped_column(Float)
+
+
+class LibraryRow(Base):
+    """A motion library: one cell job (a row of ``jobs``) per target. Its status and progress are
+    derived from its cells' jobs (service.library); the cells are listed in ``spec["cells"]``
+    (key, parameters, job id) and each cell job's spec names its library and cell."""
+
+    __tablename__ = "libraries"
+    __table_args__ = (Index("ix_libraries_owner_created", "owner", "created_at"),)
+
+    id: Mapped[str] = mapped_column(String(40), primary_key=True)
+    owner: Mapped[str] = mapped_column(String(40))
+    motion_id: Mapped[str] = mapped_column(String(40))  # the source motion
+    spec: Mapped[dict[str, Any]] = mapped_column(JSON)
+    cancel_requested: Mapped[bool] = mapped_column(Boolean, default=False)
+    created_at: Mapped[float] = mapped_column(Float)

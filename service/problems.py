@@ -73,7 +73,8 @@ def problem_response(
 
 #: the longest ``detail`` sent: a message never repeats a large input
 MAX_DETAIL = 2000
-_IDS = {"motion": re.compile(r"m_[0-9a-f]{32}"), "job": re.compile(r"j_[0-9a-f]{32}")}
+_IDS = {"motion": re.compile(r"m_[0-9a-f]{32}"), "job": re.compile(r"j_[0-9a-f]{32}"),
+        "library": re.compile(r"l_[0-9a-f]{32}")}
 
 
 def _short(ident: str, n: int = 80) -> str:

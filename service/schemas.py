@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
@@ -172,3 +172,111 @@ class Health(BaseModel):
     broker: str | None = None
     compute: str | None = None
     schema_revision: str | None = None
+
+
+# --- libraries ---------------------------------------------------------------------------------
+
+_SLOPES = list[Annotated[float, Field(gt=-89.0, lt=89.0)]]
+_CURVES = list[Annotated[float, Field(ge=-720.0, le=720.0)]]
+_SPEEDS = list[Annotated[float, Field(gt=0.0, le=5.0)]]
+
+
+class GridIn(Strict):
+    """Axes of a library grid: every combination of the values is a cell (at most 125 cells).
+    ``speed_scale`` needs a solver with the speed axis (otherwise 422)."""
+
+    slope_deg: _SLOPES | None = Field(None, min_length=1, max_length=25, description="slopes (degrees, + uphill)")
+    curve_deg: _CURVES | None = Field(None, min_length=1, max_length=25,
+                                      description="heading changes over one cycle (degrees, + left)")
+    speed_scale: _SPEEDS | None = Field(None, min_length=1, max_length=25,
+                                        description="walking speed relative to the capture's")
+
+
+class LibraryTargetIn(Strict):
+    slope_deg: float | None = Field(None, gt=-89.0, lt=89.0)
+    curve_deg: float | None = Field(None, ge=-720.0, le=720.0)
+    speed_scale: float | None = Field(None, gt=0.0, le=5.0)
+
+
+def _grid_or_targets(schema: dict) -> None:
+    for k in ("grid", "targets"):  # present means not null
+        prop = schema["properties"][k]
+        if "anyOf" in prop:
+            (only,) = [x for x in prop.pop("anyOf") if x.get("type") != "null"]
+            prop.update(only)
+        prop.pop("default", None)
+    schema["oneOf"] = [{"required": ["grid"], "not": {"required": ["targets"]}},
+                       {"required": ["targets"], "not": {"required": ["grid"]}}]
+
+
+class LibraryIn(Strict):
+    """A motion library: a ``grid`` or an explicit list of ``targets`` (exactly one of them)."""
+
+    model_config = ConfigDict(json_schema_extra=_grid_or_targets)
+
+    grid: GridIn | None = None
+    targets: list[LibraryTargetIn] | None = Field(None, min_length=1, max_length=125)
+    control: StepControlIn = Field(default_factory=StepControlIn)
+    tutor: TutorIn = Field(default_factory=TutorIn)
+
+    @model_validator(mode="after")
+    def _one(self) -> LibraryIn:
+        given = self.model_fields_set & {"grid", "targets"}
+        if len(given) != 1 or (self.grid is None and self.targets is None):
+            raise ValueError("give either grid or targets (one of them, not null)")
+        return self
+
+
+LibraryStatus = Literal["queued", "running", "succeeded", "failed", "canceled", "impasse"]
+
+
+class LibraryCellOut(BaseModel):
+    key: str
+    clip_motion_id: str | None = Field(description="the cell's clip: its last realistic λ optimum")
+    clip_lam: float | None
+    plausible: bool | None = Field(description="the clip's plausibility verdict (null: not checked)")
+    parameters: dict[str, float]
+    job_id: str
+    status: JobStatus
+    at_impasse: bool
+    lam_reached: float
+    steps: int
+    solves: int
+    attempts: int
+    message: str
+    started_at: str | None
+    finished_at: str | None
+    wall_time_s: float | None
+    links: dict[str, str]
+
+
+class LibraryProgress(BaseModel):
+    cells: int
+    done: int
+    fraction: float = Field(description="mean over cells of λ reached (1 for a finished cell)")
+    queued: int
+    running: int
+    succeeded: int
+    failed: int
+    canceled: int
+    impasse: int
+
+
+class LibraryOut(BaseModel):
+    id: str
+    status: LibraryStatus
+    motion_id: str
+    axes: list[str]
+    grid: dict[str, Any] | None
+    targets: list[dict[str, Any]] | None
+    control: dict[str, Any]
+    cancel_requested: bool
+    created_at: str
+    finished_at: str | None
+    progress: LibraryProgress
+    cells: list[LibraryCellOut]
+    links: dict[str, str]
+
+
+class LibraryPage(Page):
+    items: list[LibraryOut]

@@ -22,7 +22,7 @@ from typing import Any, Literal
 from sqlalchemy import Select, delete, func, or_, select, update
 from sqlalchemy.orm import Session
 
-from service.models import TERMINAL, ApiKey, IdempotencyRow, JobRow, MotionRow, ProgressRow
+from service.models import TERMINAL, ApiKey, IdempotencyRow, JobRow, LibraryRow, MotionRow, ProgressRow
 from solver.motion import Motion
 
 
@@ -499,3 +499,69 @@ def stranded_jobs(
         .limit(limit)
     )
     return list(session.scalars(q))
+
+
+# --- libraries ------------------------------------------------------------------------------
+
+
+def create_library(
+    session: Session, *, owner: str, motion_id: str, spec: dict, cells: Sequence[tuple[str, dict, dict]],
+    runner: str, max_attempts: int,
+) -> tuple[LibraryRow, list[str]]:
+    """Insert a library and its cell jobs (one queued job per (key, parameters, job spec)), in
+    the caller's transaction: all of them or none. Returns the row and the job ids in the
+    order given."""
+    lid = new_id("l")
+    t = now()
+    listed, ids = [], []
+    for key, params, job_spec in cells:
+        job = create_job(session, owner=owner, motion_id=motion_id,
+                         spec={**job_spec, "library": {"id": lid, "cell": key}}, runner=runner,
+                         max_attempts=max_attempts)
+        listed.append({"key": key, "parameters": params, "job_id": job.id})
+        ids.append(job.id)
+    row = LibraryRow(id=lid, owner=owner, motion_id=motion_id, spec={**spec, "cells": listed},
+                     cancel_requested=False, created_at=t)
+    session.add(row)
+    session.flush()
+    return row, ids
+
+
+def get_library(session: Session, *, library_id: str, owner: str | None) -> LibraryRow | None:
+    row = session.get(LibraryRow, library_id)
+    if row is None or (owner is not None and row.owner != owner):
+        return None
+    return row
+
+
+def list_libraries(session: Session, *, owner: str, offset: int = 0, limit: int = 50) -> tuple[list[LibraryRow], int]:
+    q = select(LibraryRow).where(LibraryRow.owner == owner)
+    total = session.scalar(select(func.count()).select_from(q.subquery())) or 0
+    rows = list(session.scalars(q.order_by(LibraryRow.created_at, LibraryRow.id).offset(offset).limit(limit)))
+    return rows, total
+
+
+def library_jobs(session: Session, *, library: LibraryRow) -> dict[str, JobRow]:
+    """The library's cell jobs by job id."""
+    ids = [c["job_id"] for c in library.spec.get("cells", [])]
+    return {j.id: j for j in session.scalars(select(JobRow).where(JobRow.id.in_(ids)))} if ids else {}
+
+
+def stored_optima(session: Session, *, job_ids: Sequence[str]) -> list[tuple[str, int, float, bool | None, str]]:
+    """(job id, step, λ, plausible, motion id) of every stored λ optimum of these jobs (no motion data)."""
+    if not job_ids:
+        return []
+    q = select(MotionRow.job_id, MotionRow.step, MotionRow.lam, MotionRow.plausible, MotionRow.id).where(
+        MotionRow.job_id.in_(list(job_ids)))
+    return [(j, int(st), float(lam), p, mid) for j, st, lam, p, mid in session.execute(q)]
+
+
+def step_row(session: Session, *, job_id: str, step: int) -> MotionRow | None:
+    return session.scalar(select(MotionRow).where(MotionRow.job_id == job_id, MotionRow.step == step))
+
+
+def request_library_cancel(session: Session, *, library: LibraryRow) -> None:
+    """Cancel every cell that has not finished (queued ones at once, running ones cooperatively)."""
+    library.cancel_requested = True
+    for c in library.spec.get("cells", []):
+        request_cancel(session, job_id=c["job_id"])

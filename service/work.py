@@ -85,6 +85,17 @@ def export(data: bytes, fmt: str, options: dict[str, Any]) -> tuple[bytes, str]:
     return (out.encode("utf-8") if isinstance(out, str) else out), mt
 
 
+def library_glb(items: list[tuple[str, bytes]], extras: dict) -> tuple[bytes, str]:
+    """One GLB of a library: (animation name, stored motion) per cell (solver.export.gltf)."""
+    from solver.export import ExportError
+    from solver.export.gltf import to_library_glb
+
+    try:
+        return to_library_glb([(k, _load(d)) for k, d in items], extras=extras), "model/gltf-binary"
+    except ExportError as e:
+        raise WorkError(422, str(e)[:1000]) from None
+
+
 def validation(data: bytes) -> dict | None:
     try:
         from mjcf.validate import validate  # noqa: F401

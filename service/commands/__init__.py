@@ -8,6 +8,7 @@ MODULES = [  # the order of the command list: the main job first
     "service.commands.tutor",  # tutor, extrapolate, validate
     "service.commands.plot",
     "service.commands.export",
+    "service.commands.library",
     "service.commands.demo",
     "service.commands.grf",  # grf, grf-compare
     "service.commands.physics",  # mjcf, check-dynamics

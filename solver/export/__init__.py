@@ -9,6 +9,10 @@ Formats (see ``docs/export.md``):
   with its buffer embedded);
 - ``bvh``: Biovision hierarchy (:func:`solver.export.bvh.to_bvh`).
 
+The JSON clip and the glTF animations carry the game-ready data of :mod:`solver.export.game`
+(loop points, root motion, foot contacts, cycle metadata); ``gltf``/``glb`` with ``loop=True``
+animate one cycle, and :func:`solver.export.gltf.to_library_glb` writes a motion library.
+
 This module holds what the formats share: the local transform of every segment relative
 to its parent (our intrinsic joint sequences composed into one rotation and translation),
 the Z-up -> Y-up axis change, rotation matrix -> quaternion conversion, and the ground

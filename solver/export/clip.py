@@ -4,8 +4,9 @@ Layout (schema ``clip.schema.json`` beside this file, documented in ``docs/expor
 skeleton (segments with parent, rest offset and rest rotation), per frame the local
 rotation quaternion (x, y, z, w) of every segment and the root translation, optional
 world positions of markers and contact points, per-frame foot contact flags and ground
-reaction per foot (force, centre of pressure, free moment). Our Z-up axes by default,
-or glTF-style Y-up (``y_up=True``).
+reaction per foot (force, centre of pressure, free moment), and the game-ready data
+(``game``: loop points, root motion, foot contacts, cycle metadata; :mod:`solver.export.game`).
+Our Z-up axes by default, or glTF-style Y-up (``y_up=True``).
 """
 
 from __future__ import annotations
@@ -157,6 +158,10 @@ def to_clip(
                 for i, foot in enumerate(FEET)
             },
         }
+    from solver.export import game
+
+    if game.has_free_root(motion):
+        clip["game"] = game.game_json(motion, axes=Y_UP if y_up else None, decimals=decimals)
     log.debug("clip of %s: %d frames, %d segments", ch.name, motion.T, len(segs))
     return clip
 

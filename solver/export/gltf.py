@@ -135,10 +135,54 @@ def ellipsoid_mesh(center: np.ndarray, axis: np.ndarray, a: float, b: float) -> 
     return verts_a, norms_a, tris_a
 
 
-def _document(motion: Motion, meshes: bool) -> tuple[dict, bytes]:
+def _animation(buf: _Buffer, motion: Motion, name: str, *, loop: bool = False) -> dict:
+    """One animation of ``motion`` (frames 0 … P, one cycle, with ``loop``; else every frame),
+    with the game-ready data (:mod:`solver.export.game`, Y up) in its ``extras``."""
+    from solver.export import game
+
+    ch = motion.character
+    S = len(ch.segments)
+    extras: dict[str, Any] = {}
+    frames = motion.T
+    if game.has_free_root(motion):
+        if loop:
+            frames = game.loop_frames(motion) + 1
+        extras = game.game_json(motion, axes=Y_UP, frames=frames)
+    lt = local_transforms(ch, motion.q[:, :frames])
+    rot, pos = change_axes(lt.rot, lt.pos, True)
+    quat = continuous_quaternions(matrix_to_quaternion(rot))  # (S, T, 4)
+    times = np.arange(frames, dtype=float) / float(motion.fps)
+    t_acc = buf.add(times, FLOAT, "SCALAR", minmax=True)
+    samplers: list[dict] = []
+    channels: list[dict] = []
+    for i in range(S):
+        if lt.moving_rot[i]:
+            out = buf.add(quat[i], FLOAT, "VEC4", minmax=True)
+            samplers.append({"input": t_acc, "output": out, "interpolation": "LINEAR"})
+            channels.append({"sampler": len(samplers) - 1, "target": {"node": i, "path": "rotation"}})
+        if i == 0 or lt.moving_pos[i]:
+            out = buf.add(pos[i], FLOAT, "VEC3", minmax=True)
+            samplers.append({"input": t_acc, "output": out, "interpolation": "LINEAR"})
+            channels.append({"sampler": len(samplers) - 1, "target": {"node": i, "path": "translation"}})
+    anim: dict[str, Any] = {"name": name, "samplers": samplers, "channels": channels}
+    if extras:
+        extras["frames_in_animation"] = frames
+        anim["extras"] = extras
+    return anim
+
+
+def _check_flag(name: str, value: Any) -> None:
+    if not isinstance(value, bool):
+        raise ExportError(f"{name} must be a boolean, got {value!r}")
+
+
+def _document(motion: Motion, meshes: bool, loop: bool = False,
+              clips: list[tuple[str, Motion]] | None = None) -> tuple[dict, bytes]:
+    """The glTF document and its buffer: the skeleton of ``motion`` and its animation, or (with
+    ``clips``) one named animation per (name, motion), all of ``motion``'s character."""
     _check_motion(motion)
-    if not isinstance(meshes, bool):
-        raise ExportError(f"meshes must be a boolean, got {meshes!r}")
+    _check_flag("meshes", meshes)
+    _check_flag("loop", loop)
     ch = motion.character
     segs = ch.segments
     S, T = len(segs), motion.T
@@ -203,23 +247,10 @@ def _document(motion: Motion, meshes: bool) -> tuple[dict, bytes]:
             nodes.append({"name": f"{s.name}_mesh", "mesh": len(mesh_list) - 1, "skin": 0})
             scene_nodes.append(len(nodes) - 1)
 
-    # animation
-    lt = local_transforms(ch, motion.q)
-    rot, pos = change_axes(lt.rot, lt.pos, True)
-    quat = continuous_quaternions(matrix_to_quaternion(rot))  # (S, T, 4)
-    times = np.arange(T, dtype=float) / float(motion.fps)
-    t_acc = buf.add(times, FLOAT, "SCALAR", minmax=True)
-    samplers: list[dict] = []
-    channels: list[dict] = []
-    for i in range(S):
-        if lt.moving_rot[i]:
-            out = buf.add(quat[i], FLOAT, "VEC4", minmax=True)
-            samplers.append({"input": t_acc, "output": out, "interpolation": "LINEAR"})
-            channels.append({"sampler": len(samplers) - 1, "target": {"node": i, "path": "rotation"}})
-        if i == 0 or lt.moving_pos[i]:
-            out = buf.add(pos[i], FLOAT, "VEC3", minmax=True)
-            samplers.append({"input": t_acc, "output": out, "interpolation": "LINEAR"})
-            channels.append({"sampler": len(samplers) - 1, "target": {"node": i, "path": "translation"}})
+    if clips is None:
+        animations = [_animation(buf, motion, str(motion.provenance.get("step", "motion")), loop=loop)]
+    else:
+        animations = [_animation(buf, m, name, loop=loop) for name, m in clips]
 
     while len(buf.data) % 4:
         buf.data.append(0)
@@ -239,7 +270,7 @@ def _document(motion: Motion, meshes: bool) -> tuple[dict, bytes]:
         "scene": 0,
         "scenes": [{"name": ch.name, "nodes": scene_nodes}],
         "nodes": nodes,
-        "animations": [{"name": str(motion.provenance.get("step", "motion")), "samplers": samplers, "channels": channels}],
+        "animations": animations,
         "buffers": [{"byteLength": len(buf.data)}],
         "bufferViews": buf.views,
         "accessors": buf.accessors,
@@ -253,14 +284,12 @@ def _document(motion: Motion, meshes: bool) -> tuple[dict, bytes]:
                 "pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.8, 0.8, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.8},
             }
         ]
-    log.debug("glTF of %s: %d nodes, %d meshes, %d channels, %d bytes", ch.name, len(nodes), len(mesh_list),
-              len(channels), len(buf.data))
+    log.debug("glTF of %s: %d nodes, %d meshes, %d animations, %d bytes", ch.name, len(nodes), len(mesh_list),
+              len(animations), len(buf.data))
     return doc, bytes(buf.data)
 
 
-def to_glb(motion: Motion, *, meshes: bool = True) -> bytes:
-    """Binary glTF (.glb): JSON chunk and BIN chunk. ``meshes``: include the segment ellipsoids."""
-    doc, data = _document(motion, meshes)
+def _glb(doc: dict, data: bytes) -> bytes:
     js = json.dumps(doc, allow_nan=False, separators=(",", ":")).encode("utf-8")
     js += b" " * (-len(js) % 4)
     data += b"\0" * (-len(data) % 4)
@@ -272,16 +301,45 @@ def to_glb(motion: Motion, *, meshes: bool = True) -> bytes:
     ])
 
 
-def to_gltf_embedded(motion: Motion, *, meshes: bool = True) -> str:
+def to_glb(motion: Motion, *, meshes: bool = True, loop: bool = False) -> bytes:
+    """Binary glTF (.glb): JSON chunk and BIN chunk. ``meshes``: include the segment ellipsoids.
+    ``loop``: the animation is one cycle, frames 0 … P (its last key repeats the first under
+    the loop transform: ``extras.loop``), instead of every frame."""
+    return _glb(*_document(motion, meshes, loop))
+
+
+def to_gltf_embedded(motion: Motion, *, meshes: bool = True, loop: bool = False) -> str:
     """glTF JSON (.gltf) with the buffer embedded as a base64 data URI."""
-    doc, data = _document(motion, meshes)
+    doc, data = _document(motion, meshes, loop)
     doc["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64.b64encode(data).decode("ascii")
     return json.dumps(doc, allow_nan=False, separators=(",", ":"))
 
 
-def to_gltf(motion: Motion, *, meshes: bool = True, binary: bool = True) -> bytes | str:
+def to_gltf(motion: Motion, *, meshes: bool = True, binary: bool = True, loop: bool = False) -> bytes | str:
     """glTF 2.0 of ``motion``: the binary ``.glb`` (bytes, the default, as :func:`to_glb`), or
     with ``binary=False`` the ``.gltf`` JSON text with its buffer embedded (:func:`to_gltf_embedded`)."""
     if not isinstance(binary, bool):
         raise ExportError(f"binary must be a boolean, got {binary!r}")
-    return to_glb(motion, meshes=meshes) if binary else to_gltf_embedded(motion, meshes=meshes)
+    return to_glb(motion, meshes=meshes, loop=loop) if binary else to_gltf_embedded(motion, meshes=meshes, loop=loop)
+
+
+def to_library_glb(clips: list[tuple[str, Motion]], *, extras: dict | None = None, meshes: bool = True,
+                   loop: bool = True) -> bytes:
+    """One GLB for a motion library: the skeleton (and meshes) once, one named animation per
+    (name, motion) — one cycle each with ``loop`` — and ``extras`` (e.g. the grid) in the
+    asset's extras under ``library``. Every motion must be of the same character."""
+    if not clips:
+        raise ExportError("a library GLB needs at least one clip")
+    names = [n for n, _ in clips]
+    if len(set(names)) != len(names) or not all(isinstance(n, str) and n for n in names):
+        raise ExportError("clip names must be distinct non-empty strings")
+    first = _check_motion(clips[0][1])
+    for name, m in clips[1:]:
+        _check_motion(m)
+        if m.character.coordinate_names != first.character.coordinate_names or \
+                [s.name for s in m.character.segments] != [s.name for s in first.character.segments]:
+            raise ExportError(f"clip {name!r} is of another character than {names[0]!r}")
+    doc, data = _document(first, meshes, loop, clips=clips)
+    if extras is not None:
+        doc["asset"]["extras"]["library"] = extras
+    return _glb(doc, data)

@@ -3,7 +3,8 @@
 //   node tests/js/load_glb.mjs FILE.glb [TIME ...]
 //
 // TIME: seconds, or "end" (the clip's duration). Environment: THREE_DIR, the `three` package
-// directory (default: service/web/node_modules/three beside this repository's tests/).
+// directory (default: service/web/node_modules/three beside this repository's tests/);
+// ANIMATIONS=all: also evaluate every animation at each TIME (animation_poses).
 //
 // Prints one JSON object: counts (nodes, bones, skins, skinned meshes, meshes), every
 // animation's duration and tracks (name, type, key count, interpolation), the world position
@@ -85,9 +86,8 @@ const animations = gltf.animations.map((clip) => ({
   })),
 }));
 
-const poses = [];
-if (gltf.animations.length > 0 && timeArgs.length > 0) {
-  const clip = gltf.animations[0];
+function posesOf(clip) {
+  const out = [];
   const mixer = new THREE.AnimationMixer(scene);
   const action = mixer.clipAction(clip);
   action.setLoop(THREE.LoopOnce, 1); // so that t = duration is the last key, not frame 0 again
@@ -101,9 +101,18 @@ if (gltf.animations.length > 0 && timeArgs.length > 0) {
     action.reset();
     action.play();
     mixer.setTime(t);
-    poses.push({ time: t, ...pose() });
+    out.push({ time: t, ...pose() });
   }
+  action.stop();
+  mixer.uncacheRoot(scene);
+  return out;
 }
+
+const poses = gltf.animations.length > 0 && timeArgs.length > 0 ? posesOf(gltf.animations[0]) : [];
+// ANIMATIONS=all: the same poses for every animation (a library GLB), with its extras
+const animationPoses = process.env.ANIMATIONS === 'all' && timeArgs.length > 0
+  ? gltf.animations.map((clip) => ({ name: clip.name, poses: posesOf(clip) })) : undefined;
+const animationExtras = (gltf.parser.json.animations || []).map((a) => a.extras || null);
 
 process.stdout.write(JSON.stringify({
   three_revision: THREE.REVISION,
@@ -117,6 +126,8 @@ process.stdout.write(JSON.stringify({
   meshes,
   asset: gltf.asset,
   animations,
+  animation_extras: animationExtras,
   rest,
   poses,
+  animation_poses: animationPoses,
 }) + '\n');

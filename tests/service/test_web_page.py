@@ -306,3 +306,43 @@ def test_docs_page_is_swagger_ui_from_local_files(api, browser):
         assert hosts == {urlparse(api.base_url).netloc}, hosts
     finally:
         context.close()
+
+
+def test_page_shows_a_library_grid_and_previews_a_cell(api, browser, tutor_id):
+    """A 2 x 2 library: the grid as a heat map of status (every cell green once done), the
+    overall progress, and a cell's clip (its last realistic λ optimum) walking in the 3D preview."""
+    if not THREE_DIR.is_dir():
+        _missing("three.js is not installed: run `npm ci` in service/web")
+    r = api.a.post(f"/motions/{tutor_id}/library", json={"grid": {"slope_deg": [-5.0, 5.0], "curve_deg": [-20.0, 20.0]}})
+    assert r.status_code == 202, r.text
+    lid = r.json()["id"]
+    context, page, requests, errors = _open(browser, 1400, 1000)
+    try:
+        page.goto(f"{api.base_url}/ui/#key={KEY_A}")
+        page.wait_for_selector(f'#library-list button[data-id="{lid}"]')
+        page.click(f'#library-list button[data-id="{lid}"]')
+        wait_js(page, "window.motionx.state.libraryCells === 4", timeout=30)
+        wait_js(page, "window.motionx.state.libraryStatus === 'succeeded'", timeout=180)
+        lib = api.a.get(f"/libraries/{lid}").json()
+        assert lib["status"] == "succeeded"
+        # the grid: rows slope, columns curve, a button per cell with its status
+        heads = page.locator("#library-grid th").all_text_contents()
+        assert "slope -5°" in heads and "curve 20°" in heads, heads
+        assert sorted(page.locator("#library-grid button").evaluate_all("bs => bs.map(b => b.dataset.status)")) == \
+            ["succeeded"] * 4
+        assert page.text_content("#library-facts").count("4 of 4 done") == 1
+        grid = _pixels(page.locator("#library-grid").screenshot())
+        assert _near(grid, "#2e7d4f", tol=20) > 400, "succeeded cells are not drawn green"
+        # a cell's clip walks in the 3D preview
+        page.click('#library-grid button[data-key="slope5_curve20"]')
+        wait_js(page, "(s => s.cellKey === 'slope5_curve20' && s.previewReady)(window.motionx.state)", timeout=60)
+        cell = next(c for c in lib["cells"] if c["key"] == "slope5_curve20")
+        last = api.a.get(f"/jobs/{cell['job_id']}/motions?limit=100").json()["items"][-1]
+        assert _state(page)["motionId"] == last["id"]
+        shown = _pixels(page.locator("#viewer-canvas").screenshot())
+        assert _orange(shown) > 0.01 * shown.shape[0] * shown.shape[1], "no character pixels"
+        page.screenshot(path=str(SCREENSHOT.with_name("library.png")), full_page=True)
+        assert not errors, errors
+        assert not _state(page)["errors"]
+    finally:
+        context.close()

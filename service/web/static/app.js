@@ -1,11 +1,14 @@
-// The motionx page: lists of motions and jobs, a job's live progress curve, a motion's 3D
-// preview, GRF plot and plausibility report. Plain ES modules, no framework, no build step.
+// The motionx page: lists of motions, jobs and libraries, a job's live progress curve, a
+// library's grid of cells (status and λ reached as a heat map; a cell's clip in the 3D
+// preview), a motion's 3D preview, GRF plot and plausibility report. Plain ES modules, no
+// framework, no build step.
 //
 // Every API call carries the key (X-API-Key). The key comes from the input box or from the
 // URL fragment (#key=...), and is remembered in localStorage. Authenticated images are
 // fetched as blobs and shown through object URLs.
 //
-// Test hook: window.motionx.state (flags such as progressPoints, previewReady, grfLoaded).
+// Test hook: window.motionx.state (flags such as progressPoints, previewReady, grfLoaded,
+// libraryCells, cellKey).
 
 import { drawProgress } from './progress.js';
 
@@ -31,14 +34,21 @@ const state = {
   residualsLoaded: false,
   residualsError: null,
   validation: null,
+  libraries: [],
+  libraryId: null,
+  libraryStatus: null,
+  libraryCells: 0, // cells drawn in the grid
+  libraryDone: 0,
+  cellKey: null, // the cell whose clip is previewed
   errors: [],
 };
-window.motionx = { state, viewer: null, selectJob, selectMotion };
+window.motionx = { state, viewer: null, selectJob, selectMotion, selectLibrary };
 
 const $ = (id) => document.getElementById(id);
 let apiKey = '';
 let jobToken = 0; // bumped on every selection, so late answers for a previous one are dropped
 let motionToken = 0;
+let libraryToken = 0;
 let lastProgress = [];
 let viewerPromise = null;
 const objectUrls = new Map(); // <img> id -> object URL to revoke
@@ -129,8 +139,10 @@ function useKey(key) {
   // another key sees other motions and jobs: start afresh
   jobToken += 1;
   motionToken += 1;
-  Object.assign(state, { motions: [], jobs: [], jobId: null, jobStatus: null, motionId: null });
-  $('job-panel').hidden = $('motion-panel').hidden = true;
+  libraryToken += 1;
+  Object.assign(state, { motions: [], jobs: [], libraries: [], jobId: null, jobStatus: null, motionId: null,
+    libraryId: null, libraryStatus: null, cellKey: null });
+  $('job-panel').hidden = $('motion-panel').hidden = $('library-panel').hidden = true;
   $('intro').hidden = false;
   setKeyStatus('none');
   refreshLists();
@@ -150,15 +162,17 @@ function keyFromFragment() {
 
 async function refreshLists() {
   try {
-    const [motions, jobs] = await Promise.all([newest('/motions'), newest('/jobs')]);
+    const [motions, jobs, libraries] = await Promise.all([newest('/motions'), newest('/jobs'), newest('/libraries', 50)]);
     state.motions = motions;
     state.jobs = jobs;
+    state.libraries = libraries;
   } catch (err) {
     if (!(err instanceof ApiError && err.status === 401)) noteError('lists', err);
-    else state.motions = state.jobs = [];
+    else state.motions = state.jobs = state.libraries = [];
   }
   renderMotionList();
   renderJobList();
+  renderLibraryList();
 }
 
 /** What an empty list says: nothing there yet, or no access. */
@@ -297,6 +311,177 @@ async function cancelJob() {
     await api(`/jobs/${state.jobId}/cancel`, { method: 'POST' });
   } catch (err) {
     noteError('cancel', err);
+  }
+}
+
+// ---------------------------------------------------------------- a library
+
+const AXIS_TEXT = { slope_deg: ['slope', '°'], curve_deg: ['curve', '°'], speed_scale: ['speed', '×'] };
+const axisValue = (axis, v) => `${(AXIS_TEXT[axis] || [axis])[0]} ${v}${(AXIS_TEXT[axis] || ['', ''])[1]}`;
+
+function libraryTitle(lib) {
+  if (lib.grid) return Object.entries(lib.grid).map(([a, vs]) => `${(AXIS_TEXT[a] || [a])[0]} ×${vs.length}`).join(' · ');
+  return `${lib.progress.cells} targets`;
+}
+
+function renderLibraryList() {
+  const ul = $('library-list');
+  ul.replaceChildren(...state.libraries.map((lib) => listButton(
+    lib.id,
+    lib.id === state.libraryId,
+    `${libraryTitle(lib)} (${lib.progress.cells} cells)`,
+    h('span', { class: `badge ${lib.status}` }, lib.status),
+    `${lib.progress.done}/${lib.progress.cells} done · ${shortId(lib.id)} · ${clock(lib.created_at)}`,
+    () => selectLibrary(lib.id),
+  )));
+  if (!state.libraries.length) ul.append(h('li', { class: 'empty' }, emptyText('libraries')));
+  ul.dataset.count = state.libraries.length;
+}
+
+async function selectLibrary(id) {
+  const token = ++libraryToken;
+  Object.assign(state, { libraryId: id, libraryStatus: null, libraryCells: 0, libraryDone: 0, cellKey: null });
+  $('intro').hidden = true;
+  $('library-panel').hidden = false;
+  $('library-id').textContent = id;
+  $('library-facts').replaceChildren();
+  $('library-grid').replaceChildren();
+  renderLibraryList();
+  while (token === libraryToken) {
+    try {
+      const lib = await api(`/libraries/${id}`);
+      if (token !== libraryToken) return;
+      renderLibrary(lib);
+      if (TERMINAL.has(lib.status)) return;
+    } catch (err) {
+      if (token !== libraryToken) return;
+      $('library-facts').replaceChildren(h('dt', {}, 'error'), h('dd', {}, err.message));
+      if (err instanceof ApiError && err.status < 500) return;
+    }
+    await sleep(JOB_POLL_MS);
+  }
+}
+
+function cellButton(cell) {
+  const lam = cell.lam_reached;
+  const attrs = {
+    type: 'button',
+    class: `${cell.status}${cell.key === state.cellKey ? ' selected' : ''}`,
+    'data-key': cell.key,
+    'data-status': cell.status,
+    title: `${cell.key}: ${cell.status}, λ reached ${fmt(lam, 4)}, ${cell.solves} solves${cell.message ? ` — ${cell.message}` : ''}`,
+    onclick: () => selectCell(cell),
+  };
+  const what = cell.status === 'impasse' ? `impasse λ ${fmt(lam, 2)}` : cell.status === 'succeeded' ? 'λ 1'
+    : cell.status === 'running' ? `λ ${fmt(lam, 2)}` : cell.status;
+  // realism of the cell's clip: ✓ plausible, ✗ not, nothing when unchecked or no clip yet
+  const mark = cell.plausible === true ? ' ✓' : cell.plausible === false ? ' ✗' : '';
+  const button = h('button', attrs, what + mark);
+  if (cell.status === 'running') { // shade: λ reached (CSSOM, which the page's style-src allows)
+    const pct = Math.round(100 * lam);
+    button.style.background = `linear-gradient(90deg, #9cc3e8 ${pct}%, #eef1f4 ${pct}%)`;
+  }
+  return button;
+}
+
+function renderLibrary(lib) {
+  state.libraryStatus = lib.status;
+  const status = $('library-status');
+  status.className = `badge ${lib.status}`;
+  status.textContent = lib.status;
+  $('library-cancel').hidden = TERMINAL.has(lib.status);
+  const p = lib.progress;
+  const times = lib.cells.map((c) => c.wall_time_s).filter((t) => typeof t === 'number');
+  const facts = [
+    ['cells', `${p.done} of ${p.cells} done`],
+    ['succeeded / impasse', `${p.succeeded} / ${p.impasse}`],
+    ['failed / canceled', `${p.failed} / ${p.canceled}`],
+    ['running / queued', `${p.running} / ${p.queued}`],
+    ['overall', `${fmt(100 * p.fraction, 3)} %`],
+    ['time per cell', times.length ? `${fmt(times.reduce((a, b) => a + b, 0) / times.length)} s` : '–'],
+  ];
+  $('library-facts').replaceChildren(...facts.flatMap(([k, v]) => [h('dt', {}, k), h('dd', {}, v)]));
+  $('library-bar-fill').style.width = `${(100 * p.fraction).toFixed(1)}%`;
+
+  // the grid: rows = first axis, columns = second (one column for a single axis); a list of
+  // targets, or a third axis, is a table of one cell per row
+  const axes = lib.axes || [];
+  const table = $('library-grid');
+  const rows = [];
+  if (lib.grid && axes.length <= 2) {
+    const [ra, ca] = axes;
+    const rv = lib.grid[ra] || [null];
+    const cv = ca ? lib.grid[ca] : [null];
+    const at = new Map(lib.cells.map((c) => [`${c.parameters[ra]}|${ca ? c.parameters[ca] : ''}`, c]));
+    rows.push(h('tr', {}, h('th', {}, ca ? `${(AXIS_TEXT[ra] || [ra])[0]} \\ ${(AXIS_TEXT[ca] || [ca])[0]}` : ''),
+      ...cv.map((v) => h('th', {}, ca ? axisValue(ca, v) : ''))));
+    for (const r of rv) {
+      rows.push(h('tr', {}, h('th', {}, axisValue(ra, r)), ...cv.map((c) => {
+        const cell = at.get(`${r}|${ca ? c : ''}`);
+        return h('td', {}, cell ? cellButton(cell) : '');
+      })));
+    }
+  } else {
+    rows.push(h('tr', {}, h('th', {}, 'target'), h('th', {}, 'cell')));
+    for (const cell of lib.cells) {
+      rows.push(h('tr', {}, h('th', {}, Object.entries(cell.parameters).map(([a, v]) => axisValue(a, v)).join(', ')),
+        h('td', {}, cellButton(cell))));
+    }
+  }
+  table.replaceChildren(h('tbody', {}, rows));
+  state.libraryCells = table.querySelectorAll('button[data-key]').length;
+  state.libraryDone = p.done;
+  const listed = state.libraries.find((l) => l.id === lib.id);
+  if (listed && (listed.status !== lib.status || listed.progress.done !== p.done)) {
+    Object.assign(listed, lib);
+    renderLibraryList();
+  }
+}
+
+/** A cell's clip (its last realistic λ optimum) in the motion panel's 3D preview. */
+async function selectCell(cell) {
+  state.cellKey = cell.key;
+  document.querySelectorAll('#library-grid button').forEach((b) => b.classList.toggle('selected', b.dataset.key === cell.key));
+  try {
+    const items = [];
+    let url = `/jobs/${cell.job_id}/motions?limit=200`;
+    while (url) {
+      const page = await api(url);
+      items.push(...page.items);
+      url = page.next;
+    }
+    const clip = items.find((m) => m.id === cell.clip_motion_id) || items.filter((m) => m.plausible !== false).pop();
+    if (!clip) {
+      noteError('cell', new Error(`cell ${cell.key} has no motion yet`));
+      return;
+    }
+    state.jobMotions = items;
+    await selectMotion(clip.id);
+  } catch (err) {
+    noteError('cell', err);
+  }
+}
+
+async function cancelLibrary() {
+  if (!state.libraryId) return;
+  try {
+    await api(`/libraries/${state.libraryId}/cancel`, { method: 'POST' });
+  } catch (err) {
+    noteError('cancel', err);
+  }
+}
+
+async function downloadLibrary(what) {
+  const id = state.libraryId;
+  if (!id) return;
+  try {
+    const blob = await api(what === 'glb' ? `/libraries/${id}/library.glb` : `/libraries/${id}/manifest`, { as: 'blob' });
+    const a = h('a', { href: URL.createObjectURL(blob), download: what === 'glb' ? `${id}.glb` : `${id}.manifest.json` });
+    a.click();
+    setTimeout(() => URL.revokeObjectURL(a.href), 10_000);
+  } catch (err) {
+    noteError('download', err);
+    alert(`Download failed: ${err.message}`);
   }
 }
 
@@ -488,6 +673,9 @@ function start() {
   $('key-forget').addEventListener('click', () => useKey(''));
   $('show-steps').addEventListener('change', renderMotionList);
   $('job-cancel').addEventListener('click', cancelJob);
+  $('library-cancel').addEventListener('click', cancelLibrary);
+  $('library-glb').addEventListener('click', () => downloadLibrary('glb'));
+  $('library-manifest').addEventListener('click', () => downloadLibrary('manifest'));
   document.querySelectorAll('.downloads button').forEach((b) => b.addEventListener('click', () => download(b.dataset.format)));
   $('viewer-play').addEventListener('click', async () => {
     const v = await viewer();

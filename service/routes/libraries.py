@@ -1,0 +1,227 @@
+"""Motion libraries: create (one job per cell), status and progress per cell and overall,
+cancel, manifest, library GLB (service.library)."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter, Depends, Query, Request
+from fastapi.concurrency import run_in_threadpool
+from fastapi.responses import JSONResponse, Response, StreamingResponse
+
+from service import library, limits, store, work
+from service.config import Settings
+from service.db import Database
+from service.deps import app_settings, get_db, get_owner, get_runner
+from service.limits import LimitError
+from service.models import TERMINAL
+from service.problems import Problem, known_id, not_found
+from service.runners import Runner
+from service.schemas import LibraryIn, LibraryOut, LibraryPage
+from service.work import Compute
+
+router = APIRouter(tags=["libraries"])
+
+
+def _library(db: Database, library_id: str, owner: str) -> dict:
+    known_id("library", library_id)
+    with db.read() as s:
+        row = store.get_library(s, library_id=library_id, owner=owner)
+        if row is None:
+            raise not_found("library", library_id)
+        return library.library_out(s, row)
+
+
+@router.post(
+    "/motions/{motion_id}/library",
+    status_code=202,
+    response_model=LibraryOut,
+    summary="start a motion library: one extrapolation job per cell of a grid (or per target of a list)",
+    description="The cells are queued as independent jobs (nearest the tutor first) and run by the workers; "
+                "each starts from the stored optimum furthest along its own homotopy (docs/service.md, "
+                "'Motion libraries'). A grid has at most 125 cells. The speed axis (speed_scale) needs a solver "
+                "that has it (422 otherwise).",
+    responses={202: {"headers": {"Location": {"schema": {"type": "string"}}}},
+               404: {"description": "no such motion for this key"},
+               422: {"description": "an axis the solver does not have, too many cells, a repeated value or "
+                                    "target, or a source motion beyond the limits"}},
+)
+def create_library(
+    motion_id: str,
+    body: LibraryIn,
+    owner: str = Depends(get_owner),
+    db: Database = Depends(get_db),
+    runner: Runner = Depends(get_runner),
+    settings: Settings = Depends(app_settings),
+) -> JSONResponse:
+    from solver.continuation import StepControl
+    from solver.library import LibraryError
+
+    known_id("motion", motion_id)
+    req = body.model_dump(mode="json", exclude_none=True)
+    req["grid"] = body.grid.model_dump(mode="json", exclude_none=True) if body.grid is not None else None
+    if body.targets is not None:
+        req["targets"] = [t.model_dump(mode="json", exclude_none=True) for t in body.targets]
+    try:
+        StepControl(**body.control.model_dump())
+        spec, cells, dispatch = library.plan(req)
+    except (LibraryError, ValueError) as e:
+        raise Problem(422, str(e)) from None
+    with db.write() as s:
+        source = store.get_motion(s, motion_id=motion_id, owner=owner)
+        if source is None:
+            raise not_found("motion", motion_id)
+        try:
+            limits.check_source(kind=source.kind, frames=source.frames, fps=source.fps, coordinates=source.n)
+        except LimitError as e:
+            raise Problem(422, str(e), type="https://motionx.dev/problems/limit") from None
+        row, job_ids = store.create_library(s, owner=owner, motion_id=motion_id, spec=spec, cells=cells,
+                                            runner=runner.name, max_attempts=settings.job_max_attempts)
+        lid = row.id
+    by_key = {key: j for (key, _, _), j in zip(cells, job_ids)}
+    for key in dispatch:  # nearest the tutor first; a broker that is down leaves them queued for the sweep
+        runner.submit(by_key[key])
+    out = _library(db, lid, owner)
+    return JSONResponse(out, status_code=202, headers={"Location": out["links"]["self"]})
+
+
+@router.get("/libraries", response_model=LibraryPage, summary="your motion libraries, oldest first")
+def list_libraries(
+    offset: int = Query(0, ge=0, le=10**9),
+    limit: int | None = Query(None, ge=1, le=1000),
+    owner: str = Depends(get_owner),
+    db: Database = Depends(get_db),
+    settings: Settings = Depends(app_settings),
+) -> dict:
+    limit = limit or settings.page_size
+    with db.read() as s:
+        rows, total = store.list_libraries(s, owner=owner, offset=offset, limit=limit)
+        items = [library.library_out(s, r) for r in rows]
+    nxt = f"/libraries?offset={offset + limit}&limit={limit}" if offset + limit < total else None
+    return dict(items=items, total=total, limit=limit, next=nxt)
+
+
+@router.get("/libraries/{library_id}", response_model=LibraryOut,
+            summary="status, progress per cell and overall, links",
+            responses={404: {"description": "no such library for this key"}})
+def get_library(library_id: str, owner: str = Depends(get_owner), db: Database = Depends(get_db)) -> dict:
+    return _library(db, library_id, owner)
+
+
+@router.post("/libraries/{library_id}/cancel", status_code=202, response_model=LibraryOut,
+             summary="cancel every unfinished cell (running ones stop between λ steps)",
+             responses={404: {"description": "no such library for this key"},
+                        409: {"description": "the library has already finished"}})
+def cancel_library(library_id: str, owner: str = Depends(get_owner), db: Database = Depends(get_db)) -> JSONResponse:
+    known_id("library", library_id)
+    with db.write() as s:
+        row = store.get_library(s, library_id=library_id, owner=owner)
+        if row is None:
+            raise not_found("library", library_id)
+        if library.library_out(s, row)["status"] in TERMINAL:
+            raise Problem(409, f"library {library_id} has already finished")
+        store.request_library_cancel(s, library=row)
+    return JSONResponse(_library(db, library_id, owner), status_code=202,
+                        headers={"Location": f"/libraries/{library_id}"})
+
+
+@router.get("/libraries/{library_id}/manifest",
+            summary="the manifest: cell -> parameters, status, files, realism figures, cycle metadata",
+            responses={404: {"description": "no such library for this key"}})
+def get_manifest(library_id: str, owner: str = Depends(get_owner), db: Database = Depends(get_db)) -> dict:
+    known_id("library", library_id)
+    with db.read() as s:
+        row = store.get_library(s, library_id=library_id, owner=owner)
+        if row is None:
+            raise not_found("library", library_id)
+        return library.manifest(s, row)
+
+
+@router.get(
+    "/libraries/{library_id}/library.glb",
+    summary="one GLB: the skeleton once, one looping animation per cell with a clip (named by its key), "
+            "the grid in asset.extras.library and the game-ready data in each animation's extras",
+    responses={200: {"content": {"model/gltf-binary": {}}}, 404: {"description": "no such library for this key"},
+               409: {"description": "no cell has a motion yet"},
+               429: {"description": "the server is busy with heavy requests: retry after Retry-After seconds"}},
+)
+async def get_library_glb(library_id: str, request: Request, owner: str = Depends(get_owner),
+                          db: Database = Depends(get_db)) -> Response:
+    known_id("library", library_id)
+
+    def load():
+        with db.read() as s:
+            row = store.get_library(s, library_id=library_id, owner=owner)
+            if row is None:
+                raise not_found("library", library_id)
+            items = [(c["key"], clip.sha256, clip.data) for c, clip in library.clips(s, row) if clip is not None]
+            grid = {"id": row.id, "axes": row.spec.get("grid"), "targets": row.spec.get("targets"),
+                    "cells": [{"key": c["key"], "parameters": c["parameters"], "status": c["status"]}
+                              for c in library.library_out(s, row)["cells"]],
+                    "manifest": f"/libraries/{row.id}/manifest"}
+            return items, grid
+
+    items, grid = await run_in_threadpool(load)
+    if not items:
+        raise Problem(409, f"library {library_id} has no cell with a motion yet")
+    compute: Compute = request.app.state.compute
+    key = ("library.glb", tuple((k, sha) for k, sha, _ in items), repr(grid))
+    body, mt = await compute.cached(key, work.library_glb, [(k, d) for k, _, d in items], grid,
+                                    what="the library GLB")
+    return Response(body, media_type=mt)
+
+
+@router.get(
+    "/libraries/{library_id}/events",
+    summary="Server-Sent Events: a cell's status or λ reached changed (cell), the library's progress (status); "
+            "ends when the library does",
+    responses={200: {"content": {"text/event-stream": {}}}, 404: {"description": "no such library for this key"}},
+)
+async def library_events(
+    library_id: str,
+    request: Request,
+    owner: str = Depends(get_owner),
+    db: Database = Depends(get_db),
+    settings: Settings = Depends(app_settings),
+) -> StreamingResponse:
+    import asyncio
+    import json
+    import time
+
+    known_id("library", library_id)
+
+    def snapshot() -> dict | None:
+        with db.read() as s:
+            row = store.get_library(s, library_id=library_id, owner=owner)
+            return library.library_out(s, row) if row is not None else None
+
+    if await run_in_threadpool(snapshot) is None:
+        raise not_found("library", library_id)
+
+    def sse(event: str, data: dict) -> str:
+        return f"event: {event}\ndata: {json.dumps(data, separators=(',', ':'))}\n\n"
+
+    async def stream():
+        seen: dict[str, tuple] = {}
+        last = None
+        deadline = time.monotonic() + settings.sse_max_s
+        while time.monotonic() < deadline:
+            lib = await run_in_threadpool(snapshot)
+            if lib is None:
+                return
+            for c in lib["cells"]:
+                key = (c["status"], c["lam_reached"], c["steps"], c["attempts"])
+                if seen.get(c["key"]) != key:
+                    seen[c["key"]] = key
+                    yield sse("cell", c)
+            state = (lib["status"], lib["progress"]["done"], round(lib["progress"]["fraction"], 6))
+            if state != last:
+                last = state
+                yield sse("status", {k: lib[k] for k in ("id", "status", "progress", "cancel_requested")})
+            if lib["status"] in TERMINAL:
+                yield sse("end", {"status": lib["status"]})
+                return
+            if await request.is_disconnected():
+                return
+            await asyncio.sleep(settings.sse_poll_s)
+
+    return StreamingResponse(stream(), media_type="text/event-stream",
+                             headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"})
