@@ -9,20 +9,27 @@ from pathlib import Path
 
 def tutor_table(res: dict) -> str:
     rows = ["| trial | character | frames | variables / constraints | build (frame fns + NLP) | simplify | correct (IPOPT its) "
-            "| marker distance to capture (mean / max) | root residual / weight |",
-            "|---|---|---|---|---|---|---|---|---|"]
+            "| marker distance to capture (mean / max) | root residual / weight | realistic (Newton / refined force, BW) |",
+            "|---|---|---|---|---|---|---|---|---|---|"]
     for key, r in res.items():
         trial, kind = key.split("/")
         if r.get("status") != "succeeded":
-            rows.append(f"| {trial} | {kind} | – | – | – | – | {r.get('status')} | – | – |")
+            rows.append(f"| {trial} | {kind} | – | – | – | – | {r.get('status')} | – | – | – |")
             continue
         d = r["marker_distance_to_capture_mm"]
         rows.append(
             f"| {trial} | {kind} | {r['frames']} | {r['variables']} / {r['constraints']} | "
             f"{r['build_frame_functions_s']:.2f} + {r['build_nlp_s']:.2f} s | {r['simplify_s']:.2f} s | "
             f"{r['correct_s']:.2f} s ({r['correct_iterations']}) | {d['mean']:.1f} / {d['max']:.0f} mm | "
-            f"{r['root_residual_rel_weight']:.0e} |")
+            f"{r['root_residual_rel_weight']:.0e} | {_realistic(r)} |")
     return "\n".join(rows)
+
+
+def _realistic(r: dict) -> str:
+    rl = r.get("realism") or {}
+    if not rl:
+        return "–"
+    return f"{'yes' if r.get('plausible') else 'NO'} ({rl.get('newton_force', float('nan')):.3f} / {rl.get('refined_force', float('nan')):.3f})"
 
 
 def continuation_table(res: dict) -> str:
@@ -32,7 +39,10 @@ def continuation_table(res: dict) -> str:
         for tgt, r in targets.items():
             cells = []
             for m in ("thesis", "adaptive"):
-                v = r[m]
+                v = r.get(m)
+                if v is None:
+                    cells.append("–")
+                    continue
                 pl = "" if v["all_plausible"] else " (implausible step!)"
                 cells.append(f"{v['status']}, {v['lambda_reached']:.3f}, {v['solves']}, {v['time_s']:.1f} s{pl}")
             rows.append(f"| {trial} | {tgt} | {cells[0]} | {cells[1]} |")

@@ -36,6 +36,10 @@ def run() -> dict:
                     "marker_distance_to_capture_mm": st["marker_distance_to_capture_mm"],
                     "root_residual_rel_weight": m.report["root_residual"]["max_force_rel_weight"],
                     "plausible": m.report["plausible"],
+                    "realism": {k: v["value"] for k, v in (m.report.get("realism") or {}).get("checks", {}).items()},
                 })
+            elif res.stats:
+                row["correct_iterations"] = sum(a.get("iterations") or 0 for a in
+                                                (res.stats.get("correct") or {}).get("attempts") or [])
             out[f"{name}/{kind}"] = row
     return out
