@@ -219,7 +219,7 @@ def _run(db: Database, job_id: str, attempt: int, token: str, settings: Settings
     seq = {"n": 0, "solves": 0}
 
     def record(phase: str, **kw: Any) -> None:
-        if phase == "extrapolate":
+        if phase == "extrapolate" and kw.get("status") != "tutor":  # λ = 0 taken from the tutor: no solve
             seq["solves"] += 1
         with hb.write_lock, db.write() as s:
             store.append_progress(s, job_id=job_id, attempt=attempt, seq=seq["n"], phase=phase,
