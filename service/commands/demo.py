@@ -6,7 +6,9 @@ by default), asks for two extrapolations of the same capture — a downhill slop
 curve — follows both jobs with a progress bar, and downloads into ``--out``, per job: every
 λ optimum (``step_NNN_lambda_L.motion.json``, ``.clip.json``, ``.glb``, ``.bvh``,
 ``.validation.json``, named as ``motionx extrapolate`` names them), ``progress.csv`` and
-``progress.png``, and the final motion's GRF and residual plots; then prints a short summary.
+``progress.png``, and the final motion's GRF and residual plots; then a small motion library
+(3 slopes × 3 curves, one job per cell: ``library/manifest.json`` and ``library/library.glb``,
+one looping animation per cell; ``--no-library`` skips it); then prints a short summary.
 
 The service is stopped (its whole process group, waited for) when the demo ends, fails, or
 receives Ctrl-C or SIGTERM; the temporary data directory is removed unless ``--keep-temp``.
@@ -165,10 +167,15 @@ def _run(args, files: list[Path], jobs: list[_Job], out: Path, server: Proc, bas
         _follow(http, jobs, deadline=time.monotonic() + args.timeout)
         summary = {"input": [f.name for f in files], "character": args.character, "fps": args.fps,
                    "jobs": [_download(http, j, out / j.name) for j in jobs]}
+        if args.library:
+            summary["library"] = _library(http, motion["id"], tutor, out / "library",
+                                          deadline=time.monotonic() + args.timeout)
         summary["wall_time_s"] = round(time.perf_counter() - t0, 2)
         (out / "summary.json").write_text(json.dumps(summary, indent=2))
         _print_summary(summary, out)
         ok = all(j["status"] in ("succeeded", "impasse") for j in summary["jobs"])
+        if "library" in summary:
+            ok = ok and summary["library"]["status"] in ("succeeded", "impasse")
         if args.serve:
             print(f"[demo] the web page: {base}/ui/#key={key}  (Ctrl-C or SIGTERM stops the service)", flush=True)
             try:
@@ -179,6 +186,46 @@ def _run(args, files: list[Path], jobs: list[_Job], out: Path, server: Proc, bas
             except (KeyboardInterrupt, Terminated):
                 print("[demo] stopping the service", flush=True)
         return 0 if ok else 1
+
+
+#: the demo's small motion library (issue 15): 3 slopes × 3 curves, HalfBoy
+LIBRARY_GRID = {"slope_deg": [-5.0, 0.0, 5.0], "curve_deg": [-30.0, 0.0, 30.0]}
+
+
+def _library(http, motion_id: str, tutor: dict, out: Path, deadline: float) -> dict:
+    """Queue the small library, follow its overall progress, download its manifest and GLB."""
+    t0 = time.perf_counter()
+    r = http.post(f"/motions/{motion_id}/library", json={"grid": LIBRARY_GRID, "tutor": tutor})
+    _check(r, 202, "library")
+    lib = r.json()
+    print(f"[demo] library {lib['id']}: {len(lib['cells'])} cells (slopes {LIBRARY_GRID['slope_deg']} × curves "
+          f"{LIBRARY_GRID['curve_deg']})", flush=True)
+    last = None
+    while True:
+        lib = http.get(f"/libraries/{lib['id']}").json()
+        pr = lib["progress"]
+        line = (f"[demo] library: {pr['done']}/{pr['cells']} cells done ({pr['succeeded']} succeeded, "
+                f"{pr['impasse']} at impasse, {pr['failed']} failed), {100 * pr['fraction']:.0f} %")
+        if line != last:
+            print(line, flush=True)
+            last = line
+        if lib["status"] not in ("queued", "running"):
+            break
+        if time.monotonic() > deadline:
+            raise CliError("the library did not finish before the demo's deadline (--timeout)")
+        time.sleep(1.0)
+    out.mkdir(parents=True, exist_ok=True)
+    manifest = http.get(f"/libraries/{lib['id']}/manifest")
+    _check(manifest, 200, "library manifest")
+    (out / "manifest.json").write_text(json.dumps(manifest.json(), indent=2))
+    glb = http.get(f"/libraries/{lib['id']}/library.glb")
+    _check(glb, 200, "library GLB")
+    (out / "library.glb").write_bytes(glb.content)
+    realistic = sum(1 for c in lib["cells"] if c["plausible"])
+    print(f"[demo] library {lib['status']}: {realistic}/{len(lib['cells'])} cells realistic, "
+          f"{time.perf_counter() - t0:.1f} s; wrote {out}/manifest.json and library.glb", flush=True)
+    return {"id": lib["id"], "status": lib["status"], "cells": len(lib["cells"]), "realistic": realistic,
+            "grid": LIBRARY_GRID, "time_s": round(time.perf_counter() - t0, 2)}
 
 
 def _check(resp, code: int, what: str) -> None:
@@ -343,6 +390,8 @@ stopped and its temporary folder removed at the end, on Ctrl-C and on SIGTERM.""
     s.add_argument("--mass", type=float, default=None, metavar="KG",
                    help="subject mass in kg (default: from the input; required when the input does not state it)")
     s.add_argument("--timeout", type=float, default=900.0, metavar="S", help="seconds to wait for the jobs")
+    s.add_argument("--no-library", dest="library", action="store_false",
+                   help="skip the small motion library (3 slopes × 3 curves) after the two jobs")
     s.add_argument("--serve", action="store_true", help="keep the service running afterwards and print the web "
                    "page's address (Ctrl-C or SIGTERM stops it)")
     s.add_argument("--keep-temp", action="store_true",

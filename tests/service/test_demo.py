@@ -132,6 +132,16 @@ def test_demo_reaches_both_targets_and_prints_a_summary(demo_run):
     # the tutor phase named as such
     assert r.stdout.count("λ=") >= 4 and "#" in r.stdout
     assert "slope_deg=-11.25 " in r.stdout
+    # the small motion library: 9 cells, every one realistic or honestly at impasse, its
+    # manifest and one looping animation per cell in the GLB
+    lib = summary["library"]
+    assert lib["cells"] == 9 and lib["status"] in ("succeeded", "impasse"), lib
+    manifest = json.loads((out / "library" / "manifest.json").read_text())
+    cells = manifest["cells"]
+    assert len(cells) == 9 and all(c["status"] in ("succeeded", "impasse") for c in cells), cells
+    glb = (out / "library" / "library.glb").read_bytes()
+    assert glb[:4] == b"glTF" and int.from_bytes(glb[8:12], "little") == len(glb)
+    assert "[demo] library " in r.stdout and "cells realistic" in r.stdout
 
 
 def test_sigterm_stops_the_demo_and_its_service_and_removes_the_temporary_folder(demo_run):
