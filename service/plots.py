@@ -238,10 +238,9 @@ def _motion_with_wrenches(motion: Any):
 def body_weight(motion) -> float:
     """Body weight (N) in the motion's own environment (its gravity), as the plausibility
     report counts it."""
-    from solver.plausibility import environment_of
+    from solver.environment import body_weight as weight
 
-    g = float(np.linalg.norm(np.asarray(environment_of(motion)["gravity"], dtype=float)))
-    return motion.character.total_mass * (g if g > 0 else 9.81)
+    return weight(motion)
 
 
 def motion_caption(motion) -> str:

@@ -26,6 +26,7 @@ from solver.kinematics import markers
 from solver.motion import Motion, foot_schedule_of
 from solver.plausibility import report
 from solver.spacetime import Environment, SolveResult, SpacetimeProblem, Weights
+from solver.environment import STANDARD_GRAVITY_VECTOR
 
 log = logging.getLogger(__name__)
 
@@ -184,7 +185,7 @@ def problem_for(character: Character, T: int, fps: float, contacts: np.ndarray |
 
 
 def estimate_wrenches(character: Character, q: np.ndarray, fps: float, contacts: np.ndarray,
-                      gravity=(0.0, 0.0, -9.81)) -> tuple[np.ndarray, dict]:
+                      gravity=STANDARD_GRAVITY_VECTOR) -> tuple[np.ndarray, dict]:
     """EFC (SPEC §5) on the simplified motion: initial contact wrenches for the correction."""
     from solver.contact import estimate_contact_wrenches
 

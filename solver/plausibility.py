@@ -19,6 +19,7 @@ from solver.kinematics import contact_points, segment_frames, standing_leg_lengt
 from solver.motion import FEET, Motion
 from solver.realism import RealismLimits, problem_lines, realism_report
 from solver.trajectory import dynamics_samples
+from solver.environment import body_weight, environment_of as _environment_of
 
 
 @dataclass(frozen=True)
@@ -32,10 +33,8 @@ class Tolerances:
 
 
 def environment_of(motion: Motion) -> dict:
-    env = dict(motion.provenance.get("environment") or {})
-    env.setdefault("gravity", [0.0, 0.0, -9.81])
-    env.setdefault("friction", 1.0)
-    return env
+    """The motion's environment as a dict (gravity, friction): :func:`solver.environment.environment_of`."""
+    return _environment_of(motion).to_dict()
 
 
 def root_residual(motion: Motion, gravity: Any) -> np.ndarray:
@@ -59,7 +58,7 @@ def report(motion: Motion, tol: Tolerances = Tolerances(), realism: RealismLimit
     env = environment_of(motion)
     g = np.asarray(env["gravity"], dtype=float)
     mu = float(env["friction"])
-    weight = ch.total_mass * float(np.linalg.norm(g)) if np.linalg.norm(g) > 0 else ch.total_mass * 9.81
+    weight = body_weight(motion)
     leg = standing_leg_length(ch)
     res = root_residual(motion, g)
     out: dict[str, Any] = {

@@ -43,6 +43,7 @@ import numpy as np
 
 from solver import kinematics
 from solver.motion import FEET, Motion
+from solver.environment import STANDARD_GRAVITY_VECTOR
 
 #: a loop closes when the segment origins at frame P match the loop transform of frame 0 within
 LOOP_TOLERANCE_M = 1e-4
@@ -115,7 +116,7 @@ def closure(motion: Motion, P: int | None = None) -> dict[str, float]:
 
 def slope_deg(environment: Mapping[str, Any] | None) -> float:
     """Ground slope along +x from a gravity vector tilted by R_y(slope): g ∝ (−sin, 0, −cos)."""
-    g = (environment or {}).get("gravity") or (0.0, 0.0, -9.81)
+    g = (environment or {}).get("gravity") or STANDARD_GRAVITY_VECTOR
     return math.degrees(math.atan2(-float(g[0]), -float(g[2])))
 
 
@@ -154,7 +155,7 @@ def game_data(motion: Motion, *, axes: np.ndarray | None = None, frames: int | N
     dpsi = float(psi[P] - psi[0])
     arc = chord if abs(dpsi) < 1e-9 else chord * (dpsi / 2.0) / math.sin(dpsi / 2.0)
     env = dict((motion.provenance or {}).get("environment") or {})
-    g = env.get("gravity") or (0.0, 0.0, -9.81)
+    g = env.get("gravity") or STANDARD_GRAVITY_VECTOR
     root_pos = np.c_[xy, np.zeros(T)] @ A.T
     q = motion.q
     in_place_yaw = q[ROOT_YAW] - psi

@@ -51,7 +51,8 @@ log = logging.getLogger(__name__)
 ROOT_PERIODIC = (2, 4, 5)
 YAW = 3
 MARKER_SCALE = 0.01  # m: the objective is in units of (1 cm)²
-P_LAYOUT = ("gm", "gq", "g", "mu", "wts", "ref", "anchor", "dpsi", "com")
+#: parameter blocks in order; "h" is the frame interval (s) of the spline: the speed axis changes it
+P_LAYOUT = ("gm", "gq", "g", "mu", "wts", "ref", "anchor", "dpsi", "com", "h")
 
 
 def _heading(vx, vy, psi):
@@ -128,7 +129,7 @@ class SpacetimeProblem:
         x = self._x = ca.MX.sym("x", self.nx)
         nm3 = 3 * ff.n_markers
         sizes = {"gm": nm3 * Tn, "gq": n * Tn, "g": 3, "mu": 1, "wts": 7, "ref": 4 * Tn, "anchor": 3 * Tn, "dpsi": 1,
-                 "com": 3 * Tn}
+                 "com": 3 * Tn, "h": 1}
         self._p_layout, off = {}, 0
         for name in P_LAYOUT:
             self._p_layout[name] = (off, sizes[name])
@@ -143,6 +144,9 @@ class SpacetimeProblem:
         grav, mu, wts, dpsi = par("g"), par("mu"), par("wts"), par("dpsi")
         REF, ANCHOR = par("ref", (4, Tn)), par("anchor", (3, Tn))
         self._COM = par("com", (3, Tn))
+        self._H = par("h")
+        #: constraint rows whose bounds scale with the frame interval: (rows, fn(h) -> (lo, hi))
+        self._h_bounds: list[tuple[np.ndarray, Any]] = []
         qi, vi = self._q_index, self._v_index
         self._terms: list[Term] = []
         self._g_parts: list[ca.MX] = []
@@ -171,8 +175,9 @@ class SpacetimeProblem:
                           np.arange(self.nq_vars + self.nv_vars, self.nx)))
         g = ca.vertcat(*self._g_parts) if self._g_parts else ca.MX(0, 1)
         self.ng = int(g.shape[0])
-        self._lbg_a = np.concatenate(self._lbg) if self._lbg else np.zeros(0)
-        self._ubg_a = np.concatenate(self._ubg) if self._ubg else np.zeros(0)
+        self._lbg_raw = np.concatenate(self._lbg) if self._lbg else np.zeros(0)
+        self._ubg_raw = np.concatenate(self._ubg) if self._ubg else np.zeros(0)
+        self._lbg_a, self._ubg_a = self.constraint_bounds(self.dt)
         self._jac, self._hess, self.hessian_nnz, self.jacobian_nnz = assemble(self._terms, x, p, g, self.nx,
                                                                                 self.ng, extra)
         self._nlp = {"x": x, "p": p, "f": objective, "g": g}
@@ -235,7 +240,7 @@ class SpacetimeProblem:
         ff, Tn, qi, vi = self.ff, self.T, self._q_index, self._v_index
         A = self.contacts
         B = self.foot_contact()
-        h = self.dt
+        h = self._H  # the frame interval: an NLP parameter
         frames = self.distinct_frames
         D = ff.derivatives
         # contact heights
@@ -248,7 +253,7 @@ class SpacetimeProblem:
         # no slip, no spin between consecutive frames
         pairs = frames
         sel, lo, hi = [], [], []
-        spin = math.sin(math.radians(ff.realism.spin_rate_deg_s) * h)
+        spin_rows = []
         for c, t in enumerate(pairs):
             for s_i, side in enumerate(FEET):
                 hh, toe = ff.heel_of[side], ff.toe_of[side]
@@ -264,10 +269,15 @@ class SpacetimeProblem:
                 lo += [0.0] * len(rows)
                 hi += [0.0] * len(rows)
                 if B[s_i, t] and B[s_i, t + 1] and not (heel_pinned and toe_pinned):
+                    spin_rows.append(len(sel))
                     sel.append((c, 2 * ff.P + 2 + s_i))
-                    lo.append(-spin)
-                    hi.append(spin)
+                    lo.append(-math.inf)
+                    hi.append(math.inf)
         nxt = [t + 1 for t in pairs]
+        g0 = self._ng
+        spin_rate = math.radians(ff.realism.spin_rate_deg_s)
+        self._h_bounds.append((g0 + np.array(spin_rows, dtype=int),
+                               lambda hv: (-math.sin(spin_rate * hv), math.sin(spin_rate * hv))))
         self._rows(Term("slip", ff.slip, 2, np.vstack([qi[:, pairs], qi[:, nxt]]), [], derivatives=D["slip"]),
                    sel, np.array(lo), np.array(hi), "no_slip")
         # feet in contact: cone, CoP, torsion, free-moment cap; support
@@ -286,34 +296,33 @@ class SpacetimeProblem:
         K = list(range(1, Tn - 1))
         km, kp = [t - 1 for t in K], [t + 1 for t in K]
         self._rows(Term("c2", ff.c2, 5, np.vstack([qi[:, km], qi[:, kp], vi[:, km], vi[:, K], vi[:, kp]]),
-                        [ca.DM.ones(1, len(K)) * h], derivatives=D["c2"]),
+                        [ca.repmat(h, 1, len(K))], derivatives=D["c2"]),
                    [(c, r) for c in range(len(K)) for r in range(self.n)], 0.0, 0.0, "spline")
         # equations of motion on the segments [k, k+1], k = 1..T−2: at frame k and the midpoint
         Wb = self._wrench_columns(kp)
         turn = ca.horzcat(ca.DM.zeros(1, len(K) - 1), dpsi)
         zseg = np.vstack([qi[:, K], vi[:, K], qi[:, kp], vi[:, kp], W, Wb])
-        seg_params = [ca.repmat(grav, 1, len(K)), ca.DM.ones(1, len(K)) * h, REF[:, K], REF[:, kp],
+        seg_params = [ca.repmat(grav, 1, len(K)), ca.repmat(h, 1, len(K)), REF[:, K], REF[:, kp],
                       ANCHOR[:, K], ANCHOR[:, kp], turn]
         self._rows(Term("seg", ff.seg, 6, zseg, seg_params, derivatives=D["seg"]),
                    [(c, r) for c in range(len(K)) for r in range(12)], 0.0, 0.0, "eom")
         # realism: bounded change of the total ground force per frame; costs on wrench change and jerk
-        fr = ff.realism.force_rate * h
-        self._rows(Term("frate", ff.frate, 2, np.vstack([W, Wb]), [turn], derivatives=D["frate"]),
-                   [(c, 0) for c in range(len(K))], -math.inf, fr * fr, "force_rate")
-        # realism: small second differences of the total ground wrench (frames k−1, k, k+1)
         rl = ff.realism
-        s15 = (15.0 * h) ** 2
+        self._h_bounds.append((self._ng + np.arange(len(K)), lambda hv: (-math.inf, (rl.force_rate * hv) ** 2)))
+        self._rows(Term("frate", ff.frate, 2, np.vstack([W, Wb]), [turn], derivatives=D["frate"]),
+                   [(c, 0) for c in range(len(K))], -math.inf, math.inf, "force_rate")
+        # realism: small second differences of the total ground wrench (frames k−1, k, k+1)
         Wm = self._wrench_columns([T_ if T_ > 0 else Tn - 2 for T_ in km])  # frame 0 is frame T−2 turned back
         ta = ca.horzcat(-dpsi, ca.DM.zeros(1, len(K) - 1))
         sm_params = [REF[:, km], REF[:, K], REF[:, kp], self._COM[:, km], self._COM[:, K], self._COM[:, kp], ta, turn]
+        self._h_bounds.append((self._ng + np.arange(2 * len(K)), lambda hv: (-math.inf, np.tile(
+            [(rl.force_curvature * (15.0 * hv) ** 2) ** 2, (rl.moment_curvature * (15.0 * hv) ** 2) ** 2], len(K)))))
         self._rows(Term("smooth", ff.smooth, 3, np.vstack([Wm, W, Wb]), sm_params, derivatives=D["smooth"]),
-                   [(c, r) for c in range(len(K)) for r in range(2)], -math.inf,
-                   np.tile([(rl.force_curvature * s15) ** 2, (rl.moment_curvature * s15) ** 2], len(K)),
-                   "smooth_ground_wrench")
+                   [(c, r) for c in range(len(K)) for r in range(2)], -math.inf, math.inf, "smooth_ground_wrench")
         self._cost(Term("wrate", ff.wrate, 2, np.vstack([W, Wb]), [turn, ca.repmat(wts[4], 1, len(K))],
                         derivatives=D["wrate"], cost=True))
         self._cost(Term("jerk", ff.jerk, 4, np.vstack([qi[:, K], vi[:, K], qi[:, kp], vi[:, kp]]),
-                        [ca.DM.ones(1, len(K)) * h, ca.repmat(wts[5], 1, len(K))], derivatives=D["jerk"], cost=True))
+                        [ca.repmat(h, 1, len(K)), ca.repmat(wts[5], 1, len(K))], derivatives=D["jerk"], cost=True))
 
     # --- packing ---------------------------------------------------------------------------
     def foot_contact(self) -> np.ndarray:
@@ -429,7 +438,9 @@ class SpacetimeProblem:
         return (m[:, None, None] * X).sum(axis=0) / m.sum()
 
     def parameters(self, guide_markers: np.ndarray, guide_q: np.ndarray, env: Environment, weights: Weights,
-                   ref: np.ndarray, anchor: np.ndarray, dpsi: float, com: np.ndarray | None = None) -> np.ndarray:
+                   ref: np.ndarray, anchor: np.ndarray, dpsi: float, com: np.ndarray | None = None,
+                   h: float | None = None) -> np.ndarray:
+        """The parameter vector (``P_LAYOUT`` order); ``h``: frame interval (s), default 1/fps."""
         nT = self.T
         K = max(len(self.eom_frames), 1)
         wts = [weights.direction / (self.n_markers * nT * MARKER_SCALE**2),
@@ -445,7 +456,17 @@ class SpacetimeProblem:
             np.asarray(env.gravity, dtype=float), [float(env.friction)], wts,
             ref.ravel(order="F"), anchor.ravel(order="F"), [float(dpsi)],
             (np.zeros((3, nT)) if com is None else com).ravel(order="F"),
+            [float(self.dt if h is None else h)],
         ])
+
+    def constraint_bounds(self, h: float) -> tuple[np.ndarray, np.ndarray]:
+        """(lbg, ubg) at the frame interval ``h``: the spin, force-rate and wrench-curvature
+        bounds are rates per second, so their per-frame bounds follow h."""
+        lo, hi = self._lbg_raw.copy(), self._ubg_raw.copy()
+        for rows, fn in self._h_bounds:
+            a, b = fn(float(h))
+            lo[rows], hi[rows] = a, b
+        return lo, hi
 
     # --- solve -----------------------------------------------------------------------------
     def solve(
@@ -465,10 +486,15 @@ class SpacetimeProblem:
         warm: bool = False,
         ipopt_options: Mapping[str, Any] | None = None,
         should_stop: Any = None,
+        frame_interval: float | None = None,
     ) -> SolveResult:
         """Solve at the given parameters. ``heading_change`` Δψ (rad): yaw[T−2] − yaw[0] of the
         optimum (default: the initial motion's). ``should_stop()`` is polled at every iteration
-        (IPOPT stops with ``User_Requested_Stop``)."""
+        (IPOPT stops with ``User_Requested_Stop``). ``frame_interval``: the spline's frame
+        interval h (s), default 1/fps (the speed axis changes it; the frame count is fixed)."""
+        h = self.dt if frame_interval is None else float(frame_interval)
+        if not (math.isfinite(h) and h > 0):
+            raise ValueError(f"the frame interval must be a positive number of seconds, got {frame_interval!r}")
         if guide_markers is None:
             if guide_q is None:
                 raise ValueError("give a guide motion or guide markers")
@@ -493,14 +519,15 @@ class SpacetimeProblem:
         ref = self.ref_points(q0) if self.dynamics else np.zeros((4, self.T))
         anchor = self.anchor_points(q0)
         p = self.parameters(guide_markers, gq, env, weights, ref, anchor, dpsi,
-                            self.com_points(q0) if self.dynamics else None)
+                            self.com_points(q0) if self.dynamics else None, h=h)
+        lbg, ubg = self.constraint_bounds(h)
         parts = [self.pack_q(q0)]
         if self.dynamics:
-            parts += [self.pack_v(spline_velocities(q0, self.dt)), self.pack_wrenches(init_wrenches, ref)]
+            parts += [self.pack_v(spline_velocities(q0, h)), self.pack_wrenches(init_wrenches, ref)]
         x0 = np.concatenate(parts)
         lbx, ubx = self.bounds(locks)
         x0 = np.clip(x0, lbx, ubx)
-        args: dict[str, Any] = dict(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=self._lbg_a, ubg=self._ubg_a)
+        args: dict[str, Any] = dict(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
         opts: dict[str, Any] = {"ipopt.max_iter": int(max_iter)}
         if warm and lam_x0 is not None and lam_g0 is not None:
             args["lam_x0"], args["lam_g0"] = lam_x0, lam_g0
@@ -526,7 +553,7 @@ class SpacetimeProblem:
         obj, gval, mk_sum = (np.asarray(v).ravel() for v in self._fg(x, p))
         viol = 0.0
         if self.ng:
-            viol = float(np.max(np.maximum(self._lbg_a - gval, 0) + np.maximum(gval - self._ubg_a, 0)))
+            viol = float(np.max(np.maximum(lbg - gval, 0) + np.maximum(gval - ubg, 0)))
         return SolveResult(
             success=bool(stats.get("success", False)) and status in SUCCESS_STATUSES,
             status=status, iterations=int(stats.get("iter_count", -1)), wall_time=wall, q=q, wrenches=wr,
