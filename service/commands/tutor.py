@@ -228,8 +228,7 @@ def cmd_extrapolate(args: argparse.Namespace) -> int:
     from service.commands.plot import write_motion_plots
     from solver.continuation import StepControl, Target, extrapolate
 
-    tutor = load_motion(args.tutor)
-    try:
+    try:  # the target first: a wrong value is told before any file is read
         target = Target(**{ax.name: getattr(args, ax.name) for ax in registry.axes()})
         control = StepControl(method=args.method, delta0=args.delta0, max_iter=args.max_iter, eps=args.eps,
                               max_solves=args.max_solves)
@@ -237,6 +236,7 @@ def cmd_extrapolate(args: argparse.Namespace) -> int:
         raise CliError(str(e)) from None
     if target.is_identity():
         raise CliError("give a target: " + ", ".join(f"{ax.cli} {ax.metavar}" for ax in registry.axes()))
+    tutor = load_motion(args.tutor)
     if tutor.wrenches is None or tutor.contacts is None:
         raise CliError(f"{args.tutor} is not a tutor (it has no contact wrenches or contact schedule); "
                        "run `motionx tutor` first")
