@@ -346,7 +346,9 @@ def extrapolate(
     _is_tutor(tutor)
     if not 0.0 < lam_end <= 1.0:
         raise ValueError("lam_end must be in (0, 1]")
-    prob = problem or problem_for(tutor.character, tutor.T, tutor.fps, tutor.contacts)
+    # stairs: root z may gain a rise over the cycle (a problem of its own structure)
+    prob = problem or problem_for(tutor.character, tutor.T, tutor.fps, tutor.contacts,
+                                  rising=bool(target.step_height_m))
     walk = _Walk(tutor, target, control, prob, on_progress, on_step, should_cancel)
     if start is not None:
         lam0, m0 = start

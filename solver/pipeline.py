@@ -171,13 +171,13 @@ _MAX_CACHED = 8
 
 
 def problem_for(character: Character, T: int, fps: float, contacts: np.ndarray | None, *,
-                dynamics: bool = True, cyclic: bool = True) -> SpacetimeProblem:
+                dynamics: bool = True, cyclic: bool = True, rising: bool = False) -> SpacetimeProblem:
     """Build (or reuse) the NLP of a structure: built once, re-solved with new parameters."""
     key = (id(character), T, float(fps), None if contacts is None else np.asarray(contacts, bool).tobytes(),
-           dynamics, cyclic)
+           dynamics, cyclic, rising)
     prob = _PROBLEMS.get(key)
     if prob is None or prob.character is not character:
-        prob = SpacetimeProblem(character, T, fps, contacts, dynamics=dynamics, cyclic=cyclic)
+        prob = SpacetimeProblem(character, T, fps, contacts, dynamics=dynamics, cyclic=cyclic, rising=rising)
         if len(_PROBLEMS) >= _MAX_CACHED:
             _PROBLEMS.pop(next(iter(_PROBLEMS)))
         _PROBLEMS[key] = prob

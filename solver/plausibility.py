@@ -19,7 +19,8 @@ from solver.kinematics import contact_points, segment_frames, standing_leg_lengt
 from solver.motion import FEET, Motion
 from solver.realism import RealismLimits, problem_lines, realism_report
 from solver.trajectory import dynamics_samples
-from solver.environment import body_weight, environment_of as _environment_of
+from solver.environment import body_weight, ground_of
+from solver.environment import environment_of as _environment_of
 
 
 @dataclass(frozen=True)
@@ -126,7 +127,9 @@ def _contact_checks(motion: Motion, mu: float, weight: float) -> dict:
     A = motion.contacts
     cp = contact_points(ch, motion.q)  # (P, 3, T)
     T = motion.T
-    z = cp[:, 2, :]
+    feet_ground = ground_of(motion)  # (2, T): the terrain under each foot
+    side = {s: k for k, s in enumerate(FEET)}
+    z = cp[:, 2, :] - feet_ground[[side[c.side] for c in ch.contacts]]  # height above the ground
     active_err = float(np.abs(z[A]).max()) if A.any() else 0.0
     penetration = float(max(0.0, -z.min()))
     slip = 0.0
@@ -158,7 +161,8 @@ def _contact_checks(motion: Motion, mu: float, weight: float) -> dict:
             min_fz = min(min_fz, float(f[2]))
             excess = max(excess, float(np.hypot(f[0], f[1]) - mu * f[2]))
             if f[2] > 1e-6 * weight:
-                u = np.array([-n0[1] / f[2], n0[0] / f[2], 0.0])
+                zg = feet_ground[k, t]  # the CoP on the ground plane under the foot
+                u = np.array([(zg * f[0] - n0[1]) / f[2], (n0[0] + zg * f[1]) / f[2], zg])
                 cops[k, :, t] = u
                 local = rots[si, :, :, t].T @ (u - poss[si, :, t]) - foot.center
                 cop_out = max(cop_out, float(np.max(np.abs(local) - foot.half)))

@@ -16,7 +16,7 @@ from solver.environment import STANDARD_GRAVITY, Environment
 
 
 def test_the_registry_has_every_axis_with_unit_bounds_default_and_doc():
-    assert registry.names() == ("slope_deg", "curve_deg", "friction", "gravity", "speed_scale")
+    assert registry.names() == ("slope_deg", "curve_deg", "friction", "gravity", "speed_scale", "step_height_m")
     for ax in registry.axes():
         assert ax.doc and ax.cli.startswith("--") and ax.lo < ax.hi
         if ax.default is not None:
@@ -47,7 +47,8 @@ def test_target_is_a_value_over_the_registered_axes():
     assert t == Target(speed_scale=1.2, slope_deg=5.0) and hash(t) == hash(Target(speed_scale=1.2, slope_deg=5.0))
     assert [a.name for a, _ in t.active()] == ["speed_scale", "slope_deg"]  # application order
     assert Target(slope_deg=0.0, speed_scale=1.0).is_identity() and not Target(friction=1.0).is_identity()
-    assert t.to_dict() == {"slope_deg": 5.0, "curve_deg": 0.0, "friction": None, "gravity": None, "speed_scale": 1.2}
+    assert t.to_dict() == {"slope_deg": 5.0, "curve_deg": 0.0, "friction": None, "gravity": None, "speed_scale": 1.2,
+                           "step_height_m": 0.0}
     with pytest.raises(AttributeError):
         t.slope_deg = 3.0  # type: ignore[misc]
 
@@ -56,7 +57,7 @@ def test_environment_values_report_every_axis_and_gravity_is_standard():
     env, values = environment_at(Environment(), Target(speed_scale=1.44), 0.5)
     assert env == Environment() and env.gravity == (0.0, 0.0, -STANDARD_GRAVITY)
     assert values == pytest.approx({"slope_deg": 0.0, "curve_deg": 0.0, "friction": 1.0,
-                                    "gravity": STANDARD_GRAVITY, "speed_scale": 1.22})
+                                    "gravity": STANDARD_GRAVITY, "speed_scale": 1.22, "step_height_m": 0.0})
 
 
 def test_speed_splits_into_stride_and_cadence_and_scales_the_frame_interval():
@@ -132,3 +133,47 @@ def test_a_faster_walk_is_realistic_with_a_shorter_cycle_and_a_longer_stride(tut
 
     # the optimum walks faster by about s (the guide's stride × √s, the cycle ÷ √s)
     assert speed(m.q, m.fps) / speed(tutor.q, tutor.fps) == pytest.approx(s, rel=0.03)
+
+
+# --- the terrain axis: stairs -----------------------------------------------------------------
+
+
+def test_stair_heights_put_successive_stances_on_successive_treads():
+    from solver.environment import stair_heights, stair_rise
+
+    T, P = 21, 19
+    B = np.zeros((2, T), dtype=bool)
+    B[0, :P] = [t <= 10 or t >= 18 for t in range(P)]  # right: stance from frame 18 over the cycle end
+    B[1, :P] = [8 <= t <= 18 for t in range(P)]  # left: stance 8..18
+    B[:, P:] = B[:, :2]
+    H = stair_heights(B, 0.1)
+    assert stair_rise(B, 0.1) == pytest.approx(0.2)  # two stances per cycle
+    np.testing.assert_allclose(H[1, 8:19], 0.0)  # the first stance of the cycle: tread 0
+    np.testing.assert_allclose(H[0, 18], 0.1)  # the next: tread 1
+    np.testing.assert_allclose(H[0, :11], -0.1)  # the right stance begun in the previous cycle
+    np.testing.assert_allclose(H[:, P:], H[:, :2] + 0.2)  # frames T-2, T-1: frames 0, 1 one cycle up
+    np.testing.assert_allclose(H[0, 11:18], -0.1)  # swinging: the lower of the treads it left and reaches
+    np.testing.assert_array_equal(stair_heights(B, 0.0), 0.0)
+
+
+def test_a_small_stair_is_climbed_realistically_with_every_contact_on_its_tread(tutor):
+    from solver.continuation import StepControl, extrapolate
+    from solver.environment import environment_of, ground_of
+    from solver.kinematics import contact_points
+    from solver.motion import FEET
+
+    step = 0.05
+    res = extrapolate(tutor, Target(step_height_m=step), StepControl())
+    assert res.status == "succeeded" and res.lam_reached == 1.0, res.message
+    assert all(st.motion.report["plausible"] and st.motion.report["realism"]["passed"] for st in res.steps)
+    m = res.steps[-1].motion
+    assert environment_of(m).step_height_m == pytest.approx(step)  # the motion stores its terrain
+    G = ground_of(m)
+    assert np.ptp(G) >= step - 1e-12  # the ground is not flat
+    cp = contact_points(m.character, m.q)
+    side = {s: k for k, s in enumerate(FEET)}
+    gz = G[[side[c.side] for c in m.character.contacts]]
+    z = cp[:, 2, :] - gz
+    assert np.abs(z[m.contacts]).max() < 1e-3  # active contacts on their treads (1 mm)
+    assert z.min() > -1e-3  # nothing below its ground
+    assert m.q[2, -2] - m.q[2, 0] == pytest.approx(2 * step, abs=1e-6)  # the root climbs two risers per cycle

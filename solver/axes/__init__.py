@@ -15,6 +15,7 @@ from solver.axes import curve as _curve  # noqa: E402,F401
 from solver.axes import friction as _friction  # noqa: E402,F401
 from solver.axes import gravity as _gravity  # noqa: E402,F401
 from solver.axes import speed as _speed  # noqa: E402,F401
+from solver.axes import terrain as _terrain  # noqa: E402,F401
 
 __all__ = ["NLP_EFFECTS", "Axis", "Target", "axes", "axis", "environment_at", "guide_at", "names", "nlp_at",
            "register", "values_at"]

@@ -9,7 +9,7 @@ from solver.environment import Environment
 
 def _environment(env: Environment, v: float) -> Environment:
     g0 = env.gravity_magnitude
-    return Environment(tuple(c * v / g0 for c in env.gravity), env.friction)  # type: ignore[arg-type]
+    return env.with_(gravity=tuple(c * v / g0 for c in env.gravity))
 
 
 GRAVITY = register(Axis(

@@ -15,7 +15,7 @@ from solver.transforms import slope
 
 def _environment(env: Environment, v: float) -> Environment:
     g = sp.rotation_about([0.0, 1.0, 0.0], math.radians(v)) @ np.asarray(env.gravity, dtype=float)
-    return Environment(tuple(float(c) for c in g), env.friction)  # type: ignore[arg-type]
+    return env.with_(gravity=tuple(float(c) for c in g))
 
 
 SLOPE = register(Axis(

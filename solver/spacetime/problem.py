@@ -38,6 +38,7 @@ import casadi as ca
 import numpy as np
 
 from solver.character import Character
+from solver.environment import stair_heights, stair_rise
 from solver.kinematics import contact_points, markers
 from solver.motion import FEET, foot_schedule_of
 from solver.spacetime.derivatives import Term, assemble
@@ -49,10 +50,13 @@ log = logging.getLogger(__name__)
 
 #: root coordinates that repeat over a cycle (root_tz, pitch, roll); x, y, yaw: under the cycle's transform
 ROOT_PERIODIC = (2, 4, 5)
+ROOT_Z = 2  # on stairs (``rising``): root z[T−2] = z[0] + the cycle's rise, not periodic
 YAW = 3
 MARKER_SCALE = 0.01  # m: the objective is in units of (1 cm)²
 #: parameter blocks in order; "h" is the frame interval (s) of the spline: the speed axis changes it
-P_LAYOUT = ("gm", "gq", "g", "mu", "wts", "ref", "anchor", "dpsi", "com", "h")
+#: "ground": per contact point and frame, the ground height (terrain); "rise": the cycle's
+#: height gain (root z of frames T−2, T−1 over frames 0, 1; stairs)
+P_LAYOUT = ("gm", "gq", "g", "mu", "wts", "ref", "anchor", "dpsi", "com", "h", "ground", "rise")
 
 
 def _heading(vx, vy, psi):
@@ -60,10 +64,12 @@ def _heading(vx, vy, psi):
     return ca.vertcat(c * vx + s * vy, -s * vx + c * vy)
 
 
-def _cyclic_root_function(dynamics: bool) -> ca.Function:
-    """Rows tying frames T−2, T−1 to frames 0, 1 for x, y, yaw (and their velocities)."""
-    z = ca.SX.sym("z", 20 if dynamics else 12)
+def _cyclic_root_function(dynamics: bool, rising: bool = False) -> ca.Function:
+    """Rows tying frames T−2, T−1 to frames 0, 1 for x, y, yaw (and their velocities); with
+    ``rising``, root z too: raised by the cycle's rise."""
+    z = ca.SX.sym("z", (20 if dynamics else 12) + (4 if rising else 0))
     dpsi = ca.SX.sym("dpsi")
+    rise = ca.SX.sym("rise")
     xa, ya, yaw = z[0:4], z[4:8], z[8:12]  # frames (0, 1, T−2, T−1)
     rows = [_heading(xa[3] - xa[2], ya[3] - ya[2], yaw[2]) - _heading(xa[1] - xa[0], ya[1] - ya[0], yaw[0])]
     if dynamics:  # the heading change over the cycle is exact
@@ -73,20 +79,26 @@ def _cyclic_root_function(dynamics: bool) -> ca.Function:
                  _heading(vx[3], vy[3], yaw[3]) - _heading(vx[1], vy[1], yaw[1])]
     else:  # kinematic fit: the yaw rate repeats, the turn follows the capture's markers
         rows.append((yaw[3] - yaw[2]) - (yaw[1] - yaw[0]))
-    return ca.Function("cyc", [z, dpsi], [ca.vertcat(*rows)])
+    if rising:
+        rz_ = z[z.shape[0] - 4:]
+        rows += [rz_[2] - rz_[0] - rise, rz_[3] - rz_[1] - rise]
+    return ca.Function("cyc", [z, dpsi, rise], [ca.vertcat(*rows)])
 
 
 class SpacetimeProblem:
     """The NLP of SPEC 5.29 for one structure; solve it many times with new parameters."""
 
     def __init__(self, character: Character, T: int, fps: float, contacts: np.ndarray | None, *,
-                 cyclic: bool = True, dynamics: bool = True, ipopt_options: Mapping[str, Any] | None = None) -> None:
+                 cyclic: bool = True, dynamics: bool = True, ipopt_options: Mapping[str, Any] | None = None,
+                 rising: bool = False) -> None:
         t0 = time.perf_counter()
         self.character = character
         self.T = Tn = int(T)
         self.fps = float(fps)
         self.dt = 1.0 / self.fps
         self.cyclic, self.dynamics = bool(cyclic), bool(dynamics)
+        #: root z may gain a rise over the cycle (stairs): its overlap frames are variables
+        self.rising = bool(rising)
         n = self.n = character.n
         if Tn < 5:
             raise ValueError(f"too few frames for a spacetime problem: {T}")
@@ -112,12 +124,15 @@ class SpacetimeProblem:
         periodic = np.zeros(n, dtype=bool)
         periodic[6:] = True
         periodic[list(ROOT_PERIODIC)] = True
+        if self.rising:
+            periodic[ROOT_Z] = False
         self.periodic = periodic
         k = 0
         self._q_index, k = self._index(periodic, k)
         self.nq_vars = k
         v_periodic = periodic.copy()
         v_periodic[YAW] = True
+        v_periodic[ROOT_Z] = True  # the vertical velocity repeats, also on stairs
         self._v_index, k = self._index(v_periodic, k) if dynamics else (np.zeros((n, 0), dtype=int), k)
         self.nv_vars = k - self.nq_vars
         self.eom_frames = list(range(1, Tn - 1)) if dynamics else []
@@ -128,8 +143,8 @@ class SpacetimeProblem:
 
         x = self._x = ca.MX.sym("x", self.nx)
         nm3 = 3 * ff.n_markers
-        sizes = {"gm": nm3 * Tn, "gq": n * Tn, "g": 3, "mu": 1, "wts": 7, "ref": 4 * Tn, "anchor": 3 * Tn, "dpsi": 1,
-                 "com": 3 * Tn, "h": 1}
+        sizes = {"gm": nm3 * Tn, "gq": n * Tn, "g": 3, "mu": 1, "wts": 7, "ref": 6 * Tn, "anchor": 3 * Tn, "dpsi": 1,
+                 "com": 3 * Tn, "h": 1, "ground": max(ff.P, 1) * Tn, "rise": 1}
         self._p_layout, off = {}, 0
         for name in P_LAYOUT:
             self._p_layout[name] = (off, sizes[name])
@@ -142,7 +157,8 @@ class SpacetimeProblem:
 
         GM, GQ = par("gm", (nm3, Tn)), par("gq", (n, Tn))
         grav, mu, wts, dpsi = par("g"), par("mu"), par("wts"), par("dpsi")
-        REF, ANCHOR = par("ref", (4, Tn)), par("anchor", (3, Tn))
+        REF, ANCHOR = par("ref", (6, Tn)), par("anchor", (3, Tn))
+        self._GROUND, self._RISE = par("ground", (max(ff.P, 1), Tn)), par("rise")
         self._COM = par("com", (3, Tn))
         self._H = par("h")
         #: constraint rows whose bounds scale with the frame interval: (rows, fn(h) -> (lo, hi))
@@ -226,10 +242,12 @@ class SpacetimeProblem:
         parts = [qi[0, fr], qi[1, fr], qi[YAW, fr]]
         if self.dynamics:
             parts += [vi[0, fr], vi[1, fr]]
-        fn = _cyclic_root_function(self.dynamics)
+        if self.rising:
+            parts += [qi[ROOT_Z, fr]]
+        fn = _cyclic_root_function(self.dynamics, self.rising)
         rows = fn.size1_out(0)
-        self._rows(Term("cyc", fn, 1, np.concatenate(parts)[:, None], [dpsi]), [(0, r) for r in range(rows)], 0.0, 0.0,
-                   "cyclic_root")
+        self._rows(Term("cyc", fn, 1, np.concatenate(parts)[:, None], [dpsi, self._RISE]),
+                   [(0, r) for r in range(rows)], 0.0, 0.0, "cyclic_root")
 
     def _wrench_columns(self, frames: list[int]) -> np.ndarray:
         """(12, len(frames)) wrench variable indices; frame T−1 is frame 1 (turned by Δψ)."""
@@ -249,7 +267,8 @@ class SpacetimeProblem:
             for j in range(ff.P):
                 sel.append((c, j))
                 hi.append(0.0 if A[j, t] else math.inf)
-        self._rows(Term("z", ff.z, 1, qi[:, frames], [], derivatives=D["z"]), sel, 0.0, np.array(hi), "contact")
+        self._rows(Term("z", ff.z, 1, qi[:, frames], [self._GROUND[:, frames]], derivatives=D["z"]), sel, 0.0,
+                   np.array(hi), "contact")
         # no slip, no spin between consecutive frames
         pairs = frames
         sel, lo, hi = [], [], []
@@ -353,14 +372,25 @@ class SpacetimeProblem:
     def unpack_v(self, x: np.ndarray) -> np.ndarray:
         return np.asarray(x)[self._v_index]
 
-    def ref_points(self, q: np.ndarray) -> np.ndarray:
-        """Per-frame (x, y) under each foot: the mean of its contact points, on the ground."""
+    def ref_points(self, q: np.ndarray, ground: np.ndarray | None = None) -> np.ndarray:
+        """(6, T) per frame and foot: (x, y) the mean of its contact points, z the ground
+        height under the foot (``ground`` (2, T); default the flat ground z = 0)."""
         cp = contact_points(self.character, q)  # (P, 3, T)
-        ref = np.zeros((4, self.T))
+        ref = np.zeros((6, self.T))
         for k, side in enumerate(FEET):
             idx = [j for j, c in enumerate(self.character.contacts) if c.side == side]
-            ref[2 * k : 2 * k + 2] = cp[idx, :2, :].mean(axis=0)
+            ref[3 * k : 3 * k + 2] = cp[idx, :2, :].mean(axis=0)
+            if ground is not None:
+                ref[3 * k + 2] = ground[k]
         return ref
+
+    def contact_ground(self, ground: np.ndarray) -> np.ndarray:
+        """(P, T) ground height under each contact point from the per-foot heights (2, T)."""
+        side = {s: k for k, s in enumerate(FEET)}
+        out = np.zeros((max(self.ff.P, 1), self.T))
+        for j, c in enumerate(self.character.contacts):
+            out[j] = ground[side[c.side]]
+        return out
 
     def anchor_points(self, q: np.ndarray) -> np.ndarray:
         a = np.zeros((3, self.T))
@@ -375,7 +405,7 @@ class SpacetimeProblem:
         for c, t in enumerate(self.eom_frames):
             for k in range(2):
                 n0, f = wrenches[k, :3, t], wrenches[k, 3:, t]
-                r = np.array([ref[2 * k, t], ref[2 * k + 1, t], 0.0])
+                r = ref[3 * k : 3 * k + 3, t]
                 x[self._w_index[6 * k : 6 * k + 6, c] - base] = np.r_[(n0 - np.cross(r, f)) / self.moment_scale,
                                                                       f / self.weight_scale]
         return x
@@ -393,7 +423,7 @@ class SpacetimeProblem:
             for k in range(2):
                 w = x[self._w_index[6 * k : 6 * k + 6, c]]
                 n_r, f = R @ (w[:3] * self.moment_scale), R @ (w[3:] * self.weight_scale)
-                r = np.array([ref[2 * k, t], ref[2 * k + 1, t], 0.0])
+                r = ref[3 * k : 3 * k + 3, t]
                 out[k, :3, t] = n_r + np.cross(r, f)
                 out[k, 3:, t] = f
 
@@ -439,7 +469,7 @@ class SpacetimeProblem:
 
     def parameters(self, guide_markers: np.ndarray, guide_q: np.ndarray, env: Environment, weights: Weights,
                    ref: np.ndarray, anchor: np.ndarray, dpsi: float, com: np.ndarray | None = None,
-                   h: float | None = None) -> np.ndarray:
+                   h: float | None = None, ground: np.ndarray | None = None, rise: float = 0.0) -> np.ndarray:
         """The parameter vector (``P_LAYOUT`` order); ``h``: frame interval (s), default 1/fps."""
         nT = self.T
         K = max(len(self.eom_frames), 1)
@@ -457,6 +487,7 @@ class SpacetimeProblem:
             ref.ravel(order="F"), anchor.ravel(order="F"), [float(dpsi)],
             (np.zeros((3, nT)) if com is None else com).ravel(order="F"),
             [float(self.dt if h is None else h)],
+            (np.zeros((max(self.ff.P, 1), nT)) if ground is None else ground).ravel(order="F"), [float(rise)],
         ])
 
     def constraint_bounds(self, h: float) -> tuple[np.ndarray, np.ndarray]:
@@ -516,10 +547,18 @@ class SpacetimeProblem:
         if not math.isfinite(dpsi):
             raise ValueError("the heading change must be finite")
         gq = q0 if guide_q is None else guide_q  # coordinates prior: the guide's, else the start's
-        ref = self.ref_points(q0) if self.dynamics else np.zeros((4, self.T))
+        feet_ground = np.zeros((2, self.T))
+        rise = 0.0
+        if env.step_height_m:
+            if not (self.rising and self.dynamics):
+                raise ValueError("stairs (step_height_m) need a dynamic problem built with rising=True")
+            feet_ground = stair_heights(self.foot_contact(), env.step_height_m)
+            rise = stair_rise(self.foot_contact(), env.step_height_m)
+        ref = self.ref_points(q0, feet_ground) if self.dynamics else np.zeros((6, self.T))
         anchor = self.anchor_points(q0)
         p = self.parameters(guide_markers, gq, env, weights, ref, anchor, dpsi,
-                            self.com_points(q0) if self.dynamics else None, h=h)
+                            self.com_points(q0) if self.dynamics else None, h=h,
+                            ground=self.contact_ground(feet_ground), rise=rise)
         lbg, ubg = self.constraint_bounds(h)
         parts = [self.pack_q(q0)]
         if self.dynamics:
