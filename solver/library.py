@@ -21,6 +21,7 @@ cells start from the base optimum.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 from dataclasses import dataclass

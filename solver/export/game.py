@@ -43,7 +43,7 @@ import numpy as np
 
 from solver import kinematics
 from solver.motion import FEET, Motion
-from solver.environment import STANDARD_GRAVITY_VECTOR
+from solver.environment import STANDARD_GRAVITY_VECTOR, environment_of
 
 #: a loop closes when the segment origins at frame P match the loop transform of frame 0 within
 LOOP_TOLERANCE_M = 1e-4
@@ -154,8 +154,8 @@ def game_data(motion: Motion, *, axes: np.ndarray | None = None, frames: int | N
     chord = float(np.linalg.norm(xy[P] - xy[0]))
     dpsi = float(psi[P] - psi[0])
     arc = chord if abs(dpsi) < 1e-9 else chord * (dpsi / 2.0) / math.sin(dpsi / 2.0)
-    env = dict((motion.provenance or {}).get("environment") or {})
-    g = env.get("gravity") or STANDARD_GRAVITY_VECTOR
+    env = environment_of(motion).to_dict()
+    g = env["gravity"]
     root_pos = np.c_[xy, np.zeros(T)] @ A.T
     q = motion.q
     in_place_yaw = q[ROOT_YAW] - psi
