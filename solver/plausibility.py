@@ -68,7 +68,7 @@ def report(motion: Motion, tol: Tolerances = Tolerances(), realism: RealismLimit
         "fps": motion.fps,
         "body_weight_N": weight,
         "leg_length_m": leg,
-        "environment": {"gravity": g.tolist(), "friction": mu},
+        "environment": {"gravity": g.tolist(), "friction": mu, **_terrain(motion)},
         "has_wrenches": motion.wrenches is not None,
         "has_contacts": motion.contacts is not None,
         "root_residual": {
@@ -120,6 +120,31 @@ def report(motion: Motion, tol: Tolerances = Tolerances(), realism: RealismLimit
     out["problems"] = problems + problem_lines(real)
     out["plausible"] = not failed
     return out
+
+
+def _terrain(motion: Motion) -> dict:
+    """Stairs: the riser height and one tread per stance (foot, frames, centre (x, y, ground
+    height) under the foot's contact points) — what a preview draws as steps."""
+    step = _environment_of(motion).step_height_m
+    if not step or motion.contacts is None:
+        return {}
+    B, G = motion.foot_contact(), ground_of(motion)
+    cp = contact_points(motion.character, motion.q)
+    treads = []
+    for k, side in enumerate(FEET):
+        idx = [j for j, c in enumerate(motion.character.contacts) if c.side == side]
+        t = 0
+        while t < motion.T:
+            if not B[k, t]:
+                t += 1
+                continue
+            a = t
+            while t < motion.T and B[k, t]:
+                t += 1
+            xy = cp[idx, :2, a:t].mean(axis=(0, 2))
+            treads.append({"foot": side, "frames": [a, t - 1],
+                           "center": [float(xy[0]), float(xy[1]), float(G[k, a])]})
+    return {"step_height_m": float(step), "treads": treads}
 
 
 def _contact_checks(motion: Motion, mu: float, weight: float) -> dict:

@@ -177,3 +177,8 @@ def test_a_small_stair_is_climbed_realistically_with_every_contact_on_its_tread(
     assert np.abs(z[m.contacts]).max() < 1e-3  # active contacts on their treads (1 mm)
     assert z.min() > -1e-3  # nothing below its ground
     assert m.q[2, -2] - m.q[2, 0] == pytest.approx(2 * step, abs=1e-6)  # the root climbs two risers per cycle
+    # the report carries one tread per stance for a preview to draw, at successive heights
+    treads = m.report["environment"]["treads"]
+    assert m.report["environment"]["step_height_m"] == pytest.approx(step) and len(treads) >= 3
+    heights = sorted({round(t["center"][2], 9) for t in treads})
+    assert np.allclose(np.diff(heights), step)

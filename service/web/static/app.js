@@ -622,7 +622,8 @@ async function loadPreview(id, token, validation) {
     const [glb, report] = await Promise.all([api(`/motions/${id}?format=glb`, { as: 'arrayBuffer' }), validation]);
     if (token !== motionToken) return;
     const gravity = report && report.environment ? report.environment.gravity : undefined;
-    await v.show(glb, { gravity });
+    const treads = report && report.environment ? report.environment.treads : undefined; // stairs
+    await v.show(glb, { gravity, treads });
     if (token !== motionToken) return;
     state.previewReady = true;
   } catch (err) {
