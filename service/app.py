@@ -85,11 +85,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     problems.install(app)
     app.add_middleware(BodyLimitMiddleware, max_bytes=app_settings.max_body_bytes)
 
-    from service.routes import docs, health, jobs, libraries, motions, plots, web
+    from service.routes import axes, docs, health, jobs, libraries, motions, plots, web
 
     index = web.STATIC_DIR / "index.html"
     app.add_middleware(SecurityHeadersMiddleware, page_policy=page_csp(index.read_text() if index.is_file() else ""))
     app.include_router(health.router)
+    app.include_router(axes.router)
     app.include_router(motions.router)
     app.include_router(jobs.router)
     app.include_router(libraries.router)

@@ -301,7 +301,7 @@ def _cell_start(db: Database, job_id: str, ref: dict, owner: str, target, hb: He
         return None, 0
     ws, motion, validation, src_job, src_step = found
     prov = dict(motion.provenance)
-    prov.update({"lambda": ws.lam, "target": {k: getattr(target, k) for k in target.__dataclass_fields__},
+    prov.update({"lambda": ws.lam, "target": target.to_dict(),
                  "warm_start": {"lam": ws.lam, "source_cell": ws.source_cell, "source_lam": ws.source_lam,
                                 "source_job": src_job, "source_step": src_step}})
     motion = motion.evolve(provenance=prov)

@@ -20,14 +20,16 @@ from typing import Any
 
 import numpy as np
 
+from solver import axes as registry
+
 DPI = 110
-#: environment values a target can change: key, axis label, colour
-ENVIRONMENT = (
-    ("slope_deg", "slope (°)", "tab:orange"),
-    ("curve_deg", "curve (°)", "tab:green"),
-    ("gravity", "|g| (m/s²)", "tab:purple"),
-    ("friction", "friction μ", "tab:brown"),
-)
+_COLOURS = {"slope_deg": "tab:orange", "curve_deg": "tab:green", "gravity": "tab:purple", "friction": "tab:brown",
+            "speed_scale": "tab:blue"}
+_PALETTE = ("tab:olive", "tab:cyan", "tab:pink", "tab:gray", "tab:red")
+#: environment values a target can change (the homotopy axes, solver.axes): key, axis label, colour
+ENVIRONMENT = tuple(
+    (ax.name, f"{ax.label} ({ax.unit})" if ax.unit else ax.label, _COLOURS.get(ax.name, _PALETTE[i % len(_PALETTE)]))
+    for i, ax in enumerate(registry.axes()))
 TARGET_KEYS = tuple(k for k, _, _ in ENVIRONMENT)
 #: the display floor of the log-scale residual plot (a residual of exactly 0 is drawn there)
 RESIDUAL_FLOOR = 1e-18
@@ -117,7 +119,7 @@ def changed_parameters(target: Mapping[str, float | None]) -> list[str]:
     out = []
     for k in TARGET_KEYS:
         v = target.get(k)
-        if v is not None and (k in ("friction", "gravity") or v != 0):
+        if registry.axis(k).changes(v):
             out.append(k)
     return out
 
@@ -129,7 +131,7 @@ def number_text(v: float, decimals: int = 4) -> str:
     return "0" if text in ("-0", "") else text
 
 
-_WORDS = {"slope_deg": "slope {}°", "curve_deg": "curve {}°", "friction": "μ={}", "gravity": "|g|={} m/s²"}
+_WORDS = {ax.name: ax.words for ax in registry.axes()}
 
 
 def environment_text(values: Mapping[str, float]) -> str:
@@ -144,7 +146,8 @@ def describe_target(target: Mapping[str, float | None] | None) -> str:
 
 
 #: line styles of the environment panels (distinct from each other and from λ's)
-_ENV_STYLE = {"slope_deg": ("--", "s"), "curve_deg": ("-.", "D"), "gravity": (":", "^"), "friction": ("--", "v")}
+_STYLES = (("--", "s"), ("-.", "D"), ("--", "v"), (":", "^"), (":", "o"), ("-.", "P"))
+_ENV_STYLE = {ax.name: _STYLES[i % len(_STYLES)] for i, ax in enumerate(registry.axes())}
 
 
 def progress_figure(progress: list[dict], target: dict | None):
@@ -238,10 +241,9 @@ def _motion_with_wrenches(motion: Any):
 def body_weight(motion) -> float:
     """Body weight (N) in the motion's own environment (its gravity), as the plausibility
     report counts it."""
-    from solver.plausibility import environment_of
+    from solver.environment import body_weight as weight
 
-    g = float(np.linalg.norm(np.asarray(environment_of(motion)["gravity"], dtype=float)))
-    return motion.character.total_mass * (g if g > 0 else 9.81)
+    return weight(motion)
 
 
 def motion_caption(motion) -> str:
@@ -252,9 +254,10 @@ def motion_caption(motion) -> str:
     if prov.get("lambda") is not None:
         parts.append(f"λ = {number_text(prov['lambda'])}")
     env = prov.get("environment_values") or {}
-    for k, lab, _ in ENVIRONMENT:
-        if k in ("slope_deg", "curve_deg") and env.get(k):
-            parts.append(f"{lab.split(' ')[0]} {number_text(env[k])}°")
+    for k in TARGET_KEYS:
+        ax = registry.axis(k)
+        if ax.default is not None and env.get(k) is not None and ax.changes(env[k]):
+            parts.append(ax.words.format(number_text(env[k])))
     return ", ".join(parts)
 
 

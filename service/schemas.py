@@ -4,9 +4,10 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, create_model, model_validator
 
 from service.limits import MAX_TUTOR_FPS, MAX_TUTOR_FRAMES, MAX_TUTOR_S, MIN_TUTOR_FPS
+from solver import axes as registry
 from solver.continuation import StepControl
 
 _SC = StepControl()
@@ -21,30 +22,40 @@ class Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True)
 
 
+def _bounds(ax: registry.Axis) -> dict[str, float]:
+    """pydantic bounds of an axis (the registry's, solver.axes)."""
+    return {"gt" if ax.lo_open else "ge": ax.lo, "lt" if ax.hi_open else "le": ax.hi}
+
+
 def _changes_something(schema: dict) -> None:
     schema["anyOf"] = [
-        {"required": ["slope_deg"], "properties": {"slope_deg": {"not": {"const": 0}}}},
-        {"required": ["curve_deg"], "properties": {"curve_deg": {"not": {"const": 0}}}},
-        {"required": ["friction"], "properties": {"friction": {"type": "number"}}},
-        {"required": ["gravity"], "properties": {"gravity": {"type": "number"}}},
+        {"required": [ax.name], "properties": {ax.name: {"type": "number"} if ax.default is None
+                                               else {"not": {"const": ax.default}}}}
+        for ax in registry.axes()
     ]
 
 
-class TargetIn(Strict):
-    """The target environment reached at λ = 1; fields combine (at least one must change)."""
+class _TargetBase(Strict):
+    """The target environment reached at λ = 1; fields combine (at least one must change).
+    One field per homotopy axis of the solver's registry (solver.axes)."""
 
     model_config = ConfigDict(json_schema_extra=_changes_something)
 
-    slope_deg: float = Field(0.0, gt=-89.0, lt=89.0, description="ground slope, positive = uphill (degrees)")
-    curve_deg: float = Field(0.0, ge=-720.0, le=720.0, description="heading change over one cycle, positive = left")
-    friction: float | None = Field(None, gt=0.0, le=10.0, description="target friction coefficient")
-    gravity: float | None = Field(None, gt=0.0, le=100.0, description="target gravity magnitude (m/s²)")
-
     @model_validator(mode="after")
-    def _not_identity(self) -> TargetIn:
-        if self.slope_deg == 0 and self.curve_deg == 0 and self.friction is None and self.gravity is None:
-            raise ValueError("the target changes nothing: give slope_deg, curve_deg, friction and/or gravity")
+    def _not_identity(self) -> _TargetBase:
+        if not any(ax.changes(getattr(self, ax.name)) for ax in registry.axes()):
+            raise ValueError("the target changes nothing: give " + ", ".join(registry.names()))
         return self
+
+
+def _target_field(ax: registry.Axis) -> tuple[Any, Any]:
+    if ax.default is None:
+        return (float | None, Field(None, description=ax.doc, **_bounds(ax)))
+    return (float, Field(float(ax.default), description=ax.doc, **_bounds(ax)))
+
+
+TargetIn = create_model("TargetIn", __base__=_TargetBase, __doc__=_TargetBase.__doc__,  # type: ignore[call-overload]
+                        **{ax.name: _target_field(ax) for ax in registry.axes()})
 
 
 class StepControlIn(Strict):
@@ -176,26 +187,19 @@ class Health(BaseModel):
 
 # --- libraries ---------------------------------------------------------------------------------
 
-_SLOPES = list[Annotated[float, Field(gt=-89.0, lt=89.0)]]
-_CURVES = list[Annotated[float, Field(ge=-720.0, le=720.0)]]
-_SPEEDS = list[Annotated[float, Field(gt=0.0, le=5.0)]]
+def _grid_field(ax: registry.Axis) -> tuple[Any, Any]:
+    values = list[Annotated[float, Field(**_bounds(ax))]]  # type: ignore[misc]
+    return (values | None, Field(None, min_length=1, max_length=25, description=ax.doc))
 
 
-class GridIn(Strict):
-    """Axes of a library grid: every combination of the values is a cell (at most 125 cells).
-    ``speed_scale`` needs a solver with the speed axis (otherwise 422)."""
-
-    slope_deg: _SLOPES | None = Field(None, min_length=1, max_length=25, description="slopes (degrees, + uphill)")
-    curve_deg: _CURVES | None = Field(None, min_length=1, max_length=25,
-                                      description="heading changes over one cycle (degrees, + left)")
-    speed_scale: _SPEEDS | None = Field(None, min_length=1, max_length=25,
-                                        description="walking speed relative to the capture's")
-
-
-class LibraryTargetIn(Strict):
-    slope_deg: float | None = Field(None, gt=-89.0, lt=89.0)
-    curve_deg: float | None = Field(None, ge=-720.0, le=720.0)
-    speed_scale: float | None = Field(None, gt=0.0, le=5.0)
+_GRID_AXES = [ax for ax in registry.axes() if ax.grid]
+#: Axes of a library grid: every combination of the values is a cell (at most 125 cells).
+GridIn = create_model("GridIn", __base__=Strict,  # type: ignore[call-overload]
+                      __doc__="Axes of a library grid: every combination of the values is a cell (at most 125 cells).",
+                      **{ax.name: _grid_field(ax) for ax in _GRID_AXES})
+LibraryTargetIn = create_model("LibraryTargetIn", __base__=Strict,  # type: ignore[call-overload]
+                               **{ax.name: (float | None, Field(None, description=ax.doc, **_bounds(ax)))
+                                  for ax in _GRID_AXES})
 
 
 def _grid_or_targets(schema: dict) -> None:

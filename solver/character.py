@@ -28,8 +28,9 @@ from typing import Iterable, Mapping, Sequence
 import numpy as np
 
 from solver import spatial as sp
+from solver.environment import STANDARD_GRAVITY
 
-GRAVITY = 9.81
+GRAVITY = STANDARD_GRAVITY
 
 #: Physical ranges checked at construction (a human-sized rigid multibody, with wide margins):
 #: a segment weighs at most MAX_SEGMENT_MASS kg; lengths (offsets, centres of mass, bones,

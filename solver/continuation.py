@@ -13,44 +13,14 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from solver import spatial as sp
+from solver.axes import Target, environment_at, guide_at, nlp_at
+from solver.environment import Environment, environment_of
 from solver.motion import Motion
-from solver.spacetime import Environment, SolveResult, SpacetimeProblem
-from solver.transforms import curve, slope
+from solver.spacetime import SolveResult, SpacetimeProblem
 
-
-@dataclass(frozen=True)
-class Target:
-    """The target environment, as data (combinable): λ = 1 reaches all of it at once.
-
-    slope_deg: ground slope along the walking direction, positive = uphill (the thesis's
-        θ = -slope: gravity rotated by R_y(-λθ), guide Ψ(Q_tut, -λθ)).
-    curve_deg: heading change over one cycle, positive = turning left (guide Φ(Q_tut, λθ)).
-    friction: target friction coefficient μ₂ (None = keep the tutor's).
-    gravity: target gravity magnitude in m/s² (None = keep the tutor's), e.g. 1.62 (Moon).
-    """
-
-    slope_deg: float = 0.0
-    curve_deg: float = 0.0
-    friction: float | None = None
-    gravity: float | None = None
-
-    def __post_init__(self) -> None:
-        for name in ("slope_deg", "curve_deg"):
-            v = getattr(self, name)
-            if not math.isfinite(v):
-                raise ValueError(f"{name} must be finite")
-        if not -89.0 < self.slope_deg < 89.0:
-            raise ValueError("slope_deg must be within (-89, 89) degrees")
-        if not -720.0 <= self.curve_deg <= 720.0:
-            raise ValueError("curve_deg must be within [-720, 720] degrees")
-        if self.friction is not None and not (math.isfinite(self.friction) and self.friction > 0):
-            raise ValueError("friction must be a positive finite number")
-        if self.gravity is not None and not (math.isfinite(self.gravity) and self.gravity > 0):
-            raise ValueError("gravity must be a positive finite magnitude (m/s²)")
-
-    def is_identity(self) -> bool:
-        return self.slope_deg == 0 and self.curve_deg == 0 and self.friction is None and self.gravity is None
+__all__ = ["CancelCheck", "ExtrapolationResult", "ProgressCallback", "ProgressRecord", "StepCallback", "StepControl",
+           "StepResult", "Target", "environment_at", "extrapolate", "guide_at", "motion_at", "nlp_at",
+           "tutor_heading_change"]
 
 
 @dataclass(frozen=True)
@@ -98,7 +68,7 @@ class ProgressRecord:
 
     wall_time: float  # s since the start of the extrapolation
     lam: float  # λ tried
-    environment: Mapping[str, float]  # slope_deg, curve_deg, friction, gravity at that λ
+    environment: Mapping[str, float]  # every registered axis's value at that λ (solver.axes)
     iterations: int
     accepted: bool
     status: str  # solver status text
@@ -131,30 +101,7 @@ StepCallback = Callable[[StepResult], None]
 CancelCheck = Callable[[], bool]
 
 
-# --- homotopy: the problem at λ -------------------------------------------------------------
-
-
-def environment_at(base: Environment, target: Target, lam: float) -> tuple[Environment, dict[str, float]]:
-    """Environment of the homotopy at λ: gravity magnitude and friction interpolated
-    linearly, gravity direction rotated by R_y(λ·slope) (SPEC: R_y(-λθ) with θ = -slope)."""
-    g0 = np.asarray(base.gravity, dtype=float)
-    gmag0 = float(np.linalg.norm(g0))
-    if gmag0 <= 0:
-        raise ValueError("the tutor's gravity is zero: nothing to extrapolate from")
-    gmag = gmag0 if target.gravity is None else gmag0 + lam * (target.gravity - gmag0)
-    theta = lam * math.radians(target.slope_deg)
-    g = sp.rotation_about([0.0, 1.0, 0.0], theta) @ (g0 / gmag0 * gmag)
-    mu = base.friction if target.friction is None else base.friction + lam * (target.friction - base.friction)
-    env = Environment(tuple(float(v) for v in g), float(mu))  # type: ignore[arg-type]
-    values = {"slope_deg": lam * target.slope_deg, "curve_deg": lam * target.curve_deg,
-              "friction": float(mu), "gravity": float(gmag)}
-    return env, values
-
-
-def guide_at(tutor_q: np.ndarray, target: Target, lam: float) -> np.ndarray:
-    """Guide of the homotopy at λ: Ψ(Φ(Q_tut, λ·curve), λ·slope) — bend the path, then tilt."""
-    q = curve(tutor_q, lam * math.radians(target.curve_deg)) if target.curve_deg else np.array(tutor_q)
-    return slope(q, lam * math.radians(target.slope_deg)) if target.slope_deg else q
+# --- homotopy: the problem at λ (solver.axes: environment_at, guide_at, nlp_at) ---------------
 
 
 @dataclass
@@ -170,7 +117,7 @@ def _is_tutor(motion: Motion) -> None:
 
 
 def _motion(tutor: Motion, lam: float, target: Target, env: Environment, values: Mapping[str, float],
-            res: SolveResult, control: StepControl, step: int) -> Motion:
+            res: SolveResult, control: StepControl, step: int, fps: float) -> Motion:
     from solver.plausibility import report
 
     prov = {
@@ -180,15 +127,14 @@ def _motion(tutor: Motion, lam: float, target: Target, env: Environment, values:
         "lambda": float(lam),
         "environment": env.to_dict(),
         "environment_values": dict(values),
-        "target": {"slope_deg": target.slope_deg, "curve_deg": target.curve_deg, "friction": target.friction,
-                   "gravity": target.gravity},
+        "target": target.to_dict(),
         "continuation": {"method": control.method, "step": step},
         "solver": {"name": "ipopt", "status": res.status, "iterations": res.iterations,
                    "time_s": round(res.wall_time, 6), "marker_rms_to_guide_mm": 1e3 * res.marker_rms},
     }
     prov["heading_change_deg"] = math.degrees(res.heading_change)
     prov["tutor_heading_change_deg"] = math.degrees(tutor_heading_change(tutor))
-    m = Motion(tutor.character, tutor.fps, res.q, contacts=tutor.contacts, wrenches=res.wrenches, provenance=prov,
+    m = Motion(tutor.character, fps, res.q, contacts=tutor.contacts, wrenches=res.wrenches, provenance=prov,
                interpolation="cubic-spline", cyclic=True)
     return m.evolve(report=report(m))
 
@@ -225,7 +171,7 @@ class _Walk:
                  should_cancel: CancelCheck | None) -> None:
         self.tutor, self.target, self.control, self.prob = tutor, target, control, prob
         self.on_progress, self.on_step, self.should_cancel = on_progress, on_step, should_cancel
-        self.env0 = Environment.from_dict(tutor.provenance.get("environment"))
+        self.env0 = environment_of(tutor)
         self.t0 = time.perf_counter()
         self.records: list[ProgressRecord] = []
         self.steps: list[StepResult] = []
@@ -238,7 +184,7 @@ class _Walk:
         if g is None:
             if len(self._guides) > 8:
                 self._guides.pop(next(iter(self._guides)))
-            g = self._guides[lam] = guide_at(self.tutor.q, self.target, lam)
+            g = self._guides[lam] = guide_at(self.tutor.q, self.target, lam, self.env0)
         return g
 
     def record(self, lam: float, values: Mapping[str, float], res: SolveResult | None, accepted: bool, status: str,
@@ -249,8 +195,15 @@ class _Walk:
         if self.on_progress:
             self.on_progress(rec)
 
+    def nlp(self, lam: float) -> dict[str, float]:
+        return nlp_at(self.target, lam, self.env0)
+
+    def fps(self, lam: float) -> float:
+        """The frame rate at λ: the frame count is fixed, the frame interval follows the axes."""
+        return self.tutor.fps / self.nlp(lam)["frame_interval"]
+
     def accept(self, lam: float, env: Environment, values: Mapping[str, float], res: SolveResult) -> bool:
-        m = _motion(self.tutor, lam, self.target, env, values, res, self.control, len(self.steps))
+        m = _motion(self.tutor, lam, self.target, env, values, res, self.control, len(self.steps), self.fps(lam))
         if not m.report["plausible"]:
             return False
         sr = StepResult(len(self.steps), float(lam), m, {"iterations": res.iterations, "solve_s": res.wall_time,
@@ -277,8 +230,9 @@ class _Walk:
             if not warm:
                 opts.update({"ipopt.bound_push": 1e-6, "ipopt.bound_frac": 1e-6})
         try:
-            dpsi = self.dpsi0 + lam * math.radians(self.target.curve_deg)
-            res = self.prob.solve(guide, env=env, init_q=init[0], init_wrenches=init[1], max_iter=max_iter,
+            eff = self.nlp(lam)
+            dpsi = self.dpsi0 + math.radians(eff["heading_change_deg"])
+            res = self.prob.solve(guide, env=env, frame_interval=self.prob.dt * eff["frame_interval"], init_q=init[0], init_wrenches=init[1], max_iter=max_iter,
                                   heading_change=dpsi, should_stop=self.should_cancel,
                                   lam_x0=warm_from.lam_x if warm else None,
                                   lam_g0=warm_from.lam_g if warm else None, warm=warm, ipopt_options=opts)
@@ -392,7 +346,9 @@ def extrapolate(
     _is_tutor(tutor)
     if not 0.0 < lam_end <= 1.0:
         raise ValueError("lam_end must be in (0, 1]")
-    prob = problem or problem_for(tutor.character, tutor.T, tutor.fps, tutor.contacts)
+    # stairs: root z may gain a rise over the cycle (a problem of its own structure)
+    prob = problem or problem_for(tutor.character, tutor.T, tutor.fps, tutor.contacts,
+                                  rising=bool(target.step_height_m))
     walk = _Walk(tutor, target, control, prob, on_progress, on_step, should_cancel)
     if start is not None:
         lam0, m0 = start

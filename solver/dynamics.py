@@ -18,8 +18,9 @@ from typing import Any, Mapping
 from solver import spatial as sp
 from solver.character import Character, Model
 from solver.kinematics import forward_kinematics
+from solver.environment import STANDARD_GRAVITY_VECTOR
 
-DEFAULT_GRAVITY = (0.0, 0.0, -9.81)
+DEFAULT_GRAVITY = STANDARD_GRAVITY_VECTOR
 
 Motion6 = tuple[sp.Vec3, sp.Vec3]
 

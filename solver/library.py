@@ -3,12 +3,12 @@ between cells, and the library's manifest (docs/service.md, "Motion libraries").
 
 A *cell* is one extrapolation of the tutor to its target
 (:func:`solver.continuation.extrapolate`, called through its public signature only). The
-grid's axes are target fields: ``slope_deg``, ``curve_deg`` and — when the solver's
-:class:`~solver.continuation.Target` has it — ``speed_scale``; any field of ``Target`` with a
-neutral value in :data:`NEUTRAL` can be an axis, so a new axis needs no change here.
+grid's axes are the registered homotopy axes marked ``grid`` (:mod:`solver.axes`: today
+``slope_deg``, ``curve_deg``, ``speed_scale``), so a new axis needs no change here.
 
 **Warm starts.** Every axis is interpolated linearly in λ by the homotopy (slope: gravity
-tilted by λ·slope and guide Ψ(·, λ·slope); curve: guide Φ(·, λ·curve)), so the problem at λ
+tilted by λ·slope and guide Ψ(·, λ·slope); curve: guide Φ(·, λ·curve); speed: the problem is
+a function of the speed value 1 + λ (s − 1)), so the problem at λ
 for target B is the problem at λ·s for target B/s. Hence a stored optimum of another cell A at
 λ_A lies on B's homotopy whenever λ_A·(A − neutral) = t·(B − neutral) with 0 ≤ t < 1: B then
 starts at λ = t from it (``extrapolate(..., start=(t, optimum))``) instead of λ = 0. Every
@@ -27,17 +27,18 @@ import math
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
+from solver import axes as registry
+
+#: the grid axes, in the order of names and manifests (the registry's, solver.axes)
+AXES = tuple(a.name for a in registry.axes() if a.grid)
 #: axis -> the value that changes nothing (λ = 0 of every homotopy)
-NEUTRAL: dict[str, float] = {"slope_deg": 0.0, "curve_deg": 0.0, "speed_scale": 1.0}
-#: the order of the axes in names and manifests
-AXES = ("slope_deg", "curve_deg", "speed_scale")
-SHORT = {"slope_deg": "slope", "curve_deg": "curve", "speed_scale": "speed"}
+NEUTRAL: dict[str, float] = {a.name: float(a.default) for a in registry.axes() if a.grid and a.default is not None}
+SHORT = {a.name: a.label for a in registry.axes() if a.grid}
 #: most cells one library may have
 MAX_CELLS = 125
 #: axes whose homotopy is linear in λ (checked by tests/test_library.py): only these carry warm
-#: starts part-way along a ray; an axis not listed (speed_scale until its homotopy is checked)
-#: shares only the base problem (λ = 0)
-LINEAR_AXES = frozenset({"slope_deg", "curve_deg"})
+#: starts part-way along a ray; another axis shares only the base problem (λ = 0)
+LINEAR_AXES = frozenset(a.name for a in registry.axes() if a.grid and a.linear)
 #: two rays are the same when their directions differ by less than this (relative)
 RAY_TOLERANCE = 1e-9
 
@@ -47,15 +48,12 @@ class LibraryError(ValueError):
 
 
 def target_fields() -> tuple[str, ...]:
-    from solver.continuation import Target
-
-    return tuple(f.name for f in dataclasses.fields(Target))
+    return registry.names()
 
 
 def supported_axes() -> tuple[str, ...]:
-    """The grid axes the solver can extrapolate along now (``speed_scale`` once Target has it)."""
-    fields = target_fields()
-    return tuple(a for a in AXES if a in fields)
+    """The grid axes the solver can extrapolate along."""
+    return AXES
 
 
 @dataclass(frozen=True)
@@ -86,9 +84,6 @@ class Cell:
 def _check_axis(name: str) -> None:
     if name not in AXES:
         raise LibraryError(f"unknown axis {name!r}; the axes are {', '.join(AXES)}")
-    if name not in supported_axes():
-        raise LibraryError(f"axis {name!r} needs a solver whose Target has it (the speed axis is not available "
-                           "in this version); use " + ", ".join(supported_axes()))
 
 
 def _finite(name: str, v: Any) -> float:
@@ -100,7 +95,7 @@ def _finite(name: str, v: Any) -> float:
 def grid_cells(axes: Mapping[str, Sequence[float]]) -> list[Cell]:
     """The cells of a grid: the product of the axes' values (each axis: distinct values)."""
     if not axes:
-        raise LibraryError("a grid needs at least one axis (slope_deg, curve_deg)")
+        raise LibraryError(f"a grid needs at least one axis ({', '.join(AXES)})")
     names = [a for a in AXES if a in axes] + [a for a in axes if a not in AXES]
     for a in names:
         _check_axis(a)
@@ -124,7 +119,7 @@ def list_cells(targets: Sequence[Mapping[str, float]]) -> list[Cell]:
         raise LibraryError(f"{len(targets)} targets; a library has at most {MAX_CELLS}")
     used = [a for a in AXES if any(a in t for t in targets)]
     if not used:
-        raise LibraryError("the targets give no axis: each needs slope_deg, curve_deg (or speed_scale)")
+        raise LibraryError(f"the targets give no axis: each needs one of {', '.join(AXES)}")
     for t in targets:
         for a in t:
             _check_axis(a)

@@ -26,6 +26,7 @@ from solver.kinematics import markers
 from solver.motion import Motion, foot_schedule_of
 from solver.plausibility import report
 from solver.spacetime import Environment, SolveResult, SpacetimeProblem, Weights
+from solver.environment import STANDARD_GRAVITY_VECTOR
 
 log = logging.getLogger(__name__)
 
@@ -170,13 +171,13 @@ _MAX_CACHED = 8
 
 
 def problem_for(character: Character, T: int, fps: float, contacts: np.ndarray | None, *,
-                dynamics: bool = True, cyclic: bool = True) -> SpacetimeProblem:
+                dynamics: bool = True, cyclic: bool = True, rising: bool = False) -> SpacetimeProblem:
     """Build (or reuse) the NLP of a structure: built once, re-solved with new parameters."""
     key = (id(character), T, float(fps), None if contacts is None else np.asarray(contacts, bool).tobytes(),
-           dynamics, cyclic)
+           dynamics, cyclic, rising)
     prob = _PROBLEMS.get(key)
     if prob is None or prob.character is not character:
-        prob = SpacetimeProblem(character, T, fps, contacts, dynamics=dynamics, cyclic=cyclic)
+        prob = SpacetimeProblem(character, T, fps, contacts, dynamics=dynamics, cyclic=cyclic, rising=rising)
         if len(_PROBLEMS) >= _MAX_CACHED:
             _PROBLEMS.pop(next(iter(_PROBLEMS)))
         _PROBLEMS[key] = prob
@@ -184,7 +185,7 @@ def problem_for(character: Character, T: int, fps: float, contacts: np.ndarray |
 
 
 def estimate_wrenches(character: Character, q: np.ndarray, fps: float, contacts: np.ndarray,
-                      gravity=(0.0, 0.0, -9.81)) -> tuple[np.ndarray, dict]:
+                      gravity=STANDARD_GRAVITY_VECTOR) -> tuple[np.ndarray, dict]:
     """EFC (SPEC §5) on the simplified motion: initial contact wrenches for the correction."""
     from solver.contact import estimate_contact_wrenches
 

@@ -19,6 +19,8 @@ from solver.kinematics import contact_points, segment_frames, standing_leg_lengt
 from solver.motion import FEET, Motion
 from solver.realism import RealismLimits, problem_lines, realism_report
 from solver.trajectory import dynamics_samples
+from solver.environment import body_weight, ground_of
+from solver.environment import environment_of as _environment_of
 
 
 @dataclass(frozen=True)
@@ -32,10 +34,8 @@ class Tolerances:
 
 
 def environment_of(motion: Motion) -> dict:
-    env = dict(motion.provenance.get("environment") or {})
-    env.setdefault("gravity", [0.0, 0.0, -9.81])
-    env.setdefault("friction", 1.0)
-    return env
+    """The motion's environment as a dict (gravity, friction): :func:`solver.environment.environment_of`."""
+    return _environment_of(motion).to_dict()
 
 
 def root_residual(motion: Motion, gravity: Any) -> np.ndarray:
@@ -59,7 +59,7 @@ def report(motion: Motion, tol: Tolerances = Tolerances(), realism: RealismLimit
     env = environment_of(motion)
     g = np.asarray(env["gravity"], dtype=float)
     mu = float(env["friction"])
-    weight = ch.total_mass * float(np.linalg.norm(g)) if np.linalg.norm(g) > 0 else ch.total_mass * 9.81
+    weight = body_weight(motion)
     leg = standing_leg_length(ch)
     res = root_residual(motion, g)
     out: dict[str, Any] = {
@@ -68,7 +68,7 @@ def report(motion: Motion, tol: Tolerances = Tolerances(), realism: RealismLimit
         "fps": motion.fps,
         "body_weight_N": weight,
         "leg_length_m": leg,
-        "environment": {"gravity": g.tolist(), "friction": mu},
+        "environment": {"gravity": g.tolist(), "friction": mu, **_terrain(motion)},
         "has_wrenches": motion.wrenches is not None,
         "has_contacts": motion.contacts is not None,
         "root_residual": {
@@ -122,12 +122,39 @@ def report(motion: Motion, tol: Tolerances = Tolerances(), realism: RealismLimit
     return out
 
 
+def _terrain(motion: Motion) -> dict:
+    """Stairs: the riser height and one tread per stance (foot, frames, centre (x, y, ground
+    height) under the foot's contact points) — what a preview draws as steps."""
+    step = _environment_of(motion).step_height_m
+    if not step or motion.contacts is None:
+        return {}
+    B, G = motion.foot_contact(), ground_of(motion)
+    cp = contact_points(motion.character, motion.q)
+    treads = []
+    for k, side in enumerate(FEET):
+        idx = [j for j, c in enumerate(motion.character.contacts) if c.side == side]
+        t = 0
+        while t < motion.T:
+            if not B[k, t]:
+                t += 1
+                continue
+            a = t
+            while t < motion.T and B[k, t]:
+                t += 1
+            xy = cp[idx, :2, a:t].mean(axis=(0, 2))
+            treads.append({"foot": side, "frames": [a, t - 1],
+                           "center": [float(xy[0]), float(xy[1]), float(G[k, a])]})
+    return {"step_height_m": float(step), "treads": treads}
+
+
 def _contact_checks(motion: Motion, mu: float, weight: float) -> dict:
     ch = motion.character
     A = motion.contacts
     cp = contact_points(ch, motion.q)  # (P, 3, T)
     T = motion.T
-    z = cp[:, 2, :]
+    feet_ground = ground_of(motion)  # (2, T): the terrain under each foot
+    side = {s: k for k, s in enumerate(FEET)}
+    z = cp[:, 2, :] - feet_ground[[side[c.side] for c in ch.contacts]]  # height above the ground
     active_err = float(np.abs(z[A]).max()) if A.any() else 0.0
     penetration = float(max(0.0, -z.min()))
     slip = 0.0
@@ -159,7 +186,8 @@ def _contact_checks(motion: Motion, mu: float, weight: float) -> dict:
             min_fz = min(min_fz, float(f[2]))
             excess = max(excess, float(np.hypot(f[0], f[1]) - mu * f[2]))
             if f[2] > 1e-6 * weight:
-                u = np.array([-n0[1] / f[2], n0[0] / f[2], 0.0])
+                zg = feet_ground[k, t]  # the CoP on the ground plane under the foot
+                u = np.array([(zg * f[0] - n0[1]) / f[2], (n0[0] + zg * f[1]) / f[2], zg])
                 cops[k, :, t] = u
                 local = rots[si, :, :, t].T @ (u - poss[si, :, t]) - foot.center
                 cop_out = max(cop_out, float(np.max(np.abs(local) - foot.half)))

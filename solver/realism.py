@@ -36,11 +36,12 @@ from scipy.interpolate import CubicSpline
 from scipy.spatial.transform import Rotation
 
 from solver.dynamics import rnea
+from solver.environment import environment_of, ground_of
 from solver.kinematics import segment_frames
 from solver.motion import FEET, Motion
 
 #: coordinates moved by the cycle's rigid transform (root x, y, yaw); the others repeat
-ROOT_X, ROOT_Y, ROOT_YAW = 0, 1, 3
+ROOT_X, ROOT_Y, ROOT_Z, ROOT_YAW = 0, 1, 2, 3
 TRANSFORMED = (ROOT_X, ROOT_Y, ROOT_YAW)
 #: frames 0, 1 and T-2, T-1 of a cyclic motion agree (after the transform) within this (m, rad)
 CYCLE_TOL = 1e-5
@@ -75,11 +76,12 @@ class RealismLimits:
 
 @dataclass(frozen=True)
 class Cycle:
-    """Rigid transform of one cycle: p ↦ R(Δψ) p + d (horizontal), yaw ↦ yaw + Δψ."""
+    """Rigid transform of one cycle: p ↦ R(Δψ) p + d, yaw ↦ yaw + Δψ (d[2]: the cycle's rise
+    on stairs, 0 on flat ground)."""
 
     N: int  # distinct frames (T - 2)
     dpsi: float
-    d: np.ndarray  # (3,), d[2] = 0
+    d: np.ndarray  # (3,)
 
     def rot(self, k: int = 1) -> np.ndarray:
         c, s = math.cos(k * self.dpsi), math.sin(k * self.dpsi)
@@ -99,9 +101,9 @@ class Cycle:
     def apply_q(self, q: np.ndarray, k: int) -> np.ndarray:
         """Frames (n, m) moved by k cycles."""
         out = np.array(q, dtype=float, copy=True)
-        p = np.vstack([q[ROOT_X], q[ROOT_Y], np.zeros(q.shape[1])])
+        p = np.vstack([q[ROOT_X], q[ROOT_Y], q[ROOT_Z]])
         p = self.rot(k) @ p + self.shift(k)[:, None]
-        out[ROOT_X], out[ROOT_Y] = p[0], p[1]
+        out[ROOT_X], out[ROOT_Y], out[ROOT_Z] = p[0], p[1], p[2]
         out[ROOT_YAW] = q[ROOT_YAW] + k * self.dpsi
         return out
 
@@ -124,7 +126,8 @@ def cycle_of(motion: Motion) -> tuple[Cycle | None, str]:
     c, s = math.cos(dpsi), math.sin(dpsi)
     p0 = q[[ROOT_X, ROOT_Y], 0]
     d2 = q[[ROOT_X, ROOT_Y], T - 2] - np.array([c * p0[0] - s * p0[1], s * p0[0] + c * p0[1]])
-    cyc = Cycle(T - 2, dpsi, np.array([d2[0], d2[1], 0.0]))
+    rise = float(q[ROOT_Z, T - 2] - q[ROOT_Z, 0]) if environment_of(motion).step_height_m else 0.0
+    cyc = Cycle(T - 2, dpsi, np.array([d2[0], d2[1], rise]))
     err = float(np.max(np.abs(cyc.apply_q(q[:, :2], 1) - q[:, T - 2:])))
     if err > CYCLE_TOL:
         return None, f"frames T-2, T-1 do not repeat frames 0, 1 (by {err:.2g}): treated as an open motion"
@@ -253,7 +256,7 @@ def refined(motion: Motion, cyc: Cycle | None, factor: int) -> dict[str, np.ndar
         per = CubicSpline(np.arange(N + 1) * dt, np.hstack([base, base[:, :1]]), axis=1, bc_type="periodic")
         out[:] = [per(ts), per(ts, 1), per(ts, 2)]
         ext = np.hstack([cyc.apply_q(base, -1), base, cyc.apply_q(base, 1), cyc.apply_q(base[:, :2], 2)])
-        tr = list(TRANSFORMED)
+        tr = list(TRANSFORMED) + ([ROOT_Z] if cyc.d[2] != 0.0 else [])  # stairs: root z rises per cycle
         pad = CubicSpline((np.arange(ext.shape[1]) - N) * dt, ext[tr], axis=1, bc_type="not-a-knot")
         out[0][tr], out[1][tr], out[2][tr] = pad(ts), pad(ts, 1), pad(ts, 2)
     w = np.empty((2, 6, s.size))
@@ -286,11 +289,13 @@ def foot_length(motion: Motion, side: str) -> float:
 
 
 def free_moments(motion: Motion) -> np.ndarray:
-    """(2, T) vertical free moment at each foot's centre of pressure (N·m; nan where f_z ≤ 0)."""
+    """(2, T) vertical free moment at each foot's centre of pressure (N·m; nan where f_z ≤ 0),
+    the CoP on the ground under the foot (``solver.environment.ground_of``)."""
     W = motion.wrenches
     n, f = W[:, :3], W[:, 3:]
+    zg = ground_of(motion)
     with np.errstate(divide="ignore", invalid="ignore"):
-        ux, uy = -n[:, 1] / f[:, 2], n[:, 0] / f[:, 2]
+        ux, uy = (zg * f[:, 0] - n[:, 1]) / f[:, 2], (n[:, 0] + zg * f[:, 1]) / f[:, 2]
         tau = n[:, 2] - (ux * f[:, 1] - uy * f[:, 0])
     return np.where(f[:, 2] > 0, tau, np.nan)
 
@@ -312,12 +317,13 @@ def torsion(motion: Motion, mu: float, weight: float, lim: RealismLimits) -> dic
     unloaded = fz < lim.unloaded * weight
     names = [sg.name for sg in ch.segments]
     rots, poss = segment_frames(ch, motion.q[:, frames])
+    ground = ground_of(motion)[:, frames]
     n_centre = np.empty(fz.shape)
     for k, side in enumerate(FEET):
         foot = ch.foot(side)
         i = names.index(foot.segment)
         p = poss[i] + np.einsum("ijt,j->it", rots[i], foot.center)
-        p[2] = 0.0
+        p[2] = ground[k]
         n_centre[k] = np.linalg.norm(_about(W[k], p)[:3], axis=0)
     return {
         "max_free_moment_Nm": float(tau_abs.max()),

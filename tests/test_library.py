@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from solver import library as L
-from solver.continuation import Target, environment_at, guide_at
+from solver.continuation import Target, environment_at, guide_at, nlp_at
 from solver.spacetime import Environment
 
 
@@ -32,12 +32,9 @@ def test_grid_cells_are_the_product_of_the_axes_in_axis_order():
     ({"slope_deg": [math.nan]}, "finite"),
     ({"slope_deg": [True]}, "finite"),
     ({"height": [1]}, "unknown axis"),
-    ({"speed_scale": [0.8, 1.2]}, "speed axis"),  # until the solver's Target has it
     ({"slope_deg": list(range(26)), "curve_deg": list(range(5))}, "at most 125"),
 ])
 def test_bad_grids_are_refused_clearly(axes, words):
-    if "speed_scale" in axes and "speed_scale" in L.supported_axes():
-        pytest.skip("the solver has the speed axis")
     with pytest.raises(L.LibraryError, match=words):
         L.grid_cells(axes)
 
@@ -45,6 +42,8 @@ def test_bad_grids_are_refused_clearly(axes, words):
 def test_targets_the_solver_refuses_are_refused_per_cell():
     with pytest.raises(L.LibraryError, match="cell slope89"):
         L.check_cells(L.grid_cells({"slope_deg": [89.0]}))
+    with pytest.raises(L.LibraryError, match=r"cell speed3: speed_scale must be within \[0.5, 2\]"):
+        L.check_cells(L.grid_cells({"speed_scale": [1.0, 3.0]}))
     with pytest.raises(L.LibraryError, match="repeats"):
         L.list_cells([{"slope_deg": 5.0}, {"slope_deg": 5.0, "curve_deg": 0.0}])
 
@@ -55,14 +54,15 @@ def test_the_homotopy_is_linear_in_lambda_so_a_ray_shares_its_problems(shared_da
 
     q = walk_motion(shared_data, "halfboy").q
     base = Environment()
-    b = Target(slope_deg=10.0, curve_deg=40.0)
-    half = Target(slope_deg=5.0, curve_deg=20.0)
+    b = Target(slope_deg=10.0, curve_deg=40.0, speed_scale=1.4)
+    half = Target(slope_deg=5.0, curve_deg=20.0, speed_scale=1.2)
     for lam in (0.3, 1.0):
         e1, v1 = environment_at(base, b, 0.5 * lam)
         e2, v2 = environment_at(base, half, lam)
         np.testing.assert_allclose(e1.gravity, e2.gravity, atol=1e-12)
         assert v1 == pytest.approx(v2)
         np.testing.assert_allclose(guide_at(q, b, 0.5 * lam), guide_at(q, half, lam), atol=1e-9)
+        assert nlp_at(b, 0.5 * lam) == pytest.approx(nlp_at(half, lam))
 
 
 def test_on_ray_finds_stored_optima_on_a_cells_homotopy():
@@ -74,9 +74,9 @@ def test_on_ray_finds_stored_optima_on_a_cells_homotopy():
     assert L.on_ray(inner, outer, 1.0) is None  # beyond the target
     assert L.on_ray(outer, other, 0.0) == 0.0  # the base problem is everyone's
     assert L.on_ray(outer, outer, 0.75) == pytest.approx(0.75)  # its own optimum: resume
-    # an axis not known to be linear in λ (speed_scale) shares only the base problem
+    # the speed axis is linear in λ too: 1.2 is half-way to 1.4
     fast, faster = L.Cell((("speed_scale", 1.2),)), L.Cell((("speed_scale", 1.4),))
-    assert L.on_ray(faster, fast, 1.0) is None and L.on_ray(faster, fast, 0.0) == 0.0
+    assert L.on_ray(faster, fast, 1.0) == pytest.approx(0.5) and L.on_ray(faster, fast, 0.0) == 0.0
     ws = L.best_start(outer, [(other, 1.0), (inner, 0.6), (inner, 1.0), (other, 0.0)])
     assert ws == L.WarmStart(0.5, inner.key, 1.0)
 
@@ -134,14 +134,12 @@ def test_cli_library_writes_the_glb_clips_and_manifest(tutor, tmp_path):
 @pytest.mark.parametrize("args, words", [
     (["--out", "{tmp}/x"], "give the grid"),
     (["--slopes=1,x", "--out", "{tmp}/x"], "comma-separated numbers"),
-    (["--speed-scales=0.8,1.2", "--out", "{tmp}/x"], "speed axis"),
+    (["--speed-scales=0.8,3", "--out", "{tmp}/x"], "speed_scale must be within"),
     (["--slopes=5,5", "--out", "{tmp}/x"], "repeats"),
 ])
 def test_cli_library_mistakes_are_one_line_errors(tutor, tmp_path, args, words):
     from test_cli_conventions import run
 
-    if "speed" in words and "speed_scale" in L.supported_axes():
-        pytest.skip("the solver has the speed axis")
     tut = tmp_path / "tutor.json"
     tutor.save(tut)
     code, _, err = run("library", tut, *[a.replace("{tmp}", str(tmp_path)) for a in args])

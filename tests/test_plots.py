@@ -87,7 +87,7 @@ def tutor_file(tutor, tmp_path_factory) -> Path:
 def test_progress_png_from_the_continuations_records(continuation):
     target, res = continuation
     recs = [asdict(r) for r in res.records]
-    px = assert_png(progress_png(recs, asdict(target)))
+    px = assert_png(progress_png(recs, target.to_dict()))
     # two environment panels (slope and friction change) below λ: taller than a one-parameter figure
     one = assert_png(progress_png(recs, {"friction": 0.7}))
     assert px.shape[0] > one.shape[0]
@@ -226,7 +226,7 @@ def test_each_plot_takes_well_under_a_second(tutor, continuation):
     target, res = continuation
     recs = [asdict(r) for r in res.records]
     grf_png(tutor)  # warm: matplotlib's import and font cache are paid once per process
-    for f, arg in ((grf_png, tutor), (residuals_png, tutor), (lambda r: progress_png(r, asdict(target)), recs)):
+    for f, arg in ((grf_png, tutor), (residuals_png, tutor), (lambda r: progress_png(r, target.to_dict()), recs)):
         t = time.perf_counter()
         f(arg)
         assert time.perf_counter() - t < 1.0

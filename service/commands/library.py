@@ -1,5 +1,5 @@
 """``motionx library``: a motion library from one tutor — a grid of targets (slope × curve
-[× speed scale when the solver has that axis]), one extrapolation per cell, written as one
+× speed scale: the grid axes of solver.axes), one extrapolation per cell, written as one
 GLB (one looping animation per cell, the grid in its extras), a JSON clip and a motion file
 per cell, and ``manifest.json`` (cell → parameters, status, files, realism figures)."""
 
@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 from service.cli import CliError, add_command, load_motion
+from solver import axes as registry
 
 #: what a library folder holds besides the per-cell files
 LIBRARY_FILES = ("manifest.json", "library.glb")
@@ -81,7 +82,8 @@ def cmd_library(args: argparse.Namespace) -> int:
     from solver.export.gltf import to_library_glb
 
     axes = {}
-    for name, vals in (("slope_deg", args.slopes), ("curve_deg", args.curves), ("speed_scale", args.speed_scales)):
+    for name in L.AXES:
+        vals = getattr(args, name)
         if vals is not None:
             axes[name] = vals
     if not axes:
@@ -155,20 +157,17 @@ def cmd_library(args: argparse.Namespace) -> int:
 
 def register(sub: argparse._SubParsersAction) -> None:
     s = add_command(sub, "library", "a motion library: extrapolate a tutor over a grid of targets", """\
-Extrapolate one tutor to every cell of a grid (slopes × curves; the speed axis needs a solver
-that has it), nearest the tutor first, each cell warm-started from the stored optimum
+Extrapolate one tutor to every cell of a grid (slopes × curves × speed scales), nearest the tutor first, each cell warm-started from the stored optimum
 furthest along its homotopy (docs/service.md, "Motion libraries"). A cell at an impasse keeps
 its last realistic motion and is marked so. Writes into --out: library.glb (one looping
 animation per cell, the grid in its extras, game-ready data per animation), per cell
 CELL.motion.json and CELL.clip.json, and manifest.json (cell -> parameters, status, files,
 realism figures). Exit status 0 when every cell succeeded or reached an impasse.""")
     s.add_argument("tutor", metavar="TUTOR.json", help="tutor motion file (from motionx tutor)")
-    s.add_argument("--slopes", type=_values("--slopes"), metavar="S1,S2,...",
-                   help="ground slopes in degrees, positive uphill (default: none, level)")
-    s.add_argument("--curves", type=_values("--curves"), metavar="C1,C2,...",
-                   help="heading changes over one cycle in degrees, positive left (default: none, straight)")
-    s.add_argument("--speed-scales", type=_values("--speed-scales"), metavar="V1,V2,...",
-                   help="walking speed relative to the capture's (needs the speed axis; default: none)")
+    for ax in registry.axes():  # one flag per grid axis of the registry: --slopes, --curves, --speed-scales
+        if ax.grid:
+            s.add_argument(ax.cli + "s", dest=ax.name, type=_values(ax.cli + "s"), metavar="V1,V2,...",
+                           help=f"{ax.doc}: comma-separated values within {ax.bounds_text()} (default: none)")
     s.add_argument("--out", required=True, metavar="DIR", help="output folder (new or empty, unless --force)")
     s.add_argument("--force", action="store_true", help="write into a non-empty --out (replaces this command's files)")
     s.add_argument("--method", choices=["adaptive", "thesis"], default="adaptive", help="step control")

@@ -16,11 +16,12 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 
 from service.cli import CliError
+from solver import axes as registry
 
 #: the suffixes of one λ optimum's files (motion file, exports, plausibility report)
 STEP_KINDS = ("motion.json", "clip.json", "glb", "bvh", "validation.json")
 #: the environment columns of progress.csv
-ENVIRONMENT_KEYS = ("slope_deg", "curve_deg", "friction", "gravity")
+ENVIRONMENT_KEYS = registry.names()  # one column per homotopy axis (solver.axes)
 PROGRESS_COLUMNS = ("phase", "wall_time_s", "lambda", *ENVIRONMENT_KEYS, "iterations", "accepted", "status",
                     "lambda_reached")
 #: files a job folder holds besides the steps (extrapolate's plots are grf/residuals.png,

@@ -18,7 +18,9 @@ def cmd_mjcf(args: argparse.Namespace) -> int:
     if args.motion is not None:
         motion = load_motion(args.motion)
         ch = motion.character
-        env = (motion.provenance.get("environment") or {}).get("gravity", (0.0, 0.0, -9.81))
+        from solver.environment import environment_of
+
+        env = environment_of(motion).gravity
         xml = to_xml(ch, env)
     else:
         ch = reference_character(args.character)

@@ -11,6 +11,7 @@ from dataclasses import asdict
 from pathlib import Path
 
 from service.cli import CliError, add_command, import_message, load_motion, parse_belt_speed, warn_input
+from solver import axes as registry
 from service.commands.outputs import prepare_output_dir, progress_csv, step_stem
 
 
@@ -198,7 +199,7 @@ def plot_progress(records, target, path: Path) -> None:
     (``service.plots.progress_png``, the plot the API serves at ``/jobs/{id}/plots/progress.png``)."""
     from service.plots import progress_png
 
-    path.write_bytes(progress_png([asdict(r) for r in records], asdict(target)))
+    path.write_bytes(progress_png([asdict(r) for r in records], target.to_dict()))
 
 
 def _extrapolate_summary(summary: dict, out: Path) -> str:
@@ -227,16 +228,15 @@ def cmd_extrapolate(args: argparse.Namespace) -> int:
     from service.commands.plot import write_motion_plots
     from solver.continuation import StepControl, Target, extrapolate
 
-    tutor = load_motion(args.tutor)
-    try:
-        target = Target(slope_deg=args.slope or 0.0, curve_deg=args.curve or 0.0, friction=args.friction,
-                        gravity=args.gravity)
+    try:  # the target first: a wrong value is told before any file is read
+        target = Target(**{ax.name: getattr(args, ax.name) for ax in registry.axes()})
         control = StepControl(method=args.method, delta0=args.delta0, max_iter=args.max_iter, eps=args.eps,
                               max_solves=args.max_solves)
     except ValueError as e:
         raise CliError(str(e)) from None
     if target.is_identity():
-        raise CliError("give a target: --slope DEG, --curve DEG, --friction MU and/or --gravity G")
+        raise CliError("give a target: " + ", ".join(f"{ax.cli} {ax.metavar}" for ax in registry.axes()))
+    tutor = load_motion(args.tutor)
     if tutor.wrenches is None or tutor.contacts is None:
         raise CliError(f"{args.tutor} is not a tutor (it has no contact wrenches or contact schedule); "
                        "run `motionx tutor` first")
@@ -274,8 +274,7 @@ def cmd_extrapolate(args: argparse.Namespace) -> int:
         "status": res.status,
         "lambda_reached": res.lam_reached,
         "message": res.message,
-        "target": {"slope_deg": target.slope_deg, "curve_deg": target.curve_deg, "friction": target.friction,
-                   "gravity": target.gravity},
+        "target": target.to_dict(),
         "control": {"method": control.method, "delta0": control.delta0, "eps": control.eps,
                     "max_iter": control.max_iter, "max_solves": control.max_solves},
         "solves": res.solves,
@@ -330,19 +329,15 @@ file v1 with its plausibility report (MuJoCo replay included). It is the input o
 
     s = add_command(sub, "extrapolate", "continuation from a tutor to a new environment (the main job)", """\
 Walk the homotopy λ from 0 (the tutor's ground) to 1 (the target: slope, curve, friction,
-gravity, combinable), solving the spacetime NLP at each λ and keeping every optimum as a
+gravity, speed, combinable; the axes of solver.axes), solving the spacetime NLP at each λ and keeping every optimum as a
 plausible motion of its own. Writes into --out, per accepted step,
 step_NNN_lambda_L.motion.json, then progress.csv, progress.png, summary.json and the last
 motion's grf.png and residuals.png. Exit status 0 for `succeeded` and `impasse`.""")
     s.add_argument("tutor", metavar="TUTOR.json", help="tutor motion file (from motionx tutor)")
-    s.add_argument("--slope", type=_finite("--slope"), metavar="DEG",
-                   help="ground slope in degrees, positive uphill (default: 0, level)")
-    s.add_argument("--curve", type=_finite("--curve"), metavar="DEG",
-                   help="heading change over one cycle in degrees, positive left (default: 0, straight)")
-    s.add_argument("--friction", type=_finite("--friction"), metavar="MU",
-                   help="target friction coefficient (default: the tutor's)")
-    s.add_argument("--gravity", type=_finite("--gravity"), metavar="G",
-                   help="target gravity magnitude in m/s², Moon 1.62 (default: the tutor's)")
+    for ax in registry.axes():  # one flag per registered homotopy axis
+        s.add_argument(ax.cli, dest=ax.name, type=_finite(ax.cli), metavar=ax.metavar,
+                       help=f"{ax.doc}; within {ax.bounds_text()}"
+                            + ("" if ax.default is None else f" (default: {ax.default:g})"))
     s.add_argument("--out", required=True, metavar="DIR", help="output folder (new or empty, unless --force)")
     s.add_argument("--force", "--overwrite", action="store_true",
                    help="write into a non-empty --out: first remove the files an extrapolation writes there "

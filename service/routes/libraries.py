@@ -37,11 +37,11 @@ def _library(db: Database, library_id: str, owner: str) -> dict:
     summary="start a motion library: one extrapolation job per cell of a grid (or per target of a list)",
     description="The cells are queued as independent jobs (nearest the tutor first) and run by the workers; "
                 "each starts from the stored optimum furthest along its own homotopy (docs/service.md, "
-                "'Motion libraries'). A grid has at most 125 cells. The speed axis (speed_scale) needs a solver "
-                "that has it (422 otherwise).",
+                "'Motion libraries'). A grid has at most 125 cells; its axes and their bounds are "
+                "the solver's grid axes (GET /axes).",
     responses={202: {"headers": {"Location": {"schema": {"type": "string"}}}},
                404: {"description": "no such motion for this key"},
-               422: {"description": "an axis the solver does not have, too many cells, a repeated value or "
+               422: {"description": "an unknown axis, a value out of its bounds, too many cells, a repeated value or "
                                     "target, or a source motion beyond the limits"}},
 )
 def create_library(

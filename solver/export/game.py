@@ -43,6 +43,7 @@ import numpy as np
 
 from solver import kinematics
 from solver.motion import FEET, Motion
+from solver.environment import STANDARD_GRAVITY_VECTOR, environment_of
 
 #: a loop closes when the segment origins at frame P match the loop transform of frame 0 within
 LOOP_TOLERANCE_M = 1e-4
@@ -115,7 +116,7 @@ def closure(motion: Motion, P: int | None = None) -> dict[str, float]:
 
 def slope_deg(environment: Mapping[str, Any] | None) -> float:
     """Ground slope along +x from a gravity vector tilted by R_y(slope): g ∝ (−sin, 0, −cos)."""
-    g = (environment or {}).get("gravity") or (0.0, 0.0, -9.81)
+    g = (environment or {}).get("gravity") or STANDARD_GRAVITY_VECTOR
     return math.degrees(math.atan2(-float(g[0]), -float(g[2])))
 
 
@@ -153,8 +154,8 @@ def game_data(motion: Motion, *, axes: np.ndarray | None = None, frames: int | N
     chord = float(np.linalg.norm(xy[P] - xy[0]))
     dpsi = float(psi[P] - psi[0])
     arc = chord if abs(dpsi) < 1e-9 else chord * (dpsi / 2.0) / math.sin(dpsi / 2.0)
-    env = dict((motion.provenance or {}).get("environment") or {})
-    g = env.get("gravity") or (0.0, 0.0, -9.81)
+    env = environment_of(motion).to_dict()
+    g = env["gravity"]
     root_pos = np.c_[xy, np.zeros(T)] @ A.T
     q = motion.q
     in_place_yaw = q[ROOT_YAW] - psi

@@ -29,7 +29,9 @@ from typing import Any
 
 import numpy as np
 
-G = 9.81
+from solver.environment import STANDARD_GRAVITY
+
+G = STANDARD_GRAVITY
 #: relative difference between the stated and the implied mass above which we warn
 MASS_TOLERANCE = 0.05
 MIN_STANCE_S = 0.1

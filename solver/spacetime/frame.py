@@ -2,7 +2,8 @@
 character), with their exact derivatives: the building blocks of the spacetime NLP.
 
 Wrenches are scaled (force / body weight W, moment / (W × leg length L)) and taken about a
-per-frame reference point on the ground under each foot, so they are O(1).
+per-frame reference point on the ground under each foot (x, y, ground height), so they are
+O(1). The ground under each contact point is a per-frame parameter (terrain: stairs).
 
 The trajectory is the C² cubic spline through the frames (``solver.trajectory``): with knot
 velocities v, the segment [a, b] of duration h is the Hermite cubic of (q_a, v_a, q_b, v_b).
@@ -111,7 +112,8 @@ class FrameFunctions:
         model = ch.model
         rl = self.realism
         self._foot_indices()
-        self.z = ca.Function("z", [q], [ca.vertcat(*[p[2] for p in pts])])
+        gnd = ca.SX.sym("ground", self.P)
+        self.z = ca.Function("z", [q, gnd], [ca.vertcat(*[p[2] for p in pts]) - gnd])  # height above the ground
 
         # no slip between consecutive frames (x, y of pinned points; the toe's sideways
         # component when the heel is pinned too), and no spin of each foot about the vertical
@@ -135,7 +137,7 @@ class FrameFunctions:
         # feet: friction cone, CoP box, torsional friction, free-moment cap; support (last row)
         w = ca.SX.sym("w", 12)
         mu = ca.SX.sym("mu")
-        ref = ca.SX.sym("ref", 4)
+        ref = ca.SX.sym("ref", 6)  # per foot: the reference point (x, y, ground height)
         L = self.length_scale
         rows = []
         for k, side in enumerate(FEET):
@@ -151,7 +153,8 @@ class FrameFunctions:
             nmom = ns * self.moment_scale
             fz = fs[2] * self.weight_scale
             rows.append(mu * fs[2] - ca.sqrt(fs[0] ** 2 + fs[1] ** 2 + CONE_EPS**2))
-            fu = ca.vertcat(fz * ref[2 * k] - nmom[1], fz * ref[2 * k + 1] + nmom[0], 0)
+            # f_z × the CoP (on the ground plane at the reference point's height)
+            fu = ca.vertcat(fz * ref[3 * k] - nmom[1], fz * ref[3 * k + 1] + nmom[0], fz * ref[3 * k + 2])
             local = ca.mtimes(R.T, fu - fz * pc) / self.weight_scale
             for kk in range(3):
                 rows.append(foot.half[kk] * fs[2] - local[kk])
@@ -173,7 +176,7 @@ class FrameFunctions:
         qa, va, qb, vb = (ca.SX.sym(s, n) for s in ("qa", "va", "qb", "vb"))
         wa, wb = ca.SX.sym("wa", 12), ca.SX.sym("wb", 12)
         g, h, turn = ca.SX.sym("g", 3), ca.SX.sym("h"), ca.SX.sym("turn")
-        ra, rb = ca.SX.sym("ra", 4), ca.SX.sym("rb", 4)
+        ra, rb = ca.SX.sym("ra", 6), ca.SX.sym("rb", 6)
         anc_a, anc_b = ca.SX.sym("anc_a", 3), ca.SX.sym("anc_b", 3)
         M, W = self.moment_scale, self.weight_scale
 
@@ -183,7 +186,7 @@ class FrameFunctions:
             for k in range(2):
                 wk = wv[6 * k : 6 * k + 6]
                 nk, fk = rz(tr, wk[:3]) * M, rz(tr, wk[3:]) * W
-                r = ca.vertcat(ref[2 * k], ref[2 * k + 1], 0)
+                r = ref[3 * k : 3 * k + 3]
                 n_o += nk + ca.cross(r, fk)
                 f_o += fk
             return n_o, f_o
@@ -222,7 +225,7 @@ class FrameFunctions:
         # the centre of mass (per-frame parameter): whole-body Newton–Euler from positions sees
         # m (a_{k-1} - 2 a_k + a_{k+1}) / 6 between the spline's accelerations and the positions'
         # second differences, so these must stay small for the motion to be realistic
-        wc, rc = ca.SX.sym("wc", 12), ca.SX.sym("rc", 4)
+        wc, rc = ca.SX.sym("wc", 12), ca.SX.sym("rc", 6)
         com_a, com_b, com_c = ca.SX.sym("com_a", 3), ca.SX.sym("com_b", 3), ca.SX.sym("com_c", 3)
         ta, tc = ca.SX.sym("ta"), ca.SX.sym("tc")
         tot = []

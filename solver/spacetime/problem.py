@@ -38,6 +38,7 @@ import casadi as ca
 import numpy as np
 
 from solver.character import Character
+from solver.environment import stair_heights, stair_rise
 from solver.kinematics import contact_points, markers
 from solver.motion import FEET, foot_schedule_of
 from solver.spacetime.derivatives import Term, assemble
@@ -49,9 +50,13 @@ log = logging.getLogger(__name__)
 
 #: root coordinates that repeat over a cycle (root_tz, pitch, roll); x, y, yaw: under the cycle's transform
 ROOT_PERIODIC = (2, 4, 5)
+ROOT_Z = 2  # on stairs (``rising``): root z[T−2] = z[0] + the cycle's rise, not periodic
 YAW = 3
 MARKER_SCALE = 0.01  # m: the objective is in units of (1 cm)²
-P_LAYOUT = ("gm", "gq", "g", "mu", "wts", "ref", "anchor", "dpsi", "com")
+#: parameter blocks in order; "h" is the frame interval (s) of the spline: the speed axis changes it
+#: "ground": per contact point and frame, the ground height (terrain); "rise": the cycle's
+#: height gain (root z of frames T−2, T−1 over frames 0, 1; stairs)
+P_LAYOUT = ("gm", "gq", "g", "mu", "wts", "ref", "anchor", "dpsi", "com", "h", "ground", "rise")
 
 
 def _heading(vx, vy, psi):
@@ -59,10 +64,12 @@ def _heading(vx, vy, psi):
     return ca.vertcat(c * vx + s * vy, -s * vx + c * vy)
 
 
-def _cyclic_root_function(dynamics: bool) -> ca.Function:
-    """Rows tying frames T−2, T−1 to frames 0, 1 for x, y, yaw (and their velocities)."""
-    z = ca.SX.sym("z", 20 if dynamics else 12)
+def _cyclic_root_function(dynamics: bool, rising: bool = False) -> ca.Function:
+    """Rows tying frames T−2, T−1 to frames 0, 1 for x, y, yaw (and their velocities); with
+    ``rising``, root z too: raised by the cycle's rise."""
+    z = ca.SX.sym("z", (20 if dynamics else 12) + (4 if rising else 0))
     dpsi = ca.SX.sym("dpsi")
+    rise = ca.SX.sym("rise")
     xa, ya, yaw = z[0:4], z[4:8], z[8:12]  # frames (0, 1, T−2, T−1)
     rows = [_heading(xa[3] - xa[2], ya[3] - ya[2], yaw[2]) - _heading(xa[1] - xa[0], ya[1] - ya[0], yaw[0])]
     if dynamics:  # the heading change over the cycle is exact
@@ -72,20 +79,26 @@ def _cyclic_root_function(dynamics: bool) -> ca.Function:
                  _heading(vx[3], vy[3], yaw[3]) - _heading(vx[1], vy[1], yaw[1])]
     else:  # kinematic fit: the yaw rate repeats, the turn follows the capture's markers
         rows.append((yaw[3] - yaw[2]) - (yaw[1] - yaw[0]))
-    return ca.Function("cyc", [z, dpsi], [ca.vertcat(*rows)])
+    if rising:
+        rz_ = z[z.shape[0] - 4:]
+        rows += [rz_[2] - rz_[0] - rise, rz_[3] - rz_[1] - rise]
+    return ca.Function("cyc", [z, dpsi, rise], [ca.vertcat(*rows)])
 
 
 class SpacetimeProblem:
     """The NLP of SPEC 5.29 for one structure; solve it many times with new parameters."""
 
     def __init__(self, character: Character, T: int, fps: float, contacts: np.ndarray | None, *,
-                 cyclic: bool = True, dynamics: bool = True, ipopt_options: Mapping[str, Any] | None = None) -> None:
+                 cyclic: bool = True, dynamics: bool = True, ipopt_options: Mapping[str, Any] | None = None,
+                 rising: bool = False) -> None:
         t0 = time.perf_counter()
         self.character = character
         self.T = Tn = int(T)
         self.fps = float(fps)
         self.dt = 1.0 / self.fps
         self.cyclic, self.dynamics = bool(cyclic), bool(dynamics)
+        #: root z may gain a rise over the cycle (stairs): its overlap frames are variables
+        self.rising = bool(rising)
         n = self.n = character.n
         if Tn < 5:
             raise ValueError(f"too few frames for a spacetime problem: {T}")
@@ -111,12 +124,15 @@ class SpacetimeProblem:
         periodic = np.zeros(n, dtype=bool)
         periodic[6:] = True
         periodic[list(ROOT_PERIODIC)] = True
+        if self.rising:
+            periodic[ROOT_Z] = False
         self.periodic = periodic
         k = 0
         self._q_index, k = self._index(periodic, k)
         self.nq_vars = k
         v_periodic = periodic.copy()
         v_periodic[YAW] = True
+        v_periodic[ROOT_Z] = True  # the vertical velocity repeats, also on stairs
         self._v_index, k = self._index(v_periodic, k) if dynamics else (np.zeros((n, 0), dtype=int), k)
         self.nv_vars = k - self.nq_vars
         self.eom_frames = list(range(1, Tn - 1)) if dynamics else []
@@ -127,8 +143,8 @@ class SpacetimeProblem:
 
         x = self._x = ca.MX.sym("x", self.nx)
         nm3 = 3 * ff.n_markers
-        sizes = {"gm": nm3 * Tn, "gq": n * Tn, "g": 3, "mu": 1, "wts": 7, "ref": 4 * Tn, "anchor": 3 * Tn, "dpsi": 1,
-                 "com": 3 * Tn}
+        sizes = {"gm": nm3 * Tn, "gq": n * Tn, "g": 3, "mu": 1, "wts": 7, "ref": 6 * Tn, "anchor": 3 * Tn, "dpsi": 1,
+                 "com": 3 * Tn, "h": 1, "ground": max(ff.P, 1) * Tn, "rise": 1}
         self._p_layout, off = {}, 0
         for name in P_LAYOUT:
             self._p_layout[name] = (off, sizes[name])
@@ -141,8 +157,12 @@ class SpacetimeProblem:
 
         GM, GQ = par("gm", (nm3, Tn)), par("gq", (n, Tn))
         grav, mu, wts, dpsi = par("g"), par("mu"), par("wts"), par("dpsi")
-        REF, ANCHOR = par("ref", (4, Tn)), par("anchor", (3, Tn))
+        REF, ANCHOR = par("ref", (6, Tn)), par("anchor", (3, Tn))
+        self._GROUND, self._RISE = par("ground", (max(ff.P, 1), Tn)), par("rise")
         self._COM = par("com", (3, Tn))
+        self._H = par("h")
+        #: constraint rows whose bounds scale with the frame interval: (rows, fn(h) -> (lo, hi))
+        self._h_bounds: list[tuple[np.ndarray, Any]] = []
         qi, vi = self._q_index, self._v_index
         self._terms: list[Term] = []
         self._g_parts: list[ca.MX] = []
@@ -171,8 +191,9 @@ class SpacetimeProblem:
                           np.arange(self.nq_vars + self.nv_vars, self.nx)))
         g = ca.vertcat(*self._g_parts) if self._g_parts else ca.MX(0, 1)
         self.ng = int(g.shape[0])
-        self._lbg_a = np.concatenate(self._lbg) if self._lbg else np.zeros(0)
-        self._ubg_a = np.concatenate(self._ubg) if self._ubg else np.zeros(0)
+        self._lbg_raw = np.concatenate(self._lbg) if self._lbg else np.zeros(0)
+        self._ubg_raw = np.concatenate(self._ubg) if self._ubg else np.zeros(0)
+        self._lbg_a, self._ubg_a = self.constraint_bounds(self.dt)
         self._jac, self._hess, self.hessian_nnz, self.jacobian_nnz = assemble(self._terms, x, p, g, self.nx,
                                                                                 self.ng, extra)
         self._nlp = {"x": x, "p": p, "f": objective, "g": g}
@@ -221,10 +242,12 @@ class SpacetimeProblem:
         parts = [qi[0, fr], qi[1, fr], qi[YAW, fr]]
         if self.dynamics:
             parts += [vi[0, fr], vi[1, fr]]
-        fn = _cyclic_root_function(self.dynamics)
+        if self.rising:
+            parts += [qi[ROOT_Z, fr]]
+        fn = _cyclic_root_function(self.dynamics, self.rising)
         rows = fn.size1_out(0)
-        self._rows(Term("cyc", fn, 1, np.concatenate(parts)[:, None], [dpsi]), [(0, r) for r in range(rows)], 0.0, 0.0,
-                   "cyclic_root")
+        self._rows(Term("cyc", fn, 1, np.concatenate(parts)[:, None], [dpsi, self._RISE]),
+                   [(0, r) for r in range(rows)], 0.0, 0.0, "cyclic_root")
 
     def _wrench_columns(self, frames: list[int]) -> np.ndarray:
         """(12, len(frames)) wrench variable indices; frame T−1 is frame 1 (turned by Δψ)."""
@@ -235,7 +258,7 @@ class SpacetimeProblem:
         ff, Tn, qi, vi = self.ff, self.T, self._q_index, self._v_index
         A = self.contacts
         B = self.foot_contact()
-        h = self.dt
+        h = self._H  # the frame interval: an NLP parameter
         frames = self.distinct_frames
         D = ff.derivatives
         # contact heights
@@ -244,11 +267,12 @@ class SpacetimeProblem:
             for j in range(ff.P):
                 sel.append((c, j))
                 hi.append(0.0 if A[j, t] else math.inf)
-        self._rows(Term("z", ff.z, 1, qi[:, frames], [], derivatives=D["z"]), sel, 0.0, np.array(hi), "contact")
+        self._rows(Term("z", ff.z, 1, qi[:, frames], [self._GROUND[:, frames]], derivatives=D["z"]), sel, 0.0,
+                   np.array(hi), "contact")
         # no slip, no spin between consecutive frames
         pairs = frames
         sel, lo, hi = [], [], []
-        spin = math.sin(math.radians(ff.realism.spin_rate_deg_s) * h)
+        spin_rows = []
         for c, t in enumerate(pairs):
             for s_i, side in enumerate(FEET):
                 hh, toe = ff.heel_of[side], ff.toe_of[side]
@@ -264,10 +288,15 @@ class SpacetimeProblem:
                 lo += [0.0] * len(rows)
                 hi += [0.0] * len(rows)
                 if B[s_i, t] and B[s_i, t + 1] and not (heel_pinned and toe_pinned):
+                    spin_rows.append(len(sel))
                     sel.append((c, 2 * ff.P + 2 + s_i))
-                    lo.append(-spin)
-                    hi.append(spin)
+                    lo.append(-math.inf)
+                    hi.append(math.inf)
         nxt = [t + 1 for t in pairs]
+        g0 = self._ng
+        spin_rate = math.radians(ff.realism.spin_rate_deg_s)
+        self._h_bounds.append((g0 + np.array(spin_rows, dtype=int),
+                               lambda hv: (-math.sin(spin_rate * hv), math.sin(spin_rate * hv))))
         self._rows(Term("slip", ff.slip, 2, np.vstack([qi[:, pairs], qi[:, nxt]]), [], derivatives=D["slip"]),
                    sel, np.array(lo), np.array(hi), "no_slip")
         # feet in contact: cone, CoP, torsion, free-moment cap; support
@@ -286,34 +315,33 @@ class SpacetimeProblem:
         K = list(range(1, Tn - 1))
         km, kp = [t - 1 for t in K], [t + 1 for t in K]
         self._rows(Term("c2", ff.c2, 5, np.vstack([qi[:, km], qi[:, kp], vi[:, km], vi[:, K], vi[:, kp]]),
-                        [ca.DM.ones(1, len(K)) * h], derivatives=D["c2"]),
+                        [ca.repmat(h, 1, len(K))], derivatives=D["c2"]),
                    [(c, r) for c in range(len(K)) for r in range(self.n)], 0.0, 0.0, "spline")
         # equations of motion on the segments [k, k+1], k = 1..T−2: at frame k and the midpoint
         Wb = self._wrench_columns(kp)
         turn = ca.horzcat(ca.DM.zeros(1, len(K) - 1), dpsi)
         zseg = np.vstack([qi[:, K], vi[:, K], qi[:, kp], vi[:, kp], W, Wb])
-        seg_params = [ca.repmat(grav, 1, len(K)), ca.DM.ones(1, len(K)) * h, REF[:, K], REF[:, kp],
+        seg_params = [ca.repmat(grav, 1, len(K)), ca.repmat(h, 1, len(K)), REF[:, K], REF[:, kp],
                       ANCHOR[:, K], ANCHOR[:, kp], turn]
         self._rows(Term("seg", ff.seg, 6, zseg, seg_params, derivatives=D["seg"]),
                    [(c, r) for c in range(len(K)) for r in range(12)], 0.0, 0.0, "eom")
         # realism: bounded change of the total ground force per frame; costs on wrench change and jerk
-        fr = ff.realism.force_rate * h
-        self._rows(Term("frate", ff.frate, 2, np.vstack([W, Wb]), [turn], derivatives=D["frate"]),
-                   [(c, 0) for c in range(len(K))], -math.inf, fr * fr, "force_rate")
-        # realism: small second differences of the total ground wrench (frames k−1, k, k+1)
         rl = ff.realism
-        s15 = (15.0 * h) ** 2
+        self._h_bounds.append((self._ng + np.arange(len(K)), lambda hv: (-math.inf, (rl.force_rate * hv) ** 2)))
+        self._rows(Term("frate", ff.frate, 2, np.vstack([W, Wb]), [turn], derivatives=D["frate"]),
+                   [(c, 0) for c in range(len(K))], -math.inf, math.inf, "force_rate")
+        # realism: small second differences of the total ground wrench (frames k−1, k, k+1)
         Wm = self._wrench_columns([T_ if T_ > 0 else Tn - 2 for T_ in km])  # frame 0 is frame T−2 turned back
         ta = ca.horzcat(-dpsi, ca.DM.zeros(1, len(K) - 1))
         sm_params = [REF[:, km], REF[:, K], REF[:, kp], self._COM[:, km], self._COM[:, K], self._COM[:, kp], ta, turn]
+        self._h_bounds.append((self._ng + np.arange(2 * len(K)), lambda hv: (-math.inf, np.tile(
+            [(rl.force_curvature * (15.0 * hv) ** 2) ** 2, (rl.moment_curvature * (15.0 * hv) ** 2) ** 2], len(K)))))
         self._rows(Term("smooth", ff.smooth, 3, np.vstack([Wm, W, Wb]), sm_params, derivatives=D["smooth"]),
-                   [(c, r) for c in range(len(K)) for r in range(2)], -math.inf,
-                   np.tile([(rl.force_curvature * s15) ** 2, (rl.moment_curvature * s15) ** 2], len(K)),
-                   "smooth_ground_wrench")
+                   [(c, r) for c in range(len(K)) for r in range(2)], -math.inf, math.inf, "smooth_ground_wrench")
         self._cost(Term("wrate", ff.wrate, 2, np.vstack([W, Wb]), [turn, ca.repmat(wts[4], 1, len(K))],
                         derivatives=D["wrate"], cost=True))
         self._cost(Term("jerk", ff.jerk, 4, np.vstack([qi[:, K], vi[:, K], qi[:, kp], vi[:, kp]]),
-                        [ca.DM.ones(1, len(K)) * h, ca.repmat(wts[5], 1, len(K))], derivatives=D["jerk"], cost=True))
+                        [ca.repmat(h, 1, len(K)), ca.repmat(wts[5], 1, len(K))], derivatives=D["jerk"], cost=True))
 
     # --- packing ---------------------------------------------------------------------------
     def foot_contact(self) -> np.ndarray:
@@ -344,14 +372,25 @@ class SpacetimeProblem:
     def unpack_v(self, x: np.ndarray) -> np.ndarray:
         return np.asarray(x)[self._v_index]
 
-    def ref_points(self, q: np.ndarray) -> np.ndarray:
-        """Per-frame (x, y) under each foot: the mean of its contact points, on the ground."""
+    def ref_points(self, q: np.ndarray, ground: np.ndarray | None = None) -> np.ndarray:
+        """(6, T) per frame and foot: (x, y) the mean of its contact points, z the ground
+        height under the foot (``ground`` (2, T); default the flat ground z = 0)."""
         cp = contact_points(self.character, q)  # (P, 3, T)
-        ref = np.zeros((4, self.T))
+        ref = np.zeros((6, self.T))
         for k, side in enumerate(FEET):
             idx = [j for j, c in enumerate(self.character.contacts) if c.side == side]
-            ref[2 * k : 2 * k + 2] = cp[idx, :2, :].mean(axis=0)
+            ref[3 * k : 3 * k + 2] = cp[idx, :2, :].mean(axis=0)
+            if ground is not None:
+                ref[3 * k + 2] = ground[k]
         return ref
+
+    def contact_ground(self, ground: np.ndarray) -> np.ndarray:
+        """(P, T) ground height under each contact point from the per-foot heights (2, T)."""
+        side = {s: k for k, s in enumerate(FEET)}
+        out = np.zeros((max(self.ff.P, 1), self.T))
+        for j, c in enumerate(self.character.contacts):
+            out[j] = ground[side[c.side]]
+        return out
 
     def anchor_points(self, q: np.ndarray) -> np.ndarray:
         a = np.zeros((3, self.T))
@@ -366,7 +405,7 @@ class SpacetimeProblem:
         for c, t in enumerate(self.eom_frames):
             for k in range(2):
                 n0, f = wrenches[k, :3, t], wrenches[k, 3:, t]
-                r = np.array([ref[2 * k, t], ref[2 * k + 1, t], 0.0])
+                r = ref[3 * k : 3 * k + 3, t]
                 x[self._w_index[6 * k : 6 * k + 6, c] - base] = np.r_[(n0 - np.cross(r, f)) / self.moment_scale,
                                                                       f / self.weight_scale]
         return x
@@ -384,7 +423,7 @@ class SpacetimeProblem:
             for k in range(2):
                 w = x[self._w_index[6 * k : 6 * k + 6, c]]
                 n_r, f = R @ (w[:3] * self.moment_scale), R @ (w[3:] * self.weight_scale)
-                r = np.array([ref[2 * k, t], ref[2 * k + 1, t], 0.0])
+                r = ref[3 * k : 3 * k + 3, t]
                 out[k, :3, t] = n_r + np.cross(r, f)
                 out[k, 3:, t] = f
 
@@ -429,7 +468,9 @@ class SpacetimeProblem:
         return (m[:, None, None] * X).sum(axis=0) / m.sum()
 
     def parameters(self, guide_markers: np.ndarray, guide_q: np.ndarray, env: Environment, weights: Weights,
-                   ref: np.ndarray, anchor: np.ndarray, dpsi: float, com: np.ndarray | None = None) -> np.ndarray:
+                   ref: np.ndarray, anchor: np.ndarray, dpsi: float, com: np.ndarray | None = None,
+                   h: float | None = None, ground: np.ndarray | None = None, rise: float = 0.0) -> np.ndarray:
+        """The parameter vector (``P_LAYOUT`` order); ``h``: frame interval (s), default 1/fps."""
         nT = self.T
         K = max(len(self.eom_frames), 1)
         wts = [weights.direction / (self.n_markers * nT * MARKER_SCALE**2),
@@ -445,7 +486,18 @@ class SpacetimeProblem:
             np.asarray(env.gravity, dtype=float), [float(env.friction)], wts,
             ref.ravel(order="F"), anchor.ravel(order="F"), [float(dpsi)],
             (np.zeros((3, nT)) if com is None else com).ravel(order="F"),
+            [float(self.dt if h is None else h)],
+            (np.zeros((max(self.ff.P, 1), nT)) if ground is None else ground).ravel(order="F"), [float(rise)],
         ])
+
+    def constraint_bounds(self, h: float) -> tuple[np.ndarray, np.ndarray]:
+        """(lbg, ubg) at the frame interval ``h``: the spin, force-rate and wrench-curvature
+        bounds are rates per second, so their per-frame bounds follow h."""
+        lo, hi = self._lbg_raw.copy(), self._ubg_raw.copy()
+        for rows, fn in self._h_bounds:
+            a, b = fn(float(h))
+            lo[rows], hi[rows] = a, b
+        return lo, hi
 
     # --- solve -----------------------------------------------------------------------------
     def solve(
@@ -465,10 +517,15 @@ class SpacetimeProblem:
         warm: bool = False,
         ipopt_options: Mapping[str, Any] | None = None,
         should_stop: Any = None,
+        frame_interval: float | None = None,
     ) -> SolveResult:
         """Solve at the given parameters. ``heading_change`` Δψ (rad): yaw[T−2] − yaw[0] of the
         optimum (default: the initial motion's). ``should_stop()`` is polled at every iteration
-        (IPOPT stops with ``User_Requested_Stop``)."""
+        (IPOPT stops with ``User_Requested_Stop``). ``frame_interval``: the spline's frame
+        interval h (s), default 1/fps (the speed axis changes it; the frame count is fixed)."""
+        h = self.dt if frame_interval is None else float(frame_interval)
+        if not (math.isfinite(h) and h > 0):
+            raise ValueError(f"the frame interval must be a positive number of seconds, got {frame_interval!r}")
         if guide_markers is None:
             if guide_q is None:
                 raise ValueError("give a guide motion or guide markers")
@@ -490,17 +547,26 @@ class SpacetimeProblem:
         if not math.isfinite(dpsi):
             raise ValueError("the heading change must be finite")
         gq = q0 if guide_q is None else guide_q  # coordinates prior: the guide's, else the start's
-        ref = self.ref_points(q0) if self.dynamics else np.zeros((4, self.T))
+        feet_ground = np.zeros((2, self.T))
+        rise = 0.0
+        if env.step_height_m:
+            if not (self.rising and self.dynamics):
+                raise ValueError("stairs (step_height_m) need a dynamic problem built with rising=True")
+            feet_ground = stair_heights(self.foot_contact(), env.step_height_m)
+            rise = stair_rise(self.foot_contact(), env.step_height_m)
+        ref = self.ref_points(q0, feet_ground) if self.dynamics else np.zeros((6, self.T))
         anchor = self.anchor_points(q0)
         p = self.parameters(guide_markers, gq, env, weights, ref, anchor, dpsi,
-                            self.com_points(q0) if self.dynamics else None)
+                            self.com_points(q0) if self.dynamics else None, h=h,
+                            ground=self.contact_ground(feet_ground), rise=rise)
+        lbg, ubg = self.constraint_bounds(h)
         parts = [self.pack_q(q0)]
         if self.dynamics:
-            parts += [self.pack_v(spline_velocities(q0, self.dt)), self.pack_wrenches(init_wrenches, ref)]
+            parts += [self.pack_v(spline_velocities(q0, h)), self.pack_wrenches(init_wrenches, ref)]
         x0 = np.concatenate(parts)
         lbx, ubx = self.bounds(locks)
         x0 = np.clip(x0, lbx, ubx)
-        args: dict[str, Any] = dict(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=self._lbg_a, ubg=self._ubg_a)
+        args: dict[str, Any] = dict(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
         opts: dict[str, Any] = {"ipopt.max_iter": int(max_iter)}
         if warm and lam_x0 is not None and lam_g0 is not None:
             args["lam_x0"], args["lam_g0"] = lam_x0, lam_g0
@@ -526,7 +592,7 @@ class SpacetimeProblem:
         obj, gval, mk_sum = (np.asarray(v).ravel() for v in self._fg(x, p))
         viol = 0.0
         if self.ng:
-            viol = float(np.max(np.maximum(self._lbg_a - gval, 0) + np.maximum(gval - self._ubg_a, 0)))
+            viol = float(np.max(np.maximum(lbg - gval, 0) + np.maximum(gval - ubg, 0)))
         return SolveResult(
             success=bool(stats.get("success", False)) and status in SUCCESS_STATUSES,
             status=status, iterations=int(stats.get("iter_count", -1)), wall_time=wall, q=q, wrenches=wr,

@@ -8,7 +8,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-STANDARD_GRAVITY = 9.81  # m/s², the tutor's gravity unless the capture says otherwise
+from solver.environment import STANDARD_GRAVITY, Environment  # noqa: F401  (re-exported)
+
 
 DEFAULT_IPOPT = {
     "ipopt.print_level": 0,
@@ -23,22 +24,6 @@ DEFAULT_IPOPT = {
     "error_on_fail": False,
 }
 SUCCESS_STATUSES = ("Solve_Succeeded",)
-
-
-@dataclass(frozen=True)
-class Environment:
-    gravity: tuple[float, float, float] = (0.0, 0.0, -STANDARD_GRAVITY)
-    friction: float = 1.0
-
-    def to_dict(self) -> dict:
-        return {"gravity": [float(g) for g in self.gravity], "friction": float(self.friction)}
-
-    @staticmethod
-    def from_dict(d: Mapping[str, Any] | None) -> "Environment":
-        if not d:
-            return Environment()
-        g = tuple(float(x) for x in d.get("gravity", (0.0, 0.0, -STANDARD_GRAVITY)))
-        return Environment(g, float(d.get("friction", 1.0)))  # type: ignore[arg-type]
 
 
 @dataclass(frozen=True)

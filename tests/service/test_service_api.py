@@ -36,6 +36,19 @@ def motion_id(api) -> str:
     return r.json()["id"]
 
 
+def test_axes_endpoint_is_the_solvers_registry_and_the_target_schema_follows_it(api):
+    from solver import axes as registry
+
+    r = api.anon.get("/axes")  # public, like /health: the page builds its words from it
+    assert r.status_code == 200
+    got = r.json()["axes"]
+    assert [a["name"] for a in got] == list(registry.names())
+    speed = next(a for a in got if a["name"] == "speed_scale")
+    assert (speed["minimum"], speed["maximum"], speed["default"], speed["unit"]) == (0.5, 2.0, 1.0, "×")
+    target = api.anon.get("/openapi.json").json()["components"]["schemas"]["TargetIn"]["properties"]
+    assert list(target) == list(registry.names())
+
+
 def test_health_and_openapi(api):
     assert api.anon.get("/health").json()["status"] == "ok"
     doc = api.anon.get("/openapi.json").json()

@@ -174,7 +174,7 @@ def test_cancel_stops_every_cell(lib_api, tutor_id):
 
 
 @pytest.mark.parametrize("body, words", [
-    ({"grid": {"speed_scale": [0.8, 1.2]}}, "speed"),
+    ({"grid": {"speed_scale": [0.8, 3.0]}}, "speed_scale"),  # out of the axis's bounds [0.5, 2]
     ({"grid": {"slope_deg": [5.0, 5.0]}}, "repeats"),
     ({"grid": {"slope_deg": [1.0, 2.0, 3.0, 4.0, 5.0], "curve_deg": [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]}, "targets": [{}]},
      "either grid or targets"),

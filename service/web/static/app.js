@@ -74,12 +74,24 @@ const fmt = (x, digits = 3) => (typeof x === 'number' && Number.isFinite(x) ? St
 const sci = (x) => (typeof x === 'number' && Number.isFinite(x) ? (x === 0 ? '0' : x.toExponential(1)) : '–');
 const clock = (iso) => (iso ? new Date(iso).toLocaleString([], { dateStyle: 'short', timeStyle: 'medium' }) : '');
 
+// the homotopy axes (GET /axes, the solver's registry): names, units, words, defaults
+let AXES = [];
+
+async function loadAxes() {
+  try {
+    const res = await fetch('/axes');
+    if (res.ok) AXES = (await res.json()).axes;
+  } catch (err) {
+    noteError('axes', err);
+  }
+}
+
+const axisOf = (name) => AXES.find((a) => a.name === name);
+const axisChanges = (a, v) => v !== null && v !== undefined && (a.default === null || v !== a.default);
+
 function targetText(t = {}) {
   const parts = [];
-  if (t.slope_deg) parts.push(`slope ${t.slope_deg}°`);
-  if (t.curve_deg) parts.push(`curve ${t.curve_deg}°`);
-  if (t.friction !== null && t.friction !== undefined) parts.push(`friction ${t.friction}`);
-  if (t.gravity !== null && t.gravity !== undefined) parts.push(`gravity ${t.gravity} m/s²`);
+  for (const a of AXES) if (axisChanges(a, t[a.name])) parts.push(a.words.replace('{}', t[a.name]));
   return parts.join(', ') || '–';
 }
 
@@ -316,11 +328,11 @@ async function cancelJob() {
 
 // ---------------------------------------------------------------- a library
 
-const AXIS_TEXT = { slope_deg: ['slope', '°'], curve_deg: ['curve', '°'], speed_scale: ['speed', '×'] };
-const axisValue = (axis, v) => `${(AXIS_TEXT[axis] || [axis])[0]} ${v}${(AXIS_TEXT[axis] || ['', ''])[1]}`;
+const axisLabel = (axis) => (axisOf(axis) ? axisOf(axis).label : axis);
+const axisValue = (axis, v) => (axisOf(axis) ? axisOf(axis).words.replace('{}', v) : `${axis} ${v}`);
 
 function libraryTitle(lib) {
-  if (lib.grid) return Object.entries(lib.grid).map(([a, vs]) => `${(AXIS_TEXT[a] || [a])[0]} ×${vs.length}`).join(' · ');
+  if (lib.grid) return Object.entries(lib.grid).map(([a, vs]) => `${axisLabel(a)} ×${vs.length}`).join(' · ');
   return `${lib.progress.cells} targets`;
 }
 
@@ -413,7 +425,7 @@ function renderLibrary(lib) {
     const rv = lib.grid[ra] || [null];
     const cv = ca ? lib.grid[ca] : [null];
     const at = new Map(lib.cells.map((c) => [`${c.parameters[ra]}|${ca ? c.parameters[ca] : ''}`, c]));
-    rows.push(h('tr', {}, h('th', {}, ca ? `${(AXIS_TEXT[ra] || [ra])[0]} \\ ${(AXIS_TEXT[ca] || [ca])[0]}` : ''),
+    rows.push(h('tr', {}, h('th', {}, ca ? `${axisLabel(ra)} \\ ${axisLabel(ca)}` : ''),
       ...cv.map((v) => h('th', {}, ca ? axisValue(ca, v) : ''))));
     for (const r of rv) {
       rows.push(h('tr', {}, h('th', {}, axisValue(ra, r)), ...cv.map((c) => {
@@ -610,7 +622,8 @@ async function loadPreview(id, token, validation) {
     const [glb, report] = await Promise.all([api(`/motions/${id}?format=glb`, { as: 'arrayBuffer' }), validation]);
     if (token !== motionToken) return;
     const gravity = report && report.environment ? report.environment.gravity : undefined;
-    await v.show(glb, { gravity });
+    const treads = report && report.environment ? report.environment.treads : undefined; // stairs
+    await v.show(glb, { gravity, treads });
     if (token !== motionToken) return;
     state.previewReady = true;
   } catch (err) {
@@ -692,7 +705,7 @@ function start() {
   });
 
   const key = keyFromFragment() ?? localStorage.getItem(KEY_STORAGE) ?? '';
-  useKey(key);
+  loadAxes().finally(() => useKey(key)); // the target words and grid labels come from GET /axes
   setInterval(() => {
     if (!document.hidden) refreshLists();
   }, LIST_POLL_MS);

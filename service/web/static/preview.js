@@ -89,7 +89,7 @@ export class Viewer {
   }
 
   /** Shows the motion in `glb` (an ArrayBuffer); `gravity` is the motion's gravity (motionx axes: Z up). */
-  async show(glb, { gravity } = {}) {
+  async show(glb, { gravity, treads } = {}) {
     const gltf = await new GLTFLoader().parseAsync(glb, '');
     this.clear();
     this.model = gltf.scene;
@@ -100,6 +100,7 @@ export class Viewer {
       }
     });
     this.world.add(this.model);
+    this.drawTreads(treads);
     this.mixer = new THREE.AnimationMixer(this.model);
     const clip = gltf.animations[0];
     if (clip) this.mixer.clipAction(clip).play();
@@ -129,7 +130,30 @@ export class Viewer {
     this.camera.position.copy(center).addScaledVector(VIEW_DIRECTION, distance);
   }
 
+  /** Stairs: one box per stance, its top at the tread's height (motionx x, y, z → glTF z, x, y). */
+  drawTreads(treads) {
+    if (this.treads) {
+      this.world.remove(this.treads);
+      this.treads.traverse((o) => o.geometry && o.geometry.dispose());
+      this.treads = null;
+    }
+    if (!Array.isArray(treads) || !treads.length) return;
+    this.treads = new THREE.Group();
+    this.treads.name = 'treads';
+    const bottom = Math.min(0, ...treads.map((t) => t.center[2])) - 0.02;
+    const material = new THREE.MeshStandardMaterial({ color: 0xb9bec6, roughness: 0.9 });
+    for (const t of treads) {
+      const [x, y, z] = t.center;
+      const height = Math.max(z - bottom, 0.01);
+      const box = new THREE.Mesh(new THREE.BoxGeometry(0.5, height, 0.32), material);
+      box.position.set(y, bottom + height / 2, x);
+      this.treads.add(box);
+    }
+    this.world.add(this.treads);
+  }
+
   clear() {
+    this.drawTreads(null);
     if (!this.model) return;
     this.mixer.stopAllAction();
     this.world.remove(this.model);

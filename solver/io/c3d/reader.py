@@ -12,10 +12,11 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from solver.io.errors import InputError
+from solver.environment import STANDARD_GRAVITY
 
 log = logging.getLogger("solver.io.c3d")
 
-G = 9.81
+G = STANDARD_GRAVITY
 SIDES = ("r", "l")
 FEET = ("right", "left")
 
