@@ -4,12 +4,14 @@
 * ``types``: Environment, Weights, Realism bounds, SolveResult, IPOPT defaults;
 * ``frame``: the generic functions of a frame, a pair of frames, a spline segment;
 * ``derivatives``: the mapped-derivative scatter engine;
+* ``layout``: how motions, wrenches and weights map onto x and p; ``callback``: stopping a solve;
 * ``problem``: the NLP of one structure, re-solved with new parameters.
 """
 
 from solver.spacetime.derivatives import MAP_THREADS
 from solver.spacetime.frame import FrameFunctions, frame_functions
-from solver.spacetime.problem import MARKER_SCALE, ROOT_PERIODIC, SpacetimeProblem
+from solver.spacetime.layout import MARKER_SCALE
+from solver.spacetime.problem import ROOT_PERIODIC, SpacetimeProblem
 from solver.spacetime.types import (DEFAULT_IPOPT, STANDARD_GRAVITY, SUCCESS_STATUSES, Environment, Realism,
                                     SolveResult, Weights)
 
