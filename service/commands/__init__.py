@@ -12,5 +12,6 @@ MODULES = [  # the order of the command list: the main job first
     "service.commands.demo",
     "service.commands.grf",  # grf, grf-compare
     "service.commands.physics",  # mjcf, check-dynamics
-    "service.commands.serve",  # serve, worker, stack, db, apikey, openapi
+    "service.commands.serve",  # serve, stack, db, apikey, openapi
+    "worker.command",  # worker (named, not imported: service/ never imports worker/)
 ]
