@@ -50,7 +50,7 @@ class stop_on_signals:
     that bounded cleanup runs; leaving the block restores the previous handlers. Outside the
     main thread (where handlers cannot be set) it does nothing."""
 
-    def __enter__(self) -> "stop_on_signals":
+    def __enter__(self) -> stop_on_signals:
         import signal
         import threading
 

@@ -31,8 +31,8 @@ from sqlalchemy.exc import DBAPIError
 
 from service import limits, store
 from service.config import Settings
-from service.limits import LimitError
 from service.db import Database, get_database
+from service.limits import LimitError
 
 log = logging.getLogger(__name__)
 

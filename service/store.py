@@ -199,7 +199,8 @@ def save_step(
 
 def set_validation(session: Session, *, motion_id: str, report: dict) -> None:
     session.execute(
-        update(MotionRow).where(MotionRow.id == motion_id).values(validation=report, plausible=bool(report.get("plausible")))
+        update(MotionRow).where(MotionRow.id == motion_id)
+        .values(validation=report, plausible=bool(report.get("plausible")))
     )
 
 

@@ -188,7 +188,7 @@ class Proc:
 
     def start(self) -> Proc:
         self.log_path.parent.mkdir(parents=True, exist_ok=True)
-        self._log = open(self.log_path, "ab")
+        self._log = open(self.log_path, "ab")  # noqa: SIM115 (the process writes it until stop() closes it)
         self.proc = subprocess.Popen(self.args, env=self.env, stdout=self._log, stderr=subprocess.STDOUT,
                                      start_new_session=True, cwd=str(Path(__file__).resolve().parents[1]))
         return self
@@ -320,7 +320,7 @@ class Stack:
         self.redis = RedisServer(self.data_dir / "redis").start()
         upgrade(self.database_url)
         self.api = start_api(self.env, port=self.port, log_path=self.data_dir / "logs" / "api.log")
-        for i in range(self.workers):
+        for _ in range(self.workers):
             self.add_worker()
         wait_api(self.base_url, self.api, timeout)
         for w in self.worker_procs:

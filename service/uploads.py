@@ -329,7 +329,7 @@ def input_summary(capture: Any, tmp: str) -> dict | None:
         return _hide_paths(jsonable(describe(capture)), tmp)
     except MemoryError:
         raise
-    except Exception:  # noqa: BLE001 - a description must never fail an upload that imported
+    except Exception:
         log.warning("could not describe the uploaded trial", exc_info=True)
         return None
 

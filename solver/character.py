@@ -21,9 +21,9 @@ thesis's "x towards the centre of mass" body frame by an equivalent constant rot
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from functools import cached_property
-from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
@@ -50,7 +50,8 @@ class CharacterError(ValueError):
 def _within(name: str, what: str, values: np.ndarray, limit: float, unit: str) -> None:
     big = float(np.max(np.abs(values))) if np.size(values) else 0.0
     if big > limit:
-        raise CharacterError(f"{name}: {what} {big:.6g} {unit} is outside the physical range (at most {limit:g} {unit})")
+        raise CharacterError(f"{name}: {what} {big:.6g} {unit} is outside the physical range "
+                             f"(at most {limit:g} {unit})")
 
 
 def check_inertia(name: str, mass: float, inertia: np.ndarray, *, moving: bool) -> None:
@@ -73,7 +74,7 @@ def check_inertia(name: str, mass: float, inertia: np.ndarray, *, moving: bool) 
                              "a moving segment needs a positive mass and inertia")
 
 
-def _ro(a: Sequence[float] | np.ndarray, shape: tuple[int, ...], allow_inf: bool = False) -> np.ndarray:
+def _ro(a: sp.Vec | sp.Mat, shape: tuple[int, ...], allow_inf: bool = False) -> np.ndarray:
     arr = np.array(a, dtype=float).reshape(shape)
     if np.any(np.isnan(arr)) or (not allow_inf and not np.all(np.isfinite(arr))):
         raise CharacterError(f"non-finite values in {arr!r}")
@@ -268,7 +269,7 @@ class Character:
         return tuple(d.kind for s in self.segments for d in s.dofs)
 
     @cached_property
-    def model(self) -> "Model":
+    def model(self) -> Model:
         return Model.from_character(self)
 
     def foot(self, side: str) -> FootBox:
@@ -292,7 +293,7 @@ class Character:
             k += len(s.dofs)
         return tuple(out)
 
-    def reduce(self, locked: Iterable[str], name: str | None = None) -> "Character":
+    def reduce(self, locked: Iterable[str], name: str | None = None) -> Character:
         """The character with the ``locked`` coordinates removed (locked at 0, SPEC 5.30).
 
         Segments left without DOF are welded to their parent (exact rigid merge).
@@ -341,7 +342,7 @@ class Model:
     seg_pos: Mapping[str, np.ndarray]  # segment origin in body coordinates
 
     @staticmethod
-    def from_character(ch: Character) -> "Model":
+    def from_character(ch: Character) -> Model:
         parent: list[int] = []
         revolute: list[bool] = []
         rot0: list[np.ndarray] = []
@@ -378,7 +379,7 @@ class Model:
                 seg_body[s.name], seg_rot[s.name], seg_pos[s.name] = pbody, base_rot, base_pos
                 add_inertia(pbody, s.mass, base_pos + base_rot @ s.com, base_rot @ s.inertia @ base_rot.T)
                 continue
-            prev_a = None
+            prev_a = np.eye(3)  # the previous dof's frame (unused at j == 0)
             for j, d in enumerate(s.dofs):
                 a = sp.align_z(d.axis)
                 if j == 0:
@@ -395,11 +396,11 @@ class Model:
             seg_body[s.name], seg_rot[s.name], seg_pos[s.name] = pbody, prev_a.T, np.zeros(3)
             add_inertia(pbody, s.mass, prev_a.T @ s.com, prev_a.T @ s.inertia @ prev_a)
 
-        for a in acc:
-            m = a[0]
+        for a_body in acc:
+            m = a_body[0]
             if m > 0:
-                c = a[1] / m
-                i_com = a[2] - m * (float(c @ c) * np.eye(3) - np.outer(c, c))
+                c = a_body[1] / m
+                i_com = a_body[2] - m * (float(c @ c) * np.eye(3) - np.outer(c, c))
             else:
                 c, i_com = np.zeros(3), np.zeros((3, 3))
             mass.append(m)
@@ -423,7 +424,7 @@ class Model:
             seg_pos=seg_pos,
         )
 
-    def point_on_body(self, segment: str, p_seg: Sequence[float]) -> tuple[int, np.ndarray]:
+    def point_on_body(self, segment: str, p_seg: sp.Vec) -> tuple[int, np.ndarray]:
         """A point given in segment coordinates -> (body index, body coordinates)."""
         b = self.seg_body[segment]
         return b, self.seg_pos[segment] + self.seg_rot[segment] @ np.asarray(p_seg, dtype=float)
@@ -473,15 +474,15 @@ class SegmentSpec:
 
     name: str
     parent: str | None
-    offset: Sequence[float]
+    offset: sp.Vec
     dofs: Sequence[Dof]
     length: float
     mass: float
-    direction: Sequence[float] = (0.0, 0.0, 1.0)
+    direction: sp.Vec = (0.0, 0.0, 1.0)
     density: float = 1050.0
-    orientation: Sequence[Sequence[float]] | None = None
-    com: Sequence[float] | None = None
-    inertia: Sequence[Sequence[float]] | None = None
+    orientation: sp.Mat | None = None
+    com: sp.Vec | None = None
+    inertia: sp.Mat | None = None
 
 
 def build_segment(spec: SegmentSpec) -> Segment:
@@ -588,7 +589,7 @@ DEG = math.pi / 180.0
 FULL_TURN = 2.0 * math.pi
 
 
-def _dof(name: str, axis: Sequence[float], lo_deg: float | None = None, hi_deg: float | None = None) -> Dof:
+def _dof(name: str, axis: sp.Vec, lo_deg: float | None = None, hi_deg: float | None = None) -> Dof:
     lo = -math.pi if lo_deg is None else lo_deg * DEG
     hi = math.pi if hi_deg is None else hi_deg * DEG
     return Dof(name, "hinge", np.asarray(axis, dtype=float), lo, hi)
@@ -840,7 +841,8 @@ def character_to_dict(ch: Character) -> dict:
                 "offset": _arr(s.offset),
                 "orientation": _arr(s.orientation),
                 "dofs": [
-                    {"name": d.name, "kind": d.kind, "axis": _arr(d.axis), "lower": _num(d.lower), "upper": _num(d.upper)}
+                    {"name": d.name, "kind": d.kind, "axis": _arr(d.axis), "lower": _num(d.lower),
+                     "upper": _num(d.upper)}
                     for d in s.dofs
                 ],
                 "mass": s.mass,
@@ -855,7 +857,8 @@ def character_to_dict(ch: Character) -> dict:
         "contacts": [
             {"name": c.name, "side": c.side, "segment": c.segment, "position": _arr(c.position)} for c in ch.contacts
         ],
-        "feet": [{"side": f.side, "segment": f.segment, "center": _arr(f.center), "half": _arr(f.half)} for f in ch.feet],
+        "feet": [{"side": f.side, "segment": f.segment, "center": _arr(f.center), "half": _arr(f.half)}
+                 for f in ch.feet],
     }
 
 
@@ -886,7 +889,8 @@ def character_from_dict(d: Mapping) -> Character:
             for c in d.get("contacts", [])
         )
         feet = tuple(
-            FootBox(str(f["side"]), str(f["segment"]), np.asarray(f["center"], dtype=float), np.asarray(f["half"], dtype=float))
+            FootBox(str(f["side"]), str(f["segment"]), np.asarray(f["center"], dtype=float),
+                    np.asarray(f["half"], dtype=float))
             for f in d.get("feet", [])
         )
     except (KeyError, TypeError, ValueError) as e:

@@ -11,9 +11,9 @@ frame about the world origin, ordered (moment; force) — SPEC 4.7: c = h0.
 from __future__ import annotations
 
 import weakref
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Mapping
-
+from typing import Any
 
 from solver import spatial as sp
 from solver.character import Character, Model
@@ -135,7 +135,7 @@ def root_wrench(character: Character, q: Any, qd: Any, qdd: Any, gravity: Any = 
     return rnea(character, q, qd, qdd, gravity).h0
 
 
-_CASADI_CACHE: "weakref.WeakKeyDictionary[Character, dict]" = weakref.WeakKeyDictionary()
+_CASADI_CACHE: weakref.WeakKeyDictionary[Character, dict] = weakref.WeakKeyDictionary()
 
 
 def casadi_functions(character: Character) -> dict:

@@ -15,8 +15,9 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -284,7 +285,8 @@ def make_tutor(
                                     "build_s": res.stats.get("build_time")}}
     stats["total_s"] = time.perf_counter() - t_start
     src_prov = {"format": capture.source.get("format"), "files": capture.source.get("files"),
-                "subject": capture.source.get("subject"), "cycle": capture.source.get("cycle") or cyc.source.get("cycle")}
+                "subject": capture.source.get("subject"),
+                "cycle": capture.source.get("cycle") or cyc.source.get("cycle")}
     simplified = Motion(syn, fps, q_sim, contacts=contacts, provenance=jsonable({
         "step": "simplify", "source": src_prov, "lambda": None}))
     if not res.success:

@@ -17,11 +17,15 @@ motion vectors (angular; linear), force vectors (moment; force).
 from __future__ import annotations
 
 import math
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
 Scalar = Any
+#: a 3-vector / 3x3 matrix given as numbers: a sequence or an array
+Vec = Sequence[float] | np.ndarray
+Mat = Sequence[Sequence[float]] | np.ndarray
 Vec3 = tuple[Scalar, Scalar, Scalar]
 Mat3 = tuple[Vec3, Vec3, Vec3]
 
@@ -294,7 +298,7 @@ def snap(x: float, tol: float = 1e-14) -> float:
     return x
 
 
-def const_vec(v: Sequence[float]) -> Vec3:
+def const_vec(v: Vec) -> Vec3:
     return (snap(v[0]), snap(v[1]), snap(v[2]))
 
 
@@ -306,7 +310,7 @@ def const_mat(m: Any) -> Mat3:
 # --- plain numpy helpers for model construction ---------------------------------------
 
 
-def rotation_about(axis: Sequence[float], angle: float) -> np.ndarray:
+def rotation_about(axis: Vec, angle: float) -> np.ndarray:
     """Rotation matrix about a unit axis (Rodrigues)."""
     a = np.asarray(axis, dtype=float)
     a = a / np.linalg.norm(a)
@@ -326,7 +330,7 @@ def quaternion_to_matrix(quat: np.ndarray) -> np.ndarray:
     ], -2)
 
 
-def align_z(axis: Sequence[float]) -> np.ndarray:
+def align_z(axis: Vec) -> np.ndarray:
     """A rotation A with A @ e_z = axis (unit); deterministic choice of the other columns.
 
     Exact for the coordinate axes (a permutation with signs), so constant folding applies.
@@ -352,7 +356,7 @@ def align_z(axis: Sequence[float]) -> np.ndarray:
     return np.column_stack([x, y, a])
 
 
-def skew(v: Sequence[float]) -> np.ndarray:
+def skew(v: Vec) -> np.ndarray:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 

@@ -22,7 +22,7 @@ def cmd_worker(args: argparse.Namespace) -> int:
     # warm — imported once in its main process, every pool process forked from it (also the one
     # replacing a killed child) starts warm, with the same code
     import mjcf.validate  # noqa: F401
-    import solver.continuation  # noqa: F401
+    import solver.continuation
     import solver.pipeline  # noqa: F401
 
     argv = [

@@ -58,8 +58,9 @@ def _load(args: argparse.Namespace):
     files = _files(args)
     kinds = [k for k in ("osim", "c3d") if getattr(args, k)] + (["files"] if files else [])
     if len(kinds) != 1:
-        raise CliError("give the trial once: its files (MODEL.osim IK.mot|MARKERS.trc [GRF.mot X.xml] | FILE.c3d | FILE.bvh | "
-                       "DeepMimic CLIP.txt CHARACTER.txt), or --osim MODEL --coordinates IK.mot, or --c3d FILE")
+        raise CliError("give the trial once: its files (MODEL.osim IK.mot|MARKERS.trc [GRF.mot X.xml] | FILE.c3d "
+                       "| FILE.bvh | DeepMimic CLIP.txt CHARACTER.txt), or --osim MODEL --coordinates IK.mot, "
+                       "or --c3d FILE")
     if args.mass is not None and not (math.isfinite(args.mass) and args.mass > 0):
         raise CliError(f"--mass must be a positive number of kg, got {args.mass}")
     belt = parse_belt_speed(args.belt_speed)

@@ -17,11 +17,11 @@ from fastapi.responses import JSONResponse, Response
 from starlette.datastructures import UploadFile
 
 from service import limits, store, uploads, work
+from service.config import Settings
 from service.db import Database
 from service.deps import app_settings, get_db, get_owner
 from service.limits import clip
 from service.problems import Problem, known_id, not_found
-from service.config import Settings
 from service.schemas import MotionOut, MotionPage
 from service.uploads import MAX_FILES, Encoded, ImporterUnavailable, UploadError
 from service.views import motion_out
@@ -123,7 +123,7 @@ async def upload_motion(
         elif ctype == "multipart/form-data":
             form = await request.form(max_files=MAX_FILES, max_fields=16)
             try:
-                unknown = sorted({k for k in form.keys() if k not in MULTIPART_FIELDS})
+                unknown = sorted({k for k in form if k not in MULTIPART_FIELDS})
                 if unknown:
                     raise UploadError(f"unknown form field(s) {clip(str(unknown), 120)}; the fields are "
                                       f"{', '.join(MULTIPART_FIELDS)}")

@@ -78,7 +78,7 @@ def _qp_batch(
 
     # symmetric tie-breaker: ‖D_r y‖² + ‖D_l (c − y)‖²
     D = []
-    for rot, ctr, half in boxes:
+    for _rot, ctr, half in boxes:
         p = ctr.copy()
         p[:, 2] = 0.0
         d = p - r  # foot centre relative to r
@@ -236,7 +236,7 @@ def _solve_batch(batch: _QPBatch, method: str, defer_relaxation: bool = False
         if defer_relaxation:
             status[i] = Status.RELAXED
             continue
-        sol, rows[i] = _relax_frame(batch, i, method)
+        sol, rows[i] = _relax_frame(batch, int(i), method)
         if sol is not None:
             y[i], status[i] = sol, Status.RELAXED
     for i in np.flatnonzero(status == Status.FAILED):

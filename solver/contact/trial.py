@@ -152,7 +152,7 @@ def estimate_capture(
     if isinstance(lateral_hz, str):
         if lateral_hz != "default":
             raise ContactError(f"lateral_hz must be a frequency (Hz), 'default' or None, got {lateral_hz!r}")
-        lateral_hz = DEFAULT_LATERAL_HZ if cutoff_hz is not None and DEFAULT_LATERAL_HZ < cutoff_hz else None
+        lateral_hz = DEFAULT_LATERAL_HZ if cutoff_hz is not None and cutoff_hz > DEFAULT_LATERAL_HZ else None
     est = estimate_contact_wrenches(ch, qf, fps, foot_schedule(sched, ch), cyclic=cyclic, smoothing_hz=smoothing_hz,
                                     project_cop=project_cop, lateral_hz=lateral_hz, **options)
     return TrialEstimate(estimate=est, times=np.asarray(capture.times, dtype=float), q=qf, contacts=sched,

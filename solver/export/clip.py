@@ -56,7 +56,8 @@ def _nullable(a: np.ndarray, decimals: int | None) -> list:
 
 
 def _check_options(decimals: Any, min_load: Any) -> None:
-    if decimals is not None and (isinstance(decimals, bool) or not isinstance(decimals, int) or not 0 <= decimals <= 17):
+    if decimals is not None and (isinstance(decimals, bool) or not isinstance(decimals, int)
+                                 or not 0 <= decimals <= 17):
         raise ExportError(f"decimals must be an integer in [0, 17] or None, got {decimals!r}")
     if min_load is not None and (isinstance(min_load, bool) or not isinstance(min_load, (int, float))):
         raise ExportError(f"min_load must be a number of newtons or None, got {min_load!r}")

@@ -93,7 +93,8 @@ def _trs_matrix(rot: np.ndarray, pos: np.ndarray) -> np.ndarray:
     return m
 
 
-def ellipsoid_mesh(center: np.ndarray, axis: np.ndarray, a: float, b: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def ellipsoid_mesh(center: np.ndarray, axis: np.ndarray, a: float,
+                   b: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A low-poly prolate ellipsoid: (vertices (V, 3), outward normals (V, 3), triangles (F, 3)).
 
     Polar semi-axis ``a`` along the unit ``axis``, equatorial semi-axis ``b``, centred at
@@ -281,7 +282,8 @@ def _document(motion: Motion, meshes: bool, loop: bool = False,
         doc["materials"] = [
             {
                 "name": "segment",
-                "pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.8, 0.8, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.8},
+                "pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.8, 0.8, 1.0], "metallicFactor": 0.0,
+                                         "roughnessFactor": 0.8},
             }
         ]
     log.debug("glTF of %s: %d nodes, %d meshes, %d animations, %d bytes", ch.name, len(nodes), len(mesh_list),

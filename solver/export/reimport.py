@@ -459,6 +459,7 @@ def _accessor(doc: dict, i: int, blobs: dict, blob: bytes | None) -> np.ndarray:
     if b not in blobs:
         blobs[b] = _buffer(doc, b, blob)
     data = blobs[b]
+    dt = np.dtype("<f4")  # the only type accepted above
     stride = view.get("byteStride") or nc * dt.itemsize
     start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
     end = start + (count - 1) * stride + nc * dt.itemsize
@@ -679,7 +680,7 @@ def motion_from_bvh(text: str | bytes, character: Character, *, units: str = "au
     if units == "auto":
         ours = np.array([s.offset for s in character.segments[1:]])
         fit = {u: float(np.abs(raw_off[1:] / f - ours).max()) if len(ours) else 0.0 for u, f in _UNITS.items()}
-        units = min(fit, key=fit.get) if len(ours) else "cm"
+        units = min(fit, key=lambda u: fit[u]) if len(ours) else "cm"
     if units not in _UNITS:
         raise ReimportError(f"units must be 'auto' or one of {sorted(_UNITS)}, got {units!r}")
     scale = _UNITS[units]

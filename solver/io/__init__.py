@@ -29,13 +29,14 @@ expected.
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 from solver.capture import Capture
 from solver.io.errors import InputError
 
-__all__ = ["InputError", "TrialError", "load_trial", "READERS"]
+__all__ = ["READERS", "InputError", "TrialError", "load_trial"]
 
 READERS = {
     "opensim": ".osim + .mot/.sto coordinates or .trc markers (+ GRF .mot, ExternalLoads .xml)",

@@ -48,9 +48,9 @@ from __future__ import annotations
 
 import logging
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Mapping
 
 import numpy as np
 
@@ -60,7 +60,7 @@ from solver.io.track import SkeletonTrack
 
 log = logging.getLogger(__name__)
 
-__all__ = ["BvhError", "BvhClip", "read_bvh", "bvh_track", "load_bvh", "UNIT_M"]
+__all__ = ["UNIT_M", "BvhClip", "BvhError", "bvh_track", "load_bvh", "read_bvh"]
 
 #: metres per file unit; "cmu": the CMU mocap database's BVH conversions (ASF units, 1/0.45 inch)
 UNIT_M = {"cm": 0.01, "m": 1.0, "mm": 0.001, "in": 0.0254, "cmu": 0.0254 / 0.45}

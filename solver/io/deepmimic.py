@@ -43,9 +43,10 @@ from __future__ import annotations
 
 import json
 import logging
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -56,7 +57,7 @@ from solver.io.track import SkeletonTrack
 
 log = logging.getLogger(__name__)
 
-__all__ = ["DeepMimicError", "DeepMimicSkeleton", "read_deepmimic_character", "deepmimic_track", "load_deepmimic"]
+__all__ = ["DeepMimicError", "DeepMimicSkeleton", "deepmimic_track", "load_deepmimic", "read_deepmimic_character"]
 
 C_DM = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 _DOF = {"none": 0, "fixed": 0, "spherical": 4, "revolute": 1}

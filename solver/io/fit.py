@@ -49,8 +49,8 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections.abc import Mapping
 from dataclasses import replace
-from typing import Mapping
 
 import numpy as np
 
@@ -75,7 +75,7 @@ from solver.io.track import LOWER_LANDMARKS, UPPER_LANDMARKS, SkeletonTrack
 
 log = logging.getLogger(__name__)
 
-__all__ = ["FitError", "fit_track", "SEGMENT_LANDMARKS", "decompose_hinges"]
+__all__ = ["SEGMENT_LANDMARKS", "FitError", "decompose_hinges", "fit_track"]
 
 
 class FitError(InputError):
@@ -314,7 +314,8 @@ def _masses(track: SkeletonTrack, segs: list[str], lower_topology: bool) -> tupl
         out.update(legs)
         out["pelvis"] = total - sum(legs.values())
         if out["pelvis"] <= 0:
-            raise FitError(f"segment masses of the legs ({sum(legs.values()):.1f} kg) exceed the subject mass {total} kg")
+            raise FitError(f"segment masses of the legs ({sum(legs.values()):.1f} kg) exceed the subject mass "
+                           f"{total} kg")
         how = "segment_masses (legs) + remainder in pelvis" if given else "Winter table"
     else:
         for s in segs:
@@ -403,19 +404,19 @@ def fit_track(
     masses, total, mass_how = _masses(track, segs, lower_topology=not full_geometry)
     inertias = dict((track.source or {}).get("segment_inertias", {}) or {})
     specs = []
-    for s in ref.segments:
-        d = tip[s.name]
+    for rs in ref.segments:
+        d = tip[rs.name]
         length = float(np.linalg.norm(d))
         if length < 1e-3:
-            raise FitError(f"segment {s.name!r} has zero length in the data ({SEGMENT_LANDMARKS[s.name][:2]})")
-        kind = SEGMENT_LANDMARKS[s.name][2]
+            raise FitError(f"segment {rs.name!r} has zero length in the data ({SEGMENT_LANDMARKS[rs.name][:2]})")
+        kind = SEGMENT_LANDMARKS[rs.name][2]
         com = inertia = None
-        if s.name in inertias and frame_src.get(s.name) == "track":
-            com = np.asarray(inertias[s.name]["com"], dtype=float).reshape(3)
-            inertia = np.asarray(inertias[s.name]["inertia"], dtype=float).reshape(3, 3)
+        if rs.name in inertias and frame_src.get(rs.name) == "track":
+            com = np.array(inertias[rs.name]["com"], dtype=float).reshape(3)
+            inertia = np.array(inertias[rs.name]["inertia"], dtype=float).reshape(3, 3)
         specs.append(
             SegmentSpec(
-                s.name, s.parent, tuple(offset.get(s.name, np.zeros(3))), s.dofs, length, masses[s.name],
+                rs.name, rs.parent, tuple(offset.get(rs.name, np.zeros(3))), rs.dofs, length, masses[rs.name],
                 tuple(d / length), winter_density(kind), com=com, inertia=inertia,
             )
         )
@@ -430,13 +431,16 @@ def fit_track(
         sole = min(heel[2], toe[2])
         top = 0.25 * max(-sole, 0.02)
         if toe[0] - heel[0] < 0.05:
-            raise FitError(f"{full} foot: heel->toe length {toe[0] - heel[0]:.3f} m is not a foot (check the landmarks)")
+            raise FitError(f"{full} foot: heel->toe length {toe[0] - heel[0]:.3f} m is not a foot "
+                           "(check the landmarks)")
         yc = 0.5 * (heel[1] + toe[1])
         feet.append(FootBox(full, f"foot_{side}", np.array([(heel[0] + toe[0]) / 2, yc, (sole + top) / 2]),
                             np.array([(toe[0] - heel[0]) / 2, width / 2, (top - sole) / 2])))
         contacts += [
-            ContactPoint(f"heel_{side}", full, f"foot_{side}", np.array([heel[0] + CONTACT_INSET, yc, sole + CONTACT_INSET])),
-            ContactPoint(f"toe_{side}", full, f"foot_{side}", np.array([toe[0] - CONTACT_INSET, yc, sole + CONTACT_INSET])),
+            ContactPoint(f"heel_{side}", full, f"foot_{side}",
+                         np.array([heel[0] + CONTACT_INSET, yc, sole + CONTACT_INSET])),
+            ContactPoint(f"toe_{side}", full, f"foot_{side}",
+                         np.array([toe[0] - CONTACT_INSET, yc, sole + CONTACT_INSET])),
         ]
         foot_report[full] = {"length_m": float(toe[0] - heel[0]), "width_m": width, "ankle_height_m": float(-sole)}
 
@@ -669,10 +673,10 @@ class _NormalEquations:
         self._cost, self._cost_run = cost.buffer()
         for buf in (self._full, self._cost):
             for i, a in enumerate((self._x, self._tgt, self._w)):
-                buf.set_arg(i, memoryview(a))
+                buf.set_arg(i, memoryview(a))  # type: ignore[call-arg, arg-type]  # casadi's stubs: size is the view's
         for i, a in enumerate((self._c, self._g, self._H)):
-            self._full.set_res(i, memoryview(a))
-        self._cost.set_res(0, memoryview(self._cc))
+            self._full.set_res(i, memoryview(a))  # type: ignore[call-arg, arg-type]
+        self._cost.set_res(0, memoryview(self._cc))  # type: ignore[call-arg, arg-type]
 
     def set_data(self, tgt: np.ndarray, w: np.ndarray) -> None:
         self._tgt[:] = tgt
@@ -695,7 +699,7 @@ def _levenberg_marquardt(fun: _NormalEquations, x0: np.ndarray, max_iter: int = 
     lam = 1e-4
     it = 0
     cost, g, H = fun.normal(x)
-    for it in range(1, max_iter + 1):
+    for _it in range(1, max_iter + 1):
         d = lam * np.diag(H) + PROXIMAL
         accepted = False
         while lam < 1e12:
@@ -732,7 +736,8 @@ def _widen_limits(ch: Character, q: np.ndarray) -> tuple[Character, dict[str, li
             if hi > d.upper:
                 nu = hi + LIMIT_MARGIN
             if (nl, nu) != (d.lower, d.upper):
-                widened[d.name] = [round(math.degrees(nl), 1), round(math.degrees(nu), 1)] if d.kind == "hinge" else [nl, nu]
+                widened[d.name] = ([round(math.degrees(nl), 1), round(math.degrees(nu), 1)] if d.kind == "hinge"
+                                   else [nl, nu])
                 d = Dof(d.name, d.kind, d.axis, nl, nu)
             dofs.append(d)
             k += 1

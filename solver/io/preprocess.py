@@ -38,12 +38,12 @@ log = logging.getLogger(__name__)
 
 __all__ = [
     "PreprocessError",
-    "resample",
-    "lowpass",
-    "detect_contacts",
     "contacts_from_plates",
-    "gait_events",
+    "detect_contacts",
     "extract_cycle",
+    "gait_events",
+    "lowpass",
+    "resample",
     "unroll_loop",
 ]
 
@@ -258,12 +258,13 @@ def contacts_from_plates(
             raise PreprocessError("contacts_from_plates: expected 4 contact points (heel_r, toe_r, heel_l, toe_l)")
     out = np.zeros((4, T), dtype=bool)
     for k in range(2):
-        rows = [2 * k, 2 * k + 1]
+        rows = np.array([2 * k, 2 * k + 1])
         if kin is None:
             out[rows] = loaded[k]
             continue
         from solver.kinematics import contact_points
 
+        assert character is not None  # kin comes from the character's kinematics
         z = contact_points(character, q)[rows, 2]
         sub = kin[rows] & loaded[k]
         none = loaded[k] & ~sub.any(axis=0)
@@ -316,12 +317,13 @@ def unroll_loop(capture: Capture, repeats: int = 2) -> Capture:
             i = names.index(nm)
             disp[i] = q[i, -1] - q[i, 0]
     qs, ts = [q], [t]
-    cs = [capture.contacts] if capture.contacts is not None else None
+    contacts = capture.contacts
+    cs = [contacts] if contacts is not None else None
     for r in range(1, repeats):
         qs.append(q[:, 1:] + r * disp[:, None])
         ts.append(t[1:] + r * period)
-        if cs is not None:
-            cs.append(capture.contacts[:, 1:])
+        if cs is not None and contacts is not None:
+            cs.append(contacts[:, 1:])
     src = dict(capture.source)
     src["unrolled_loops"] = repeats
     return capture.evolve(q=np.hstack(qs), times=np.concatenate(ts),

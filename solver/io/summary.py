@@ -10,7 +10,8 @@ error of our capture skeleton, and the contact schedule as stance intervals per 
 from __future__ import annotations
 
 import logging
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 

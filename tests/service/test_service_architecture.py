@@ -55,7 +55,8 @@ print(json.dumps({
     "modules": names,
     "settings_cached": get_settings.cache_info().currsize,
     "engines": len(_ENGINES) + sum(isinstance(o, Engine) for o in objs),
-    "celery_apps": sum(isinstance(o, Celery) and o.main != "default" for o in objs),  # Celery keeps its own "default" apps
+    # Celery keeps its own "default" apps
+    "celery_apps": sum(isinstance(o, Celery) and o.main != "default" for o in objs),
     "fastapi_apps": sum(isinstance(o, FastAPI) for o in objs),
 }))
 """

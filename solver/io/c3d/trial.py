@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -56,9 +57,9 @@ def read_c3d_trial(path: str | Path, *, mass: float | None = None, require_plate
     # pelvis markers first: they decide the walking direction
     roles = {}
     for role in ("ASI", "PSI"):
-        pair = [mk.find(role, s) for s in ("R", "L")]
-        if all(pair):
-            roles[role] = _mid(mk.get(pair[0]), mk.get(pair[1]))
+        right, left = (mk.find(role, s) for s in ("R", "L"))
+        if right and left:
+            roles[role] = _mid(mk.get(right), mk.get(left))
     if "PSI" not in roles and mk.find("SACR") is not None:
         roles["PSI"] = mk.get(mk.find("SACR"))  # type: ignore[arg-type]
     R, floor, axes_info = _detect_axes(raw, mk, specs, roles)

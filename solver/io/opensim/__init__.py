@@ -86,8 +86,8 @@ COM offset. Body height, when the source does not give it, is estimated by the f
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Mapping
 
 from solver.capture import Capture
 from solver.io.mass import ImpliedMass, implied_mass, mass_warning
@@ -100,16 +100,16 @@ from solver.io.opensim.treadmill import estimate_belt_speed
 log = logging.getLogger(__name__)
 
 __all__ = [
-    "OpenSimError",
-    "Storage",
-    "read_mot",
-    "load_opensim",
-    "opensim_track",
-    "read_opensim_grf",
-    "plates_implied_mass",
-    "estimate_belt_speed",
     "C_OSIM",
     "PLACEHOLDER_MASS_FRACTION",
+    "OpenSimError",
+    "Storage",
+    "estimate_belt_speed",
+    "load_opensim",
+    "opensim_track",
+    "plates_implied_mass",
+    "read_mot",
+    "read_opensim_grf",
 ]
 
 
