@@ -23,6 +23,7 @@ import numpy as np
 
 from solver.capture import Capture, GroundFrame
 from solver.character import FULL_SUPERFLUOUS, LOWER_SUPERFLUOUS, Character, merge_segments
+from solver.gait import extract_cycle
 from solver.kinematics import markers
 from solver.motion import Motion, foot_schedule_of
 from solver.plausibility import report
@@ -228,8 +229,6 @@ def make_tutor(
 ) -> TutorResult:
     """import → cycle → simplify → estimate → correct. ``source`` is a Capture, or a motion of
     step "capture" (e.g. stored by the service)."""
-    from solver.io.preprocess import extract_cycle
-
     t_start = time.perf_counter()
     capture = motion_capture(source) if isinstance(source, Motion) else source
     if not (math.isfinite(fps) and fps > 0):

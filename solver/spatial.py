@@ -310,12 +310,37 @@ def const_mat(m: Any) -> Mat3:
 # --- plain numpy helpers for model construction ---------------------------------------
 
 
-def rotation_about(axis: Vec, angle: float) -> np.ndarray:
-    """Rotation matrix about a unit axis (Rodrigues)."""
+def rotation_about(axis: Vec, angle: float | np.ndarray) -> np.ndarray:
+    """Rotation about ``axis`` (normalised here) by ``angle`` radians (Rodrigues): (3, 3) for a
+    number, (..., 3, 3) for an array of angles. The one rotation-about-an-axis helper (joint
+    DOF, exporters, reimport, transforms); :func:`elementary_rotation` is its exact form about
+    a coordinate axis."""
     a = np.asarray(axis, dtype=float)
     a = a / np.linalg.norm(a)
     k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
-    return np.eye(3) + math.sin(angle) * k + (1 - math.cos(angle)) * (k @ k)
+    th = np.asarray(angle, dtype=float)
+    if th.ndim == 0:
+        t = float(th)
+        return np.eye(3) + math.sin(t) * k + (1 - math.cos(t)) * (k @ k)
+    s = np.sin(th)[..., None, None]
+    c = np.cos(th)[..., None, None]
+    return np.eye(3) + s * k + (1.0 - c) * (k @ k)
+
+
+def elementary_rotation(axis: int, angle: np.ndarray) -> np.ndarray:
+    """Rotations (..., 3, 3) about coordinate axis ``axis`` (0 x, 1 y, 2 z) by ``angle`` radians,
+    written out (cos and sin in place, no rounding of Rodrigues' 1 - (1 - cos)): BVH channels,
+    DeepMimic's heading."""
+    a = np.asarray(angle, dtype=float)
+    c, s = np.cos(a), np.sin(a)
+    o, z = np.ones_like(a), np.zeros_like(a)
+    if axis == 0:
+        rows = [[o, z, z], [z, c, -s], [z, s, c]]
+    elif axis == 1:
+        rows = [[c, z, s], [z, o, z], [-s, z, c]]
+    else:
+        rows = [[c, -s, z], [s, c, z], [z, z, o]]
+    return np.stack([np.stack(r, axis=-1) for r in rows], axis=-2)
 
 
 def quaternion_to_matrix(quat: np.ndarray) -> np.ndarray:

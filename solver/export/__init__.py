@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from solver import spatial as sp
 from solver.character import Character
 from solver.motion import Motion
 
@@ -84,12 +85,8 @@ class LocalTransforms:
     moving_pos: tuple[bool, ...]
 
 
-def _axis_rotations(axis: np.ndarray, angles: np.ndarray) -> np.ndarray:
-    """Rodrigues: rotations about a unit ``axis`` by each angle, shape (T, 3, 3)."""
-    k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
-    s = np.sin(angles)[:, None, None]
-    c = np.cos(angles)[:, None, None]
-    return np.eye(3) + s * k + (1.0 - c) * (k @ k)
+#: the name tests and older code use: rotations about a unit axis by each angle, (T, 3, 3)
+_axis_rotations = sp.rotation_about
 
 
 def local_transforms(character: Character, q: np.ndarray) -> LocalTransforms:

@@ -43,6 +43,7 @@ import numpy as np
 from solver import spatial as sp
 from solver.character import Character
 from solver.export import Y_UP, ExportError, _axis_rotations
+from solver.io.bvh import BvhError, parse_bvh
 from solver.motion import Motion
 
 __all__ = [
@@ -590,93 +591,22 @@ def motion_from_gltf(data: bytes | str | dict, character: Character, *, animatio
 _UNITS = {"m": 1.0, "cm": 100.0, "mm": 1000.0}
 
 
-def _elementary(axis: str, deg: np.ndarray) -> np.ndarray:
-    """(T, 3, 3) rotations about the BVH channel's axis by angles in degrees."""
-    return _axis_rotations(np.eye(3)["XYZ".index(axis)], np.radians(deg))
-
-
-def _parse_bvh(text: str) -> tuple[list, int, float, np.ndarray]:
-    """Joints [(name, parent index, offset, channels)], frame count, frame time, values (T, channels)."""
-    tok = text.split()
-    joints: list = []
-    i = 0
-
-    def expect(word: str) -> None:
-        if i >= len(tok) or tok[i] != word:
-            got = tok[i] if i < len(tok) else "end of file"
-            raise ReimportError(f"BVH: expected {word!r}, got {got!r}")
-
-    def number(j: int) -> float:
-        try:
-            return float(tok[j])
-        except (IndexError, ValueError):
-            raise ReimportError(f"BVH: expected a number, got {tok[j] if j < len(tok) else 'end of file'!r}") from None
-
-    def joint(parent: int) -> None:
-        nonlocal i
-        name = tok[i + 1]
-        i += 2
-        expect("{")
-        i += 1
-        expect("OFFSET")
-        off = np.array([number(i + 1), number(i + 2), number(i + 3)])
-        i += 4
-        chans: list[str] = []
-        if i < len(tok) and tok[i] == "CHANNELS":
-            nch = int(number(i + 1))
-            chans = tok[i + 2: i + 2 + nch]
-            for c in chans:
-                if c not in ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation"):
-                    raise ReimportError(f"BVH: unknown channel {c!r}")
-            i += 2 + nch
-        me = len(joints)
-        joints.append((name, parent, off, chans))
-        while i < len(tok) and tok[i] != "}":
-            if tok[i] == "JOINT":
-                joint(me)
-            elif tok[i] == "End":
-                i += 2  # End Site
-                expect("{")
-                while i < len(tok) and tok[i] != "}":
-                    i += 1
-                i += 1
-            else:
-                raise ReimportError(f"BVH: unexpected {tok[i]!r} in joint {name!r}")
-        expect("}")
-        i += 1
-
-    expect("HIERARCHY")
-    i += 1
-    expect("ROOT")
-    joint(-1)
-    expect("MOTION")
-    if tok[i + 1: i + 2] != ["Frames:"] or tok[i + 3: i + 5] != ["Frame", "Time:"]:
-        raise ReimportError("BVH: expected 'Frames: N' and 'Frame Time: dt' after MOTION")
-    frames, ftime = int(number(i + 2)), number(i + 5)
-    nch = sum(len(j[3]) for j in joints)
-    try:
-        vals = np.array(tok[i + 6:], dtype=float)
-    except ValueError:
-        raise ReimportError("BVH: the motion table holds something that is not a number") from None
-    if vals.size != frames * nch:
-        raise ReimportError(f"BVH: {vals.size} values for {frames} frames x {nch} channels")
-    if not (ftime > 0 and math.isfinite(ftime)):
-        raise ReimportError(f"BVH: Frame Time must be positive, got {ftime}")
-    return joints, frames, ftime, vals.reshape(frames, nch)
-
-
 def motion_from_bvh(text: str | bytes, character: Character, *, units: str = "auto", rot_tol: float = ROT_TOL,
                     len_tol: float = LEN_TOL) -> Reimported:
     """Read a BVH file (Y-up; any rotation channel order). ``units``: "cm", "m", "mm", or
     "auto" (the one that makes the file's joint offsets the character's)."""
     if isinstance(text, bytes):
         text = text.decode("utf-8", errors="replace")
-    joints, T, ftime, vals = _parse_bvh(text)
+    try:
+        clip = parse_bvh(text, "BVH")
+    except BvhError as e:
+        raise ReimportError(str(e)) from None
+    T = clip.T
     where = "the BVH file"
-    names = [j[0] for j in joints]
-    parents = [joints[j[1]][0] if j[1] >= 0 else None for j in joints]
+    names = list(clip.names)
+    parents = [clip.names[p] if p >= 0 else None for p in clip.parents]
     index = _match_skeleton(character, names, parents, where)
-    raw_off = np.array([joints[i][2] for i in index]) @ Y_UP  # ours, file units
+    raw_off = clip.offsets[index] @ Y_UP  # ours, file units
     if units == "auto":
         ours = np.array([s.offset for s in character.segments[1:]])
         fit = {u: float(np.abs(raw_off[1:] / f - ours).max()) if len(ours) else 0.0 for u, f in _UNITS.items()}
@@ -689,18 +619,11 @@ def motion_from_bvh(text: str | bytes, character: Character, *, units: str = "au
     S = len(index)
     rot = np.empty((S, T, 3, 3))
     pos = np.empty((S, T, 3))
-    starts = np.cumsum([0] + [len(j[3]) for j in joints])
     for k, i in enumerate(index):
-        _, _, off, chans = joints[i]
-        r = np.broadcast_to(np.eye(3), (T, 3, 3)).copy()
-        p = np.broadcast_to(off, (T, 3)).copy()
-        for c, col in zip(chans, range(starts[i], starts[i + 1])):
-            if c.endswith("rotation"):
-                r = r @ _elementary(c[0], vals[:, col])
-            else:
-                p[:, "XYZ".index(c[0])] += vals[:, col]
+        r, p = clip.local(i)
         rot[k] = Y_UP.T @ r @ Y_UP
         pos[k] = (p @ Y_UP) / scale
+    ftime = clip.frame_time
     return _coordinates(character, rot, pos, rot_tol=rot_tol, len_tol=len_tol, source="bvh",
                         fps=_fps_from(1.0 / ftime), where=where)
 

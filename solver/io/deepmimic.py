@@ -129,9 +129,7 @@ def _quat_to_matrix(q: np.ndarray) -> np.ndarray:
 
 
 def _rotz(a: np.ndarray) -> np.ndarray:
-    c, s = np.cos(a), np.sin(a)
-    o, z = np.ones_like(a), np.zeros_like(a)
-    return np.stack([np.stack([c, -s, z], 1), np.stack([s, c, z], 1), np.stack([z, z, o], 1)], 1)
+    return sp.elementary_rotation(2, a)
 
 
 def _forward(sk: DeepMimicSkeleton, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

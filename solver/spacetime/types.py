@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -34,7 +35,7 @@ class Environment:
         return {"gravity": [float(g) for g in self.gravity], "friction": float(self.friction)}
 
     @staticmethod
-    def from_dict(d: Mapping[str, Any] | None) -> "Environment":
+    def from_dict(d: Mapping[str, Any] | None) -> Environment:
         if not d:
             return Environment()
         g = tuple(float(x) for x in d.get("gravity", (0.0, 0.0, -STANDARD_GRAVITY)))

@@ -90,7 +90,8 @@ from collections.abc import Mapping
 from pathlib import Path
 
 from solver.capture import Capture
-from solver.io.mass import ImpliedMass, implied_mass, mass_warning
+from solver.gait import detect_contacts, gait_events
+from solver.io.mass import ImpliedMass, implied_mass, mass_warning, stride_from_events
 from solver.io.opensim.base import C_OSIM, OpenSimError
 from solver.io.opensim.external_loads import grf_arrays, read_opensim_grf
 from solver.io.opensim.model import PLACEHOLDER_MASS_FRACTION, opensim_track
@@ -156,9 +157,6 @@ def load_opensim(
                           ik_weights=ik_weights, ik_reweight=ik_reweight)
     cap = fit_track(track, lower_only=lower_only)
     if grf is not None:
-        from solver.io.mass import stride_from_events
-        from solver.io.preprocess import detect_contacts, gait_events
-
         contacts = detect_contacts(cap.character, cap.q, cap.fps)
         measured = read_opensim_grf(grf, grf_xml, times=cap.times, frame=cap.frame, contacts=contacts)
         src = dict(cap.source)
