@@ -151,5 +151,5 @@ def test_package_graph_has_no_upward_import_and_no_cycle():
 def test_no_cycle_between_solver_and_mjcf_subpackages():
     """solver.io, solver.export, solver.contact, solver.spacetime, … and mjcf's modules form a DAG."""
     edges = {k: v for k, v in _module_graph(2).items() if k.split(".")[0] in ("solver", "mjcf")}
-    assert "solver.io" in edges.get("solver.pipeline", set())
+    assert "solver.character" in edges.get("solver.pipeline", set())  # the parser sees the real imports
     assert not _cycles(edges), _cycles(edges)
