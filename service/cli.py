@@ -21,12 +21,14 @@ import os
 import sys
 from pathlib import Path
 
+from solver.formats import reader_suffixes
+
 log = logging.getLogger("motionx")
 
-#: the files of a captured trial (what `motionx tutor` reads), by suffix
-TRIAL_SUFFIXES = {".c3d": "C3D", ".bvh": "BVH", ".osim": "OpenSim model", ".mot": "OpenSim motion",
-                  ".sto": "OpenSim storage", ".trc": "marker trajectories"}
-#: importer parameters (``solver.io.errors.InputError.parameter``) -> the flag that sets them
+#: the files of a captured trial (what `motionx tutor` reads), by suffix: the readers' registry
+#: (solver.formats) but .txt/.json/.xml, which may be a motion file too
+TRIAL_SUFFIXES = {s: kind for s, kind in reader_suffixes().items() if s not in (".txt", ".json", ".xml")}
+#: importer parameters (``solver.errors.InputError.parameter``) -> the flag that sets them
 PARAMETER_FLAGS = {"mass": "--mass KG", "belt_speed": "--belt-speed auto|V"}
 
 

@@ -208,5 +208,9 @@ class CeleryRunner:
         self.app.close()
 
 
+#: the runners by name (``Settings.runner``, ``motionx serve --runner``): the service's registry
+RUNNERS: dict[str, type[LocalRunner] | type[CeleryRunner]] = {"local": LocalRunner, "celery": CeleryRunner}
+
+
 def make_runner(settings: Settings, db: Database) -> Runner:
-    return CeleryRunner(settings, db) if settings.runner == "celery" else LocalRunner(settings, db)
+    return RUNNERS[settings.runner](settings, db)

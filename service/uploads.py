@@ -32,11 +32,13 @@ from typing import Any
 
 from service import limits
 from service.limits import LimitError, clip
+from solver.formats import reader_suffixes
 from solver.motion import Motion, MotionError, motion_from_dict
 
 log = logging.getLogger(__name__)
 
-TRIAL_SUFFIXES = (".osim", ".mot", ".sto", ".trc", ".xml", ".c3d", ".bvh", ".txt", ".json")
+#: every suffix a trial file may have (the readers' registry, solver.formats)
+TRIAL_SUFFIXES = tuple(reader_suffixes())
 MAX_FILES = 8
 #: characters refused in names (SQL text columns, exports): control characters
 _CONTROL = re.compile(r"[\x00-\x1f\x7f]")
@@ -298,7 +300,7 @@ def trial_upload(files: list[tuple[str, bytes]], mass: float | None, belt_speed:
     return dataclasses.replace(encode(motion), input=(motion.provenance or {}).get("input"))
 
 
-#: importer parameters (``solver.io.errors.InputError.parameter``) -> how a client sends them
+#: importer parameters (``solver.errors.InputError.parameter``) -> how a client sends them
 FORM_FIELDS = {"mass": "send the form field 'mass' (kg)", "belt_speed": "send the form field 'belt_speed' (m/s)"}
 
 

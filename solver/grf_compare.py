@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from solver.capture import GroundFrame
+from solver.errors import InputError
 from solver.io.c3d.events import feet_on_plates  # noqa: F401  (the check grf-compare applies)
 
 FEET = ("right", "left")
@@ -49,7 +50,7 @@ UNITS = {"fx": "N", "fy": "N", "fz": "N", "tz": "N·m", "cop": "cm"}
 COP_MIN_LOAD = 0.05  # fraction of the peak measured vertical force
 
 
-class GRFFileError(ValueError):
+class GRFFileError(InputError):
     """A ground-reaction file is malformed; the message names the problem."""
 
 

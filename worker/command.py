@@ -11,16 +11,17 @@ import os
 
 from service.cli import add_command
 from service.commands.serve import _settings
-from worker.app import create_celery
 
 
 def cmd_worker(args: argparse.Namespace) -> int:
+    # lazy (heavy: Celery, SQLAlchemy, the job code): the command line imports every command module
+    from worker.app import create_celery
+
     settings = _settings(broker_url=args.broker_url, database_url=args.database_url,
                          worker_concurrency=args.concurrency)
     app = create_celery(settings)
-    # lazy: the command line imports every command module, and only the worker needs the solver
-    # warm — imported once in its main process, every pool process forked from it (also the one
-    # replacing a killed child) starts warm, with the same code
+    # lazy as above; imported once in the worker's main process, so every pool process forked from
+    # it (also the one replacing a killed child) starts warm, with the same code
     import mjcf.validate  # noqa: F401
     import solver.continuation
     import solver.pipeline  # noqa: F401

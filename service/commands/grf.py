@@ -26,20 +26,13 @@ log = logging.getLogger("motionx")
 
 
 def _user_errors() -> tuple[type[Exception], ...]:
-    """Exceptions that describe bad input (their message is the user-facing error)."""
+    """Exceptions that describe bad input (their message is the user-facing error): every reader's,
+    gait processing's and the force files' (one base, solver.errors.InputError), and the contact
+    estimator's option checks."""
     from solver.contact import ContactError
-    from solver.grf_compare import GRFFileError
-    from solver.io import TrialError
-    from solver.io.bvh import BvhError
-    from solver.io.c3d import C3DError
-    from solver.io.deepmimic import DeepMimicError
-    from solver.io.errors import InputError
-    from solver.io.fit import FitError
-    from solver.io.opensim import OpenSimError
-    from solver.io.preprocess import PreprocessError
+    from solver.errors import InputError
 
-    return (ContactError, GRFFileError, C3DError, FitError, OpenSimError, PreprocessError, TrialError, BvhError,
-            DeepMimicError, InputError)
+    return (InputError, ContactError)
 
 
 def _exists(path: str | None, flag: str) -> None:

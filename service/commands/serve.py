@@ -161,7 +161,7 @@ key configured (MOTIONX_API_KEYS) or stored, it makes one and prints it once."""
     s.add_argument("--host", default=None, metavar="ADDR",
                    help="address to listen on (default: $MOTIONX_HOST or 127.0.0.1; 0.0.0.0 for every interface)")
     s.add_argument("--port", type=int, default=None, metavar="P", help="TCP port (default: $MOTIONX_PORT or 8000)")
-    s.add_argument("--runner", choices=["local", "celery"], default=None,
+    s.add_argument("--runner", default=None, metavar="NAME",  # checked by Settings (service.config.RUNNER_NAMES)
                    help="who runs the jobs: local (a process pool in this process) or celery (`motionx worker`s "
                         "over Redis) (default: $MOTIONX_RUNNER or local)")
     s.add_argument("--log-level", default="info", choices=["critical", "error", "warning", "info", "debug"],

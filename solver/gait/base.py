@@ -11,10 +11,11 @@ import numpy as np
 
 from solver.capture import Capture, MeasuredGRF
 from solver.character import Character
+from solver.errors import InputError
 from solver.filtering import zero_phase_lowpass
 
 
-class GaitError(ValueError):
+class GaitError(InputError):
     """A trial cannot be processed as asked (too short, a foot never on the ground, ...); the
     message says why."""
 

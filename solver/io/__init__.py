@@ -34,16 +34,13 @@ from pathlib import Path
 from typing import Any
 
 from solver.capture import Capture
-from solver.io.errors import InputError
+from solver.errors import InputError
+from solver.formats import READERS as FORMAT_READERS
 
 __all__ = ["READERS", "InputError", "TrialError", "load_trial"]
 
-READERS = {
-    "opensim": ".osim + .mot/.sto coordinates or .trc markers (+ GRF .mot, ExternalLoads .xml)",
-    "c3d": ".c3d",
-    "bvh": ".bvh",
-    "deepmimic": "DeepMimic motion .txt/.json + character .txt/.json",
-}
+#: reader name -> its files in words, from the registry (solver.formats.READERS: suffixes, options)
+READERS = {r.name: r.files for r in FORMAT_READERS}
 
 
 class TrialError(InputError):

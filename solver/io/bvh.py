@@ -56,7 +56,7 @@ import numpy as np
 
 from solver import spatial as sp
 from solver.capture import Capture, GroundFrame
-from solver.io.errors import InputError
+from solver.errors import InputError
 from solver.io.track import SkeletonTrack
 
 log = logging.getLogger(__name__)

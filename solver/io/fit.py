@@ -65,7 +65,7 @@ from solver.character import (
     winter_density,
     winter_mass,
 )
-from solver.io.errors import InputError
+from solver.errors import InputError
 from solver.io.fit_ik import _solve_ik, _widen_limits, decompose_hinges
 from solver.io.track import LOWER_LANDMARKS, UPPER_LANDMARKS, SkeletonTrack
 

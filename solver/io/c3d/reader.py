@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from solver.io.errors import InputError
+from solver.errors import InputError
 
 log = logging.getLogger("solver.io.c3d")
 
