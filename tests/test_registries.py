@@ -34,7 +34,7 @@ def test_front_ends_enumerate_the_registries():
     assert set(uploads.TRIAL_SUFFIXES) == set(reader_suffixes()) == {
         ".osim", ".mot", ".sto", ".trc", ".xml", ".c3d", ".bvh", ".txt", ".json"}
     assert set(TRIAL_SUFFIXES) <= set(reader_suffixes())
-    assert CHOICES == tuple(EXPORTERS)
+    assert tuple(EXPORTERS) == CHOICES
     assert FORMATS == (*EXPORTERS, "motion") == typing.get_args(ExportFormat)
     assert {r.name for r in READERS} == set(solver.io.READERS)
 
