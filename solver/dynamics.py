@@ -146,7 +146,7 @@ def casadi_functions(character: Character) -> dict:
     cached = _CASADI_CACHE.get(character)
     if cached is not None:
         return cached
-    import casadi as ca
+    import casadi as ca  # lazy: keeps CasADi out of numpy-only paths and OpenSim's child process
 
     n = character.n
     q, qd, qdd = ca.SX.sym("q", n), ca.SX.sym("qd", n), ca.SX.sym("qdd", n)

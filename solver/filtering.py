@@ -31,9 +31,11 @@ def butter_sos(order: int, cutoff_hz: float, fps: float) -> np.ndarray:
 
 
 def zero_phase_lowpass(x: np.ndarray, fps: float, cutoff_hz: float, *, order: int, axis: int = -1,
-                       cyclic: bool = False, edge: Literal["filter", "cutoff"] = "cutoff") -> np.ndarray:
+                       cyclic: bool = False, edge: Literal["filter", "cutoff"] = "cutoff",
+                       padlen: int | None = None) -> np.ndarray:
     """``x`` low-passed forwards and backwards along ``axis`` (twice the attenuation of ``order``,
-    no phase lag); see the module docstring for ``edge`` and ``cyclic``."""
+    no phase lag); see the module docstring for ``edge`` and ``cyclic`` (``padlen``: the odd
+    extension's length, instead of ``edge``'s)."""
     from scipy.signal import sosfiltfilt  # as above
 
     sos = butter_sos(int(order), float(cutoff_hz), float(fps))
@@ -48,7 +50,9 @@ def zero_phase_lowpass(x: np.ndarray, fps: float, cutoff_hz: float, *, order: in
         out = sosfiltfilt(sos, ext, axis=-1, padtype=None)
         y = np.concatenate([out[..., k0 * P:(k0 + 1) * P], out[..., k0 * P:k0 * P + 1] + offset], axis=-1)
     else:
-        if edge == "filter":
+        if padlen is not None:
+            pass
+        elif edge == "filter":
             padlen = min(3 * (2 * len(sos) + 1), T - 1)
         else:
             padlen = min(T - 1, int(math.ceil(3 * fps / cutoff_hz)))

@@ -332,10 +332,10 @@ def plot(
     title: str = "",
 ) -> None:
     """PNG of estimated (dashed) vs measured (solid) curves: forces, free moment, CoP."""
-    import matplotlib
+    import matplotlib  # lazy: matplotlib only for this figure
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # lazy: matplotlib only for this figure
 
     t = estimate.times
     fig, axes = plt.subplots(6, 1, figsize=(9, 14), sharex=True)

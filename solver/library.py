@@ -25,9 +25,13 @@ import dataclasses
 import functools
 import itertools
 import math
+import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
+
+from solver.continuation import StepControl, Target, extrapolate
+from solver.export import game
 
 #: axis -> the value that changes nothing (λ = 0 of every homotopy)
 NEUTRAL: dict[str, float] = {"slope_deg": 0.0, "curve_deg": 0.0, "speed_scale": 1.0}
@@ -49,7 +53,6 @@ class LibraryError(ValueError):
 
 
 def target_fields() -> tuple[str, ...]:
-    from solver.continuation import Target
 
     return tuple(f.name for f in dataclasses.fields(Target))
 
@@ -138,7 +141,6 @@ def list_cells(targets: Sequence[Mapping[str, float]]) -> list[Cell]:
 
 def check_cells(cells: Sequence[Cell]) -> None:
     """Every cell's target must be one the solver accepts (its own checks)."""
-    from solver.continuation import Target
 
     for c in cells:
         try:
@@ -251,9 +253,7 @@ def solve_library(tutor, cells: Sequence[Cell], control=None, *,
     """Extrapolate every cell in one process, nearest the tutor first, each warm-started from
     the best stored optimum (:func:`best_start`). The CLI's engine; the service runs the same
     cells as jobs."""
-    import time
 
-    from solver.continuation import StepControl, Target, extrapolate
 
     control = control or StepControl()
     check_cells(cells)
@@ -320,7 +320,6 @@ def cell_entry(cell: Cell, *, status: str, lam_reached: float, message: str = ""
                extra: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """One cell of a manifest: parameters, status (an impasse is marked and keeps its last
     realistic λ), files, realism figures (the plausibility report's) and the clip's cycle."""
-    from solver.export import game
 
     entry: dict[str, Any] = {
         "key": cell.key, "parameters": cell.values, "status": status,

@@ -248,11 +248,11 @@ def schema() -> dict:
 def _validator():
     """jsonschema-rs when installed (a 3,600-frame file in ~6 ms instead of ~2.7 s), else jsonschema."""
     try:
-        import jsonschema_rs
+        import jsonschema_rs  # optional: the fast validator when installed
 
         return "rs", jsonschema_rs.validator_for(schema())
     except ImportError:
-        import jsonschema
+        import jsonschema  # lazy: only validation needs it
 
         return "py", jsonschema.Draft202012Validator(schema())
 

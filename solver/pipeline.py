@@ -23,8 +23,9 @@ import numpy as np
 
 from solver.capture import Capture, GroundFrame
 from solver.character import FULL_SUPERFLUOUS, LOWER_SUPERFLUOUS, Character, merge_segments
+from solver.contact import estimate_contact_wrenches
 from solver.gait import extract_cycle
-from solver.kinematics import markers
+from solver.kinematics import contact_points, markers
 from solver.motion import Motion, foot_schedule_of
 from solver.plausibility import report
 from solver.spacetime import Environment, SolveResult, SpacetimeProblem, Weights
@@ -188,7 +189,6 @@ def problem_for(character: Character, T: int, fps: float, contacts: np.ndarray |
 def estimate_wrenches(character: Character, q: np.ndarray, fps: float, contacts: np.ndarray,
                       gravity=(0.0, 0.0, -9.81)) -> tuple[np.ndarray, dict]:
     """EFC (SPEC §5) on the simplified motion: initial contact wrenches for the correction."""
-    from solver.contact import estimate_contact_wrenches
 
     B = foot_schedule_of(character, contacts)
     est = estimate_contact_wrenches(character, q, fps, B, gravity=gravity)
@@ -206,7 +206,6 @@ def contact_plane_calibration(character: Character, q: np.ndarray, contacts: np.
     capture whose soles touch the floor has them hovering; without this the correction
     would pull the whole body down. Returns the shifted motion and the shift (m).
     """
-    from solver.kinematics import contact_points
 
     cp = contact_points(character, q)
     z = cp[:, 2, :][np.asarray(contacts, dtype=bool)]

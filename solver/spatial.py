@@ -226,7 +226,7 @@ def motion_to_child(rot: Mat3, pos: Vec3, v: tuple[Vec3, Vec3]) -> tuple[Vec3, V
 
 def is_symbolic(x: Any) -> bool:
     try:
-        import casadi as ca
+        import casadi as ca  # lazy: keeps CasADi out of numpy-only paths and OpenSim's child process
     except ImportError:  # pragma: no cover - casadi is a hard dependency
         return False
     return isinstance(x, (ca.SX, ca.MX))
@@ -234,7 +234,7 @@ def is_symbolic(x: Any) -> bool:
 
 def cos(x: Scalar) -> Scalar:
     if is_symbolic(x):
-        import casadi as ca
+        import casadi as ca  # lazy: keeps CasADi out of numpy-only paths and OpenSim's child process
 
         return ca.cos(x)
     if _is_const(x):
@@ -244,7 +244,7 @@ def cos(x: Scalar) -> Scalar:
 
 def sin(x: Scalar) -> Scalar:
     if is_symbolic(x):
-        import casadi as ca
+        import casadi as ca  # lazy: keeps CasADi out of numpy-only paths and OpenSim's child process
 
         return ca.sin(x)
     if _is_const(x):
@@ -270,7 +270,7 @@ def stack(items: Sequence[Scalar], like: Any = None) -> Any:
     Python-constant entries are broadcast to the batch shape of the others.
     """
     if any(is_symbolic(x) for x in items) or is_symbolic(like):
-        import casadi as ca
+        import casadi as ca  # lazy: keeps CasADi out of numpy-only paths and OpenSim's child process
 
         return ca.vertcat(*[x if is_symbolic(x) else ca.DM(float(x)) for x in items])
     shape: tuple[int, ...] = ()

@@ -6,6 +6,7 @@ import logging
 from dataclasses import dataclass
 
 import numpy as np
+import quadprog
 
 from solver.character import Character
 from solver.contact.common import FEASIBILITY_TOL, Status
@@ -142,7 +143,6 @@ def _row_scale(batch: _QPBatch, i: int) -> float:
 
 def _solve_qp(P: np.ndarray, qv: np.ndarray, G: np.ndarray, h: np.ndarray) -> np.ndarray | None:
     """min yᵀPy + 2qᵀy s.t. G y ≤ h with quadprog; None if infeasible."""
-    import quadprog
 
     try:
         return quadprog.solve_qp(2.0 * P, -2.0 * qv, -G.T, -h, 0)[0]
@@ -162,7 +162,6 @@ def _bounds(batch: _QPBatch, i: int) -> tuple[np.ndarray, np.ndarray]:
 def _relaxation(batch: _QPBatch, i: int) -> np.ndarray | None:
     """Smallest least-squares relaxation s (rows weighted to N·m) of the polygon and friction rows
     making frame i feasible, the vertical-force bounds kept."""
-    import quadprog
 
     G, h, w = batch.G[i], batch.h[i], batch.row_weight[i]
     Gb, hb = _bounds(batch, i)

@@ -6,6 +6,7 @@ import logging
 from dataclasses import dataclass
 
 import numpy as np
+import quadprog
 
 from solver.character import Character
 from solver.contact.common import FEASIBILITY_TOL
@@ -92,7 +93,6 @@ def _smooth_split(batch: _QPBatch, y: np.ndarray, rows: list, ds: np.ndarray, li
     under every frame's own constraint rows. κ = fps / (2π f_s): a zero-phase first-order
     low-pass at f_s of the per-frame optimum, in the effort metric, that respects the
     constraints and the boundaries. Returns y (N_ds, 6) about each frame's r."""
-    import quadprog
 
     out = y.copy()
     P = line.period
@@ -219,7 +219,7 @@ def _smooth_split(batch: _QPBatch, y: np.ndarray, rows: list, ds: np.ndarray, li
 def _solve_block_tridiagonal(D: np.ndarray, O: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     """x with the symmetric block-tridiagonal system (diagonal blocks D (N, 6, 6), blocks O (N−1, 6, 6)
     above the diagonal) times x = rhs (N, 6): one banded solve."""
-    from scipy.linalg import solve_banded
+    from scipy.linalg import solve_banded  # lazy: scipy.linalg costs ~0.2 s to import
 
     N, b = D.shape[0], D.shape[1]
     n = N * b

@@ -28,6 +28,7 @@ from solver.export import (
     _check_motion,
     change_axes,
     continuous_quaternions,
+    game,
     ground_reactions,
     local_transforms,
     matrix_to_quaternion,
@@ -159,7 +160,6 @@ def to_clip(
                 for i, foot in enumerate(FEET)
             },
         }
-    from solver.export import game
 
     if game.has_free_root(motion):
         clip["game"] = game.game_json(motion, axes=Y_UP if y_up else None, decimals=decimals)
@@ -190,7 +190,7 @@ def schema() -> dict:
 
 def validate_clip(clip: Any) -> None:
     """Check a clip against the published schema and its array lengths against each other."""
-    import jsonschema
+    import jsonschema  # lazy: only validation needs it
 
     validator = jsonschema.Draft202012Validator(schema())
     errors = sorted(validator.iter_errors(clip), key=lambda e: list(e.absolute_path))

@@ -38,6 +38,7 @@ from solver.export import (
     _check_motion,
     change_axes,
     continuous_quaternions,
+    game,
     local_transforms,
     matrix_to_quaternion,
 )
@@ -139,7 +140,6 @@ def ellipsoid_mesh(center: np.ndarray, axis: np.ndarray, a: float,
 def _animation(buf: _Buffer, motion: Motion, name: str, *, loop: bool = False) -> dict:
     """One animation of ``motion`` (frames 0 … P, one cycle, with ``loop``; else every frame),
     with the game-ready data (:mod:`solver.export.game`, Y up) in its ``extras``."""
-    from solver.export import game
 
     ch = motion.character
     S = len(ch.segments)

@@ -43,6 +43,7 @@ from solver import hinges as hinge_chains
 from solver import spatial as sp
 from solver.character import Character
 from solver.export import Y_UP, ExportError
+from solver.export.clip import FORMAT, validate_clip
 from solver.io.bvh import BvhError, parse_bvh
 from solver.motion import Motion
 
@@ -250,7 +251,6 @@ def _fps_from(value: float) -> float:
 def motion_from_clip(clip: dict | str | bytes, character: Character, *, rot_tol: float = ROT_TOL,
                      len_tol: float = LEN_TOL) -> Reimported:
     """Read a motionx JSON clip (a dict or its JSON text), Z-up or Y-up."""
-    from solver.export.clip import FORMAT, validate_clip
 
     if isinstance(clip, (str, bytes)):
         try:

@@ -58,7 +58,7 @@ def resample(capture: Capture, fps: float) -> Capture:
     are preserved exactly. Contact schedules take the nearest sample; measured GRF is
     interpolated linearly (``valid`` where both neighbours are valid).
     """
-    from scipy.interpolate import CubicSpline
+    from scipy.interpolate import CubicSpline  # lazy: scipy.interpolate costs ~0.4 s to import
 
     if not (np.isfinite(fps) and fps > 0):
         raise GaitError(f"resample: fps must be a positive number, got {fps}")

@@ -32,6 +32,7 @@ import numpy as np
 from solver.capture import MeasuredGRF
 from solver.character import Character
 from solver.gait.base import GaitError, lowpass
+from solver.kinematics import contact_points, points_world
 
 
 def _clean_runs(b: np.ndarray, min_frames: int) -> np.ndarray:
@@ -88,7 +89,6 @@ def detect_contacts(
     is on when any of the toe contact point, the toes' tip or the metatarsal heads is on.
     Raises when a foot never comes within ``floor_tol`` of the floor (z = 0).
     """
-    from solver.kinematics import contact_points, points_world
 
     q = np.asarray(q, dtype=float)
     if q.ndim != 2 or q.shape[0] != character.n:
@@ -163,7 +163,6 @@ def contacts_from_plates(
         if kin is None:
             out[rows] = loaded[k]
             continue
-        from solver.kinematics import contact_points
 
         assert character is not None  # kin comes from the character's kinematics
         z = contact_points(character, q)[rows, 2]

@@ -57,6 +57,7 @@ import numpy as np
 from solver import spatial as sp
 from solver.capture import Capture, GroundFrame
 from solver.errors import InputError
+from solver.io.fit import fit_track
 from solver.io.track import SkeletonTrack
 
 log = logging.getLogger(__name__)
@@ -461,7 +462,6 @@ def load_bvh(
     lower_only: bool | None = None,
 ) -> Capture:
     """Import a BVH clip as a :class:`Capture` (conventions in the module doc)."""
-    from solver.io.fit import fit_track
 
     return fit_track(bvh_track(path, mass=mass, units=units, up=up, floor_height=floor_height),
                      lower_only=lower_only)

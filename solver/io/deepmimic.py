@@ -53,6 +53,7 @@ import numpy as np
 from solver import spatial as sp
 from solver.capture import Capture, GroundFrame
 from solver.errors import InputError
+from solver.io.fit import fit_track
 from solver.io.track import SkeletonTrack
 
 log = logging.getLogger(__name__)
@@ -281,6 +282,5 @@ def load_deepmimic(
     motion: str | Path, character: str | Path, *, mass: float | None = None, lower_only: bool | None = None
 ) -> Capture:
     """Import a DeepMimic clip as a :class:`Capture` (conventions in the module doc)."""
-    from solver.io.fit import fit_track
 
     return fit_track(deepmimic_track(motion, character, mass=mass), lower_only=lower_only)

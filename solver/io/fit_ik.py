@@ -17,6 +17,7 @@ import numpy as np
 from solver import hinges
 from solver import spatial as sp
 from solver.character import Character, Dof
+from solver.kinematics import forward_kinematics, points_world, segment_frames
 
 log = logging.getLogger(__name__)
 
@@ -69,9 +70,8 @@ def _initial_guess(ch: Character, F: Mapping[str, np.ndarray], origin: Mapping[s
 
 
 def _solve_ik(ch, times, lm, F, origin, ori, attach, w_ori):
-    import casadi as ca
+    import casadi as ca  # lazy: keeps CasADi out of numpy-only paths and OpenSim's child process
 
-    from solver.kinematics import forward_kinematics, points_world
 
     T = times.size
     att = [(name, seg, p) for name, (seg, p) in attach.items()]
@@ -153,7 +153,6 @@ def _solve_ik(ch, times, lm, F, origin, ori, attach, w_ori):
         per[name] = {"mean": round(float(e.mean()), 2), "max": round(float(e.max()), 2)}
         all_err.append(e)
     cat = np.concatenate(all_err)
-    from solver.kinematics import segment_frames
 
     rots, _ = segment_frames(ch, Q)
     seg_idx = {s.name: i for i, s in enumerate(ch.segments)}
@@ -184,7 +183,7 @@ class _NormalEquations:
     """
 
     def __init__(self, qs, target, weight, r) -> None:
-        import casadi as ca
+        import casadi as ca  # lazy: keeps CasADi out of numpy-only paths and OpenSim's child process
 
         n, m = qs.shape[0], r.shape[0]
         J = ca.jacobian(r, qs)

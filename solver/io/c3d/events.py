@@ -58,7 +58,7 @@ CONTACT_HEIGHT = 0.015
 
 def _extrema(x: np.ndarray, times: np.ndarray, fps: float, maxima: bool) -> np.ndarray:
     """Times of the prominent maxima (or minima) of x, refined by a parabola through 3 frames."""
-    from scipy.signal import find_peaks
+    from scipy.signal import find_peaks  # lazy: scipy.signal costs ~1 s to import
 
     y = x if maxima else -x
     if not np.isfinite(y).all() or np.ptp(y) <= 0:

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from solver.filtering import zero_phase_lowpass
 from solver.io.c3d.markers import _Markers
 from solver.io.c3d.reader import SIDES, C3DError, SubjectParams, _mid, _perp, _rigid_fill, _unit, fill_gaps
 
@@ -228,14 +229,11 @@ def _heading(lm: dict[str, np.ndarray], fps: float) -> tuple[np.ndarray, np.ndar
     """Horizontal forward and left unit vectors (3, T) of the walk: the hips' left-right axis
     made horizontal, low-passed below the stride frequency (the pelvis' own yaw oscillation
     at the stride frequency is not the trunk's: the thorax counter-rotates)."""
-    from scipy.signal import butter, sosfiltfilt
-
     y = lm["hip_l"] - lm["hip_r"]
     y = _unit(np.vstack([y[:2], np.zeros((1, y.shape[1]))]))
     T = y.shape[1]
     if T > 6 and fps / 2 > HEADING_HZ:
-        sos = butter(2, HEADING_HZ, fs=fps, output="sos")
-        y = _unit(sosfiltfilt(sos, y, axis=1, padtype="odd", padlen=min(T - 1, int(3 * fps / HEADING_HZ))))
+        y = _unit(zero_phase_lowpass(y, fps, HEADING_HZ, order=2, axis=1, padlen=min(T - 1, int(3 * fps / HEADING_HZ))))
     up = np.zeros_like(y)
     up[2] = 1.0
     return np.cross(y, up, axis=0), y

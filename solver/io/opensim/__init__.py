@@ -91,6 +91,7 @@ from pathlib import Path
 
 from solver.capture import Capture
 from solver.gait import detect_contacts, gait_events
+from solver.io.fit import fit_track
 from solver.io.mass import ImpliedMass, implied_mass, mass_warning, stride_from_events
 from solver.io.opensim.base import C_OSIM, OpenSimError
 from solver.io.opensim.external_loads import grf_arrays, read_opensim_grf
@@ -150,7 +151,6 @@ def load_opensim(
     ``capture.source["implied_mass"]`` and a disagreement of more than 5 % with the mass used
     is logged and kept in ``source["mass_warning"]``.
     """
-    from solver.io.fit import fit_track
 
     track = opensim_track(model, motion, mass=mass, belt_speed=belt_speed, grf=grf, grf_xml=grf_xml,
                           in_degrees=in_degrees, floor_height=floor_height, height=height,

@@ -14,6 +14,7 @@ import numpy as np
 
 from solver.capture import GroundFrame
 from solver.io.opensim.base import OpenSimError
+from solver.io.opensim.external_loads import read_opensim_grf
 from solver.io.track import SkeletonTrack
 
 log = logging.getLogger(__name__)
@@ -54,7 +55,6 @@ def belt_shift(track: SkeletonTrack, belt_speed: float | str, grf, grf_xml) -> S
             raise OpenSimError(f"belt_speed must be a number (m/s) or 'auto', got {belt_speed!r}")
         stance = None
         if grf is not None:
-            from solver.io.opensim.external_loads import read_opensim_grf
 
             g = read_opensim_grf(grf, grf_xml, times=track.times, frame=track.frame)
             stance = g.force[:, 2] > 200.0
