@@ -235,7 +235,7 @@ class FrameFunctions:
                                   [ca.vertcat(ca.sumsqr(d2f), ca.sumsqr(d2n))])
 
 
-_FRAME_CACHE: weakref.WeakKeyDictionary[Character, FrameFunctions] = weakref.WeakKeyDictionary()
+_FRAME_CACHE: "weakref.WeakKeyDictionary[Character, FrameFunctions]" = weakref.WeakKeyDictionary()
 
 
 def frame_functions(character: Character) -> FrameFunctions:

@@ -32,8 +32,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Mapping
-from typing import Any
+from typing import Any, Mapping
 
 import casadi as ca
 import numpy as np
@@ -43,7 +42,7 @@ from solver.kinematics import contact_points, markers
 from solver.motion import FEET, foot_schedule_of
 from solver.spacetime.derivatives import Term, assemble
 from solver.spacetime.frame import FOOT_ROWS, frame_functions
-from solver.spacetime.types import DEFAULT_IPOPT, SUCCESS_STATUSES, Environment, SolveResult, Weights
+from solver.spacetime.types import (DEFAULT_IPOPT, SUCCESS_STATUSES, Environment, SolveResult, Weights)
 from solver.trajectory import spline_velocities
 
 log = logging.getLogger(__name__)

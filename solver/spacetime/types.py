@@ -3,9 +3,8 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 
@@ -35,7 +34,7 @@ class Environment:
         return {"gravity": [float(g) for g in self.gravity], "friction": float(self.friction)}
 
     @staticmethod
-    def from_dict(d: Mapping[str, Any] | None) -> Environment:
+    def from_dict(d: Mapping[str, Any] | None) -> "Environment":
         if not d:
             return Environment()
         g = tuple(float(x) for x in d.get("gravity", (0.0, 0.0, -STANDARD_GRAVITY)))
