@@ -37,9 +37,9 @@ def now() -> float:
 def insert_for(session: Session, table):
     """The dialect's INSERT construct (both have ``on_conflict_do_update/nothing``)."""
     if session.get_bind().dialect.name == "postgresql":
-        from sqlalchemy.dialects.postgresql import insert
+        from sqlalchemy.dialects.postgresql import insert  # the dialect's own upsert
     else:
-        from sqlalchemy.dialects.sqlite import insert
+        from sqlalchemy.dialects.sqlite import insert  # the dialect's own upsert
     return insert(table)
 
 

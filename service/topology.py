@@ -91,7 +91,7 @@ class RedisServer:
         return self
 
     def client(self):
-        import redis
+        import redis  # lazy: only `motionx stack` needs it
 
         return redis.Redis(host="127.0.0.1", port=self.port, socket_timeout=5, socket_connect_timeout=2)
 
@@ -128,7 +128,7 @@ class RedisServer:
 
 
 def _pg_admin(admin_url: str):
-    import psycopg
+    import psycopg  # lazy: only `motionx stack` needs it
 
     return psycopg.connect(admin_url.replace("postgresql+psycopg://", "postgresql://"), autocommit=True,
                            connect_timeout=5)
@@ -136,7 +136,7 @@ def _pg_admin(admin_url: str):
 
 def create_postgres_database(admin_url: str, name: str, *, exist_ok: bool = True) -> str:
     """Create database ``name`` on the server of ``admin_url``; returns its SQLAlchemy URL."""
-    from psycopg import sql
+    from psycopg import sql  # lazy: only `motionx stack` needs it
     from sqlalchemy.engine import make_url
 
     with _pg_admin(admin_url) as conn:
@@ -150,7 +150,7 @@ def create_postgres_database(admin_url: str, name: str, *, exist_ok: bool = True
 
 
 def drop_postgres_database(admin_url: str, name: str) -> None:
-    from psycopg import sql
+    from psycopg import sql  # lazy: only `motionx stack` needs it
 
     with _pg_admin(admin_url) as conn:
         conn.execute(sql.SQL("DROP DATABASE IF EXISTS {} WITH (FORCE)").format(sql.Identifier(name)))
@@ -314,7 +314,7 @@ class Stack:
                            data_dir=self.data_dir, extra=self.extra_env)
 
     def start(self, timeout: float = 90.0) -> Stack:
-        from service.db import upgrade
+        from service.db import upgrade  # lazy: only `motionx stack` needs it
 
         self.data_dir.mkdir(parents=True, exist_ok=True)
         self.redis = RedisServer(self.data_dir / "redis").start()

@@ -68,7 +68,7 @@ class Encoded:
 
 
 def encode(motion: Motion) -> Encoded:
-    from service.store import encode_motion
+    from service.store import encode_motion  # lazy: runs in a compute process; the API process does not load the solver
 
     data, digest = encode_motion(motion)
     return Encoded(kind=classify(motion), character=motion.reference_name or motion.character.name, n=motion.n,
@@ -269,7 +269,7 @@ def motion_from_trial(files: list[tuple[str, bytes]], *, mass: float | None, bel
         raise UploadError(f"unsupported file type(s) {bad}; supported: {list(TRIAL_SUFFIXES)}")
     _precheck_trial(names, files)
     try:
-        from solver.io import load_trial
+        from solver.io import load_trial  # lazy: runs in a compute process; the API process does not load the solver
         from solver.pipeline import capture_motion
     except ImportError as e:
         raise ImporterUnavailable(f"mocap import is not available in this build ({e})") from None
@@ -324,7 +324,7 @@ def input_summary(capture: Any, tmp: str) -> dict | None:
     """What the uploaded trial looks like (``solver.io.summary.describe``): mass, the mass the
     plates imply and a warning when they disagree, fit errors, stance intervals per foot.
     Like the error messages, it never shows the server's temporary folder."""
-    from solver.io.summary import describe
+    from solver.io.summary import describe  # lazy: runs in a compute process; the API process does not load the solver
     from solver.pipeline import jsonable
 
     try:

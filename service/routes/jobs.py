@@ -72,6 +72,7 @@ def extrapolate(
     runner: Runner = Depends(get_runner),
     settings: Settings = Depends(app_settings),
 ) -> JSONResponse:
+    # lazy: the API process loads the solver (CasADi) on first use only
     from solver.continuation import StepControl, Target
 
     known_id("motion", motion_id)
