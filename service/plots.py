@@ -41,7 +41,6 @@ class PlotError(ValueError):
 
 
 def _figure(width: float, height: float):
-    # lazy: plots run in compute processes; matplotlib and the solver load there
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -227,7 +226,7 @@ def progress_png(progress: list[dict], target: dict | None) -> bytes:
 
 
 def _motion_with_wrenches(motion: Any):
-    from solver.motion import Motion  # lazy: plots run in compute processes; matplotlib and the solver load there
+    from solver.motion import Motion
 
     if not isinstance(motion, Motion):
         raise PlotError(f"expected a motion (solver.motion.Motion), got {type(motion).__name__}")
@@ -239,7 +238,6 @@ def _motion_with_wrenches(motion: Any):
 def body_weight(motion) -> float:
     """Body weight (N) in the motion's own environment (its gravity), as the plausibility
     report counts it."""
-    # lazy: plots run in compute processes; matplotlib and the solver load there
     from solver.plausibility import environment_of
 
     g = float(np.linalg.norm(np.asarray(environment_of(motion)["gravity"], dtype=float)))
@@ -281,7 +279,6 @@ def grf_png(motion) -> bytes:
     The forces are those of ``solver.export.ground_reactions`` (the motion's foot
     wrenches). A motion without contact wrenches raises :class:`PlotError`.
     """
-    # lazy: plots run in compute processes; matplotlib and the solver load there
     from solver.export import ExportError, ground_reactions
     from solver.motion import FEET
 
@@ -356,7 +353,6 @@ class ResidualSeries:
 
 def residual_series(motion) -> ResidualSeries:
     """The per-frame root residuals that :func:`residuals_png` draws (ours and MuJoCo's)."""
-    # lazy: plots run in compute processes; matplotlib and the solver load there
     from mjcf.validate import mujoco_residual
     from solver.kinematics import standing_leg_length
     from solver.plausibility import environment_of, root_residual
@@ -364,7 +360,6 @@ def residual_series(motion) -> ResidualSeries:
     motion = _motion_with_wrenches(motion)
     ours = root_residual(motion, environment_of(motion)["gravity"])
     mj = mujoco_residual(motion)
-    # lazy: plots run in compute processes; matplotlib and the solver load there
     from solver.trajectory import dynamics_samples
 
     return ResidualSeries(time=dynamics_samples(motion).time, ours=ours, mujoco=mj, weight_N=body_weight(motion),

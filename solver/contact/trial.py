@@ -14,6 +14,7 @@ from solver.contact.common import ContactError, ContactEstimate
 from solver.contact.estimator import estimate_contact_wrenches
 from solver.filtering import zero_phase_lowpass
 from solver.gait import contacts_from_plates, detect_contacts
+from solver.gait.base import unwrap_hinges
 from solver.motion import foot_schedule_of
 
 log = logging.getLogger("solver.contact")
@@ -38,13 +39,9 @@ def lowpass_kinematics(character: Character, q: np.ndarray, fps: float, cutoff_h
     a transient that corrupts accelerations near the ends). A cyclic motion (last frame =
     first frame one period later) is filtered as the periodic signal it is.
     """
-    q = np.array(q, dtype=float, copy=True)
     if not (math.isfinite(cutoff_hz) and 0 < cutoff_hz < fps / 2):
         raise ContactError(f"low-pass cut-off {cutoff_hz} Hz must lie in (0, fps/2 = {fps / 2:g} Hz)")
-    for i, kind in enumerate(character.dof_kinds):
-        if kind == "hinge":
-            q[i] = np.unwrap(q[i])
-    return zero_phase_lowpass(q, fps, cutoff_hz, order=order, axis=1, cyclic=cyclic)
+    return zero_phase_lowpass(unwrap_hinges(character, q), fps, cutoff_hz, order=order, axis=1, cyclic=cyclic)
 
 
 def foot_schedule(contacts: np.ndarray, character: Character) -> np.ndarray:

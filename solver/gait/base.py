@@ -43,7 +43,8 @@ def lowpass(x: np.ndarray, fps: float, cutoff_hz: float, *, order: int = 4, axis
     return zero_phase_lowpass(x, fps, cutoff_hz, order=order, axis=axis, edge="filter")
 
 
-def _unwrapped(character: Character, q: np.ndarray) -> np.ndarray:
+def unwrap_hinges(character: Character, q: np.ndarray) -> np.ndarray:
+    """A copy of ``q`` (n, T) with every hinge angle made continuous (no 2π jumps)."""
     q = np.array(q, dtype=float, copy=True)
     for i, k in enumerate(character.dof_kinds):
         if k == "hinge":
@@ -69,7 +70,7 @@ def resample(capture: Capture, fps: float) -> Capture:
     if n < 2:
         raise GaitError(f"resample: {t[-1] - t[0]:.3f} s at {fps} fps gives fewer than 2 frames")
     tn = t[0] + np.arange(n) / fps
-    q = _unwrapped(capture.character, capture.q)
+    q = unwrap_hinges(capture.character, capture.q)
     qn = CubicSpline(t, q, axis=1)(tn) if capture.T >= 4 else np.stack([np.interp(tn, t, r) for r in q])
     contacts = None
     idx = np.clip(np.searchsorted(t, tn), 1, len(t) - 1)
@@ -93,3 +94,6 @@ def resample(capture: Capture, fps: float) -> Capture:
     src = dict(capture.source)
     src["resampled_fps"] = float(fps)
     return capture.evolve(q=qn, times=tn, contacts=contacts, measured=measured, source=src)
+
+
+_unwrapped = unwrap_hinges  # the name solver.io.preprocess exported

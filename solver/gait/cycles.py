@@ -9,7 +9,7 @@ import logging
 import numpy as np
 
 from solver.capture import Capture, MeasuredGRF
-from solver.gait.base import GaitError, _unwrapped, resample
+from solver.gait.base import GaitError, resample, unwrap_hinges
 from solver.gait.contacts import detect_contacts
 
 log = logging.getLogger(__name__)
@@ -28,7 +28,7 @@ def unroll_loop(capture: Capture, repeats: int = 2) -> Capture:
     if capture.T < 3:
         raise GaitError("unroll_loop: a loop needs at least 3 frames")
     ch = capture.character
-    q = _unwrapped(ch, capture.q)
+    q = unwrap_hinges(ch, capture.q)
     t = capture.times
     names = ch.coordinate_names
     period = t[-1] - t[0]
