@@ -9,12 +9,16 @@
         -> (Capture, contacts (P, T))                                     (solver.gait.cycles)
     unroll_loop(capture, repeats=2) -> Capture                            (solver.gait.cycles)
 
+    belt_speed(times, feet, *, stance=None) -> m/s                        (solver.gait.belt)
+    unwrap_hinges(character, q) -> q with continuous hinge angles         (solver.gait.base)
+
 Every failure is a :class:`GaitError` (``PreprocessError``, its name in solver.io.preprocess,
-which re-exports this package). The treadmill's belt speed stays with the reader of the
-trials that have one (solver/io/opensim/treadmill.py): it shifts a reader's marker track.
+which re-exports this package), an :class:`solver.errors.InputError`. The treadmill reader
+(solver/io/opensim/treadmill.py) takes the belt speed from here and shifts its marker track.
 """
 
-from solver.gait.base import GaitError, PreprocessError, lowpass, resample
+from solver.gait.base import GaitError, PreprocessError, lowpass, resample, unwrap_hinges
+from solver.gait.belt import belt_speed
 from solver.gait.contacts import contacts_from_plates, detect_contacts, gait_events
 from solver.gait.cycles import LOOP_PERIOD_S, extract_cycle, unroll_loop
 
@@ -22,6 +26,7 @@ __all__ = [
     "LOOP_PERIOD_S",
     "GaitError",
     "PreprocessError",
+    "belt_speed",
     "contacts_from_plates",
     "detect_contacts",
     "extract_cycle",
@@ -29,4 +34,5 @@ __all__ = [
     "lowpass",
     "resample",
     "unroll_loop",
+    "unwrap_hinges",
 ]
