@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.installed
 WEB    := service/web
 WEB_STAMP := $(WEB)/node_modules/.installed
 
-.PHONY: venv test bench demo clean reliability stack fuzz
+.PHONY: venv test lint bench demo clean reliability stack fuzz
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -22,7 +22,12 @@ $(WEB_STAMP): $(WEB)/package.json $(WEB)/package-lock.json
 
 venv: $(STAMP) $(WEB_STAMP)
 
-test: $(STAMP) $(WEB_STAMP)
+# static checks: ruff (rules in pyproject.toml) on everything, mypy on solver/ and mjcf/
+lint: $(STAMP)
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/mypy
+
+test: $(STAMP) $(WEB_STAMP) lint
 	$(PY) -m pytest -q $(PYTEST_ARGS)
 
 demo: $(STAMP) $(WEB_STAMP)

@@ -36,7 +36,8 @@ def run() -> dict:
         T = 1000
         fm = f.map(T)
         gg = np.tile(g[:, None], (1, T))
-        res["casadi_eval_map_T1000_us_per_frame"] = 1e6 * best_time(lambda: fm(q[:, :T], qd[:, :T], qdd[:, :T], gg), 5) / T
+        res["casadi_eval_map_T1000_us_per_frame"] = (1e6 * best_time(lambda: fm(q[:, :T], qd[:, :T], qdd[:, :T], gg), 5)
+                                                      / T)
         rep = MujocoReplay.create(ch)
         m, d = rep.model, rep.data
         d.qpos[rep.qpos_index] = q[:, 0]

@@ -80,7 +80,8 @@ def run() -> dict:
         tl = best_time(lambda: estimate_contact_wrenches(ch, ql, fps, fl, **opts), 3)
         res["long_frames"] = int(ql.shape[1])
         res["long_frames_per_s"] = ql.shape[1] / tl
-        res["per_frame_long_frames_per_s"] = ql.shape[1] / best_time(lambda: estimate_contact_wrenches(ch, ql, fps, fl), 3)
+        res["per_frame_long_frames_per_s"] = ql.shape[1] / best_time(
+            lambda: estimate_contact_wrenches(ch, ql, fps, fl), 3)
         res["pipeline_frames_per_s"] = cap.T / best_time(lambda: estimate_capture(cap, contacts="kinematics"), 5)
         # the thesis's nested form, on a slice with double support
         ds = np.flatnonzero(est.double_support)

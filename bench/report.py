@@ -8,8 +8,9 @@ from pathlib import Path
 
 
 def tutor_table(res: dict) -> str:
-    rows = ["| trial | character | frames | variables / constraints | build (frame fns + NLP) | simplify | correct (IPOPT its) "
-            "| marker distance to capture (mean / max) | root residual / weight | realistic (Newton / refined force, BW) |",
+    rows = ["| trial | character | frames | variables / constraints | build (frame fns + NLP) | simplify "
+            "| correct (IPOPT its) | marker distance to capture (mean / max) | root residual / weight "
+            "| realistic (Newton / refined force, BW) |",
             "|---|---|---|---|---|---|---|---|---|---|"]
     for key, r in res.items():
         trial, kind = key.split("/")

@@ -14,7 +14,7 @@ import json
 import os
 import platform
 import time
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 SECTIONS = ["dynamics", "grf", "tutor", "continuation", "service", "library"]
@@ -33,7 +33,7 @@ def main() -> int:
         mod = importlib.import_module(f"bench.{name}")
         data = mod.run()
         results["sections"][name] = {"results": data, "wall_s": round(time.perf_counter() - t, 2),
-                                     "at": datetime.now(timezone.utc).isoformat(timespec="seconds")}
+                                     "at": datetime.now(UTC).isoformat(timespec="seconds")}
         print(f"[bench] {name}: {json.dumps(data)[:400]}")
     results["machine"] = {"platform": platform.platform(), "python": platform.python_version(),
                           "cpus": os.cpu_count()}

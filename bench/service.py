@@ -47,10 +47,9 @@ def _summary(lat_s: list[float], wall: float) -> dict:
 
 def tutor_motion_json() -> str:
     """The tutor of the DeepMimic walk (the same input as the reliability tests)."""
+    from service.examples import data_dir
     from solver.io import load_trial
     from solver.pipeline import capture_motion, make_tutor
-
-    from service.examples import data_dir
 
     d = data_dir() / "deepmimic_humanoid3d_walk"
     res = make_tutor(capture_motion(load_trial([d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt"])))

@@ -11,7 +11,7 @@ model compiled in memory (:func:`compile_model`), and the XML is for viewing/exc
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import mujoco
 import numpy as np

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -11,7 +12,7 @@ from solver.character import Character
 from solver.dynamics import rnea
 
 
-def random_states(character: Character, samples: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
+def random_states(character: Character, samples: int, rng: np.random.Generator) -> dict[str, Any]:
     """Random configurations within joint limits, velocities, accelerations, gravity, foot wrenches."""
     n = character.n
     lo = np.where(np.isfinite(character.lower), character.lower, -1.0)

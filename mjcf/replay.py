@@ -9,8 +9,8 @@ the moment about the root joint anchor (a 3x3 solve on their world axes).
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Mapping, Sequence
 
 import mujoco
 import numpy as np
@@ -32,7 +32,7 @@ class MujocoReplay:
     root_joint_ids: np.ndarray
 
     @staticmethod
-    def create(character: Character, gravity: Sequence[float] = DEFAULT_GRAVITY) -> "MujocoReplay":
+    def create(character: Character, gravity: Sequence[float] = DEFAULT_GRAVITY) -> MujocoReplay:
         model = compile_model(character, gravity)
         # inverse dynamics of the free motion only: no contact, limit or passive forces
         model.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT)

@@ -1,9 +1,10 @@
 """Plausibility of a motion, with the root residual recomputed independently by MuJoCo.
 
 MuJoCo replay: the motion's coordinates, velocities and accelerations at its dynamics samples
-(``solver.trajectory``: frames and midpoints of its spline, or central differences) go through ``mj_inverse`` on the MJCF generated from the motion's character,
-with the contact wrenches applied to the feet (``mj_applyFT``). What the six root joints
-still need is the residual wrench; it must vanish, and agree with ours.
+(``solver.trajectory``: frames and midpoints of its spline, or central differences) go through
+``mj_inverse`` on the MJCF generated from the motion's character, with the contact wrenches applied
+to the feet (``mj_applyFT``). What the six root joints still need is the residual wrench; it must
+vanish, and agree with ours.
 """
 
 from __future__ import annotations
@@ -38,7 +39,7 @@ def validate(motion: Motion, tol: Tolerances = Tolerances()) -> dict[str, Any]:
     ours = root_residual(motion, environment_of(motion)["gravity"])
     mj = mujoco_residual(motion)
     diff = mj - ours
-    mjr = {
+    mjr: dict[str, Any] = {
         "max_force_N": float(np.abs(mj[3:]).max()),
         "max_moment_Nm": float(np.abs(mj[:3]).max()),
         "max_force_rel_weight": float(np.abs(mj[3:]).max() / weight),

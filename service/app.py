@@ -85,6 +85,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     problems.install(app)
     app.add_middleware(BodyLimitMiddleware, max_bytes=app_settings.max_body_bytes)
 
+    # lazy: loaded when an app is made, not on import (importing service creates nothing)
     from service.routes import axes, docs, health, jobs, libraries, motions, plots, web
 
     index = web.STATIC_DIR / "index.html"
@@ -106,6 +107,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
 
 def _problem_model():
+    # lazy: loaded when an app is made, not on import (importing service creates nothing)
     from service.schemas import Problem
 
     return Problem
@@ -118,6 +120,7 @@ def _openapi(app: FastAPI) -> dict:
         return app.openapi_schema
     schema = get_openapi(title=app.title, version=app.version, description=app.description, routes=app.routes)
     comps = schema.setdefault("components", {}).setdefault("schemas", {})
+    # lazy: loaded when an app is made, not on import (importing service creates nothing)
     from solver.motion import schema as motion_schema
 
     ms = copy.deepcopy(motion_schema())
@@ -151,8 +154,9 @@ def _openapi(app: FastAPI) -> dict:
 
 def _example_motion() -> dict:
     """A small valid upload for the documentation (a HalfBoy standing still for 1 s at 15 fps)."""
-    import numpy as np
+    import numpy as np  # lazy: loaded when an app is made, not on import (importing service creates nothing)
 
+    # lazy: loaded when an app is made, not on import (importing service creates nothing)
     from solver.character import reference
     from solver.motion import Motion
 

@@ -18,15 +18,22 @@ import json
 import logging
 import math
 import os
+import select
+import signal
 import sys
+import threading
+from importlib.metadata import PackageNotFoundError
+from importlib.metadata import version as dist_version
 from pathlib import Path
+
+from solver.formats import reader_suffixes
 
 log = logging.getLogger("motionx")
 
-#: the files of a captured trial (what `motionx tutor` reads), by suffix
-TRIAL_SUFFIXES = {".c3d": "C3D", ".bvh": "BVH", ".osim": "OpenSim model", ".mot": "OpenSim motion",
-                  ".sto": "OpenSim storage", ".trc": "marker trajectories"}
-#: importer parameters (``solver.io.errors.InputError.parameter``) -> the flag that sets them
+#: the files of a captured trial (what `motionx tutor` reads), by suffix: the readers' registry
+#: (solver.formats) but .txt/.json/.xml, which may be a motion file too
+TRIAL_SUFFIXES = {s: kind for s, kind in reader_suffixes().items() if s not in (".txt", ".json", ".xml")}
+#: importer parameters (``solver.errors.InputError.parameter``) -> the flag that sets them
 PARAMETER_FLAGS = {"mass": "--mass KG", "belt_speed": "--belt-speed auto|V"}
 
 
@@ -50,10 +57,7 @@ class stop_on_signals:
     that bounded cleanup runs; leaving the block restores the previous handlers. Outside the
     main thread (where handlers cannot be set) it does nothing."""
 
-    def __enter__(self) -> "stop_on_signals":
-        import signal
-        import threading
-
+    def __enter__(self) -> stop_on_signals:
         self._active = threading.current_thread() is threading.main_thread()
         if self._active:
             self._old = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
@@ -61,15 +65,11 @@ class stop_on_signals:
         return self
 
     def shield(self) -> None:
-        import signal
-
         if self._active:
             for sig in self._old:
                 signal.signal(sig, signal.SIG_IGN)
 
     def __exit__(self, *exc) -> None:
-        import signal
-
         if self._active:
             for sig, handler in self._old.items():
                 signal.signal(sig, handler)
@@ -107,7 +107,7 @@ def warn_input(summary: dict) -> None:
 
 
 def reference_character(name: str):
-    from solver.character import CharacterError, reference
+    from solver.character import CharacterError, reference  # lazy: command-line start-up time (motionx --help, 0.75 s)
 
     try:
         return reference(name)
@@ -128,7 +128,7 @@ def _a_capture(path: Path, what: str) -> CliError:
 def load_motion(path: str | Path):
     """A motion file v1, or a :class:`CliError` that says what the file is instead (binary,
     not JSON, a captured trial, a motion file with errors)."""
-    from solver.motion import Motion, MotionError
+    from solver.motion import Motion, MotionError  # lazy: command-line start-up time (motionx --help, 0.75 s)
 
     p = Path(path)
     if not p.exists():
@@ -204,9 +204,6 @@ def add_command(sub: argparse._SubParsersAction, name: str, summary: str, descri
 
 
 def version() -> str:
-    from importlib.metadata import PackageNotFoundError
-    from importlib.metadata import version as dist_version
-
     try:
         return dist_version("motionx")
     except PackageNotFoundError:  # pragma: no cover - a source tree without an install
@@ -214,7 +211,7 @@ def version() -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from service.commands import MODULES
+    from service.commands import MODULES  # lazy: import cycle (the command modules import this one)
 
     p = argparse.ArgumentParser(prog="motionx", formatter_class=HelpFormatter, description="""\
 Turn one captured human walk into physically plausible walks on new ground: make the capture
@@ -235,8 +232,6 @@ the main job:
 
 def _stdout_is_broken() -> bool:
     """True when stdout is a pipe whose reader has gone (``| head`` after its lines)."""
-    import select
-
     try:
         fd = sys.stdout.fileno()
         poller = select.poll()

@@ -23,6 +23,10 @@ def _default_data_dir() -> Path:
     return Path.home() / ".local" / "share" / "motionx"
 
 
+#: the runners' names (service.runners.RUNNERS maps each to its class; a test checks they agree)
+RUNNER_NAMES = ("local", "celery")
+RunnerName = Literal[RUNNER_NAMES]  # type: ignore[valid-type]
+
 class Settings(BaseSettings):
     model_config = SettingsConfigDict(env_prefix="MOTIONX_", extra="ignore", frozen=True)
 
@@ -37,7 +41,7 @@ class Settings(BaseSettings):
     auto_migrate: bool = Field(True, description="`motionx serve` upgrades the schema (Alembic) on start")
 
     # --- runner ----------------------------------------------------------------------
-    runner: Literal["local", "celery"] = "local"
+    runner: RunnerName = "local"
     local_workers: int = Field(2, ge=1, le=64, description="process-pool size of the LocalRunner")
 
     # --- Celery / Redis --------------------------------------------------------------

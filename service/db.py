@@ -97,7 +97,7 @@ def migrations_dir() -> Path:
 
 
 def alembic_config(url: str):
-    from alembic.config import Config
+    from alembic.config import Config  # lazy: Alembic only for migrations
 
     cfg = Config()
     cfg.set_main_option("script_location", str(migrations_dir()))
@@ -108,13 +108,13 @@ def alembic_config(url: str):
 
 def upgrade(url: str, revision: str = "head") -> None:
     """Bring the schema at ``url`` to ``revision`` (Alembic)."""
-    from alembic import command
+    from alembic import command  # lazy: Alembic only for migrations
 
     command.upgrade(alembic_config(url), revision)
 
 
 def current_revision(url: str) -> str | None:
-    from alembic.runtime.migration import MigrationContext
+    from alembic.runtime.migration import MigrationContext  # lazy: Alembic only for migrations
 
     db = get_database(url)
     with db.engine.connect() as conn:

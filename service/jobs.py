@@ -31,8 +31,8 @@ from sqlalchemy.exc import DBAPIError
 
 from service import limits, store
 from service.config import Settings
-from service.limits import LimitError
 from service.db import Database, get_database
+from service.limits import LimitError
 
 log = logging.getLogger(__name__)
 
@@ -202,6 +202,7 @@ def execute_job(job_id: str, settings: Settings) -> str:
 
 
 def _run(db: Database, job_id: str, attempt: int, token: str, settings: Settings, hb: Heartbeat):
+    # lazy: the solver loads in the job's process, not the API's
     from solver.continuation import StepControl, Target, extrapolate
     from solver.pipeline import jsonable
     from solver.spacetime import SpacetimeProblem
@@ -237,7 +238,7 @@ def _run(db: Database, job_id: str, attempt: int, token: str, settings: Settings
             tutor = store.load_motion(row) if row is not None else None
             tutor_id = row.id if row is not None else None
         if tutor is None:
-            from solver.pipeline import make_tutor
+            from solver.pipeline import make_tutor  # lazy: the solver loads in the job's process, not the API's
 
             res = make_tutor(motion, character=character, fps=fps)
             record("tutor", wall_time=time.monotonic() - t0, lam=0.0, lam_reached=0.0, environment={},
@@ -294,7 +295,7 @@ def _run(db: Database, job_id: str, attempt: int, token: str, settings: Settings
 def _cell_start(db: Database, job_id: str, ref: dict, owner: str, target, hb: Heartbeat):
     """A library cell's warm start: the stored optimum furthest along its homotopy, stored as
     the cell's step 0 (its provenance says where it came from). Returns (start, step offset)."""
-    from service import library
+    from service import library  # lazy: the solver loads in the job's process, not the API's
 
     found = library.warm_start(db, job_id, ref)
     if found is None:
@@ -325,7 +326,7 @@ def _tutor_iterations(stats: Any) -> int:
 def validation_report(motion) -> dict | None:
     """The plausibility report (MuJoCo replay included) of one λ optimum, or an error note."""
     try:
-        from mjcf.validate import validate
+        from mjcf.validate import validate  # lazy: the solver loads in the job's process, not the API's
         from solver.pipeline import jsonable
     except ImportError:
         return None

@@ -24,7 +24,7 @@ from typing import Any
 
 from service import store
 from service.db import Database
-from service.models import TERMINAL, JobRow, LibraryRow
+from service.models import TERMINAL, JobRow, LibraryRow, MotionRow
 from service.views import iso
 from solver import library as L
 
@@ -145,8 +145,6 @@ def library_out(session, row: LibraryRow) -> dict:
 def clips(session, row: LibraryRow) -> list[tuple[dict, Any]]:
     """(cell view, clip MotionRow or None) per cell: the clip is the cell's last realistic λ optimum
     (the highest step not marked implausible; see :func:`library_out`)."""
-    from service.models import MotionRow
-
     view = library_out(session, row)
     return [(c, session.get(MotionRow, c["clip_motion_id"]) if c["clip_motion_id"] else None) for c in view["cells"]]
 

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import base64
+import hashlib
 import json
+import re
 
 from starlette.exceptions import HTTPException
 
@@ -70,10 +73,6 @@ class BodyLimitMiddleware:
 
 def _inline_script_hashes(html: str) -> list[str]:
     """CSP source expressions ('sha256-…') of the inline scripts of a page (its import map)."""
-    import base64
-    import hashlib
-    import re
-
     out = []
     for m in re.finditer(r"<script(?![^>]*\bsrc=)[^>]*>(.*?)</script>", html, re.S):
         digest = hashlib.sha256(m.group(1).encode("utf-8")).digest()

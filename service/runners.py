@@ -23,6 +23,7 @@ from service.config import Settings
 from service.db import Database
 from service.jobs import execute_job
 from service.procpool import ProcPool, TaskTimeout, WorkerLost
+from service.queue import TASK_NAME, celery_app
 
 log = logging.getLogger(__name__)
 
@@ -167,17 +168,13 @@ class CeleryRunner:
     name = "celery"
 
     def __init__(self, settings: Settings, db: Database) -> None:
-        from worker.app import create_celery
-
         self.settings, self.db = settings, db
-        self.app = create_celery(settings)
+        self.app = celery_app(settings)  # publishes only: the task runs in `motionx worker`
 
     def start(self) -> None:
         self.sweep()
 
     def submit(self, job_id: str) -> bool:
-        from worker.app import TASK_NAME
-
         try:
             self.app.send_task(TASK_NAME, args=[job_id], queue=self.settings.celery_queue)
         except Exception as e:  # broker down: the job stays queued in SQL; the sweep dispatches it later
@@ -211,5 +208,9 @@ class CeleryRunner:
         self.app.close()
 
 
+#: the runners by name (``Settings.runner``, ``motionx serve --runner``): the service's registry
+RUNNERS: dict[str, type[LocalRunner] | type[CeleryRunner]] = {"local": LocalRunner, "celery": CeleryRunner}
+
+
 def make_runner(settings: Settings, db: Database) -> Runner:
-    return CeleryRunner(settings, db) if settings.runner == "celery" else LocalRunner(settings, db)
+    return RUNNERS[settings.runner](settings, db)

@@ -37,9 +37,9 @@ def now() -> float:
 def insert_for(session: Session, table):
     """The dialect's INSERT construct (both have ``on_conflict_do_update/nothing``)."""
     if session.get_bind().dialect.name == "postgresql":
-        from sqlalchemy.dialects.postgresql import insert
+        from sqlalchemy.dialects.postgresql import insert  # the dialect's own upsert
     else:
-        from sqlalchemy.dialects.sqlite import insert
+        from sqlalchemy.dialects.sqlite import insert  # the dialect's own upsert
     return insert(table)
 
 
@@ -199,7 +199,8 @@ def save_step(
 
 def set_validation(session: Session, *, motion_id: str, report: dict) -> None:
     session.execute(
-        update(MotionRow).where(MotionRow.id == motion_id).values(validation=report, plausible=bool(report.get("plausible")))
+        update(MotionRow).where(MotionRow.id == motion_id)
+        .values(validation=report, plausible=bool(report.get("plausible")))
     )
 
 

@@ -91,7 +91,7 @@ class RedisServer:
         return self
 
     def client(self):
-        import redis
+        import redis  # lazy: only `motionx stack` needs it
 
         return redis.Redis(host="127.0.0.1", port=self.port, socket_timeout=5, socket_connect_timeout=2)
 
@@ -128,7 +128,7 @@ class RedisServer:
 
 
 def _pg_admin(admin_url: str):
-    import psycopg
+    import psycopg  # lazy: only `motionx stack` needs it
 
     return psycopg.connect(admin_url.replace("postgresql+psycopg://", "postgresql://"), autocommit=True,
                            connect_timeout=5)
@@ -136,7 +136,7 @@ def _pg_admin(admin_url: str):
 
 def create_postgres_database(admin_url: str, name: str, *, exist_ok: bool = True) -> str:
     """Create database ``name`` on the server of ``admin_url``; returns its SQLAlchemy URL."""
-    from psycopg import sql
+    from psycopg import sql  # lazy: only `motionx stack` needs it
     from sqlalchemy.engine import make_url
 
     with _pg_admin(admin_url) as conn:
@@ -150,7 +150,7 @@ def create_postgres_database(admin_url: str, name: str, *, exist_ok: bool = True
 
 
 def drop_postgres_database(admin_url: str, name: str) -> None:
-    from psycopg import sql
+    from psycopg import sql  # lazy: only `motionx stack` needs it
 
     with _pg_admin(admin_url) as conn:
         conn.execute(sql.SQL("DROP DATABASE IF EXISTS {} WITH (FORCE)").format(sql.Identifier(name)))
@@ -188,7 +188,7 @@ class Proc:
 
     def start(self) -> Proc:
         self.log_path.parent.mkdir(parents=True, exist_ok=True)
-        self._log = open(self.log_path, "ab")
+        self._log = open(self.log_path, "ab")  # noqa: SIM115 (the process writes it until stop() closes it)
         self.proc = subprocess.Popen(self.args, env=self.env, stdout=self._log, stderr=subprocess.STDOUT,
                                      start_new_session=True, cwd=str(Path(__file__).resolve().parents[1]))
         return self
@@ -314,13 +314,13 @@ class Stack:
                            data_dir=self.data_dir, extra=self.extra_env)
 
     def start(self, timeout: float = 90.0) -> Stack:
-        from service.db import upgrade
+        from service.db import upgrade  # lazy: only `motionx stack` needs it
 
         self.data_dir.mkdir(parents=True, exist_ok=True)
         self.redis = RedisServer(self.data_dir / "redis").start()
         upgrade(self.database_url)
         self.api = start_api(self.env, port=self.port, log_path=self.data_dir / "logs" / "api.log")
-        for i in range(self.workers):
+        for _ in range(self.workers):
             self.add_worker()
         wait_api(self.base_url, self.api, timeout)
         for w in self.worker_procs:

@@ -32,11 +32,13 @@ from typing import Any
 
 from service import limits
 from service.limits import LimitError, clip
+from solver.formats import reader_suffixes
 from solver.motion import Motion, MotionError, motion_from_dict
 
 log = logging.getLogger(__name__)
 
-TRIAL_SUFFIXES = (".osim", ".mot", ".sto", ".trc", ".xml", ".c3d", ".bvh", ".txt", ".json")
+#: every suffix a trial file may have (the readers' registry, solver.formats)
+TRIAL_SUFFIXES = tuple(reader_suffixes())
 MAX_FILES = 8
 #: characters refused in names (SQL text columns, exports): control characters
 _CONTROL = re.compile(r"[\x00-\x1f\x7f]")
@@ -66,7 +68,7 @@ class Encoded:
 
 
 def encode(motion: Motion) -> Encoded:
-    from service.store import encode_motion
+    from service.store import encode_motion  # lazy: runs in a compute process; the API process does not load the solver
 
     data, digest = encode_motion(motion)
     return Encoded(kind=classify(motion), character=motion.reference_name or motion.character.name, n=motion.n,
@@ -267,7 +269,7 @@ def motion_from_trial(files: list[tuple[str, bytes]], *, mass: float | None, bel
         raise UploadError(f"unsupported file type(s) {bad}; supported: {list(TRIAL_SUFFIXES)}")
     _precheck_trial(names, files)
     try:
-        from solver.io import load_trial
+        from solver.io import load_trial  # lazy: runs in a compute process; the API process does not load the solver
         from solver.pipeline import capture_motion
     except ImportError as e:
         raise ImporterUnavailable(f"mocap import is not available in this build ({e})") from None
@@ -298,7 +300,7 @@ def trial_upload(files: list[tuple[str, bytes]], mass: float | None, belt_speed:
     return dataclasses.replace(encode(motion), input=(motion.provenance or {}).get("input"))
 
 
-#: importer parameters (``solver.io.errors.InputError.parameter``) -> how a client sends them
+#: importer parameters (``solver.errors.InputError.parameter``) -> how a client sends them
 FORM_FIELDS = {"mass": "send the form field 'mass' (kg)", "belt_speed": "send the form field 'belt_speed' (m/s)"}
 
 
@@ -322,14 +324,14 @@ def input_summary(capture: Any, tmp: str) -> dict | None:
     """What the uploaded trial looks like (``solver.io.summary.describe``): mass, the mass the
     plates imply and a warning when they disagree, fit errors, stance intervals per foot.
     Like the error messages, it never shows the server's temporary folder."""
-    from solver.io.summary import describe
+    from solver.io.summary import describe  # lazy: runs in a compute process; the API process does not load the solver
     from solver.pipeline import jsonable
 
     try:
         return _hide_paths(jsonable(describe(capture)), tmp)
     except MemoryError:
         raise
-    except Exception:  # noqa: BLE001 - a description must never fail an upload that imported
+    except Exception:
         log.warning("could not describe the uploaded trial", exc_info=True)
         return None
 

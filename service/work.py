@@ -17,6 +17,8 @@ JSON-ready values (pickled to the child, results pickled back).
 from __future__ import annotations
 
 import asyncio
+import hashlib
+import json
 import logging
 import zlib
 from collections import OrderedDict
@@ -52,9 +54,7 @@ _MOTIONS: OrderedDict[bytes, Any] = OrderedDict()
 
 def _load(data: bytes):
     """A stored motion (zlib-compressed motion file v1); the last few are kept per process."""
-    import hashlib
-    import json
-
+    # lazy: runs in a compute process; the API process does not load the solver
     from solver.motion import motion_from_dict
 
     key = hashlib.sha256(data).digest()
@@ -71,6 +71,7 @@ def _load(data: bytes):
 
 def export(data: bytes, fmt: str, options: dict[str, Any]) -> tuple[bytes, str]:
     try:
+        # lazy: runs in a compute process; the API process does not load the solver
         from solver.export import ExportError, export_motion, media_type
     except ImportError as e:
         raise WorkError(501, f"exporters are not available in this build ({e})") from None
@@ -87,7 +88,7 @@ def export(data: bytes, fmt: str, options: dict[str, Any]) -> tuple[bytes, str]:
 
 def library_glb(items: list[tuple[str, bytes]], extras: dict) -> tuple[bytes, str]:
     """One GLB of a library: (animation name, stored motion) per cell (solver.export.gltf)."""
-    from solver.export import ExportError
+    from solver.export import ExportError  # lazy: runs in a compute process; the API process does not load the solver
     from solver.export.gltf import to_library_glb
 
     try:
@@ -101,12 +102,14 @@ def validation(data: bytes) -> dict | None:
         from mjcf.validate import validate  # noqa: F401
     except ImportError as e:
         raise WorkError(501, f"the validator is not available in this build ({e})") from None
+    # lazy: runs in a compute process; the API process does not load the solver
     from service.jobs import validation_report
 
     return validation_report(_load(data))
 
 
 def motion_plot(data: bytes, kind: str) -> bytes:
+    # lazy: runs in a compute process; the API process does not load the solver
     from service.plots import PlotError, grf_png, residuals_png
 
     render = {"grf": grf_png, "residuals": residuals_png}[kind]
@@ -119,6 +122,7 @@ def motion_plot(data: bytes, kind: str) -> bytes:
 
 
 def progress_plot(points: list[dict], target: dict) -> bytes:
+    # lazy: runs in a compute process; the API process does not load the solver
     from service.plots import PlotError, progress_png
 
     try:

@@ -15,8 +15,9 @@ Importers (``solver.io``) turn a trial of any format into a :class:`Capture`:
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -79,7 +80,7 @@ class GroundFrame:
                 "velocity": self.velocity.tolist(), "axes": self.axes}
 
     @staticmethod
-    def from_dict(d: Mapping[str, Any] | None) -> "GroundFrame":
+    def from_dict(d: Mapping[str, Any] | None) -> GroundFrame:
         if not d:
             return GroundFrame()
         return GroundFrame(R=np.asarray(d["R"], dtype=float), offset=np.asarray(d["offset"], dtype=float),
@@ -142,5 +143,5 @@ class Capture:
         """Sampling rate (uniform sampling is assumed: median step)."""
         return float(1.0 / np.median(np.diff(self.times)))
 
-    def evolve(self, **changes: Any) -> "Capture":
+    def evolve(self, **changes: Any) -> Capture:
         return replace(self, **changes)

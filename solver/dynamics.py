@@ -11,9 +11,9 @@ frame about the world origin, ordered (moment; force) — SPEC 4.7: c = h0.
 from __future__ import annotations
 
 import weakref
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Mapping
-
+from typing import Any
 
 from solver import spatial as sp
 from solver.character import Character, Model
@@ -136,7 +136,7 @@ def root_wrench(character: Character, q: Any, qd: Any, qdd: Any, gravity: Any = 
     return rnea(character, q, qd, qdd, gravity).h0
 
 
-_CASADI_CACHE: "weakref.WeakKeyDictionary[Character, dict]" = weakref.WeakKeyDictionary()
+_CASADI_CACHE: weakref.WeakKeyDictionary[Character, dict] = weakref.WeakKeyDictionary()
 
 
 def casadi_functions(character: Character) -> dict:
@@ -147,7 +147,7 @@ def casadi_functions(character: Character) -> dict:
     cached = _CASADI_CACHE.get(character)
     if cached is not None:
         return cached
-    import casadi as ca
+    import casadi as ca  # lazy: keeps CasADi out of numpy-only paths and OpenSim's child process
 
     n = character.n
     q, qd, qdd = ca.SX.sym("q", n), ca.SX.sym("qd", n), ca.SX.sym("qdd", n)

@@ -32,13 +32,15 @@ from __future__ import annotations
 import csv
 import io
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
 from solver.capture import GroundFrame
+from solver.errors import InputError
 from solver.io.c3d.events import feet_on_plates  # noqa: F401  (the check grf-compare applies)
 
 FEET = ("right", "left")
@@ -48,7 +50,7 @@ UNITS = {"fx": "N", "fy": "N", "fz": "N", "tz": "N·m", "cop": "cm"}
 COP_MIN_LOAD = 0.05  # fraction of the peak measured vertical force
 
 
-class GRFFileError(ValueError):
+class GRFFileError(InputError):
     """A ground-reaction file is malformed; the message names the problem."""
 
 
@@ -71,7 +73,7 @@ class GroundReactions:
     force: np.ndarray
     cop: np.ndarray
     free_moment: np.ndarray
-    valid: np.ndarray | None = None
+    valid: np.ndarray = None  # type: ignore[assignment]  # None: frames with finite forces (__post_init__)
 
     def __post_init__(self) -> None:
         T = np.asarray(self.times).shape[0]
@@ -88,7 +90,7 @@ class GroundReactions:
     def T(self) -> int:
         return int(self.times.shape[0])
 
-    def resample(self, times: np.ndarray) -> "GroundReactions":
+    def resample(self, times: np.ndarray) -> GroundReactions:
         """Linear interpolation onto ``times``; frames outside the span are invalid."""
         t = np.asarray(times, dtype=float)
         inside = (t >= self.times[0] - 1e-9) & (t <= self.times[-1] + 1e-9)
@@ -330,15 +332,16 @@ def plot(
     title: str = "",
 ) -> None:
     """PNG of estimated (dashed) vs measured (solid) curves: forces, free moment, CoP."""
-    import matplotlib
+    import matplotlib  # lazy: matplotlib only for this figure
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # lazy: matplotlib only for this figure
 
     t = estimate.times
     fig, axes = plt.subplots(6, 1, figsize=(9, 14), sharex=True)
     colors = {"right": "tab:red", "left": "tab:blue"}
-    panels = [(f"f{axis_names[k]} (N)", lambda g, s, k=k: g.force[s, k]) for k in range(3)]
+    panels: list[tuple[str, Callable[..., Any]]] = [
+        (f"f{axis_names[k]} (N)", lambda g, s, k=k: g.force[s, k]) for k in range(3)]
     panels.append(("free moment (N·m)", lambda g, s: g.free_moment[s]))
     panels += [(f"CoP {axis_names[k]} ({length_unit})", lambda g, s, k=k: g.cop[s, k])
                for k in range(3) if k != vertical]

@@ -6,8 +6,9 @@ frame at once) or a CasADi column; they return the same kind.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -54,12 +55,12 @@ def forward_kinematics(character: Character, q: Any) -> Pose:
     return Pose(tuple(rots), tuple(poss))
 
 
-def point_world(pose: Pose, body: int, p_body: Sequence[float]) -> sp.Vec3:
+def point_world(pose: Pose, body: int, p_body: sp.Vec) -> sp.Vec3:
     pb = sp.const_vec(p_body)
     return sp.vadd(pose.pos[body], sp.matvec(pose.rot[body], pb))
 
 
-def points_world(character: Character, q: Any, points: Sequence[tuple[str, Sequence[float]]]) -> Any:
+def points_world(character: Character, q: Any, points: Sequence[tuple[str, sp.Vec]]) -> Any:
     """World positions of points given as (segment, segment coordinates).
 
     Returns shape (len(points), 3) numpy for a single frame, (len(points), 3, T) for a
@@ -67,7 +68,7 @@ def points_world(character: Character, q: Any, points: Sequence[tuple[str, Seque
     """
     model = character.model
     pose = forward_kinematics(character, q)
-    out = []
+    out: list[Any] = []
     for seg, p in points:
         b, pb = model.point_on_body(seg, p)
         out.extend(point_world(pose, b, pb))

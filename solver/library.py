@@ -22,10 +22,16 @@ cells start from the base optimum.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import itertools
 import math
+import time
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Callable, Iterable, Mapping, Sequence
+from typing import Any
+
+from solver.continuation import StepControl, Target, extrapolate
+from solver.export import game
 
 from solver import axes as registry
 
@@ -131,7 +137,6 @@ def list_cells(targets: Sequence[Mapping[str, float]]) -> list[Cell]:
 
 def check_cells(cells: Sequence[Cell]) -> None:
     """Every cell's target must be one the solver accepts (its own checks)."""
-    from solver.continuation import Target
 
     for c in cells:
         try:
@@ -143,7 +148,7 @@ def check_cells(cells: Sequence[Cell]) -> None:
 def order(cells: Sequence[Cell]) -> list[Cell]:
     """Dispatch order: nearest the tutor first (largest relative offset over the axes, then their
     sum), so the cells whose rays pass through them find them solved."""
-    spans = {}
+    spans: dict[str, float] = {}
     for c in cells:
         for (k, _), o in zip(c.params, c.offset()):
             spans[k] = max(spans.get(k, 0.0), abs(o))
@@ -244,9 +249,7 @@ def solve_library(tutor, cells: Sequence[Cell], control=None, *,
     """Extrapolate every cell in one process, nearest the tutor first, each warm-started from
     the best stored optimum (:func:`best_start`). The CLI's engine; the service runs the same
     cells as jobs."""
-    import time
 
-    from solver.continuation import StepControl, Target, extrapolate
 
     control = control or StepControl()
     check_cells(cells)
@@ -261,9 +264,9 @@ def solve_library(tutor, cells: Sequence[Cell], control=None, *,
             m = next(m for c, lam, m in stored if c.key == ws.source_cell and lam == ws.source_lam)
             start = (ws.lam, m)
         ctl = dataclasses.replace(control, delta0=1.0) if cell.is_neutral() else control
-        steps: list = [] if start is None else [(ws.lam, start[1])]
+        steps: list = [] if start is None else [start]
 
-        def on_step(step, cell=cell) -> None:
+        def on_step(step, cell=cell, steps=steps) -> None:
             steps.append((step.lam, step.motion))
             stored.append((cell, step.lam, step.motion))
 
@@ -272,8 +275,8 @@ def solve_library(tutor, cells: Sequence[Cell], control=None, *,
         else:
             res = extrapolate(tutor, Target(**cell.target_kwargs()), ctl, start=start, on_step=on_step,
                               should_cancel=should_cancel,
-                              on_progress=(lambda r, cell=cell: on_progress(cell, r)) if on_progress else None)
-        status = "canceled" if cancelled else res.status
+                              on_progress=functools.partial(on_progress, cell) if on_progress else None)
+        status = "canceled" if cancelled or res is None else res.status
         lam = (ws.lam if ws else 0.0) if res is None else max(res.lam_reached, ws.lam if ws else 0.0)
         kept = last_realistic(steps)
         motion = kept[1] if kept else None
@@ -313,7 +316,6 @@ def cell_entry(cell: Cell, *, status: str, lam_reached: float, message: str = ""
                extra: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """One cell of a manifest: parameters, status (an impasse is marked and keeps its last
     realistic λ), files, realism figures (the plausibility report's) and the clip's cycle."""
-    from solver.export import game
 
     entry: dict[str, Any] = {
         "key": cell.key, "parameters": cell.values, "status": status,

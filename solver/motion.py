@@ -19,11 +19,12 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from functools import cache
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -159,7 +160,7 @@ class Motion:
             raise MotionError("motion has no contact schedule")
         return foot_schedule_of(self.character, self.contacts)
 
-    def evolve(self, **changes: Any) -> "Motion":
+    def evolve(self, **changes: Any) -> Motion:
         """A new motion with some fields replaced (motions are immutable)."""
         return replace(self, **changes)
 
@@ -195,7 +196,7 @@ class Motion:
                 "feet": {foot: self.wrenches[i].T.tolist() for i, foot in enumerate(FEET)},
             }
         prov = dict(self.provenance)
-        prov.setdefault("created", datetime.now(timezone.utc).isoformat(timespec="seconds"))
+        prov.setdefault("created", datetime.now(UTC).isoformat(timespec="seconds"))
         d["provenance"] = prov
         if self.report is not None:
             d["report"] = self.report
@@ -208,11 +209,11 @@ class Motion:
         Path(path).write_text(self.to_json())
 
     @staticmethod
-    def from_dict(d: Mapping[str, Any]) -> "Motion":
+    def from_dict(d: Mapping[str, Any]) -> Motion:
         return motion_from_dict(d)
 
     @staticmethod
-    def load(path: str | Path) -> "Motion":
+    def load(path: str | Path) -> Motion:
         p = Path(path)
         try:
             data = json.loads(p.read_text())
@@ -233,7 +234,8 @@ def _check_ranges(character: Character, q: np.ndarray) -> None:
         a = np.abs(q[rows])
         if float(a.max()) > limit:
             i, t = np.unravel_index(int(np.argmax(a)), a.shape)
-            raise MotionError(f"coordinate {character.coordinate_names[rows[i]]!r} = {q[rows[i], t]:.6g} {unit} at frame "
+            name = character.coordinate_names[rows[i]]
+            raise MotionError(f"coordinate {name!r} = {q[rows[i], t]:.6g} {unit} at frame "
                               f"{t} is outside the physical range (|{kind}| at most {limit:g} {unit})")
 
 
@@ -246,11 +248,11 @@ def schema() -> dict:
 def _validator():
     """jsonschema-rs when installed (a 3,600-frame file in ~6 ms instead of ~2.7 s), else jsonschema."""
     try:
-        import jsonschema_rs
+        import jsonschema_rs  # optional: the fast validator when installed
 
         return "rs", jsonschema_rs.validator_for(schema())
     except ImportError:
-        import jsonschema
+        import jsonschema  # lazy: only validation needs it
 
         return "py", jsonschema.Draft202012Validator(schema())
 

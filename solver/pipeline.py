@@ -15,14 +15,17 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
 from solver.capture import Capture, GroundFrame
 from solver.character import FULL_SUPERFLUOUS, LOWER_SUPERFLUOUS, Character, merge_segments
-from solver.kinematics import markers
+from solver.contact import estimate_contact_wrenches
+from solver.gait import extract_cycle
+from solver.kinematics import contact_points, markers
 from solver.motion import Motion, foot_schedule_of
 from solver.plausibility import report
 from solver.spacetime import Environment, SolveResult, SpacetimeProblem, Weights
@@ -187,7 +190,6 @@ def problem_for(character: Character, T: int, fps: float, contacts: np.ndarray |
 def estimate_wrenches(character: Character, q: np.ndarray, fps: float, contacts: np.ndarray,
                       gravity=STANDARD_GRAVITY_VECTOR) -> tuple[np.ndarray, dict]:
     """EFC (SPEC §5) on the simplified motion: initial contact wrenches for the correction."""
-    from solver.contact import estimate_contact_wrenches
 
     B = foot_schedule_of(character, contacts)
     est = estimate_contact_wrenches(character, q, fps, B, gravity=gravity)
@@ -205,7 +207,6 @@ def contact_plane_calibration(character: Character, q: np.ndarray, contacts: np.
     capture whose soles touch the floor has them hovering; without this the correction
     would pull the whole body down. Returns the shifted motion and the shift (m).
     """
-    from solver.kinematics import contact_points
 
     cp = contact_points(character, q)
     z = cp[:, 2, :][np.asarray(contacts, dtype=bool)]
@@ -228,8 +229,6 @@ def make_tutor(
 ) -> TutorResult:
     """import → cycle → simplify → estimate → correct. ``source`` is a Capture, or a motion of
     step "capture" (e.g. stored by the service)."""
-    from solver.io.preprocess import extract_cycle
-
     t_start = time.perf_counter()
     capture = motion_capture(source) if isinstance(source, Motion) else source
     if not (math.isfinite(fps) and fps > 0):
@@ -285,7 +284,8 @@ def make_tutor(
                                     "build_s": res.stats.get("build_time")}}
     stats["total_s"] = time.perf_counter() - t_start
     src_prov = {"format": capture.source.get("format"), "files": capture.source.get("files"),
-                "subject": capture.source.get("subject"), "cycle": capture.source.get("cycle") or cyc.source.get("cycle")}
+                "subject": capture.source.get("subject"),
+                "cycle": capture.source.get("cycle") or cyc.source.get("cycle")}
     simplified = Motion(syn, fps, q_sim, contacts=contacts, provenance=jsonable({
         "step": "simplify", "source": src_prov, "lambda": None}))
     if not res.success:

@@ -3,14 +3,15 @@
 Residuals are measured where the motion's own trajectory defines q̇ and q̈
 (``solver.trajectory.dynamics_samples``: frames and midpoints of the C² cubic spline for the
 optimizer's motions, interior frames by central differences for file v1): the root residual is
-h0(q, q̇, q̈, g) minus the sum of the contact wrenches — zero for a physically plausible motion. Moments are reported about the root (pelvis) position of
-each frame, so they do not depend on where the world origin is.
+h0(q, q̇, q̈, g) minus the sum of the contact wrenches — zero for a physically plausible motion.
+Moments are reported about the root (pelvis) position of each frame, so they do not depend on where the world origin is.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -150,6 +151,7 @@ def _terrain(motion: Motion) -> dict:
 def _contact_checks(motion: Motion, mu: float, weight: float) -> dict:
     ch = motion.character
     A = motion.contacts
+    assert A is not None  # the caller checks that the motion has contacts
     cp = contact_points(ch, motion.q)  # (P, 3, T)
     T = motion.T
     feet_ground = ground_of(motion)  # (2, T): the terrain under each foot

@@ -148,6 +148,7 @@ def frame_wrenches(motion: Motion, cyc: Cycle | None) -> tuple[np.ndarray, np.nd
     """Per-foot wrenches (2, 6, m) on frames ``idx`` (returned): frames 1..T-2, and for a cycle
     frame T-1 as frame 1 moved by the transform (the stored overlap frames are copies)."""
     W = motion.wrenches
+    assert W is not None  # callers check that the motion has wrenches
     idx = np.arange(1, motion.T - 1)
     if cyc is None:
         return W[:, :, 1:-1], idx
@@ -198,6 +199,7 @@ def newton_euler(motion: Motion, gravity: np.ndarray, weight: float, leg: float,
     (G_t alone everywhere) is reported too."""
     mom = momentum_from_positions(motion)
     dt, M, c = motion.dt, float(mom["mass"]), mom["com"]
+    assert motion.wrenches is not None  # callers check that the motion has wrenches
     W = motion.wrenches.sum(axis=0)  # (6, T)
     if cyc is not None:  # the overlap frames as the cycle's transform of frames T-2 and 1
         W = np.concatenate([cyc.apply_wrench(W[:, -2:-1], -1), W[:, 1:-1], cyc.apply_wrench(W[:, 1:2], 1)], axis=1)
@@ -292,6 +294,7 @@ def free_moments(motion: Motion) -> np.ndarray:
     """(2, T) vertical free moment at each foot's centre of pressure (N·m; nan where f_z ≤ 0),
     the CoP on the ground under the foot (``solver.environment.ground_of``)."""
     W = motion.wrenches
+    assert W is not None  # callers check that the motion has wrenches
     n, f = W[:, :3], W[:, 3:]
     zg = ground_of(motion)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -306,6 +309,7 @@ def torsion(motion: Motion, mu: float, weight: float, lim: RealismLimits) -> dic
     size can give its load — half its length plus the torsion radius)."""
     ch = motion.character
     frames = slice(1, motion.T - 1)
+    assert motion.wrenches is not None  # callers check that the motion has wrenches
     W = motion.wrenches[:, :, frames]
     tau = free_moments(motion)[:, frames]
     fz, nz = W[:, 5], W[:, 2]
@@ -341,6 +345,7 @@ def foot_spin(motion: Motion, weight: float, lim: RealismLimits) -> dict[str, An
     names = [s.name for s in ch.segments]
     rots, _ = segment_frames(ch, motion.q)
     out, worst = 0.0, None
+    assert motion.wrenches is not None  # callers check that the motion has wrenches
     for k, side in enumerate(FEET):
         R = np.moveaxis(rots[names.index(ch.foot(side).segment)], -1, 0)  # (T, 3, 3)
         rv = Rotation.from_matrix(np.einsum("tij,tkj->tik", R[1:], R[:-1])).as_rotvec()
@@ -365,8 +370,9 @@ def requested_heading(motion: Motion) -> tuple[float | None, str]:
     continuation's λ·curve alone (``environment_values.curve_deg``, else ``target.curve_deg`` ×
     ``lambda``), which assumes a straight tutor."""
     prov = motion.provenance
-    ev = prov.get("environment_values") if isinstance(prov.get("environment_values"), dict) else {}
-    tgt = prov.get("target") if isinstance(prov.get("target"), dict) else {}
+    ev_raw, tgt_raw = prov.get("environment_values"), prov.get("target")
+    ev: dict = ev_raw if isinstance(ev_raw, dict) else {}
+    tgt: dict = tgt_raw if isinstance(tgt_raw, dict) else {}
     curve, where = None, ""
     if ev.get("curve_deg") is not None:
         curve, where = float(ev["curve_deg"]), "provenance.environment_values.curve_deg"

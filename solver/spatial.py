@@ -17,11 +17,15 @@ motion vectors (angular; linear), force vectors (moment; force).
 from __future__ import annotations
 
 import math
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
 Scalar = Any
+#: a 3-vector / 3x3 matrix given as numbers: a sequence or an array
+Vec = Sequence[float] | np.ndarray
+Mat = Sequence[Sequence[float]] | np.ndarray
 Vec3 = tuple[Scalar, Scalar, Scalar]
 Mat3 = tuple[Vec3, Vec3, Vec3]
 
@@ -222,7 +226,7 @@ def motion_to_child(rot: Mat3, pos: Vec3, v: tuple[Vec3, Vec3]) -> tuple[Vec3, V
 
 def is_symbolic(x: Any) -> bool:
     try:
-        import casadi as ca
+        import casadi as ca  # lazy: keeps CasADi out of numpy-only paths and OpenSim's child process
     except ImportError:  # pragma: no cover - casadi is a hard dependency
         return False
     return isinstance(x, (ca.SX, ca.MX))
@@ -230,7 +234,7 @@ def is_symbolic(x: Any) -> bool:
 
 def cos(x: Scalar) -> Scalar:
     if is_symbolic(x):
-        import casadi as ca
+        import casadi as ca  # lazy: keeps CasADi out of numpy-only paths and OpenSim's child process
 
         return ca.cos(x)
     if _is_const(x):
@@ -240,7 +244,7 @@ def cos(x: Scalar) -> Scalar:
 
 def sin(x: Scalar) -> Scalar:
     if is_symbolic(x):
-        import casadi as ca
+        import casadi as ca  # lazy: keeps CasADi out of numpy-only paths and OpenSim's child process
 
         return ca.sin(x)
     if _is_const(x):
@@ -266,7 +270,7 @@ def stack(items: Sequence[Scalar], like: Any = None) -> Any:
     Python-constant entries are broadcast to the batch shape of the others.
     """
     if any(is_symbolic(x) for x in items) or is_symbolic(like):
-        import casadi as ca
+        import casadi as ca  # lazy: keeps CasADi out of numpy-only paths and OpenSim's child process
 
         return ca.vertcat(*[x if is_symbolic(x) else ca.DM(float(x)) for x in items])
     shape: tuple[int, ...] = ()
@@ -294,7 +298,7 @@ def snap(x: float, tol: float = 1e-14) -> float:
     return x
 
 
-def const_vec(v: Sequence[float]) -> Vec3:
+def const_vec(v: Vec) -> Vec3:
     return (snap(v[0]), snap(v[1]), snap(v[2]))
 
 
@@ -306,12 +310,37 @@ def const_mat(m: Any) -> Mat3:
 # --- plain numpy helpers for model construction ---------------------------------------
 
 
-def rotation_about(axis: Sequence[float], angle: float) -> np.ndarray:
-    """Rotation matrix about a unit axis (Rodrigues)."""
+def rotation_about(axis: Vec, angle: float | np.ndarray) -> np.ndarray:
+    """Rotation about ``axis`` (normalised here) by ``angle`` radians (Rodrigues): (3, 3) for a
+    number, (..., 3, 3) for an array of angles. The one rotation-about-an-axis helper (joint
+    DOF, exporters, reimport, transforms); :func:`elementary_rotation` is its exact form about
+    a coordinate axis."""
     a = np.asarray(axis, dtype=float)
     a = a / np.linalg.norm(a)
     k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
-    return np.eye(3) + math.sin(angle) * k + (1 - math.cos(angle)) * (k @ k)
+    th = np.asarray(angle, dtype=float)
+    if th.ndim == 0:
+        t = float(th)
+        return np.eye(3) + math.sin(t) * k + (1 - math.cos(t)) * (k @ k)
+    s = np.sin(th)[..., None, None]
+    c = np.cos(th)[..., None, None]
+    return np.eye(3) + s * k + (1.0 - c) * (k @ k)
+
+
+def elementary_rotation(axis: int, angle: np.ndarray) -> np.ndarray:
+    """Rotations (..., 3, 3) about coordinate axis ``axis`` (0 x, 1 y, 2 z) by ``angle`` radians,
+    written out (cos and sin in place, no rounding of Rodrigues' 1 - (1 - cos)): BVH channels,
+    DeepMimic's heading."""
+    a = np.asarray(angle, dtype=float)
+    c, s = np.cos(a), np.sin(a)
+    o, z = np.ones_like(a), np.zeros_like(a)
+    if axis == 0:
+        rows = [[o, z, z], [z, c, -s], [z, s, c]]
+    elif axis == 1:
+        rows = [[c, z, s], [z, o, z], [-s, z, c]]
+    else:
+        rows = [[c, -s, z], [s, c, z], [z, z, o]]
+    return np.stack([np.stack(r, axis=-1) for r in rows], axis=-2)
 
 
 def quaternion_to_matrix(quat: np.ndarray) -> np.ndarray:
@@ -326,7 +355,7 @@ def quaternion_to_matrix(quat: np.ndarray) -> np.ndarray:
     ], -2)
 
 
-def align_z(axis: Sequence[float]) -> np.ndarray:
+def align_z(axis: Vec) -> np.ndarray:
     """A rotation A with A @ e_z = axis (unit); deterministic choice of the other columns.
 
     Exact for the coordinate axes (a permutation with signs), so constant folding applies.
@@ -352,7 +381,7 @@ def align_z(axis: Sequence[float]) -> np.ndarray:
     return np.column_stack([x, y, a])
 
 
-def skew(v: Sequence[float]) -> np.ndarray:
+def skew(v: Vec) -> np.ndarray:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 

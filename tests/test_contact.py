@@ -187,7 +187,8 @@ def test_qp_matches_the_thesis_nonlinear_formulation_solved_by_slsqp(ch):
     feet = [ch.model.seg_body[ch.foot(s).segment] for s in ("right", "left")]
     from solver.kinematics import segment_frames
 
-    seg_idx = [next(i for i, s in enumerate(ch.segments) if s.name == ch.foot(side).segment) for side in ("right", "left")]
+    seg_idx = [next(i for i, s in enumerate(ch.segments) if s.name == ch.foot(side).segment)
+               for side in ("right", "left")]
     checked = 0
     for t in np.flatnonzero(est.status == Status.OPTIMAL)[::25]:
         qt = q[:, t]
@@ -286,7 +287,7 @@ def test_bad_inputs_are_refused_with_a_clear_message(ch, sway):
     q, fps, fc, _ = sway
     bad = q.copy()
     bad[ch.index("knee_angle_r"), 7] = np.nan
-    with pytest.raises(ContactError, match="knee_angle_r.*frame 7"):
+    with pytest.raises(ContactError, match=r"knee_angle_r.*frame 7"):
         estimate_contact_wrenches(ch, bad, fps, fc)
     with pytest.raises(ContactError, match="model/motion mismatch"):
         estimate_contact_wrenches(C.halfboy(), q, fps, fc)
@@ -333,7 +334,8 @@ def _effort_quadratic(ch, q, fps, t, c):
     b = np.array([(ep[i] - em[i]) / (4 * s) for i in range(6)])
     for i in range(6):
         for j in range(i + 1, 6):
-            H[i, j] = H[j, i] = (E(s * (I[i] + I[j])) - e - 2 * s * (b[i] + b[j]) - s * s * (H[i, i] + H[j, j])) / (2 * s * s)
+            H[i, j] = H[j, i] = ((E(s * (I[i] + I[j])) - e - 2 * s * (b[i] + b[j]) - s * s * (H[i, i] + H[j, j]))
+                                 / (2 * s * s))
     return H, b
 
 

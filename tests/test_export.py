@@ -327,8 +327,8 @@ def animated_world(g: pygltflib.GLTF2, blob: bytes) -> np.ndarray:
     def visit(i: int) -> None:
         n = g.nodes[i]
         for f in range(T):
-            tr = tracks.get((i, "translation"), None)
-            ro = tracks.get((i, "rotation"), None)
+            tr = tracks.get((i, "translation"))
+            ro = tracks.get((i, "rotation"))
             local = node_matrix(tr[f] if tr is not None else n.translation,
                                 ro[f] if ro is not None else n.rotation, n.scale)
             world[i, f] = local if i not in parent else world[parent[i], f] @ local
@@ -436,7 +436,8 @@ def test_slide_joint_below_the_root_is_animated_in_clip_and_gltf_and_refused_by_
     ch = C.halfboy()
     segs = list(ch.segments)
     k = [s.name for s in segs].index("shank_r")
-    segs[k] = replace(segs[k], dofs=(C.Dof("shank_slide_r", "slide", np.array([0.0, 0.3, -1.0]), -0.1, 0.1),) + segs[k].dofs)
+    slide = C.Dof("shank_slide_r", "slide", np.array([0.0, 0.3, -1.0]), -0.1, 0.1)
+    segs[k] = replace(segs[k], dofs=(slide, *segs[k].dofs))
     ch = replace(ch, segments=tuple(segs), name="sliding")
     motion, _ = smooth_motion(ch, T=12, seed=5)
     q = motion.q.copy()

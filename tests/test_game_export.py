@@ -16,9 +16,8 @@ import numpy as np
 import pytest
 
 from solver import kinematics as K
-from solver.export import ExportError, Y_UP, export_motion
+from solver.export import Y_UP, ExportError, export_motion, game
 from solver.export import clip as CL
-from solver.export import game
 from solver.export.gltf import to_library_glb
 from solver.motion import FEET, Motion
 

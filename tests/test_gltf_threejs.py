@@ -69,7 +69,8 @@ def test_three_loads_the_skinned_character_and_its_clip(loaded):
     assert clip["duration"] == pytest.approx((motion.T - 1) / motion.fps, rel=1e-6)
     tracks = {t["name"]: t for t in clip["tracks"]}
     hinged = [s.name for s in ch.segments if any(d.kind == "hinge" for d in s.dofs)]
-    assert sorted(n for n, t in tracks.items() if t["type"] == "quaternion") == sorted(f"{n}.quaternion" for n in hinged)
+    quaternion_tracks = sorted(n for n, t in tracks.items() if t["type"] == "quaternion")
+    assert quaternion_tracks == sorted(f"{n}.quaternion" for n in hinged)
     assert [n for n, t in tracks.items() if t["type"] == "vector"] == [f"{names[0]}.position"]  # the root's
     assert len(tracks) == len(hinged) + 1
     for t in tracks.values():

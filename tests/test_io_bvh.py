@@ -82,8 +82,8 @@ def write_bvh(motion: Path, character: Path, out: Path, scale: float = 100.0, pr
             order.append(None)
         if nm == "neck":
             b = sk.bodies["neck"]
-            lines.extend([f"{ind}  End Site", ind + "  {", f"{ind}    OFFSET {vec([0, b['AttachY'] + b['Param0'] / 2, 0])}",
-                          ind + "  }"])
+            tip = vec([0, b['AttachY'] + b['Param0'] / 2, 0])
+            lines.extend([f"{ind}  End Site", ind + "  {", f"{ind}    OFFSET {tip}", ind + "  }"])
         if nm.endswith("wrist"):
             lines.extend([f"{ind}  End Site", ind + "  {", f"{ind}    OFFSET {vec([0, -sk.bodies[nm]['Param0'], 0])}",
                           ind + "  }"])
@@ -251,4 +251,5 @@ def test_bvh_without_mass_names_the_mass_flag(shared_data, tmp_path):
     exe = shutil.which("motionx") or str(Path(sys.executable).with_name("motionx"))
     for cmd in (["grf", "--input", p, "--out", tmp_path / "x.csv"], ["tutor", p, "--out", tmp_path / "t.json"]):
         r = subprocess.run([exe, *map(str, cmd)], capture_output=True, text=True, timeout=120)
-        assert r.returncode == 2 and "does not state it; pass --mass KG" in r.stderr and "mass=" not in r.stderr, r.stderr
+        assert r.returncode == 2 and "does not state it; pass --mass KG" in r.stderr, r.stderr
+        assert "mass=" not in r.stderr, r.stderr

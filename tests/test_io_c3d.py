@@ -510,7 +510,7 @@ def test_mass_from_the_plates_when_the_file_has_none(path, trial, tmp_path):
         no_mass(c)
         c["parameters"]["FORCE_PLATFORM"]["USED"]["value"] = np.array([1])
 
-    with pytest.raises(C3DError, match="mass unknown.*pass mass=") as e:
+    with pytest.raises(C3DError, match=r"mass unknown.*pass mass=") as e:
         read_c3d(_variant(path, tmp_path / "nomass1.c3d", no_mass_one_plate))
     assert e.value.parameter == "mass"  # front ends name their own control (CLI --mass)
 

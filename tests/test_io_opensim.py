@@ -500,7 +500,7 @@ def test_trc_input_makes_a_capture_through_load_trial(shared_data):
     assert cap.source["ik"]["marker_error_mm"]["rms"] < 25
     assert cap.source["belt_speed_m_s"] == pytest.approx(1.13, abs=0.03)
     assert cap.measured is not None and cap.measured.valid.all()
-    with pytest.raises(OpenSimError, match="only apply to a .trc|apply to a .trc"):
+    with pytest.raises(OpenSimError, match=r"only apply to a \.trc|apply to a \.trc"):
         load_opensim(d / "subject01.osim", d / "subject01_walk1_ik.mot", ik_reweight=1)
 
 
@@ -508,7 +508,7 @@ def test_trc_errors(shared_data, tmp_path):
     d = shared_data / TM
     bad = tmp_path / "x.trc"
     bad.write_text("hello\n")
-    with pytest.raises(OpenSimError, match="not a .trc marker file"):
+    with pytest.raises(OpenSimError, match=r"not a \.trc marker file"):
         load_opensim(d / "subject01.osim", bad)
     # markers none of which the model has
     lines = (d / "marker_trajectories.trc").read_text().splitlines()

@@ -11,8 +11,8 @@ residual is exactly zero, the new checks must see it.
 from __future__ import annotations
 
 import json
-import zlib
 import math
+import zlib
 
 import numpy as np
 import pytest
@@ -22,8 +22,7 @@ from solver.dynamics import rnea
 from solver.kinematics import finite_differences, standing_leg_length
 from solver.motion import Motion
 from solver.plausibility import report
-from solver.realism import (RealismLimits, cycle_of, momentum_from_positions, newton_euler, realism_report,
-                            refinement)
+from solver.realism import RealismLimits, cycle_of, momentum_from_positions, newton_euler, realism_report, refinement
 
 G = np.array([0.0, 0.0, -9.81])
 

@@ -2,6 +2,10 @@
 
 Add a module to ``MODULES`` to add its commands; keep argument parsing and printing here
 and the work in ``solver``/``mjcf``.
+
+Command modules import the solver inside their command functions, on purpose: building the
+parser imports every module listed here, so a module-level solver import would make every
+``motionx`` call, ``--help`` included, load numpy, SciPy or CasADi first (``--help``: 0.7 s).
 """
 
 MODULES = [  # the order of the command list: the main job first
@@ -12,5 +16,6 @@ MODULES = [  # the order of the command list: the main job first
     "service.commands.demo",
     "service.commands.grf",  # grf, grf-compare
     "service.commands.physics",  # mjcf, check-dynamics
-    "service.commands.serve",  # serve, worker, stack, db, apikey, openapi
+    "service.commands.serve",  # serve, stack, db, apikey, openapi
+    "worker.command",  # worker (named, not imported: service/ never imports worker/)
 ]

@@ -9,8 +9,9 @@ import sys
 from pathlib import Path
 
 from service.cli import CliError, add_command, load_motion
+from solver.formats import EXPORTERS
 
-CHOICES = ("json", "gltf", "glb", "bvh")
+CHOICES = tuple(EXPORTERS)  # the exporters' registry (solver.formats)
 
 
 def cmd_export(args: argparse.Namespace) -> int:

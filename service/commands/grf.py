@@ -26,20 +26,13 @@ log = logging.getLogger("motionx")
 
 
 def _user_errors() -> tuple[type[Exception], ...]:
-    """Exceptions that describe bad input (their message is the user-facing error)."""
+    """Exceptions that describe bad input (their message is the user-facing error): every reader's,
+    gait processing's and the force files' (one base, solver.errors.InputError), and the contact
+    estimator's option checks."""
     from solver.contact import ContactError
-    from solver.grf_compare import GRFFileError
-    from solver.io import TrialError
-    from solver.io.bvh import BvhError
-    from solver.io.c3d import C3DError
-    from solver.io.deepmimic import DeepMimicError
-    from solver.io.errors import InputError
-    from solver.io.fit import FitError
-    from solver.io.opensim import OpenSimError
-    from solver.io.preprocess import PreprocessError
+    from solver.errors import InputError
 
-    return (ContactError, GRFFileError, C3DError, FitError, OpenSimError, PreprocessError, TrialError, BvhError,
-            DeepMimicError, InputError)
+    return (InputError, ContactError)
 
 
 def _exists(path: str | None, flag: str) -> None:
@@ -58,8 +51,9 @@ def _load(args: argparse.Namespace):
     files = _files(args)
     kinds = [k for k in ("osim", "c3d") if getattr(args, k)] + (["files"] if files else [])
     if len(kinds) != 1:
-        raise CliError("give the trial once: its files (MODEL.osim IK.mot|MARKERS.trc [GRF.mot X.xml] | FILE.c3d | FILE.bvh | "
-                       "DeepMimic CLIP.txt CHARACTER.txt), or --osim MODEL --coordinates IK.mot, or --c3d FILE")
+        raise CliError("give the trial once: its files (MODEL.osim IK.mot|MARKERS.trc [GRF.mot X.xml] | FILE.c3d "
+                       "| FILE.bvh | DeepMimic CLIP.txt CHARACTER.txt), or --osim MODEL --coordinates IK.mot, "
+                       "or --c3d FILE")
     if args.mass is not None and not (math.isfinite(args.mass) and args.mass > 0):
         raise CliError(f"--mass must be a positive number of kg, got {args.mass}")
     belt = parse_belt_speed(args.belt_speed)

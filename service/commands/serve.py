@@ -1,4 +1,4 @@
-"""Service commands: ``serve`` (API), ``worker`` (Celery), ``stack`` (the compose topology as
+"""Service commands: ``serve`` (API), ``stack`` (the compose topology as
 processes), ``db upgrade``, ``apikey create|revoke``, ``openapi``."""
 
 from __future__ import annotations
@@ -6,7 +6,6 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import os
 import signal
 import sys
 import threading
@@ -64,27 +63,6 @@ def cmd_serve(args: argparse.Namespace) -> int:
                       "database": settings.sqlalchemy_url.split("@")[-1]}), flush=True)
     uvicorn.run(create_app(settings), host=settings.host, port=settings.port, log_level=args.log_level,
                 timeout_graceful_shutdown=10, access_log=args.access_log)
-    return 0
-
-
-def cmd_worker(args: argparse.Namespace) -> int:
-    from worker.app import create_celery
-
-    settings = _settings(broker_url=args.broker_url, database_url=args.database_url,
-                         worker_concurrency=args.concurrency)
-    app = create_celery(settings)
-    # import the pipeline once in the worker's main process: every pool process forked from
-    # it (also the one replacing a killed child) starts warm, with the same code
-    import mjcf.validate  # noqa: F401
-    import solver.continuation
-    import solver.pipeline  # noqa: F401
-
-    argv = [
-        "worker", f"--loglevel={args.loglevel}", "-Q", settings.celery_queue,
-        f"--concurrency={settings.worker_concurrency}", f"--hostname={args.hostname or f'motionx-{os.getpid()}@%h'}",
-        "--without-gossip", "--without-mingle",
-    ]
-    app.worker_main(argv)
     return 0
 
 
@@ -183,7 +161,7 @@ key configured (MOTIONX_API_KEYS) or stored, it makes one and prints it once."""
     s.add_argument("--host", default=None, metavar="ADDR",
                    help="address to listen on (default: $MOTIONX_HOST or 127.0.0.1; 0.0.0.0 for every interface)")
     s.add_argument("--port", type=int, default=None, metavar="P", help="TCP port (default: $MOTIONX_PORT or 8000)")
-    s.add_argument("--runner", choices=["local", "celery"], default=None,
+    s.add_argument("--runner", default=None, metavar="NAME",  # checked by Settings (service.config.RUNNER_NAMES)
                    help="who runs the jobs: local (a process pool in this process) or celery (`motionx worker`s "
                         "over Redis) (default: $MOTIONX_RUNNER or local)")
     s.add_argument("--log-level", default="info", choices=["critical", "error", "warning", "info", "debug"],
@@ -191,19 +169,6 @@ key configured (MOTIONX_API_KEYS) or stored, it makes one and prints it once."""
     s.add_argument("--access-log", action="store_true", help="log every request")
     _db_args(s)
     s.set_defaults(func=cmd_serve)
-
-    s = add_command(sub, "worker", "run a Celery worker executing extrapolation jobs", """\
-Run a Celery worker that executes extrapolation jobs from the Redis queue (the same job
-function as the local runner), with late acknowledgement and prefetch 1.""")
-    s.add_argument("--concurrency", type=int, default=None, metavar="N",
-                   help="pool processes (default: $MOTIONX_WORKER_CONCURRENCY or 1)")
-    s.add_argument("--hostname", default=None, metavar="NAME", help="Celery node name (default: motionx-<pid>@%%h)")
-    s.add_argument("--loglevel", default="INFO", metavar="LEVEL", help="Celery's log level")
-    s.add_argument("--broker-url", default=None, metavar="URL",
-                   help="Redis URL (default: $MOTIONX_BROKER_URL or redis://127.0.0.1:6379/0)")
-    s.add_argument("--database-url", default=None, metavar="URL",
-                   help="SQLAlchemy URL (default: $DATABASE_URL, else SQLite)")
-    s.set_defaults(func=cmd_worker)
 
     s = add_command(sub, "stack", "start the docker-compose topology as processes: Redis (AOF), "
                     "PostgreSQL database, API, N workers; Ctrl-C stops it", """\

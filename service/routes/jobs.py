@@ -16,8 +16,8 @@ from service import limits, store
 from service.config import Settings
 from service.db import Database
 from service.deps import app_settings, get_db, get_owner, get_runner
-from service.models import TERMINAL
 from service.limits import LimitError
+from service.models import TERMINAL
 from service.problems import Problem, known_id, not_found
 from service.runners import Runner
 from service.schemas import ExtrapolateIn, JobOut, JobPage, MotionPage
@@ -72,6 +72,7 @@ def extrapolate(
     runner: Runner = Depends(get_runner),
     settings: Settings = Depends(app_settings),
 ) -> JSONResponse:
+    # lazy: the API process loads the solver (CasADi) on first use only
     from solver.continuation import StepControl, Target
 
     known_id("motion", motion_id)

@@ -3,6 +3,10 @@ cancel, manifest, library GLB (service.library)."""
 
 from __future__ import annotations
 
+import asyncio
+import json
+import time
+
 from fastapi import APIRouter, Depends, Query, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse, Response, StreamingResponse
@@ -52,7 +56,7 @@ def create_library(
     runner: Runner = Depends(get_runner),
     settings: Settings = Depends(app_settings),
 ) -> JSONResponse:
-    from solver.continuation import StepControl
+    from solver.continuation import StepControl  # lazy: the API process loads the solver (CasADi) on first use only
     from solver.library import LibraryError
 
     known_id("motion", motion_id)
@@ -182,10 +186,6 @@ async def library_events(
     db: Database = Depends(get_db),
     settings: Settings = Depends(app_settings),
 ) -> StreamingResponse:
-    import asyncio
-    import json
-    import time
-
     known_id("library", library_id)
 
     def snapshot() -> dict | None:

@@ -17,15 +17,16 @@ from fastapi.responses import JSONResponse, Response
 from starlette.datastructures import UploadFile
 
 from service import limits, store, uploads, work
+from service.config import Settings
 from service.db import Database
 from service.deps import app_settings, get_db, get_owner
 from service.limits import clip
 from service.problems import Problem, known_id, not_found
-from service.config import Settings
 from service.schemas import MotionOut, MotionPage
 from service.uploads import MAX_FILES, Encoded, ImporterUnavailable, UploadError
 from service.views import motion_out
 from service.work import Compute
+from solver.formats import EXPORTERS, export_media_types
 
 router = APIRouter(tags=["motions"])
 
@@ -55,7 +56,9 @@ UPLOAD_BODY = {
     }
 }
 
-FORMATS = ("json", "gltf", "glb", "bvh", "motion")
+#: the exporters' registry (solver.formats), and the motion file itself
+FORMATS = (*EXPORTERS, "motion")
+ExportFormat = Literal[FORMATS]  # type: ignore[valid-type]
 MULTIPART_FIELDS = ("files", "mass", "belt_speed", "name")
 NAME_PATTERN = r"^[^\x00-\x1f\x7f]*$"
 _CONTROL = re.compile(r"[\x00-\x1f\x7f]")
@@ -123,7 +126,7 @@ async def upload_motion(
         elif ctype == "multipart/form-data":
             form = await request.form(max_files=MAX_FILES, max_fields=16)
             try:
-                unknown = sorted({k for k in form.keys() if k not in MULTIPART_FIELDS})
+                unknown = sorted({k for k in form if k not in MULTIPART_FIELDS})
                 if unknown:
                     raise UploadError(f"unknown form field(s) {clip(str(unknown), 120)}; the fields are "
                                       f"{', '.join(MULTIPART_FIELDS)}")
@@ -195,8 +198,7 @@ def _option(k: str, v: str) -> Any:
                 "the .gltf JSON with its buffer embedded, model/gltf+json, instead of the binary .glb). "
                 "An option the exporter does not know, or a value it refuses, gets 422. Exports are computed "
                 "in the server's compute processes and cached by content.",
-    responses={200: {"content": {"application/json": {}, "model/gltf+json": {}, "model/gltf-binary": {},
-                                 "text/plain": {}}},
+    responses={200: {"content": {mt: {} for mt in ("application/json", *export_media_types())}},
                404: {"description": "no such motion for this key"},
                422: {"description": "an exporter option it does not know or a value it refuses"},
                429: {"description": "the server is busy with heavy requests: retry after Retry-After seconds"},
@@ -205,7 +207,7 @@ def _option(k: str, v: str) -> Any:
 async def get_motion(
     motion_id: str,
     request: Request,
-    format: Literal["json", "gltf", "glb", "bvh", "motion"] = Query(
+    format: ExportFormat = Query(
         "json", description="output format (gltf and glb: binary glTF 2.0); other query parameters are the "
                             "exporter's options"),
     owner: str = Depends(get_owner),

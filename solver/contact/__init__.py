@@ -124,7 +124,23 @@ from solver.contact.trial import (
     lowpass_kinematics,
 )
 
-__all__ = ["COP_MIN_FZ", "CONTACT_SOURCES", "DEFAULT_CUTOFF_HZ", "DEFAULT_FRICTION", "DEFAULT_LATERAL_HZ",
-           "DEFAULT_PENETRATION", "DEFAULT_REGULARIZATION", "METHODS", "ContactError", "ContactEstimate", "Status",
-           "Support", "TrialEstimate", "cop_and_free_moment", "estimate_capture", "estimate_contact_wrenches",
-           "foot_schedule", "lowpass_kinematics"]
+__all__ = [
+    "CONTACT_SOURCES",
+    "COP_MIN_FZ",
+    "DEFAULT_CUTOFF_HZ",
+    "DEFAULT_FRICTION",
+    "DEFAULT_LATERAL_HZ",
+    "DEFAULT_PENETRATION",
+    "DEFAULT_REGULARIZATION",
+    "METHODS",
+    "ContactError",
+    "ContactEstimate",
+    "Status",
+    "Support",
+    "TrialEstimate",
+    "cop_and_free_moment",
+    "estimate_capture",
+    "estimate_contact_wrenches",
+    "foot_schedule",
+    "lowpass_kinematics",
+]

@@ -20,6 +20,7 @@ would attribute the whole error to the angular momentum.
 from __future__ import annotations
 
 import numpy as np
+import quadprog
 
 from solver.character import Character
 from solver.contact.geometry import _foot_frames, _Pose
@@ -81,7 +82,6 @@ def least_norm(B: np.ndarray, b: np.ndarray, tol: np.ndarray) -> np.ndarray:
     one such row's boundary, b_i B_i / ‖B_i‖², satisfies every row it is the optimum (every feasible
     point satisfies row i, so lies at least that far from 0): one batched step settles most frames;
     the others (corners: 2 or 3 active rows) are one small QP each (quadprog)."""
-    import quadprog
 
     N, m, k = B.shape
     out = np.full((N, k), np.nan)
@@ -130,7 +130,6 @@ def correct_double(c: np.ndarray, com: np.ndarray, r: np.ndarray, G_r: np.ndarra
     right foot's wrench about the frame's reference point r (N, 3) (conditioning), minimises ‖δ‖²
     (plus 1e-8 ‖y‖² for strict convexity: 1e-8 N² per N² of load) under both feet's rows. Returns
     (totals, corrected (N,), a feasible right-foot wrench about r (N, 6), NaN where not corrected)."""
-    import quadprog
 
     out = np.array(c, dtype=float, copy=True)
     N = out.shape[1]

@@ -5,7 +5,8 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -112,13 +113,14 @@ def estimate_contact_wrenches(
     res = rnea(character, qf, qd, qdd, g)
     tau0, h0 = np.asarray(res.tau), np.asarray(res.h0)
     full = mode == "com" or lateral_hz is not None
+    com: np.ndarray | None
     if lateral_hz is not None:
         # every frame's pose (the filter needs the ends), the estimator's frames taken from it
         pose_all = _dense_pose(character, q, full=True)
         com_all = centre_of_mass(character, pose_all)
         sl = slice(int(frames[0]), int(frames[-1]) + 1)  # the frames are consecutive: views, no copies
         pose = _Pose(pose_all.rot[sl], pose_all.pos[sl])
-        com = com_all[:, sl]
+        com = com_sl = com_all[:, sl]
         lat = lateral_correction(com_all, h0[3:], float(np.sum(character.model.mass)), float(fps),
                                  float(lateral_hz), cyclic)
         if lat is None:
@@ -130,7 +132,7 @@ def estimate_contact_wrenches(
             df = lat[0]
             h0 = h0.copy()
             h0[3:] += df
-            h0[:3] += np.cross(com.T, df.T).T
+            h0[:3] += np.cross(com_sl.T, df.T).T
     else:
         pose = _dense_pose(character, qf, full=full)
         com = centre_of_mass(character, pose) if mode == "com" else None
@@ -149,6 +151,7 @@ def estimate_contact_wrenches(
     ds = np.flatnonzero(sup == Support.DOUBLE)
     c = h0  # the total each split must sum to (corrected where no split exists, mode "com")
     if mode == "com":
+        assert com is not None
         c = h0.copy()
         for s, mask in ((0, right), (1, left)):
             k = np.flatnonzero(mask)
@@ -168,13 +171,15 @@ def estimate_contact_wrenches(
                 w[s][:, k], moved = _project_cop(w[s][:, k], character, pose.take(k), FEET[s], penetration)
                 st[k[moved]] = Status.PROJECTED
     if len(ds):
-        opts = dict(friction=friction, penetration=penetration, regularization=regularization, effort=effort)
+        opts: dict[str, Any] = dict(friction=friction, penetration=penetration, regularization=regularization,
+                                    effort=effort)
         pose_ds = pose.take(ds)
         batch = _qp_batch(character, pose_ds, tau0[:, ds], c[:, ds], **opts)
         y, st_ds, rows = _solve_batch(batch, method, defer_relaxation=mode == "com")
         if mode == "com" and np.any(st_ds == Status.RELAXED):
             # no split exists: the least force at the centre of mass that makes one exist, then the split
             j = np.flatnonzero(st_ds == Status.RELAXED)
+            assert com is not None  # mode "com"
             pj = pose_ds.take(j)
             cj, moved, y_c = correct_double(c[:, ds[j]], com[:, ds[j]], batch.r[j],
                                             foot_rows(character, pj, FEET[0], penetration, friction),
@@ -188,10 +193,10 @@ def estimate_contact_wrenches(
                 batch = _splice(batch, sub, jm)
                 y[jm] = y_c[moved]
                 tol = 1e-7 * np.maximum(np.abs(sub.c[:, 5]), 1.0)
-                for k, i in enumerate(jm):
-                    rows[i] = (sub.G[k], sub.h[k] + np.maximum(sub.G[k] @ y_c[moved][k] - sub.h[k], 0.0) + tol[k])
+                for r, i in enumerate(jm):
+                    rows[i] = (sub.G[r], sub.h[r] + np.maximum(sub.G[r] @ y_c[moved][r] - sub.h[r], 0.0) + tol[r])
             for i in j[~moved]:  # no correction found: the least relaxation of the frame's rows (the thesis's)
-                sol, rows[i] = _relax_frame(batch, i, method)
+                sol, rows[i] = _relax_frame(batch, int(i), method)
                 if sol is None:
                     st_ds[i] = Status.FAILED
                 else:

@@ -33,11 +33,11 @@ class _Pose:
     rot: np.ndarray
     pos: np.ndarray
 
-    def take(self, idx: np.ndarray) -> "_Pose":
+    def take(self, idx: np.ndarray) -> _Pose:
         return _Pose(self.rot[idx], self.pos[idx])
 
 
-_LEGS: "weakref.WeakKeyDictionary[Character, tuple[Character, np.ndarray]]" = weakref.WeakKeyDictionary()
+_LEGS: weakref.WeakKeyDictionary[Character, tuple[Character, np.ndarray]] = weakref.WeakKeyDictionary()
 
 
 def _legs(character: Character) -> tuple[Character, np.ndarray]:

@@ -15,38 +15,16 @@ the total, and so its free moment and the CoP's forward position, are untouched)
 
 from __future__ import annotations
 
-import math
-from functools import lru_cache
-
 import numpy as np
 
 from solver.contact.common import _derivatives
-
-
-@lru_cache(maxsize=32)
-def _butter(cutoff_hz: float, fps: float) -> np.ndarray:
-    from scipy.signal import butter
-
-    return butter(2, cutoff_hz, btype="low", fs=fps, output="sos")
+from solver.filtering import zero_phase_lowpass
 
 
 def _lowpass(x: np.ndarray, fps: float, cutoff_hz: float, cyclic: bool) -> np.ndarray:
     """Zero-phase 2nd-order Butterworth forwards and backwards (the kinematics' filter, odd extension over
     3 periods of the cut-off; a cyclic signal x[-1] = x[0] + offset filtered as the periodic signal)."""
-    from scipy.signal import sosfiltfilt
-
-    sos = _butter(float(cutoff_hz), float(fps))
-    T = x.shape[-1]
-    if cyclic:
-        P = T - 1
-        offset = x[-1] - x[0]
-        reps = max(3, 2 * int(math.ceil(3 * fps / cutoff_hz / P)) + 1)
-        k0 = reps // 2
-        ext = np.concatenate([x[:P] + (k - k0) * offset for k in range(reps)])
-        out = sosfiltfilt(sos, ext, padtype=None)
-        return np.concatenate([out[k0 * P:(k0 + 1) * P], out[k0 * P:k0 * P + 1] + offset])
-    padlen = min(T - 1, int(math.ceil(3 * fps / cutoff_hz)))
-    return sosfiltfilt(sos, x, padtype="odd", padlen=padlen)
+    return zero_phase_lowpass(x, fps, cutoff_hz, order=2, cyclic=cyclic)
 
 
 MAX_TURN_DEG = 30.0  # a walk whose heading turns more than this has no single lateral axis

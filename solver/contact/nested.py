@@ -6,13 +6,13 @@ import logging
 import math
 
 import numpy as np
+import quadprog
 
 log = logging.getLogger("solver.contact")
 
 
 def _solve_qp(P: np.ndarray, qv: np.ndarray, G: np.ndarray, h: np.ndarray) -> np.ndarray | None:
     """min yᵀPy + 2qᵀy s.t. G y ≤ h with quadprog; None if infeasible."""
-    import quadprog
 
     try:
         return quadprog.solve_qp(2.0 * P, -2.0 * qv, -G.T, -h, 0)[0]
@@ -23,7 +23,7 @@ def _solve_qp(P: np.ndarray, qv: np.ndarray, G: np.ndarray, h: np.ndarray) -> np
 
 def _nested(P: np.ndarray, qv: np.ndarray, G: np.ndarray, h: np.ndarray, scale: float) -> np.ndarray | None:
     """Thesis form: inner QP with y_fz = z fixed, outer bounded search over z (SPEC 4.30-4.31)."""
-    from scipy.optimize import linprog, minimize_scalar
+    from scipy.optimize import linprog, minimize_scalar  # lazy: scipy.optimize costs ~0.4 s to import
 
     # feasible interval of z = y_fz (an LP each way)
     e = np.zeros(6)

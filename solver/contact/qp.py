@@ -6,6 +6,7 @@ import logging
 from dataclasses import dataclass
 
 import numpy as np
+import quadprog
 
 from solver.character import Character
 from solver.contact.common import FEASIBILITY_TOL, Status
@@ -78,7 +79,7 @@ def _qp_batch(
 
     # symmetric tie-breaker: ‖D_r y‖² + ‖D_l (c − y)‖²
     D = []
-    for rot, ctr, half in boxes:
+    for _rot, ctr, half in boxes:
         p = ctr.copy()
         p[:, 2] = 0.0
         d = p - r  # foot centre relative to r
@@ -142,7 +143,6 @@ def _row_scale(batch: _QPBatch, i: int) -> float:
 
 def _solve_qp(P: np.ndarray, qv: np.ndarray, G: np.ndarray, h: np.ndarray) -> np.ndarray | None:
     """min yᵀPy + 2qᵀy s.t. G y ≤ h with quadprog; None if infeasible."""
-    import quadprog
 
     try:
         return quadprog.solve_qp(2.0 * P, -2.0 * qv, -G.T, -h, 0)[0]
@@ -162,7 +162,6 @@ def _bounds(batch: _QPBatch, i: int) -> tuple[np.ndarray, np.ndarray]:
 def _relaxation(batch: _QPBatch, i: int) -> np.ndarray | None:
     """Smallest least-squares relaxation s (rows weighted to N·m) of the polygon and friction rows
     making frame i feasible, the vertical-force bounds kept."""
-    import quadprog
 
     G, h, w = batch.G[i], batch.h[i], batch.row_weight[i]
     Gb, hb = _bounds(batch, i)
@@ -236,7 +235,7 @@ def _solve_batch(batch: _QPBatch, method: str, defer_relaxation: bool = False
         if defer_relaxation:
             status[i] = Status.RELAXED
             continue
-        sol, rows[i] = _relax_frame(batch, i, method)
+        sol, rows[i] = _relax_frame(batch, int(i), method)
         if sol is not None:
             y[i], status[i] = sol, Status.RELAXED
     for i in np.flatnonzero(status == Status.FAILED):

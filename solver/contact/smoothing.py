@@ -6,6 +6,7 @@ import logging
 from dataclasses import dataclass
 
 import numpy as np
+import quadprog
 
 from solver.character import Character
 from solver.contact.common import FEASIBILITY_TOL
@@ -92,7 +93,6 @@ def _smooth_split(batch: _QPBatch, y: np.ndarray, rows: list, ds: np.ndarray, li
     under every frame's own constraint rows. κ = fps / (2π f_s): a zero-phase first-order
     low-pass at f_s of the per-frame optimum, in the effort metric, that respects the
     constraints and the boundaries. Returns y (N_ds, 6) about each frame's r."""
-    import quadprog
 
     out = y.copy()
     P = line.period
@@ -103,20 +103,21 @@ def _smooth_split(batch: _QPBatch, y: np.ndarray, rows: list, ds: np.ndarray, li
     if not runs:
         return out
     # every pair (a -> b) of consecutive frames touching a run; "wrapped": b is frame 0 seen as frame P
-    pa, pb, wr, rid, la, lb = [], [], [], [], [], []
+    # per pair: a, b, wrapped, run, a's and b's place in the run (-1: outside it)
+    pairs: tuple[list, list, list, list, list, list] = ([], [], [], [], [], [])
     for r_i, run in enumerate(runs):
         loc = {pos: j for j, pos in enumerate(run)}
         prv = run[0] - 1 if run[0] > 0 else (n_pos - 1 if P is not None else None)
         if prv is not None and prv not in loc:
-            pa.append(prv), pb.append(run[0]), wr.append(P is not None and run[0] == 0), rid.append(r_i)
-            la.append(-1), lb.append(0)
+            for lst, v in zip(pairs, (prv, run[0], P is not None and run[0] == 0, r_i, -1, 0)):
+                lst.append(v)
         for j, pos in enumerate(run):
             nxt = pos + 1 if pos + 1 < n_pos else (0 if P is not None else None)
             if nxt is None:
                 continue
-            pa.append(pos), pb.append(nxt), wr.append(P is not None and nxt == 0), rid.append(r_i)
-            la.append(j), lb.append(loc.get(nxt, -1))
-    pa, pb, wr, rid, la, lb = (np.array(v) for v in (pa, pb, wr, rid, la, lb))
+            for lst, v in zip(pairs, (pos, nxt, P is not None and nxt == 0, r_i, j, loc.get(nxt, -1))):
+                lst.append(v)
+    pa, pb, wr, rid, la, lb = (np.array(v) for v in pairs)
     b_phys = np.where(wr, P if P is not None else 0, pb)
     d = 0.5 * (line.r[pa] - line.r[b_phys])  # r_a − R with R the pair's mid-point; r_b − R = −d
     K = len(pa)
@@ -218,7 +219,7 @@ def _smooth_split(batch: _QPBatch, y: np.ndarray, rows: list, ds: np.ndarray, li
 def _solve_block_tridiagonal(D: np.ndarray, O: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     """x with the symmetric block-tridiagonal system (diagonal blocks D (N, 6, 6), blocks O (N−1, 6, 6)
     above the diagonal) times x = rhs (N, 6): one banded solve."""
-    from scipy.linalg import solve_banded
+    from scipy.linalg import solve_banded  # lazy: scipy.linalg costs ~0.2 s to import
 
     N, b = D.shape[0], D.shape[1]
     n = N * b

@@ -12,6 +12,9 @@ import numpy as np
 from solver.character import Character
 from solver.contact.common import ContactError, ContactEstimate
 from solver.contact.estimator import estimate_contact_wrenches
+from solver.filtering import zero_phase_lowpass
+from solver.gait import contacts_from_plates, detect_contacts
+from solver.gait.base import unwrap_hinges
 from solver.motion import foot_schedule_of
 
 log = logging.getLogger("solver.contact")
@@ -36,26 +39,9 @@ def lowpass_kinematics(character: Character, q: np.ndarray, fps: float, cutoff_h
     a transient that corrupts accelerations near the ends). A cyclic motion (last frame =
     first frame one period later) is filtered as the periodic signal it is.
     """
-    from scipy.signal import butter, sosfiltfilt
-
-    q = np.array(q, dtype=float, copy=True)
     if not (math.isfinite(cutoff_hz) and 0 < cutoff_hz < fps / 2):
         raise ContactError(f"low-pass cut-off {cutoff_hz} Hz must lie in (0, fps/2 = {fps / 2:g} Hz)")
-    for i, kind in enumerate(character.dof_kinds):
-        if kind == "hinge":
-            q[i] = np.unwrap(q[i])
-    sos = butter(order, cutoff_hz, btype="low", fs=fps, output="sos")
-    T = q.shape[1]
-    if cyclic:
-        P = T - 1
-        offset = (q[:, -1] - q[:, 0])[:, None]
-        reps = max(3, 2 * int(math.ceil(3 * fps / cutoff_hz / P)) + 1)
-        k0 = reps // 2
-        ext = np.concatenate([q[:, :P] + (k - k0) * offset for k in range(reps)], axis=1)
-        out = sosfiltfilt(sos, ext, axis=1, padtype=None)
-        return np.concatenate([out[:, k0 * P:(k0 + 1) * P], out[:, k0 * P:k0 * P + 1] + offset], axis=1)
-    padlen = min(T - 1, int(math.ceil(3 * fps / cutoff_hz)))
-    return sosfiltfilt(sos, q, axis=1, padtype="odd", padlen=padlen)
+    return zero_phase_lowpass(unwrap_hinges(character, q), fps, cutoff_hz, order=order, axis=1, cyclic=cyclic)
 
 
 def foot_schedule(contacts: np.ndarray, character: Character) -> np.ndarray:
@@ -109,8 +95,6 @@ def estimate_capture(
     ``cyclic``: ``None`` = the capture's ``source["loop"] == "wrap"``. Other options go to
     :func:`estimate_contact_wrenches`.
     """
-    from solver.io.preprocess import contacts_from_plates, detect_contacts
-
     ch = capture.character
     q, fps = np.asarray(capture.q, dtype=float), float(capture.fps)
     if q.shape[0] != ch.n:
@@ -152,7 +136,7 @@ def estimate_capture(
     if isinstance(lateral_hz, str):
         if lateral_hz != "default":
             raise ContactError(f"lateral_hz must be a frequency (Hz), 'default' or None, got {lateral_hz!r}")
-        lateral_hz = DEFAULT_LATERAL_HZ if cutoff_hz is not None and DEFAULT_LATERAL_HZ < cutoff_hz else None
+        lateral_hz = DEFAULT_LATERAL_HZ if cutoff_hz is not None and cutoff_hz > DEFAULT_LATERAL_HZ else None
     est = estimate_contact_wrenches(ch, qf, fps, foot_schedule(sched, ch), cyclic=cyclic, smoothing_hz=smoothing_hz,
                                     project_cop=project_cop, lateral_hz=lateral_hz, **options)
     return TrialEstimate(estimate=est, times=np.asarray(capture.times, dtype=float), q=qf, contacts=sched,

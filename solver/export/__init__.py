@@ -22,6 +22,7 @@ wrenches. :func:`export_motion` dispatches on a format name and refuses unknown 
 
 from __future__ import annotations
 
+import importlib
 import inspect
 import math
 from dataclasses import dataclass
@@ -29,7 +30,9 @@ from typing import Any
 
 import numpy as np
 
+from solver import spatial as sp
 from solver.character import Character
+from solver.formats import EXPORTERS
 from solver.motion import Motion
 
 __all__ = [
@@ -84,12 +87,8 @@ class LocalTransforms:
     moving_pos: tuple[bool, ...]
 
 
-def _axis_rotations(axis: np.ndarray, angles: np.ndarray) -> np.ndarray:
-    """Rodrigues: rotations about a unit ``axis`` by each angle, shape (T, 3, 3)."""
-    k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
-    s = np.sin(angles)[:, None, None]
-    c = np.cos(angles)[:, None, None]
-    return np.eye(3) + s * k + (1.0 - c) * (k @ k)
+#: the name tests and older code use: rotations about a unit axis by each angle, (T, 3, 3)
+_axis_rotations = sp.rotation_about
 
 
 def local_transforms(character: Character, q: np.ndarray) -> LocalTransforms:
@@ -235,18 +234,11 @@ def ground_reactions(motion: Motion, min_load: float | None = None) -> GroundRea
 
 # --- dispatch -------------------------------------------------------------------------------
 
-#: format name -> (module, function, media type)
-FORMATS: dict[str, tuple[str, str, str]] = {
-    "json": ("solver.export.clip", "to_clip_json", "application/json"),
-    "gltf": ("solver.export.gltf", "to_gltf", "model/gltf-binary"),  # binary=False: model/gltf+json
-    "glb": ("solver.export.gltf", "to_glb", "model/gltf-binary"),
-    "bvh": ("solver.export.bvh", "to_bvh", "text/plain"),
-}
+#: format name -> (module, function, media type), from the registry (solver.formats.EXPORTERS)
+FORMATS: dict[str, tuple[str, str, str]] = {n: (e.module, e.function, e.media_type) for n, e in EXPORTERS.items()}
 
 
 def _exporter(fmt: str):
-    import importlib
-
     try:
         module, func, _ = FORMATS[fmt]
     except KeyError:
@@ -255,7 +247,8 @@ def _exporter(fmt: str):
 
 
 #: (format, option, value) -> media type when that option changes the result's type
-_MEDIA_BY_OPTION: dict[tuple[str, str, Any], str] = {("gltf", "binary", False): "model/gltf+json"}
+_MEDIA_BY_OPTION: dict[tuple[str, str, Any], str] = {
+    (n, key, value): mt for n, e in EXPORTERS.items() for (key, value), mt in e.media_by_option.items()}
 
 
 def media_type(fmt: str, **options: Any) -> str:

@@ -41,7 +41,7 @@ _BAD_NAME = re.compile(r"[\s{}]")
 
 def euler_angles(rot: np.ndarray, order: str) -> np.ndarray:
     """Intrinsic Euler angles (radians) of rotation matrices (..., 3, 3): R = R_o0(a) R_o1(b) R_o2(c)."""
-    from scipy.spatial.transform import Rotation
+    from scipy.spatial.transform import Rotation  # lazy: scipy.spatial costs ~0.2 s to import
 
     shape = rot.shape[:-2]
     with warnings.catch_warnings():

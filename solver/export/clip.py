@@ -28,6 +28,7 @@ from solver.export import (
     _check_motion,
     change_axes,
     continuous_quaternions,
+    game,
     ground_reactions,
     local_transforms,
     matrix_to_quaternion,
@@ -56,7 +57,8 @@ def _nullable(a: np.ndarray, decimals: int | None) -> list:
 
 
 def _check_options(decimals: Any, min_load: Any) -> None:
-    if decimals is not None and (isinstance(decimals, bool) or not isinstance(decimals, int) or not 0 <= decimals <= 17):
+    if decimals is not None and (isinstance(decimals, bool) or not isinstance(decimals, int)
+                                 or not 0 <= decimals <= 17):
         raise ExportError(f"decimals must be an integer in [0, 17] or None, got {decimals!r}")
     if min_load is not None and (isinstance(min_load, bool) or not isinstance(min_load, (int, float))):
         raise ExportError(f"min_load must be a number of newtons or None, got {min_load!r}")
@@ -158,7 +160,6 @@ def to_clip(
                 for i, foot in enumerate(FEET)
             },
         }
-    from solver.export import game
 
     if game.has_free_root(motion):
         clip["game"] = game.game_json(motion, axes=Y_UP if y_up else None, decimals=decimals)
@@ -189,7 +190,7 @@ def schema() -> dict:
 
 def validate_clip(clip: Any) -> None:
     """Check a clip against the published schema and its array lengths against each other."""
-    import jsonschema
+    import jsonschema  # lazy: only validation needs it
 
     validator = jsonschema.Draft202012Validator(schema())
     errors = sorted(validator.iter_errors(clip), key=lambda e: list(e.absolute_path))

@@ -37,7 +37,8 @@ direction +x), ``stride_length_m`` (the chord over the cycle), gravity and frict
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 
@@ -189,7 +190,7 @@ def game_data(motion: Motion, *, axes: np.ndarray | None = None, frames: int | N
         for i, foot in enumerate(FEET):
             idx = [k for k, c in enumerate(ch.contacts) if c.side == foot]
             active = motion.contacts[idx]  # (k, T)
-            planted = active.any(axis=0)
+            planted = np.asarray(active.any(axis=0))
             pos = np.full((T, 3), np.nan)
             for t in np.flatnonzero(planted):
                 pos[t] = cp[[idx[k] for k in np.flatnonzero(active[:, t])], :, t].mean(axis=0)

@@ -38,6 +38,7 @@ from solver.export import (
     _check_motion,
     change_axes,
     continuous_quaternions,
+    game,
     local_transforms,
     matrix_to_quaternion,
 )
@@ -93,7 +94,8 @@ def _trs_matrix(rot: np.ndarray, pos: np.ndarray) -> np.ndarray:
     return m
 
 
-def ellipsoid_mesh(center: np.ndarray, axis: np.ndarray, a: float, b: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def ellipsoid_mesh(center: np.ndarray, axis: np.ndarray, a: float,
+                   b: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A low-poly prolate ellipsoid: (vertices (V, 3), outward normals (V, 3), triangles (F, 3)).
 
     Polar semi-axis ``a`` along the unit ``axis``, equatorial semi-axis ``b``, centred at
@@ -138,7 +140,6 @@ def ellipsoid_mesh(center: np.ndarray, axis: np.ndarray, a: float, b: float) -> 
 def _animation(buf: _Buffer, motion: Motion, name: str, *, loop: bool = False) -> dict:
     """One animation of ``motion`` (frames 0 … P, one cycle, with ``loop``; else every frame),
     with the game-ready data (:mod:`solver.export.game`, Y up) in its ``extras``."""
-    from solver.export import game
 
     ch = motion.character
     S = len(ch.segments)
@@ -281,7 +282,8 @@ def _document(motion: Motion, meshes: bool, loop: bool = False,
         doc["materials"] = [
             {
                 "name": "segment",
-                "pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.8, 0.8, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.8},
+                "pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.8, 0.8, 1.0], "metallicFactor": 0.0,
+                                         "roughnessFactor": 0.8},
             }
         ]
     log.debug("glTF of %s: %d nodes, %d meshes, %d animations, %d bytes", ch.name, len(nodes), len(mesh_list),

@@ -30,7 +30,6 @@ largest residuals, and ``.motion()`` to get a :class:`~solver.motion.Motion`).
 from __future__ import annotations
 
 import base64
-import itertools
 import json
 import math
 import re
@@ -40,9 +39,12 @@ from typing import Any
 
 import numpy as np
 
+from solver import hinges as hinge_chains
 from solver import spatial as sp
 from solver.character import Character
-from solver.export import Y_UP, ExportError, _axis_rotations
+from solver.export import Y_UP, ExportError
+from solver.export.clip import FORMAT, validate_clip
+from solver.io.bvh import BvhError, parse_bvh
 from solver.motion import Motion
 
 __all__ = [
@@ -104,119 +106,13 @@ def quaternion_to_matrix(quat: np.ndarray) -> np.ndarray:
     return sp.quaternion_to_matrix(qv)
 
 
-def _angle(E: np.ndarray) -> np.ndarray:
-    """Rotation angle (rad) of each (..., 3, 3) rotation matrix, accurate near 0 and π."""
-    v = np.stack([E[..., 2, 1] - E[..., 1, 2], E[..., 0, 2] - E[..., 2, 0], E[..., 1, 0] - E[..., 0, 1]], -1)
-    return np.arctan2(0.5 * np.linalg.norm(v, axis=-1), 0.5 * (np.trace(E, axis1=-2, axis2=-1) - 1.0))
-
-
-def _about(axis: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Paden-Kahan subproblem 1: the angle θ that best rotates ``p`` onto ``q`` about ``axis``
-    (R(axis, θ) p ∥ q in the plane normal to the axis). ``p``, ``q``: (T, 3) or (3,)."""
-    p = np.broadcast_to(p, np.shape(q)) if np.ndim(p) < np.ndim(q) else p
-    pp = p - np.multiply.outer(p @ axis, axis)
-    qq = q - np.multiply.outer(q @ axis, axis)
-    return np.arctan2(np.einsum("...i,...i->...", np.cross(pp, qq), np.broadcast_to(axis, pp.shape)),
-                      np.einsum("...i,...i->...", pp, qq))
-
-
-def _single(axis: np.ndarray, M: np.ndarray) -> np.ndarray:
-    """The angle θ maximising tr(R(axis, θ)ᵀ M), i.e. the rotation about ``axis`` nearest M (T, 3, 3)."""
-    K = sp.skew(axis)
-    b = np.einsum("ij,tij->t", K, M)
-    c = np.einsum("i,tij,j->t", axis, M, axis) - np.trace(M, axis1=1, axis2=2)
-    return np.arctan2(b, -c)
-
-
-def _wrap(x: np.ndarray) -> np.ndarray:
-    return (np.asarray(x) + np.pi) % (2.0 * np.pi) - np.pi
-
-
-def _limit_violation(theta: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
-    """Distance of each angle (..., k) to its joint interval, the angle taken modulo 2π."""
-    out = np.full(theta.shape, np.inf)
-    for shift in (-2.0 * np.pi, 0.0, 2.0 * np.pi):
-        t = _wrap(theta) + shift
-        out = np.minimum(out, np.maximum(lower - t, 0.0) + np.maximum(t - upper, 0.0))
-    return out
-
-
-def _product(axes: list[np.ndarray], theta: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
-    """R(a₁, θ₁) R(a₂, θ₂) … (T, 3, 3) and the prefix products before each factor."""
-    T = theta.shape[0]
-    R = np.broadcast_to(np.eye(3), (T, 3, 3)).copy()
-    prefixes = []
-    for i, a in enumerate(axes):
-        prefixes.append(R)
-        R = R @ _axis_rotations(a, theta[:, i])
-    return R, prefixes
-
-
 def decompose_hinges(M: np.ndarray, axes: list[np.ndarray], lower: np.ndarray | None = None,
                      upper: np.ndarray | None = None, *, polish: int = 2) -> tuple[np.ndarray, np.ndarray]:
-    """Angles θ (T, k) with R(a₁, θ₁) … R(a_k, θ_k) ≈ M (T, 3, 3) and the residual angle (T,) per frame.
-
-    Closed form for k ≤ 3 hinges (any axes, consecutive axes not parallel), then ``polish``
-    Gauss-Newton steps on the rotation error. Of the two solutions of a 3-hinge chain, frame
-    0 takes the one in the limits (``lower``/``upper``, default unbounded; then the smaller
-    angles) and every later frame the one nearest the previous frame's.
-    """
-    M = np.asarray(M, dtype=float)
-    T, k = M.shape[0], len(axes)
-    axes = [np.asarray(a, dtype=float) / np.linalg.norm(a) for a in axes]
-    lower = np.full(k, -np.inf) if lower is None else np.asarray(lower, dtype=float)
-    upper = np.full(k, np.inf) if upper is None else np.asarray(upper, dtype=float)
-    if k > 3:
-        raise ReimportError(f"cannot decompose a chain of {k} hinges (at most 3)")
-    for a, b in itertools.pairwise(axes):
-        if np.linalg.norm(np.cross(a, b)) < 1e-6:
-            raise ReimportError("cannot decompose a hinge chain with two consecutive parallel axes")
-    if k == 0:
-        return np.zeros((T, 0)), _angle(M)
-    if k == 1:
-        theta = _single(axes[0], M)[:, None]
-    elif k == 2:
-        a1, a2 = axes
-        t1 = _about(a1, a2, M @ a2)
-        rest = np.swapaxes(_axis_rotations(a1, t1), 1, 2) @ M
-        theta = np.stack([t1, _single(a2, rest)], axis=1)
-    else:
-        a1, a2, a3 = axes
-        q = M @ a3  # = R1 R2 a3: find c = R2 a3 = R1ᵀ q (subproblem 2), then θ3
-        u = float(a1 @ a2)
-        w = np.cross(a1, a2)
-        d1, d2 = q @ a1, float(a2 @ a3)
-        alpha = (d1 - u * d2) / (1.0 - u * u)
-        beta = (d2 - u * d1) / (1.0 - u * u)
-        g2 = (1.0 - alpha**2 - beta**2 - 2.0 * alpha * beta * u) / float(w @ w)
-        gamma = np.sqrt(np.maximum(g2, 0.0))
-        cands = []
-        for sign in (1.0, -1.0):
-            c = np.outer(alpha, a1) + np.outer(beta, a2) + np.outer(sign * gamma, w)
-            t2 = _about(a2, a3, c)
-            t1 = _about(a1, c, q)
-            R12 = _axis_rotations(a1, t1) @ _axis_rotations(a2, t2)
-            t3 = _single(a3, np.swapaxes(R12, 1, 2) @ M)
-            cands.append(np.stack([t1, t2, t3], axis=1))
-        cand = np.stack(cands)  # (2, T, 3)
-        pick = np.empty(T, dtype=int)
-        cost0 = _limit_violation(cand[:, 0], lower, upper).sum(axis=1) + 1e-6 * np.sum(_wrap(cand[:, 0]) ** 2, axis=1)
-        pick[0] = int(np.argmin(cost0))
-        prev = cand[pick[0], 0]
-        for t in range(1, T):
-            d = np.sum(_wrap(cand[:, t] - prev) ** 2, axis=1)
-            pick[t] = int(np.argmin(d))
-            prev = cand[pick[t], t]
-        theta = cand[pick, np.arange(T)]
-    for _ in range(polish):  # Gauss-Newton on the left rotation error M Rᵀ ≈ I + [e]×
-        R, prefixes = _product(axes, theta)
-        E = M @ np.swapaxes(R, 1, 2)
-        e = 0.5 * np.stack([E[:, 2, 1] - E[:, 1, 2], E[:, 0, 2] - E[:, 2, 0], E[:, 1, 0] - E[:, 0, 1]], -1)
-        J = np.stack([P @ a for P, a in zip(prefixes, axes)], axis=-1)  # (T, 3, k)
-        JtJ = np.swapaxes(J, 1, 2) @ J + 1e-12 * np.eye(k)
-        theta = theta + np.linalg.solve(JtJ, np.einsum("tik,ti->tk", J, e)[..., None])[..., 0]
-    R, _ = _product(axes, theta)
-    return theta, _angle(M @ np.swapaxes(R, 1, 2))
+    """:func:`solver.hinges.decompose_hinges`, its errors as :class:`ReimportError`."""
+    try:
+        return hinge_chains.decompose_hinges(M, axes, lower, upper, polish=polish)
+    except hinge_chains.HingeError as e:
+        raise ReimportError(str(e)) from None
 
 
 def _continuous(theta: np.ndarray, lower: float, upper: float) -> np.ndarray:
@@ -272,7 +168,7 @@ def _coordinates(character: Character, rot: np.ndarray, pos: np.ndarray, *, rot_
             cols = []
             for j, d in slides:
                 before = [a for jj, a in zip([jj for jj, _ in hinges], axes) if jj < j]
-                P, _ = _product(before, theta[:, : len(before)])
+                P, _ = hinge_chains.product(before, theta[:, : len(before)])
                 cols.append(seg.orientation @ P @ d.axis)  # (T, 3)
             A = np.stack(cols, axis=-1)  # (T, 3, m)
             AtA = np.swapaxes(A, 1, 2) @ A
@@ -336,7 +232,7 @@ def _check_rest(character: Character, offsets: np.ndarray | None, rest_rot: np.n
                 raise ReimportError(f"{where} does not match character {character.name!r}: segment {s.name!r} "
                                     f"has its joint {d:.3g} m from the character's (> {len_tol:g} m)")
         if rest_rot is not None:
-            a = float(_angle(rest_rot[i] @ s.orientation.T))
+            a = float(hinge_chains.rotation_angle(rest_rot[i] @ s.orientation.T))
             if a > rot_tol:
                 raise ReimportError(f"{where} does not match character {character.name!r}: segment {s.name!r} "
                                     f"has a rest orientation {a:.3g} rad from the character's")
@@ -355,7 +251,6 @@ def _fps_from(value: float) -> float:
 def motion_from_clip(clip: dict | str | bytes, character: Character, *, rot_tol: float = ROT_TOL,
                      len_tol: float = LEN_TOL) -> Reimported:
     """Read a motionx JSON clip (a dict or its JSON text), Z-up or Y-up."""
-    from solver.export.clip import FORMAT, validate_clip
 
     if isinstance(clip, (str, bytes)):
         try:
@@ -459,6 +354,7 @@ def _accessor(doc: dict, i: int, blobs: dict, blob: bytes | None) -> np.ndarray:
     if b not in blobs:
         blobs[b] = _buffer(doc, b, blob)
     data = blobs[b]
+    dt = np.dtype("<f4")  # the only type accepted above
     stride = view.get("byteStride") or nc * dt.itemsize
     start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
     end = start + (count - 1) * stride + nc * dt.itemsize
@@ -589,97 +485,26 @@ def motion_from_gltf(data: bytes | str | dict, character: Character, *, animatio
 _UNITS = {"m": 1.0, "cm": 100.0, "mm": 1000.0}
 
 
-def _elementary(axis: str, deg: np.ndarray) -> np.ndarray:
-    """(T, 3, 3) rotations about the BVH channel's axis by angles in degrees."""
-    return _axis_rotations(np.eye(3)["XYZ".index(axis)], np.radians(deg))
-
-
-def _parse_bvh(text: str) -> tuple[list, int, float, np.ndarray]:
-    """Joints [(name, parent index, offset, channels)], frame count, frame time, values (T, channels)."""
-    tok = text.split()
-    joints: list = []
-    i = 0
-
-    def expect(word: str) -> None:
-        if i >= len(tok) or tok[i] != word:
-            got = tok[i] if i < len(tok) else "end of file"
-            raise ReimportError(f"BVH: expected {word!r}, got {got!r}")
-
-    def number(j: int) -> float:
-        try:
-            return float(tok[j])
-        except (IndexError, ValueError):
-            raise ReimportError(f"BVH: expected a number, got {tok[j] if j < len(tok) else 'end of file'!r}") from None
-
-    def joint(parent: int) -> None:
-        nonlocal i
-        name = tok[i + 1]
-        i += 2
-        expect("{")
-        i += 1
-        expect("OFFSET")
-        off = np.array([number(i + 1), number(i + 2), number(i + 3)])
-        i += 4
-        chans: list[str] = []
-        if i < len(tok) and tok[i] == "CHANNELS":
-            nch = int(number(i + 1))
-            chans = tok[i + 2: i + 2 + nch]
-            for c in chans:
-                if c not in ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation"):
-                    raise ReimportError(f"BVH: unknown channel {c!r}")
-            i += 2 + nch
-        me = len(joints)
-        joints.append((name, parent, off, chans))
-        while i < len(tok) and tok[i] != "}":
-            if tok[i] == "JOINT":
-                joint(me)
-            elif tok[i] == "End":
-                i += 2  # End Site
-                expect("{")
-                while i < len(tok) and tok[i] != "}":
-                    i += 1
-                i += 1
-            else:
-                raise ReimportError(f"BVH: unexpected {tok[i]!r} in joint {name!r}")
-        expect("}")
-        i += 1
-
-    expect("HIERARCHY")
-    i += 1
-    expect("ROOT")
-    joint(-1)
-    expect("MOTION")
-    if tok[i + 1: i + 2] != ["Frames:"] or tok[i + 3: i + 5] != ["Frame", "Time:"]:
-        raise ReimportError("BVH: expected 'Frames: N' and 'Frame Time: dt' after MOTION")
-    frames, ftime = int(number(i + 2)), number(i + 5)
-    nch = sum(len(j[3]) for j in joints)
-    try:
-        vals = np.array(tok[i + 6:], dtype=float)
-    except ValueError:
-        raise ReimportError("BVH: the motion table holds something that is not a number") from None
-    if vals.size != frames * nch:
-        raise ReimportError(f"BVH: {vals.size} values for {frames} frames x {nch} channels")
-    if not (ftime > 0 and math.isfinite(ftime)):
-        raise ReimportError(f"BVH: Frame Time must be positive, got {ftime}")
-    return joints, frames, ftime, vals.reshape(frames, nch)
-
-
 def motion_from_bvh(text: str | bytes, character: Character, *, units: str = "auto", rot_tol: float = ROT_TOL,
                     len_tol: float = LEN_TOL) -> Reimported:
     """Read a BVH file (Y-up; any rotation channel order). ``units``: "cm", "m", "mm", or
     "auto" (the one that makes the file's joint offsets the character's)."""
     if isinstance(text, bytes):
         text = text.decode("utf-8", errors="replace")
-    joints, T, ftime, vals = _parse_bvh(text)
+    try:
+        clip = parse_bvh(text, "BVH")
+    except BvhError as e:
+        raise ReimportError(str(e)) from None
+    T = clip.T
     where = "the BVH file"
-    names = [j[0] for j in joints]
-    parents = [joints[j[1]][0] if j[1] >= 0 else None for j in joints]
+    names = list(clip.names)
+    parents = [clip.names[p] if p >= 0 else None for p in clip.parents]
     index = _match_skeleton(character, names, parents, where)
-    raw_off = np.array([joints[i][2] for i in index]) @ Y_UP  # ours, file units
+    raw_off = clip.offsets[index] @ Y_UP  # ours, file units
     if units == "auto":
         ours = np.array([s.offset for s in character.segments[1:]])
         fit = {u: float(np.abs(raw_off[1:] / f - ours).max()) if len(ours) else 0.0 for u, f in _UNITS.items()}
-        units = min(fit, key=fit.get) if len(ours) else "cm"
+        units = min(fit, key=lambda u: fit[u]) if len(ours) else "cm"
     if units not in _UNITS:
         raise ReimportError(f"units must be 'auto' or one of {sorted(_UNITS)}, got {units!r}")
     scale = _UNITS[units]
@@ -688,18 +513,11 @@ def motion_from_bvh(text: str | bytes, character: Character, *, units: str = "au
     S = len(index)
     rot = np.empty((S, T, 3, 3))
     pos = np.empty((S, T, 3))
-    starts = np.cumsum([0] + [len(j[3]) for j in joints])
     for k, i in enumerate(index):
-        _, _, off, chans = joints[i]
-        r = np.broadcast_to(np.eye(3), (T, 3, 3)).copy()
-        p = np.broadcast_to(off, (T, 3)).copy()
-        for c, col in zip(chans, range(starts[i], starts[i + 1])):
-            if c.endswith("rotation"):
-                r = r @ _elementary(c[0], vals[:, col])
-            else:
-                p[:, "XYZ".index(c[0])] += vals[:, col]
+        r, p = clip.local(i)
         rot[k] = Y_UP.T @ r @ Y_UP
         pos[k] = (p @ Y_UP) / scale
+    ftime = clip.frame_time
     return _coordinates(character, rot, pos, rot_tol=rot_tol, len_tol=len_tol, source="bvh",
                         fps=_fps_from(1.0 / ftime), where=where)
 

@@ -29,20 +29,18 @@ expected.
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 from solver.capture import Capture
-from solver.io.errors import InputError
+from solver.errors import InputError
+from solver.formats import READERS as FORMAT_READERS
 
-__all__ = ["InputError", "TrialError", "load_trial", "READERS"]
+__all__ = ["READERS", "InputError", "TrialError", "load_trial"]
 
-READERS = {
-    "opensim": ".osim + .mot/.sto coordinates or .trc markers (+ GRF .mot, ExternalLoads .xml)",
-    "c3d": ".c3d",
-    "bvh": ".bvh",
-    "deepmimic": "DeepMimic motion .txt/.json + character .txt/.json",
-}
+#: reader name -> its files in words, from the registry (solver.formats.READERS: suffixes, options)
+READERS = {r.name: r.files for r in FORMAT_READERS}
 
 
 class TrialError(InputError):
@@ -50,7 +48,7 @@ class TrialError(InputError):
 
 
 def _is_grf_mot(path: Path) -> bool:
-    from solver.io.opensim import read_mot
+    from solver.io.opensim import read_mot  # lazy: the reader the files call for
 
     sto = read_mot(path)
     return any(lab.endswith(("force_vx", "_vx")) and "force" in lab for lab in sto.labels)
@@ -107,7 +105,7 @@ def load_trial(
         other = exts - {".osim", ".mot", ".sto", ".trc", ".xml"}
         if other:
             raise TrialError(f"unexpected files with an OpenSim trial: {sorted(other)}")
-        from solver.io.opensim import load_opensim
+        from solver.io.opensim import load_opensim  # lazy: the reader the files call for
 
         return load_opensim(by_ext[".osim"][0], kin[0], mass=mass, belt_speed=belt_speed,
                             grf=grfs[0] if grfs else None, grf_xml=xmls[0] if xmls else None,
@@ -120,14 +118,14 @@ def load_trial(
         if lower_only is not None:
             options["lower_only"] = lower_only
         try:
-            from solver.io.c3d import load_c3d
+            from solver.io.c3d import load_c3d  # lazy: the reader the files call for
         except ImportError as e:
             raise TrialError(f"the C3D reader is not available ({e})") from None
         return load_c3d(ps[0], mass=mass, **options)
     if exts == {".bvh"}:
         if len(ps) != 1:
             raise TrialError(f"one .bvh file expected, got {len(ps)}")
-        from solver.io.bvh import load_bvh
+        from solver.io.bvh import load_bvh  # lazy: the reader the files call for
 
         return load_bvh(ps[0], mass=mass, lower_only=lower_only, **options)
     if exts <= {".txt", ".json"}:
@@ -135,7 +133,7 @@ def load_trial(
         motions = [p for p, k in kinds.items() if k == "motion"]
         chars = [p for p, k in kinds.items() if k == "character"]
         if len(motions) == 1 and len(chars) == 1 and len(ps) == 2:
-            from solver.io.deepmimic import load_deepmimic
+            from solver.io.deepmimic import load_deepmimic  # lazy: the reader the files call for
 
             return load_deepmimic(motions[0], chars[0], mass=mass, lower_only=lower_only, **options)
         raise TrialError(

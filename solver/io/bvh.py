@@ -48,19 +48,21 @@ from __future__ import annotations
 
 import logging
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Mapping
 
 import numpy as np
 
+from solver import spatial as sp
 from solver.capture import Capture, GroundFrame
-from solver.io.errors import InputError
+from solver.errors import InputError
+from solver.io.fit import fit_track
 from solver.io.track import SkeletonTrack
 
 log = logging.getLogger(__name__)
 
-__all__ = ["BvhError", "BvhClip", "read_bvh", "bvh_track", "load_bvh", "UNIT_M"]
+__all__ = ["UNIT_M", "BvhClip", "BvhError", "bvh_track", "load_bvh", "parse_bvh", "read_bvh"]
 
 #: metres per file unit; "cmu": the CMU mocap database's BVH conversions (ASF units, 1/0.45 inch)
 UNIT_M = {"cm": 0.01, "m": 1.0, "mm": 0.001, "in": 0.0254, "cmu": 0.0254 / 0.45}
@@ -86,6 +88,24 @@ class BvhClip:
     def T(self) -> int:
         return int(self.motion.shape[0])
 
+    def local(self, j: int, motion: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Joint ``j``'s rotation (T, 3, 3) and position (T, 3) in its parent's frame: its rotation
+        channels applied in the order listed (intrinsic), its position channels added to OFFSET."""
+        m = self.motion if motion is None else motion
+        T = m.shape[0]
+        col = sum(len(c) for c in self.channels[:j])
+        loc_p = np.broadcast_to(self.offsets[j], (T, 3)).copy()
+        loc_R = np.broadcast_to(np.eye(3), (T, 3, 3)).copy()
+        for ch in self.channels[j]:
+            v = m[:, col]
+            col += 1
+            axis = "XYZ".index(ch[0].upper())
+            if ch.lower().endswith("position"):
+                loc_p[:, axis] += v
+            else:
+                loc_R = loc_R @ sp.elementary_rotation(axis, np.radians(v))
+        return loc_R, loc_p
+
     def forward(self, motion: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """World rotation (J, T, 3, 3) and position (J, T, 3) of every joint (file axes/units)."""
         m = self.motion if motion is None else motion
@@ -93,18 +113,8 @@ class BvhClip:
         J = len(self.names)
         R = np.zeros((J, T, 3, 3))
         P = np.zeros((J, T, 3))
-        col = 0
         for j in range(J):
-            loc_p = np.broadcast_to(self.offsets[j], (T, 3)).copy()
-            loc_R = np.broadcast_to(np.eye(3), (T, 3, 3)).copy()
-            for ch in self.channels[j]:
-                v = m[:, col]
-                col += 1
-                axis = "XYZ".index(ch[0].upper())
-                if ch.lower().endswith("position"):
-                    loc_p[:, axis] += v
-                else:
-                    loc_R = loc_R @ _rot(axis, np.radians(v))
+            loc_R, loc_p = self.local(j, m)
             par = self.parents[j]
             if par < 0:
                 R[j], P[j] = loc_R, loc_p
@@ -114,26 +124,24 @@ class BvhClip:
         return R, P
 
 
-def _rot(axis: int, a: np.ndarray) -> np.ndarray:
-    c, s = np.cos(a), np.sin(a)
-    o, z = np.ones_like(a), np.zeros_like(a)
-    if axis == 0:
-        rows = [[o, z, z], [z, c, -s], [z, s, c]]
-    elif axis == 1:
-        rows = [[c, z, s], [z, o, z], [-s, z, c]]
-    else:
-        rows = [[c, -s, z], [s, c, z], [z, z, o]]
-    return np.stack([np.stack(r, axis=-1) for r in rows], axis=-2)
 
 
 _CHANNELS = {f"{a}{k}" for a in "XYZ" for k in ("position", "rotation")}
 
 
 def read_bvh(path: str | Path) -> BvhClip:
+    """The hierarchy and channels of a BVH file (:func:`parse_bvh`)."""
     p = Path(path)
     if not p.is_file():
         raise BvhError(f"BVH file not found: {p}")
-    toks = p.read_text(errors="replace").split()
+    return parse_bvh(p.read_text(errors="replace"), str(p))
+
+
+def parse_bvh(text: str, where: str = "BVH") -> BvhClip:
+    """The one BVH parser (this importer and :func:`solver.export.reimport.motion_from_bvh`):
+    hierarchy, channels, frame time and values, no interpretation. Errors name ``where``."""
+    p = where
+    toks = text.split()
     pos = 0
 
     def take(what: str) -> str:
@@ -151,7 +159,7 @@ def read_bvh(path: str | Path) -> BvhClip:
             raise BvhError(f"{p}: expected a number for {what}, got {t!r}") from None
 
     if take("HIERARCHY").upper() != "HIERARCHY":
-        raise BvhError(f"{p}: not a BVH file (must start with HIERARCHY)")
+        raise BvhError(f"{p}: not a BVH file (expected 'HIERARCHY' first)")
     names: list[str] = []
     parents: list[int] = []
     offsets: list[list[float]] = []
@@ -223,8 +231,8 @@ def read_bvh(path: str | Path) -> BvhClip:
     if n_frames < 1:
         raise BvhError(f"{p}: the clip has no frames")
     if len(vals) != n_frames * nch:
-        raise BvhError(f"{p}: expected {n_frames} frames x {nch} channels = {n_frames * nch} values, "
-                       f"found {len(vals)}")
+        raise BvhError(f"{p}: {len(vals)} values for {n_frames} frames x {nch} channels (expected "
+                       f"{n_frames * nch})")
     try:
         motion = np.array(vals, dtype=float).reshape(n_frames, nch)
     except ValueError:
@@ -454,7 +462,6 @@ def load_bvh(
     lower_only: bool | None = None,
 ) -> Capture:
     """Import a BVH clip as a :class:`Capture` (conventions in the module doc)."""
-    from solver.io.fit import fit_track
 
     return fit_track(bvh_track(path, mass=mass, units=units, up=up, floor_height=floor_height),
                      lower_only=lower_only)

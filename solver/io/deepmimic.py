@@ -43,20 +43,22 @@ from __future__ import annotations
 
 import json
 import logging
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
 from solver import spatial as sp
 from solver.capture import Capture, GroundFrame
-from solver.io.errors import InputError
+from solver.errors import InputError
+from solver.io.fit import fit_track
 from solver.io.track import SkeletonTrack
 
 log = logging.getLogger(__name__)
 
-__all__ = ["DeepMimicError", "DeepMimicSkeleton", "read_deepmimic_character", "deepmimic_track", "load_deepmimic"]
+__all__ = ["DeepMimicError", "DeepMimicSkeleton", "deepmimic_track", "load_deepmimic", "read_deepmimic_character"]
 
 C_DM = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 _DOF = {"none": 0, "fixed": 0, "spherical": 4, "revolute": 1}
@@ -128,9 +130,7 @@ def _quat_to_matrix(q: np.ndarray) -> np.ndarray:
 
 
 def _rotz(a: np.ndarray) -> np.ndarray:
-    c, s = np.cos(a), np.sin(a)
-    o, z = np.ones_like(a), np.zeros_like(a)
-    return np.stack([np.stack([c, -s, z], 1), np.stack([s, c, z], 1), np.stack([z, z, o], 1)], 1)
+    return sp.elementary_rotation(2, a)
 
 
 def _forward(sk: DeepMimicSkeleton, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -282,6 +282,5 @@ def load_deepmimic(
     motion: str | Path, character: str | Path, *, mass: float | None = None, lower_only: bool | None = None
 ) -> Capture:
     """Import a DeepMimic clip as a :class:`Capture` (conventions in the module doc)."""
-    from solver.io.fit import fit_track
 
     return fit_track(deepmimic_track(motion, character, mass=mass), lower_only=lower_only)

@@ -1,20 +1,5 @@
-"""The one base class of every reader's bad-input error."""
+"""Compatibility: :class:`InputError` lives in :mod:`solver.errors` (readers and gait processing share it)."""
 
-from __future__ import annotations
+from solver.errors import InputError
 
-
-class InputError(ValueError):
-    """An input (a trial's files or the options given with them) cannot be turned into a
-    trial; the message names the file and the problem.
-
-    When one argument of the importer would fix it (the subject's mass of a file that does
-    not state it), ``parameter`` names it: ``str(e)`` then advises the Python argument
-    (``…; pass mass=... (kg)``) while ``reason`` is the message without the advice, so that
-    a front end names its own control instead (the CLI's ``--mass``, the upload's form field).
-    """
-
-    def __init__(self, reason: str = "", *, parameter: str | None = None, unit: str = "") -> None:
-        advice = f"; pass {parameter}=...{f' ({unit})' if unit else ''}" if parameter else ""
-        super().__init__(reason + advice)
-        self.reason = reason
-        self.parameter = parameter
+__all__ = ["InputError"]

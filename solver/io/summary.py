@@ -10,10 +10,12 @@ error of our capture skeleton, and the contact schedule as stance intervals per 
 from __future__ import annotations
 
 import logging
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 
+from solver.gait import detect_contacts, gait_events
 from solver.io.mass import implied_mass, mass_warning, stride_from_events
 
 log = logging.getLogger(__name__)
@@ -48,8 +50,6 @@ def describe(capture: Any, *, contacts: np.ndarray | None = None, contacts_from:
     ``contacts``: the (P, T) contact schedule used downstream (rows = the character's contact
     points); by default the capture's own (plates) or one detected from the kinematics.
     """
-    from solver.io.preprocess import detect_contacts, gait_events
-
     src = dict(capture.source or {})
     fit = dict(src.get("fit") or {})
     ch = capture.character

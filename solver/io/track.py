@@ -21,8 +21,9 @@ foot_r, toes_r, abdomen, thorax, head, clavicle_r, upper_arm_r, forearm_r, hand_
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 

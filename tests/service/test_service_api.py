@@ -236,7 +236,7 @@ def test_impossible_targets_rejected(api, motion_id, body, needle):
 
 def test_non_finite_target_rejected(api, motion_id):
     for token in ("NaN", "Infinity", "-Infinity", "1e999"):
-        r = api.a.post(f"/motions/{motion_id}/extrapolate", content='{"target": {"slope_deg": %s}}' % token,
+        r = api.a.post(f"/motions/{motion_id}/extrapolate", content=f'{{"target": {{"slope_deg": {token}}}}}',
                        headers={"content-type": "application/json"})
         assert_problem(r, 422)
 

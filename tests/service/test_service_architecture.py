@@ -55,7 +55,8 @@ print(json.dumps({
     "modules": names,
     "settings_cached": get_settings.cache_info().currsize,
     "engines": len(_ENGINES) + sum(isinstance(o, Engine) for o in objs),
-    "celery_apps": sum(isinstance(o, Celery) and o.main != "default" for o in objs),  # Celery keeps its own "default" apps
+    # Celery keeps its own "default" apps
+    "celery_apps": sum(isinstance(o, Celery) and o.main != "default" for o in objs),
     "fastapi_apps": sum(isinstance(o, FastAPI) for o in objs),
 }))
 """
@@ -67,3 +68,88 @@ def test_importing_service_and_worker_creates_nothing():
     r = json.loads(out.stdout.strip().splitlines()[-1])
     assert "service.app" in r["modules"] and "worker.app" in r["modules"] and "service.jobs" in r["modules"]
     assert (r["settings_cached"], r["engines"], r["celery_apps"], r["fastapi_apps"]) == (0, 0, 0, 0), r
+
+
+# --- the package graph -----------------------------------------------------------------------
+PACKAGES = ("solver", "mjcf", "service", "worker")
+#: who may import whom (every import, also those inside functions): worker -> service -> solver/mjcf
+ALLOWED = {"solver": set(), "mjcf": {"solver"}, "service": {"solver", "mjcf"}, "worker": {"service", "solver", "mjcf"}}
+
+
+def _module_graph(depth: int) -> dict[str, set[str]]:
+    """Edges between our modules, cut to their first ``depth`` name parts, from every import
+    statement of every file (top-level or not, relative ones resolved)."""
+    edges: dict[str, set[str]] = {}
+    for pkg in PACKAGES:
+        for path in sorted((ROOT / pkg).rglob("*.py")):
+            if "migrations" in path.parts:
+                continue
+            parts = list(path.relative_to(ROOT).with_suffix("").parts)
+            is_pkg = parts[-1] == "__init__"
+            if is_pkg:
+                parts = parts[:-1]
+            for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+                if isinstance(node, ast.Import):
+                    targets = [a.name for a in node.names]
+                elif isinstance(node, ast.ImportFrom):
+                    if node.level:
+                        base = parts[: len(parts) - node.level + (1 if is_pkg else 0)]
+                        targets = [".".join(base + ([node.module] if node.module else []))]
+                    else:
+                        targets = [node.module or ""]
+                else:
+                    continue
+                src = ".".join(parts[:depth])
+                for t in targets:
+                    if t.split(".")[0] in PACKAGES:
+                        dst = ".".join(t.split(".")[:depth])
+                        if dst != src:
+                            edges.setdefault(src, set()).add(dst)
+    return edges
+
+
+def _cycles(edges: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one node (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    out: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        for w in sorted(edges.get(v, ())):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in sorted(edges):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_package_graph_has_no_upward_import_and_no_cycle():
+    edges = _module_graph(1)
+    assert edges.get("service", set()) >= {"solver", "mjcf"}  # the parser sees the real imports
+    upward = {src: sorted(dst - ALLOWED[src]) for src, dst in edges.items() if dst - ALLOWED[src]}
+    assert not upward, f"imports against the layering worker -> service -> solver/mjcf: {upward}"
+    assert not _cycles(edges)
+
+
+def test_no_cycle_between_solver_and_mjcf_subpackages():
+    """solver.io, solver.export, solver.contact, solver.spacetime, … and mjcf's modules form a DAG."""
+    edges = {k: v for k, v in _module_graph(2).items() if k.split(".")[0] in ("solver", "mjcf")}
+    assert "solver.character" in edges.get("solver.pipeline", set())  # the parser sees the real imports
+    assert not _cycles(edges), _cycles(edges)

@@ -272,7 +272,8 @@ def test_broker_down_at_submission_loses_nothing(tmp_path, redis_binary, tutor_m
     st.start()
     try:
         with httpx.Client(base_url=st.base_url, headers={"X-API-Key": st.api_keys}, timeout=30) as c:
-            mid = c.post("/motions", content=tutor_motion_json, headers={"content-type": "application/json"}).json()["id"]
+            mid = c.post("/motions", content=tutor_motion_json,
+                         headers={"content-type": "application/json"}).json()["id"]
             st.redis.stop()
             r = c.post(f"/motions/{mid}/extrapolate", json=CHEAP)
             assert r.status_code == 202 and r.json()["status"] == "queued"
@@ -316,7 +317,8 @@ def test_celery_recovers_a_killed_worker_with_default_settings(tmp_path, redis_b
     st.start()
     try:
         with httpx.Client(base_url=st.base_url, headers={"X-API-Key": st.api_keys}, timeout=30) as c:
-            mid = c.post("/motions", content=tutor_motion_json, headers={"content-type": "application/json"}).json()["id"]
+            mid = c.post("/motions", content=tutor_motion_json,
+                         headers={"content-type": "application/json"}).json()["id"]
             job = c.post(f"/motions/{mid}/extrapolate", json=KILLABLE).json()
             _kill_worker_running(st, c, job["id"])
             t0 = time.monotonic()

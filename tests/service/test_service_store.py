@@ -149,10 +149,9 @@ def test_idempotency_key_is_unique_per_owner(db):
         assert store.find_idempotent(s, owner=owner(), key="k-1", request_hash="h1") is None
         with pytest.raises(store.IdempotencyConflict):
             store.find_idempotent(s, owner=own, key="k-1", request_hash="other")
-    with pytest.raises(IntegrityError):  # a racing second insert loses at commit
-        with db.write() as s:
-            store.create_job(s, owner=own, motion_id=motion_id, spec={}, runner="celery", max_attempts=3,
-                             idempotency_key="k-1", request_hash="h1")
+    with pytest.raises(IntegrityError), db.write() as s:  # a racing second insert loses at commit
+        store.create_job(s, owner=own, motion_id=motion_id, spec={}, runner="celery", max_attempts=3,
+                         idempotency_key="k-1", request_hash="h1")
 
 
 def test_cancel_queued_is_immediate_running_is_flagged(db):

@@ -152,7 +152,8 @@ def test_page_and_vendor_files_are_served_locally(api):
         r = api.anon.get(urljoin("/ui/", imports["three"]))
         assert r.status_code == 404 and "npm ci" in r.json()["detail"]
         _missing("three.js is not installed: run `npm ci` in service/web")
-    for url in (imports["three"], "./vendor/three/build/three.core.js", imports["three/addons/"] + "loaders/GLTFLoader.js",
+    for url in (imports["three"], "./vendor/three/build/three.core.js",
+                imports["three/addons/"] + "loaders/GLTFLoader.js",
                 imports["three/addons/"] + "controls/OrbitControls.js", "app.js", "progress.js", "preview.js"):
         r = api.anon.get(urljoin("/ui/", url))
         assert r.status_code == 200, (url, r.status_code)
@@ -160,8 +161,8 @@ def test_page_and_vendor_files_are_served_locally(api):
     assert api.anon.get("/ui/style.css").headers["content-type"].startswith("text/css")
     # only what the page needs from node_modules, and nothing outside it
     for url in ("/ui/vendor/three/package.json", "/ui/vendor/three/build/three.cjs", "/ui/vendor/three/src/Three.js",
-                "/ui/vendor/three/examples/jsm/..%2F..%2Fsrc%2FThree.js", "/ui/..%2Fnode_modules%2Fthree%2Fsrc%2FThree.js",
-                "/ui/nope.js"):
+                "/ui/vendor/three/examples/jsm/..%2F..%2Fsrc%2FThree.js",
+                "/ui/..%2Fnode_modules%2Fthree%2Fsrc%2FThree.js", "/ui/nope.js"):
         assert api.anon.get(url).status_code == 404, url
 
     # no CDN or other host: no absolute http(s) URL in our own files
@@ -313,7 +314,8 @@ def test_page_shows_a_library_grid_and_previews_a_cell(api, browser, tutor_id):
     overall progress, and a cell's clip (its last realistic λ optimum) walking in the 3D preview."""
     if not THREE_DIR.is_dir():
         _missing("three.js is not installed: run `npm ci` in service/web")
-    r = api.a.post(f"/motions/{tutor_id}/library", json={"grid": {"slope_deg": [-5.0, 5.0], "curve_deg": [-20.0, 20.0]}})
+    grid = {"slope_deg": [-5.0, 5.0], "curve_deg": [-20.0, 20.0]}
+    r = api.a.post(f"/motions/{tutor_id}/library", json={"grid": grid})
     assert r.status_code == 202, r.text
     lid = r.json()["id"]
     context, page, requests, errors = _open(browser, 1400, 1000)

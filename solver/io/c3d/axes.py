@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import logging
 import math
-from typing import Any, Mapping, Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -62,7 +63,7 @@ def _detect_axes(raw: _Raw, mk: _Markers, specs: Sequence[PlateSpec], pelvis_rol
             if (lbl := mk.find(role, side)) is not None]
     foot_c = np.nanmean(np.stack(feet), axis=0) if feet else None
     if specs:
-        normals = []
+        normals: list[np.ndarray] = []
         for s in specs:
             n = s.rotation[:, 2]
             normals.append(n if not normals or n @ normals[0] >= 0 else -n)

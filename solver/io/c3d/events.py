@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -57,7 +58,7 @@ CONTACT_HEIGHT = 0.015
 
 def _extrema(x: np.ndarray, times: np.ndarray, fps: float, maxima: bool) -> np.ndarray:
     """Times of the prominent maxima (or minima) of x, refined by a parabola through 3 frames."""
-    from scipy.signal import find_peaks
+    from scipy.signal import find_peaks  # lazy: scipy.signal costs ~1 s to import
 
     y = x if maxima else -x
     if not np.isfinite(y).all() or np.ptp(y) <= 0:
@@ -348,7 +349,8 @@ def _feet_and_plates(signals: Sequence[PlateSignal], lm: Mapping[str, np.ndarray
     # --- kinematic stance (Zeni et al. 2008), event offsets calibrated on the plates -------
     fwd = _unit(np.cross(lm["hip_l"] - lm["hip_r"], np.array([0.0, 0.0, 1.0])[:, None], axis=0))
     events = {foot: _zeni_events(lm, s, fwd, times, fps) for foot, s in zip(FEET, SIDES)}
-    plate_events = {foot: ([], []) for foot in FEET}  # (onsets, offsets) in s, foot by foot
+    # (onsets, offsets) in s, foot by foot
+    plate_events: dict[str, tuple[list[float], list[float]]] = {foot: ([], []) for foot in FEET}
     for p in periods_info:
         if p["foot"] in FEET:
             if p["start"] > times[0] + dt and not p["start_split"]:

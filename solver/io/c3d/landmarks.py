@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
+from solver.filtering import zero_phase_lowpass
 from solver.io.c3d.markers import _Markers
 from solver.io.c3d.reader import SIDES, C3DError, SubjectParams, _mid, _perp, _rigid_fill, _unit, fill_gaps
 
@@ -80,10 +81,16 @@ def _landmarks(mk: _Markers, R: np.ndarray, floor: float, sp: SubjectParams, hei
         used[key] = lbl
         return x
 
+    def need(role: str, side: str | None = None) -> np.ndarray:
+        """A required marker (a C3DError when it is missing or has a long gap)."""
+        x = marker(role, side)
+        assert x is not None  # marker() raises for a required one
+        return x
+
     mr = sp.marker_radius
     H = sp.height or height_est
     # --- pelvis -------------------------------------------------------------------------
-    rasi, lasi = marker("ASI", "R"), marker("ASI", "L")
+    rasi, lasi = need("ASI", "R"), need("ASI", "L")
     rpsi, lpsi = marker("PSI", "R", required=False), marker("PSI", "L", required=False)
     if rpsi is not None and lpsi is not None:
         mpsi = _mid(rpsi, lpsi)
@@ -107,16 +114,19 @@ def _landmarks(mk: _Markers, R: np.ndarray, floor: float, sp: SubjectParams, hei
         S = s.upper()
         sgn = 1.0 if s == "l" else -1.0
         # leg length: parameter, else ASIS -> knee -> ankle path along the markers
-        kne = marker("KNE", S)
-        ank = marker("ANK", S)
+        kne = need("KNE", S)
+        ank = need("ANK", S)
         asi = lasi if s == "l" else rasi
-        leg = sp.leg_length[s]
-        if leg is None:
+        leg_param = sp.leg_length[s]
+        if leg_param is not None:
+            leg = leg_param
+        else:
             leg = float(np.median(np.linalg.norm(asi - kne, axis=0) + np.linalg.norm(kne - ank, axis=0)))
             notes.append(f"{S} leg length estimated from markers: {leg:.3f} m")
         # Davis (1991) / Newington hip joint centre in the pelvis frame (mm in the regression)
         Lmm = leg * 1000.0
-        xdis = (sp.asis_trochanter[s] * 1000.0) if sp.asis_trochanter[s] else 0.1288 * Lmm - 48.56
+        asis_troch = sp.asis_trochanter[s]
+        xdis = (asis_troch * 1000.0) if asis_troch else 0.1288 * Lmm - 48.56
         C = 0.115 * Lmm - 15.3
         theta, beta = 0.5, 0.314
         mm = mr * 1000.0
@@ -127,7 +137,8 @@ def _landmarks(mk: _Markers, R: np.ndarray, floor: float, sp: SubjectParams, hei
         lm[f"hip_{s}"] = hip
         medial_dir = -sgn * py  # towards the body's midline
         def centre(lateral: np.ndarray, medial_role: str, wand_role: str, width: float | None, frac: float,
-                   proximal: np.ndarray, what: str) -> np.ndarray:
+                   proximal: np.ndarray, what: str, S: str = S,
+                   medial_dir: np.ndarray = medial_dir) -> np.ndarray:
             """Mid-point of the lateral and medial markers, else PiG's chord (wand) or a medial shift."""
             medial = marker(medial_role, S, required=False)
             if medial is not None:
@@ -149,7 +160,7 @@ def _landmarks(mk: _Markers, R: np.ndarray, floor: float, sp: SubjectParams, hei
         ankle_lat[s] = ank
         # foot: heel and toe markers sit at the same height above the sole (PiG); the toe
         # marker is on the 2nd metatarsal head. Sole = their heights during stance.
-        hee = marker("HEE", S)
+        hee = need("HEE", S)
         toe_m = marker("TOE", S, required=False)
         if toe_m is None:
             mt1, mt5 = marker("MT1", S, required=False), marker("MT5", S, required=False)
@@ -218,14 +229,11 @@ def _heading(lm: dict[str, np.ndarray], fps: float) -> tuple[np.ndarray, np.ndar
     """Horizontal forward and left unit vectors (3, T) of the walk: the hips' left-right axis
     made horizontal, low-passed below the stride frequency (the pelvis' own yaw oscillation
     at the stride frequency is not the trunk's: the thorax counter-rotates)."""
-    from scipy.signal import butter, sosfiltfilt
-
     y = lm["hip_l"] - lm["hip_r"]
     y = _unit(np.vstack([y[:2], np.zeros((1, y.shape[1]))]))
     T = y.shape[1]
-    if T > 6 and HEADING_HZ < fps / 2:
-        sos = butter(2, HEADING_HZ, fs=fps, output="sos")
-        y = _unit(sosfiltfilt(sos, y, axis=1, padtype="odd", padlen=min(T - 1, int(3 * fps / HEADING_HZ))))
+    if T > 6 and fps / 2 > HEADING_HZ:
+        y = _unit(zero_phase_lowpass(y, fps, HEADING_HZ, order=2, axis=1, padlen=min(T - 1, int(3 * fps / HEADING_HZ))))
     up = np.zeros_like(y)
     up[2] = 1.0
     return np.cross(y, up, axis=0), y
@@ -320,8 +328,9 @@ def _upper_landmarks(marker: Callable[..., np.ndarray | None], lm: dict[str, np.
         else:
             elbow = shoulder - UPPER_ARM_H * H * t_up
         wra, wrb = marker("WRA", S, required=False), marker("WRB", S, required=False)
-        if wra is not None or wrb is not None:
-            wrist = _mid(wra, wrb) if wra is not None and wrb is not None else (wra if wra is not None else wrb)
+        wrists = [x for x in (wra, wrb) if x is not None]
+        if wrists:
+            wrist = _mid(wrists[0], wrists[1]) if len(wrists) == 2 else wrists[0]
             parts.append("wrist")
         else:
             wrist = elbow + FOREARM_H * H * _unit(elbow - shoulder)
@@ -341,8 +350,7 @@ def _upper_landmarks(marker: Callable[..., np.ndarray | None], lm: dict[str, np.
 def _height_estimate(mk: _Markers, R: np.ndarray, floor: float, sp: SubjectParams) -> float:
     if sp.height:
         return sp.height
-    heads = [mk.find(r, s) for r in ("FHD", "BHD") for s in ("L", "R")]
-    heads = [h for h in heads if h]
+    heads = [h for h in (mk.find(r, s) for r in ("FHD", "BHD") for s in ("L", "R")) if h]
     if heads:
         z = np.nanmedian(np.stack([R[2] @ mk.get(h) for h in heads]), axis=0) - floor
         return float(np.nanmedian(z) / 0.955)

@@ -14,9 +14,10 @@ from __future__ import annotations
 
 import json
 import re
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -142,7 +143,7 @@ def detect_marker_set(labels: Sequence[str]) -> dict:
     "matched" (labels of the set present), "of"}; name ``"unknown"`` below 6 matches, and
     ``"clusters"`` when technical clusters (e.g. ``LTH1..4``) outnumber every set."""
     present = {_norm(x) for x in labels}
-    best = {"name": "unknown", "reference": "", "matched": 0, "of": 0}
+    best: dict[str, Any] = {"name": "unknown", "reference": "", "matched": 0, "of": 0}
     for ms in MARKER_SETS:
         hit = len(present & set(ms.labels))
         if hit > best["matched"]:
@@ -255,9 +256,9 @@ class _Markers:
             return lbl if lbl and self._seen.get(lbl) else None
         r = ROLES[role]
         for core in r.names:
-            lbl = self._by_reading.get((side if r.sided else None, core))
-            if lbl is not None and self._seen.get(lbl) and lbl not in self.mapping.values():
-                return lbl
+            found = self._by_reading.get((side if r.sided else None, core))
+            if found is not None and self._seen.get(found) and found not in self.mapping.values():
+                return found
         return None
 
     def get(self, label: str) -> np.ndarray:

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
@@ -137,8 +137,8 @@ def _plate_units(raw: _Raw, spec: PlateSpec) -> tuple[float | None, float | None
     """(N per force unit, N·m per moment unit) from ANALOG:UNITS (None: not stated)."""
     us = [raw.analog_units[c] if c < len(raw.analog_units) else "" for c in spec.channels]
     if spec.type == 3:
-        f = [_force_unit(u) for u in us if u]
-        return (f[0] if f else None), None
+        units = [_force_unit(u) for u in us if u]
+        return (units[0] if units else None), None
     if spec.type == 1:  # Fx Fy Fz CoPx CoPy Tz
         f1 = _force_unit(us[0]) if us[0] else None
         m1 = _moment_unit(us[5]) if us[5] else None

@@ -5,14 +5,15 @@ from __future__ import annotations
 import logging
 import math
 import re
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
-from solver.io.errors import InputError
 from solver.environment import STANDARD_GRAVITY
+from solver.errors import InputError
 
 log = logging.getLogger("solver.io.c3d")
 
@@ -126,7 +127,7 @@ def _clean_label(s: str) -> str:
 
 def _read_raw(path: Path) -> _Raw:
     try:
-        import ezc3d
+        import ezc3d  # optional at import time: a missing ezc3d is reported as a C3DError
     except ImportError as e:  # pragma: no cover - dependency declared in pyproject
         raise C3DError("reading C3D needs the 'ezc3d' package") from e
     if not path.is_file():
@@ -198,7 +199,7 @@ def fill_gaps(x: np.ndarray, max_gap: int) -> tuple[np.ndarray, list[tuple[int, 
     Returns the filled copy and the gaps left (interior longer gaps and gaps at the ends,
     as [start, stop) frame ranges).
     """
-    from scipy.interpolate import CubicSpline
+    from scipy.interpolate import CubicSpline  # lazy: scipy.interpolate costs ~0.4 s to import
 
     x = np.array(x, dtype=float, copy=True)
     T = x.shape[1]

@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -16,6 +17,8 @@ from solver.io.c3d.landmarks import _height_estimate, _landmarks
 from solver.io.c3d.markers import _Markers, parse_mapping, required_markers
 from solver.io.c3d.plates import PlateSignal, _plate_signals, _plate_specs
 from solver.io.c3d.reader import FEET, C3DError, G, _mid, _param, _read_raw, _strings, _subject_params, fill_gaps
+from solver.io.fit import fit_track
+from solver.io.mass import implied_mass, mass_warning
 from solver.io.track import SkeletonTrack
 
 log = logging.getLogger("solver.io.c3d")
@@ -56,9 +59,9 @@ def read_c3d_trial(path: str | Path, *, mass: float | None = None, require_plate
     # pelvis markers first: they decide the walking direction
     roles = {}
     for role in ("ASI", "PSI"):
-        pair = [mk.find(role, s) for s in ("R", "L")]
-        if all(pair):
-            roles[role] = _mid(mk.get(pair[0]), mk.get(pair[1]))
+        right, left = (mk.find(role, s) for s in ("R", "L"))
+        if right and left:
+            roles[role] = _mid(mk.get(right), mk.get(left))
     if "PSI" not in roles and mk.find("SACR") is not None:
         roles["PSI"] = mk.get(mk.find("SACR"))  # type: ignore[arg-type]
     R, floor, axes_info = _detect_axes(raw, mk, specs, roles)
@@ -114,7 +117,6 @@ def read_c3d_trial(path: str | Path, *, mass: float | None = None, require_plate
     # plates, else one whole stance of each foot over the stride time of the gait events)
     implied = None
     if measured is not None:
-        from solver.io.mass import implied_mass
 
         strikes = [feet.events[f]["foot_strike"] for f in FEET]
         strides = [b - a for s in strikes for a, b in zip(s[:-1], s[1:])]
@@ -134,7 +136,6 @@ def read_c3d_trial(path: str | Path, *, mass: float | None = None, require_plate
         raise C3DError(f"{name}: implausible subject mass {m:g} kg")
     source["mass_from"] = how
     if implied is not None:
-        from solver.io.mass import mass_warning
 
         source["implied_mass"] = implied.as_dict()
         source["mass_implied_kg"] = round(float(implied.kg), 2)
@@ -168,7 +169,6 @@ def load_c3d(path: str | Path, *, mass: float | None = None, require_plates: boo
              markers: str | Path | Mapping[str, str] | None = None, **fit_options: Any) -> Capture:
     """The capture of a C3D trial: ``fit_track(read_c3d(path, ...), **fit_options)``
     (``fit_options``: e.g. ``lower_only``, ``orientation_weight``; see ``solver.io.fit``)."""
-    from solver.io.fit import fit_track
 
     track = read_c3d(path, mass=mass, require_plates=require_plates, max_gap_s=max_gap_s,
                      fz_threshold=fz_threshold, markers=markers)

@@ -86,11 +86,13 @@ COM offset. Body height, when the source does not give it, is estimated by the f
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Mapping
 
 from solver.capture import Capture
-from solver.io.mass import ImpliedMass, implied_mass, mass_warning
+from solver.gait import detect_contacts, gait_events
+from solver.io.fit import fit_track
+from solver.io.mass import ImpliedMass, implied_mass, mass_warning, stride_from_events
 from solver.io.opensim.base import C_OSIM, OpenSimError
 from solver.io.opensim.external_loads import grf_arrays, read_opensim_grf
 from solver.io.opensim.model import PLACEHOLDER_MASS_FRACTION, opensim_track
@@ -100,16 +102,16 @@ from solver.io.opensim.treadmill import estimate_belt_speed
 log = logging.getLogger(__name__)
 
 __all__ = [
-    "OpenSimError",
-    "Storage",
-    "read_mot",
-    "load_opensim",
-    "opensim_track",
-    "read_opensim_grf",
-    "plates_implied_mass",
-    "estimate_belt_speed",
     "C_OSIM",
     "PLACEHOLDER_MASS_FRACTION",
+    "OpenSimError",
+    "Storage",
+    "estimate_belt_speed",
+    "load_opensim",
+    "opensim_track",
+    "plates_implied_mass",
+    "read_mot",
+    "read_opensim_grf",
 ]
 
 
@@ -149,16 +151,12 @@ def load_opensim(
     ``capture.source["implied_mass"]`` and a disagreement of more than 5 % with the mass used
     is logged and kept in ``source["mass_warning"]``.
     """
-    from solver.io.fit import fit_track
 
     track = opensim_track(model, motion, mass=mass, belt_speed=belt_speed, grf=grf, grf_xml=grf_xml,
                           in_degrees=in_degrees, floor_height=floor_height, height=height,
                           ik_weights=ik_weights, ik_reweight=ik_reweight)
     cap = fit_track(track, lower_only=lower_only)
     if grf is not None:
-        from solver.io.mass import stride_from_events
-        from solver.io.preprocess import detect_contacts, gait_events
-
         contacts = detect_contacts(cap.character, cap.q, cap.fps)
         measured = read_opensim_grf(grf, grf_xml, times=cap.times, frame=cap.frame, contacts=contacts)
         src = dict(cap.source)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from solver.io.errors import InputError
+from solver.errors import InputError
 
 
 class OpenSimError(InputError):

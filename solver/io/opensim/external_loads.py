@@ -23,13 +23,14 @@ from __future__ import annotations
 import logging
 import re
 import xml.etree.ElementTree as ET
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
 from solver.capture import GroundFrame, MeasuredGRF
+from solver.gait import lowpass
 from solver.io.opensim.base import C_OSIM, OpenSimError
 from solver.io.opensim.storage import Storage, read_mot
 
@@ -225,8 +226,6 @@ def read_opensim_grf(
     fk = 1.0 / float(np.median(np.diff(times))) if times.size > 1 else fs
     Ff, TQf = F, TQ
     if fs > 2.5 * fk and len(t) > 30:
-        from solver.io.preprocess import lowpass
-
         cut = 0.4 * fk
         Ff = np.stack([lowpass(F[k].T, fs, cut).T for k in range(2)])
         TQf = np.stack([lowpass(TQ[k].T, fs, cut).T for k in range(2)])

@@ -24,8 +24,9 @@ have, model markers without data.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -56,7 +57,7 @@ def solve_ik(model: str | Path, trc: str | Path, *, weights: Mapping[str, float]
     Returns the worker's result (as :func:`solver.io.opensim.worker.run_worker`, plus
     ``ik_times``, ``ik_q``) and the ``source`` entries describing the fit.
     """
-    from solver.io.opensim.worker import run_worker
+    from solver.io.opensim.worker import run_worker  # lazy: the child-process launcher, only when OpenSim runs
 
     p = Path(trc)
     if not p.is_file():

@@ -10,15 +10,22 @@ from __future__ import annotations
 
 import logging
 import re
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
 from solver.capture import GroundFrame
+from solver.character import capture_full
+from solver.io.fit import HIP_HEIGHT_FRACTION, SEGMENT_LANDMARKS
 from solver.io.opensim.base import C_OSIM, OpenSimError, to_ours_p, to_ours_R
+from solver.io.opensim.external_loads import floor_from_grf
+from solver.io.opensim.ik import solve_ik
 from solver.io.opensim.storage import Storage, read_mot
+from solver.io.opensim.treadmill import belt_shift
 from solver.io.track import SkeletonTrack
+from solver.kinematics import points_world
 
 log = logging.getLogger(__name__)
 
@@ -132,14 +139,13 @@ def opensim_track(
     inverse kinematics OpenSim solves first (:func:`solver.io.opensim.ik.solve_ik`;
     ``ik_weights``, ``ik_reweight``).
     """
-    from solver.io.opensim.worker import run_worker
+    from solver.io.opensim.worker import run_worker  # lazy: the child-process launcher, only when OpenSim runs
 
     model = str(model)
     if not Path(model).is_file():
         raise OpenSimError(f"model file not found: {model}")
     src_extra: dict[str, Any] = {}
     if Path(motion).suffix.lower() == ".trc":
-        from solver.io.opensim.ik import solve_ik
 
         res, src_extra = solve_ik(model, motion, weights=ik_weights, reweight=ik_reweight)
         times = np.asarray(res["ik_times"], dtype=float)
@@ -195,7 +201,6 @@ def opensim_track(
     # floor height (OpenSim y): given, else from the GRF's centre of pressure, else 0
     floor = floor_height
     if floor is None and grf is not None:
-        from solver.io.opensim.external_loads import floor_from_grf
 
         floor = floor_from_grf(grf, grf_xml)
     floor = 0.0 if floor is None else float(floor)
@@ -311,7 +316,6 @@ def opensim_track(
     )
     track = _with_segment_inertias(track, res, seg_of, off)
     if belt_speed is not None:
-        from solver.io.opensim.treadmill import belt_shift
 
         track = belt_shift(track, belt_speed, grf, grf_xml)
     return track
@@ -320,8 +324,6 @@ def opensim_track(
 def _neutral_upper_body(height: float) -> dict[str, np.ndarray]:
     """Upper-body landmarks of ``capture_full(height)`` in its neutral pose, relative to the
     lumbar joint, our axes: where an arm-less model's torso carries them."""
-    from solver.character import capture_full
-    from solver.kinematics import points_world
 
     ch = capture_full(height)
     pts = {"lumbar": ("abdomen", np.zeros(3)), "neck": ("head", np.zeros(3)),
@@ -342,7 +344,6 @@ def _neutral_upper_body(height: float) -> dict[str, np.ndarray]:
 
 
 def _height_from_legs(lm: Mapping[str, np.ndarray]) -> float:
-    from solver.io.fit import HIP_HEIGHT_FRACTION
 
     leg = np.nanmedian(lm["hip_r"][2] - np.minimum(lm["heel_r"][2], lm["toe_r"][2]))
     return float(np.nanmax([leg / HIP_HEIGHT_FRACTION, 0.5]))
@@ -355,7 +356,6 @@ def _with_segment_inertias(track: SkeletonTrack, res, seg_of, off) -> SkeletonTr
     in the orienting body's axes (relabelled to ours) relative to the segment's origin
     landmark (measured in that body's frame, median over the trial).
     """
-    from solver.io.fit import SEGMENT_LANDMARKS
 
     names = list(res["body_names"])
     bi = {b: i for i, b in enumerate(names)}

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Mapping
 
 import numpy as np
 
@@ -61,14 +61,14 @@ def read_mot(path: str | Path) -> Storage:
         dup = sorted({x for x in labels if labels.count(x) > 1})
         raise OpenSimError(f"{p}: duplicate column labels {dup}")
     rows = []
-    for k, ln in enumerate(body[1:]):
+    for i, ln in enumerate(body[1:]):
         parts = ln.split()
         if len(parts) != len(labels):
-            raise OpenSimError(f"{p}: data row {k + 1} has {len(parts)} values, expected {len(labels)}")
+            raise OpenSimError(f"{p}: data row {i + 1} has {len(parts)} values, expected {len(labels)}")
         try:
             rows.append([float(x) for x in parts])
         except ValueError:
-            raise OpenSimError(f"{p}: data row {k + 1} is not numeric: {ln[:80]!r}") from None
+            raise OpenSimError(f"{p}: data row {i + 1} is not numeric: {ln[:80]!r}") from None
     if not rows:
         raise OpenSimError(f"{p}: no data rows")
     arr = np.array(rows)
@@ -79,8 +79,8 @@ def read_mot(path: str | Path) -> Storage:
         raise OpenSimError(f"{p}: {nrows} row(s) contain NaN/inf values (first: row {r + 1}, column {labels[c]!r})")
     t = arr[:, 0]
     if len(t) > 1 and not np.all(np.diff(t) > 0):
-        k = int(np.argmax(np.diff(t) <= 0))
-        raise OpenSimError(f"{p}: time must increase strictly (row {k + 2}: {t[k + 1]} after {t[k]})")
+        i = int(np.argmax(np.diff(t) <= 0))
+        raise OpenSimError(f"{p}: time must increase strictly (row {i + 2}: {t[i + 1]} after {t[i]})")
     if "nRows" in header and header["nRows"].isdigit() and int(header["nRows"]) != len(t):
         log.info("%s: header says nRows=%s but the file has %d rows (using the rows)", p, header["nRows"], len(t))
     deg = header.get("inDegrees")

@@ -13,7 +13,10 @@ import math
 import numpy as np
 
 from solver.capture import GroundFrame
+from solver.gait.base import GaitError
+from solver.gait.belt import belt_speed
 from solver.io.opensim.base import OpenSimError
+from solver.io.opensim.external_loads import read_opensim_grf
 from solver.io.track import SkeletonTrack
 
 log = logging.getLogger(__name__)
@@ -26,26 +29,12 @@ def estimate_belt_speed(track: SkeletonTrack, *, stance: np.ndarray | None = Non
     (2, T) bool per foot when known, e.g. from force plates); its forward velocity is
     -v_belt. Frames with the foot moving vertically faster than 0.1 m/s are skipped.
     """
-    t = np.asarray(track.times, dtype=float)
-    if t.size < 5:
-        raise OpenSimError("estimate_belt_speed: at least 5 frames are needed")
-    vals = []
-    for k, s in enumerate("rl"):
-        p = 0.5 * (np.asarray(track.landmarks[f"heel_{s}"]) + np.asarray(track.landmarks[f"mtp_{s}"]))
-        v = np.gradient(p, t, axis=1)
-        other = "l" if s == "r" else "r"
-        po = 0.5 * (np.asarray(track.landmarks[f"heel_{other}"]) + np.asarray(track.landmarks[f"mtp_{other}"]))
-        if stance is not None:
-            on = np.asarray(stance, dtype=bool)[k]
-        else:
-            low = p[2] < np.nanpercentile(p[2], 5) + 0.03
-            on = low & (p[2] < po[2]) & (np.abs(v[2]) < 0.1)
-        vals.append(-v[0][on])
-    allv = np.concatenate(vals)
-    allv = allv[np.isfinite(allv)]
-    if allv.size < 3:
-        raise OpenSimError("estimate_belt_speed: no stance frames found (is this a walking trial?)")
-    return float(np.median(allv))
+    feet = {s: 0.5 * (np.asarray(track.landmarks[f"heel_{s}"]) + np.asarray(track.landmarks[f"mtp_{s}"]))
+            for s in "rl"}
+    try:
+        return belt_speed(track.times, feet, stance=stance)
+    except GaitError as e:
+        raise OpenSimError(str(e)) from None
 
 
 def belt_shift(track: SkeletonTrack, belt_speed: float | str, grf, grf_xml) -> SkeletonTrack:
@@ -54,8 +43,6 @@ def belt_shift(track: SkeletonTrack, belt_speed: float | str, grf, grf_xml) -> S
             raise OpenSimError(f"belt_speed must be a number (m/s) or 'auto', got {belt_speed!r}")
         stance = None
         if grf is not None:
-            from solver.io.opensim.external_loads import read_opensim_grf
-
             g = read_opensim_grf(grf, grf_xml, times=track.times, frame=track.frame)
             stance = g.force[:, 2] > 200.0
         v = estimate_belt_speed(track, stance=stance)

@@ -34,8 +34,9 @@ import subprocess
 import sys
 import tempfile
 import xml.etree.ElementTree as ET
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -97,8 +98,8 @@ def main() -> None:  # pragma: no cover - runs in the child process (exercised b
             req = {**req, "columns": cols, "values": values, "in_degrees": False}
             state = model.initSystem()
         _evaluate(osim, model, state, req, out, arrays, notes)
-        np.savez(req["out"], meta=json.dumps(out), **arrays)
-    except Exception as e:  # noqa: BLE001 - reported to the parent as one line
+        np.savez(req["out"], meta=json.dumps(out), **arrays)  # type: ignore[arg-type]  # numpy stubs: **arrays
+    except Exception as e:
         with open(req["out"] + ".err", "w") as f:
             f.write(str(e))
         sys.exit(3)
@@ -111,13 +112,13 @@ def _load_model(osim, path: str, notes: list[str], *, keep_markers: bool):  # pr
 
     try:
         return load(path)
-    except Exception as first:  # noqa: BLE001 - OpenSim raises RuntimeError subclasses
+    except Exception as first:
         fd, tmp = tempfile.mkstemp(suffix=".osim")
         os.close(fd)
         try:
             repair_model_xml(path, tmp, keep_markers=keep_markers)
             res = load(tmp)
-        except Exception as second:  # noqa: BLE001
+        except Exception as second:
             raise RuntimeError(f"OpenSim cannot initialize the model: {first}; after repair: {second}") from None
         finally:
             os.unlink(tmp)

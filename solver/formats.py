@@ -1,0 +1,93 @@
+"""The registries of the file formats the solver reads and writes (standard library only, so
+that front ends enumerate them without importing numpy or a reader).
+
+- :data:`READERS`: the trial readers (``solver.io.load_trial`` dispatches on a trial's files),
+  each with its file suffixes and the options it takes beside the files;
+- :data:`EXPORTERS`: the motion exporters (``solver.export.export_motion``), each with its
+  function and media type.
+
+The command line, the upload route and the export route enumerate these (suffixes accepted,
+``--format`` choices, the ``format`` query parameter, response media types): a new reader or
+exporter is one entry here plus its module.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any
+
+
+@dataclass(frozen=True)
+class Reader:
+    name: str
+    #: file suffix -> what a file with it is
+    suffixes: MappingProxyType[str, str]
+    #: the files of one trial, in words (error messages, help)
+    files: str
+    #: reader options beside the files -> their meaning (``load_trial(..., **options)``)
+    options: MappingProxyType[str, str] = field(default_factory=lambda: MappingProxyType({}))
+
+
+def _ro(d: dict[str, str]) -> MappingProxyType[str, str]:
+    return MappingProxyType(d)
+
+
+_COMMON = {"mass": "the subject's mass (kg) when the files do not state it",
+           "lower_only": "fit the lower body only (None: the whole body when the data allow)"}
+
+READERS: tuple[Reader, ...] = (
+    Reader("opensim", _ro({".osim": "OpenSim model", ".mot": "OpenSim motion", ".sto": "OpenSim storage",
+                           ".trc": "marker trajectories", ".xml": "OpenSim ExternalLoads"}),
+           ".osim + .mot/.sto coordinates or .trc markers (+ GRF .mot, ExternalLoads .xml)",
+           _ro({**_COMMON, "belt_speed": "treadmill belt speed (m/s) or 'auto'",
+                "in_degrees": "the coordinates file is in degrees (default: its header says)"})),
+    Reader("c3d", _ro({".c3d": "C3D"}), ".c3d",
+           _ro({**_COMMON, "markers": "marker label mapping (role -> label)"})),
+    Reader("bvh", _ro({".bvh": "BVH"}), ".bvh",
+           _ro({**_COMMON, "units": "length unit of the file ('auto', 'cm', 'm', 'mm', 'in', 'cmu')",
+                "up": "the file's up axis ('y' or 'z')"})),
+    Reader("deepmimic", _ro({".txt": "DeepMimic motion or character", ".json": "DeepMimic motion or character"}),
+           "DeepMimic motion .txt/.json + character .txt/.json", _ro(dict(_COMMON))),
+)
+
+
+def reader_suffixes() -> dict[str, str]:
+    """Every suffix a trial file may have -> what it is (first reader wins)."""
+    out: dict[str, str] = {}
+    for r in READERS:
+        for suffix, kind in r.suffixes.items():
+            out.setdefault(suffix, kind)
+    return out
+
+
+@dataclass(frozen=True)
+class Exporter:
+    name: str
+    module: str
+    function: str
+    media_type: str
+    description: str
+    #: (option, value) -> the media type when that option changes the result's type
+    media_by_option: MappingProxyType[tuple[str, Any], str] = field(default_factory=lambda: MappingProxyType({}))
+
+
+EXPORTERS: MappingProxyType[str, Exporter] = MappingProxyType({e.name: e for e in (
+    Exporter("json", "solver.export.clip", "to_clip_json", "application/json",
+             "the JSON clip (local transforms, contacts, ground reactions)"),
+    Exporter("gltf", "solver.export.gltf", "to_gltf", "model/gltf-binary",
+             "glTF 2.0, binary (.glb); binary=False: the .gltf JSON with its buffer embedded",
+             MappingProxyType({("binary", False): "model/gltf+json"})),
+    Exporter("glb", "solver.export.gltf", "to_glb", "model/gltf-binary", "binary glTF 2.0 (.glb)"),
+    Exporter("bvh", "solver.export.bvh", "to_bvh", "text/plain", "BVH (Y up)"),
+)})
+
+
+def export_media_types() -> tuple[str, ...]:
+    """Every media type an export may have, in registry order."""
+    out: list[str] = []
+    for e in EXPORTERS.values():
+        for mt in (e.media_type, *e.media_by_option.values()):
+            if mt not in out:
+                out.append(mt)
+    return tuple(out)

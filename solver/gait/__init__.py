@@ -1,0 +1,38 @@
+"""Gait processing: domain logic on a captured walk, outside the readers (solver/io/).
+
+    resample(capture, fps) -> Capture                                   (solver.gait.base)
+    lowpass(x, fps, cutoff_hz, *, order=4, axis=-1) -> ndarray            (solver.gait.base)
+    detect_contacts(character, q, fps, ...) -> (P, T) bool               (solver.gait.contacts)
+    contacts_from_plates(measured, *, threshold=20.0, ...) -> (P, T) bool (solver.gait.contacts)
+    gait_events(contacts, times) -> dict                                  (solver.gait.contacts)
+    extract_cycle(capture, fps=None, *, start=..., contacts=None, cycle=0)
+        -> (Capture, contacts (P, T))                                     (solver.gait.cycles)
+    unroll_loop(capture, repeats=2) -> Capture                            (solver.gait.cycles)
+
+    belt_speed(times, feet, *, stance=None) -> m/s                        (solver.gait.belt)
+    unwrap_hinges(character, q) -> q with continuous hinge angles         (solver.gait.base)
+
+Every failure is a :class:`GaitError` (``PreprocessError``, its name in solver.io.preprocess,
+which re-exports this package), an :class:`solver.errors.InputError`. The treadmill reader
+(solver/io/opensim/treadmill.py) takes the belt speed from here and shifts its marker track.
+"""
+
+from solver.gait.base import GaitError, PreprocessError, lowpass, resample, unwrap_hinges
+from solver.gait.belt import belt_speed
+from solver.gait.contacts import contacts_from_plates, detect_contacts, gait_events
+from solver.gait.cycles import LOOP_PERIOD_S, extract_cycle, unroll_loop
+
+__all__ = [
+    "LOOP_PERIOD_S",
+    "GaitError",
+    "PreprocessError",
+    "belt_speed",
+    "contacts_from_plates",
+    "detect_contacts",
+    "extract_cycle",
+    "gait_events",
+    "lowpass",
+    "resample",
+    "unroll_loop",
+    "unwrap_hinges",
+]

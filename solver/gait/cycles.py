@@ -1,0 +1,232 @@
+"""Gait cycles: one cycle with its overlap frames out of a trial (or of a looping clip), and
+unrolling a looping clip.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from solver.capture import Capture, MeasuredGRF
+from solver.gait.base import GaitError, resample, unwrap_hinges
+from solver.gait.contacts import detect_contacts
+
+log = logging.getLogger(__name__)
+
+
+def unroll_loop(capture: Capture, repeats: int = 2) -> Capture:
+    """A looping clip (its last frame is the phase of its first) repeated ``repeats`` times.
+
+    As DeepMimic's ``"Loop": "wrap"``: each repetition is translated horizontally by the
+    clip's root displacement (last - first frame, vertical component ignored); orientations
+    are not accumulated. The first frame of every repetition after the first is dropped (it
+    is the previous repetition's last frame). Hinge angles are unwrapped first.
+    """
+    if repeats < 1:
+        raise GaitError("unroll_loop: repeats must be >= 1")
+    if capture.T < 3:
+        raise GaitError("unroll_loop: a loop needs at least 3 frames")
+    ch = capture.character
+    q = unwrap_hinges(ch, capture.q)
+    t = capture.times
+    names = ch.coordinate_names
+    period = t[-1] - t[0]
+    disp = np.zeros(ch.n)
+    for nm in ("root_tx", "root_ty"):
+        if nm in names:
+            i = names.index(nm)
+            disp[i] = q[i, -1] - q[i, 0]
+    qs, ts = [q], [t]
+    contacts = capture.contacts
+    cs = [contacts] if contacts is not None else None
+    for r in range(1, repeats):
+        qs.append(q[:, 1:] + r * disp[:, None])
+        ts.append(t[1:] + r * period)
+        if cs is not None and contacts is not None:
+            cs.append(contacts[:, 1:])
+    src = dict(capture.source)
+    src["unrolled_loops"] = repeats
+    return capture.evolve(q=np.hstack(qs), times=np.concatenate(ts),
+                          contacts=None if cs is None else np.hstack(cs), measured=None, source=src)
+
+
+def extract_cycle(
+    capture: Capture,
+    fps: float | None = None,
+    *,
+    start: str = "right_heel_strike",
+    contacts: np.ndarray | None = None,
+    cycle: int = 0,
+) -> tuple[Capture, np.ndarray]:
+    """One gait cycle with the two overlap frames the cyclic constraint needs (SPEC §6).
+
+    The capture is first resampled to ``fps`` (if given). The contact schedule is ``contacts``
+    if given, else the capture's own (e.g. from force plates), else :func:`detect_contacts`.
+    With strikes of the ``start`` foot
+    at frames s and s + N (the next strike), the cycle is frames s .. s + N + 1 (T = N + 2):
+    frames T-1 and T repeat frames 1 and 2 one period later (q_1 = q_{T-1}, q_2 = q_T for the
+    non-root coordinates). ``cycle`` picks which complete cycle (0 = the first). A looping
+    clip (``capture.source["loop"] == "wrap"``, its last frame at the phase of its first) is
+    one cycle already: the cycle is the clip plus the loop's second frame (T = clip + 1),
+    starting at the clip's boundary when the ``start`` strike is within 2 frames of it
+    (cyclically), otherwise at the strike (the loop's closure error then falls inside the
+    cycle). Returns the cycle's Capture (its ``contacts`` set) and its (P, T) contacts.
+    """
+    if start == "auto":
+        errors = []
+        for st in ("right_heel_strike", "left_heel_strike", "best_loop"):
+            try:
+                return extract_cycle(capture, fps, start=st, contacts=contacts, cycle=cycle)
+            except GaitError as e:
+                errors.append(str(e))
+        raise GaitError("extract_cycle: no gait cycle found: " + " | ".join(errors))
+    if start not in ("right_heel_strike", "left_heel_strike", "best_loop"):
+        raise GaitError("extract_cycle: start must be 'right_heel_strike', 'left_heel_strike', 'best_loop' "
+                              f"or 'auto', not {start!r}")
+    cap = resample(capture, fps) if fps is not None else capture
+    if contacts is None:
+        contacts = cap.contacts  # e.g. from force plates (resampled with the capture); else detected below
+    if cap.source.get("loop") == "wrap":
+        return _extract_loop_cycle(cap, start, contacts)
+    if contacts is None:
+        contacts = detect_contacts(cap.character, cap.q, cap.fps)
+    contacts = np.asarray(contacts, dtype=bool)
+    if contacts.shape != (len(cap.character.contacts), cap.T):
+        raise GaitError(f"extract_cycle: contacts must be ({len(cap.character.contacts)}, T={cap.T}), "
+                              f"got {contacts.shape}")
+    if contacts.shape[0] != 4:
+        raise GaitError("extract_cycle: expected 4 contact points (heel_r, toe_r, heel_l, toe_l)")
+    feet = np.stack([contacts[0] | contacts[1], contacts[2] | contacts[3]])
+    for k, side in enumerate(("right", "left")):
+        if not feet[k].any():
+            raise GaitError(f"extract_cycle: the {side} foot is never on the ground in this clip")
+    if start == "best_loop":
+        return _best_loop_cycle(cap, contacts, feet)
+    k = 0 if start.startswith("right") else 1
+    d = np.diff(feet[k].astype(int))
+    strikes = np.where(d == 1)[0] + 1
+    side = "right" if k == 0 else "left"
+    if strikes.size == 0:
+        raise GaitError(f"extract_cycle: no {side} heel strike found in {cap.T} frames "
+                              f"({cap.times[-1] - cap.times[0]:.2f} s)")
+    usable = [s for s in strikes[:-1] if s + 1 + (strikes[strikes > s][0] - s) < cap.T] if strikes.size > 1 else []
+    if len(usable) <= cycle:
+        raise GaitError(
+            f"extract_cycle: clip too short for a gait cycle: {strikes.size} {side} heel strike(s) at "
+            f"{[round(float(cap.times[s]), 3) for s in strikes]} s; a cycle needs two strikes and one frame after "
+            f"the second (cycle={cycle} asked)"
+        )
+    s0 = usable[cycle]
+    s1 = strikes[strikes > s0][0]
+    sl = slice(s0, s1 + 2)
+    cc = contacts[:, sl]
+    fc = feet[:, sl][:, :-2]
+    if not np.any(fc[0] & fc[1]):
+        raise GaitError("extract_cycle: no double support in the cycle (is this a walk? running has none)")
+    if not fc[1 - k].any():
+        raise GaitError(f"extract_cycle: the {'left' if k == 0 else 'right'} foot never touches the ground "
+                              "during the cycle")
+    cycle_info = {"start": start, "index": cycle, "frames": [int(s0), int(s1 + 1)],
+                  "t_start": float(cap.times[s0]), "period_s": float(cap.times[s1] - cap.times[s0]),
+                  "overlap_frames": 2}
+    return _cycle_capture(cap, sl, cc, cycle_info), cc
+
+
+def _cycle_capture(cap: Capture, sl: slice, contacts: np.ndarray, cycle_info: dict) -> Capture:
+    """The frames ``sl`` of a capture (plates included) with the cycle recorded in its source."""
+    m = cap.measured
+    meas = None
+    if m is not None:
+        meas = MeasuredGRF(force=m.force[..., sl], cop=m.cop[..., sl], free_moment=m.free_moment[..., sl],
+                           valid=m.valid[sl], source=m.source)
+    src = dict(cap.source)
+    src["cycle"] = cycle_info
+    return Capture(character=cap.character, q=cap.q[:, sl], times=cap.times[sl], frame=cap.frame, source=src,
+                   contacts=contacts, measured=meas)
+
+
+#: plausible walking cycle durations (s) searched by the best-loop cycle
+LOOP_PERIOD_S = (0.7, 2.0)
+
+
+def _best_loop_cycle(cap: Capture, contacts: np.ndarray, feet: np.ndarray) -> tuple[Capture, np.ndarray]:
+    """A cycle for trials shorter than two strikes of one foot: the period N and start s whose
+    frames (s, s+1) best match (s+N, s+N+1) — joint coordinates, root height, pitch and roll,
+    and the contact schedule (which must repeat exactly) — as in motion-graph loop detection.
+    The cycle must contain double support and both feet's stances."""
+    T, fps = cap.T, cap.fps
+    lo = max(4, int(round(LOOP_PERIOD_S[0] * fps)))
+    hi = min(T - 2, int(round(LOOP_PERIOD_S[1] * fps)))
+    if hi < lo:
+        raise GaitError(f"extract_cycle: {T} frames ({cap.times[-1] - cap.times[0]:.2f} s) are too few for "
+                              f"a gait cycle of at least {LOOP_PERIOD_S[0]} s plus two overlap frames")
+    periodic = np.zeros(cap.character.n, dtype=bool)
+    periodic[6:] = True
+    periodic[[2, 4, 5]] = True
+    qp = cap.q[periodic]
+    scale = np.maximum(np.std(qp, axis=1, keepdims=True), 1e-3)
+    qn = qp / scale
+    best = None
+    for N in range(lo, hi + 1):
+        for s0 in range(0, T - N - 1):
+            if not np.array_equal(contacts[:, s0 : s0 + 2], contacts[:, s0 + N : s0 + N + 2]):
+                continue
+            fc = feet[:, s0 : s0 + N]
+            if not (np.any(fc[0] & fc[1]) and fc[0].any() and fc[1].any() and (~fc[0]).any() and (~fc[1]).any()):
+                continue
+            err = float(np.sum((qn[:, s0 : s0 + 2] - qn[:, s0 + N : s0 + N + 2]) ** 2))
+            if best is None or err < best[0]:
+                best = (err, s0, N)
+    if best is None:
+        raise GaitError("extract_cycle: no loop of a walking period closes in this clip (the contact schedule "
+                              "never repeats with double support and both stances inside)")
+    err, s0, N = best
+    sl = slice(s0, s0 + N + 2)
+    cc = contacts[:, sl]
+    cycle_info = {"start": "best_loop", "index": 0, "frames": [int(s0), int(s0 + N + 1)],
+                  "t_start": float(cap.times[s0]), "period_s": float(N / fps), "overlap_frames": 2,
+                  "loop_mismatch_rms_std": float(np.sqrt(err / (2 * qn.shape[0])))}
+    return _cycle_capture(cap, sl, cc, cycle_info), cc
+
+
+def _extract_loop_cycle(cap: Capture, start: str, contacts: np.ndarray | None) -> tuple[Capture, np.ndarray]:
+    Tc = cap.T - 1  # the last frame is the first one's phase
+    if Tc < 4:
+        raise GaitError(f"extract_cycle: a looping clip of {cap.T} frames is too short for a gait cycle")
+    if contacts is None:
+        contacts = detect_contacts(cap.character, cap.q, cap.fps)
+    contacts = np.asarray(contacts, dtype=bool)
+    if contacts.shape != (4, cap.T):
+        raise GaitError(f"extract_cycle: contacts must be (4, T={cap.T}), got {contacts.shape}")
+    cyc = contacts[:, :Tc]
+    feet = np.stack([cyc[0] | cyc[1], cyc[2] | cyc[3]])
+    for k, side in enumerate(("right", "left")):
+        if not feet[k].any():
+            raise GaitError(f"extract_cycle: the {side} foot is never on the ground in this clip")
+        if feet[k].all():
+            raise GaitError(f"extract_cycle: the {side} foot never leaves the ground in this clip")
+    if not np.any(feet[0] & feet[1]):
+        raise GaitError("extract_cycle: no double support in the clip (is this a walk? running has none)")
+    k = 0 if start.startswith("right") else 1
+    strikes = [i for i in range(Tc) if feet[k][i] and not feet[k][i - 1]]
+    side = "right" if k == 0 else "left"
+    if not strikes:
+        raise GaitError(f"extract_cycle: no {side} heel strike found in the looping clip")
+    dist = [min(i, Tc - i) for i in strikes]
+    s0 = 0 if min(dist) <= 2 else strikes[0]
+    u = unroll_loop(cap, 3)
+    sl = slice(s0, s0 + Tc + 2)
+    idx = np.arange(s0, s0 + Tc + 2) % Tc
+    cc = cyc[:, idx]
+    src = dict(cap.source)
+    src["cycle"] = {"start": start, "index": 0, "frames": [int(s0), int(s0 + Tc)],
+                    "t_start": float(u.times[s0]), "period_s": float(u.times[s0 + Tc] - u.times[s0]),
+                    "overlap_frames": 2, "loop": True,
+                    "strike_frame": int(strikes[int(np.argmin(dist))])}
+    if s0 != 0:
+        log.warning("extract_cycle: the looping clip's boundary falls inside the cycle (closure error of the loop "
+                    "included)")
+    out = Capture(character=cap.character, q=u.q[:, sl], times=u.times[sl], frame=cap.frame, source=src,
+                  contacts=cc, measured=None)
+    return out, cc
