@@ -53,7 +53,8 @@ def run() -> dict:
         rows: dict = {label: {m: _run(tutor, tgt, m) for m in ("thesis", "adaptive")} for label, tgt in TIMED.items()}
         if name == "deepmimic_walk":
             rows.update({label: {"adaptive": _run(tutor, tgt, "adaptive")} for label, tgt in REACH.items()})
-            rows.update({label: {"adaptive": _run(tutor, tgt, "adaptive", eps=0.02)} for label, tgt in IMPOSSIBLE.items()})
+            rows.update({label: {"adaptive": _run(tutor, tgt, "adaptive", eps=0.02)}
+                         for label, tgt in IMPOSSIBLE.items()})
         out[f"{name}/halfboy_15fps"] = rows
     # full body, 30 frames/s: curve π/2
     full = make_tutor(load_trial(tr["c3d_pig"]), character="fullbody", fps=30.0).motion

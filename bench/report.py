@@ -30,7 +30,9 @@ def _realistic(r: dict) -> str:
     rl = r.get("realism") or {}
     if not rl:
         return "–"
-    return f"{'yes' if r.get('plausible') else 'NO'} ({rl.get('newton_force', float('nan')):.3f} / {rl.get('refined_force', float('nan')):.3f})"
+    nan = float("nan")
+    verdict = "yes" if r.get("plausible") else "NO"
+    return f"{verdict} ({rl.get('newton_force', nan):.3f} / {rl.get('refined_force', nan):.3f})"
 
 
 def continuation_table(res: dict) -> str:

@@ -10,6 +10,7 @@ import numpy as np
 from mjcf.replay import MujocoReplay
 from solver.character import Character
 from solver.dynamics import rnea
+from solver.environment import STANDARD_GRAVITY
 
 
 def random_states(character: Character, samples: int, rng: np.random.Generator) -> dict[str, Any]:
@@ -22,7 +23,7 @@ def random_states(character: Character, samples: int, rng: np.random.Generator) 
     qd = rng.normal(0.0, 2.0, (n, samples))
     qdd = rng.normal(0.0, 10.0, (n, samples))
     g = rng.normal(size=(3, samples))
-    g *= 9.81 / np.linalg.norm(g, axis=0)
+    g *= STANDARD_GRAVITY / np.linalg.norm(g, axis=0)
     wrenches = {f.segment: rng.normal(0.0, 100.0, (6, samples)) for f in character.feet}
     return {"q": q, "qd": qd, "qdd": qdd, "g": g, "fext": wrenches}
 

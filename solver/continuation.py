@@ -8,8 +8,9 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -148,7 +149,7 @@ def tutor_heading_change(tutor: Motion) -> float:
 
 
 def _predict(history: list[_State], lam_try: float, secant: bool,
-             guide: Callable[[float], np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+             guide: Callable[[float], np.ndarray]) -> tuple[np.ndarray, np.ndarray | None]:
     """Initial motion at λ_try: the new guide plus the previous optimum's deviation from its
     own guide (the guide carries the bend and tilt of the homotopy; the deviation carries what
     the physics added), extrapolated along the secant of the last two deviations."""
@@ -159,8 +160,9 @@ def _predict(history: list[_State], lam_try: float, secant: bool,
     a = history[-2]
     s = (lam_try - b.lam) / (b.lam - a.lam)
     dev_a = a.res.q - guide(a.lam)
+    wa, wb = a.res.wrenches, b.res.wrenches
     return (guide(lam_try) + dev_b + s * (dev_b - dev_a),
-            b.res.wrenches + s * (b.res.wrenches - a.res.wrenches))
+            wb if wa is None or wb is None else wb + s * (wb - wa))
 
 
 class _Walk:
@@ -204,7 +206,7 @@ class _Walk:
 
     def accept(self, lam: float, env: Environment, values: Mapping[str, float], res: SolveResult) -> bool:
         m = _motion(self.tutor, lam, self.target, env, values, res, self.control, len(self.steps), self.fps(lam))
-        if not m.report["plausible"]:
+        if m.report is None or not m.report["plausible"]:
             return False
         sr = StepResult(len(self.steps), float(lam), m, {"iterations": res.iterations, "solve_s": res.wall_time,
                                                           "status": res.status, "marker_rms_mm": 1e3 * res.marker_rms})
@@ -217,7 +219,7 @@ class _Walk:
         return ExtrapolationResult(status, float(lam), tuple(self.steps), tuple(self.records), self.solves,
                                    time.perf_counter() - self.t0, message)
 
-    def solve(self, lam: float, init: tuple[np.ndarray, np.ndarray], warm_from: SolveResult | None,
+    def solve(self, lam: float, init: tuple[np.ndarray, np.ndarray | None], warm_from: SolveResult | None,
               max_iter: int, guide: np.ndarray | None = None,
               restart_mu: float | None = None) -> tuple[SolveResult | None, bool, str, Environment, dict]:
         env, values = environment_at(self.env0, self.target, lam)
@@ -232,10 +234,12 @@ class _Walk:
         try:
             eff = self.nlp(lam)
             dpsi = self.dpsi0 + math.radians(eff["heading_change_deg"])
-            res = self.prob.solve(guide, env=env, frame_interval=self.prob.dt * eff["frame_interval"], init_q=init[0], init_wrenches=init[1], max_iter=max_iter,
+            res = self.prob.solve(guide, env=env, frame_interval=self.prob.dt * eff["frame_interval"],
+                                  init_q=init[0], init_wrenches=init[1], max_iter=max_iter,
                                   heading_change=dpsi, should_stop=self.should_cancel,
-                                  lam_x0=warm_from.lam_x if warm else None,
-                                  lam_g0=warm_from.lam_g if warm else None, warm=warm, ipopt_options=opts)
+                                  lam_x0=warm_from.lam_x if warm and warm_from is not None else None,
+                                  lam_g0=warm_from.lam_g if warm and warm_from is not None else None,
+                                  warm=warm, ipopt_options=opts)
         except RuntimeError as e:  # a numerical failure inside the solver is a status, not a crash
             self.solves += 1
             return None, False, f"error: {e}", env, values
@@ -257,11 +261,11 @@ class _Walk:
             self.record(0.0, values, res, ok, "tutor", 0.0)
             if ok:
                 return _State(0.0, res)
-        res, ok, status, env, values = self.solve(0.0, (tut.q, tut.wrenches), None,
-                                                  max(self.control.max_iter, 500), guide=tut.q)
-        ok = ok and self.accept(0.0, env, values, res)  # type: ignore[arg-type]
-        self.record(0.0, values, res, ok, status, 0.0)
-        return _State(0.0, res) if ok else None  # type: ignore[arg-type]
+        solved, ok, status, env, values = self.solve(0.0, (tut.q, tut.wrenches), None,
+                                                     max(self.control.max_iter, 500), guide=tut.q)
+        ok = ok and solved is not None and self.accept(0.0, env, values, solved)
+        self.record(0.0, values, solved, ok, status, 0.0)
+        return _State(0.0, solved) if ok and solved is not None else None
 
     def run(self, history: list[_State], lam_end: float) -> ExtrapolationResult:
         c = self.control
@@ -355,7 +359,7 @@ def extrapolate(
         if not 0.0 <= lam0 < lam_end:
             raise ValueError("the start λ must lie in [0, lam_end)")
         stored = SolveResult(True, "stored", 0, 0.0, m0.q, m0.wrenches, math.nan, math.nan,
-                             None, None, 0.0)  # type: ignore[arg-type]
+                             None, None, 0.0)
         return walk.run([_State(lam0, stored)], lam_end)
     base = walk.base()
     if base is None:

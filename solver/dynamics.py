@@ -17,8 +17,8 @@ from typing import Any
 
 from solver import spatial as sp
 from solver.character import Character, Model
-from solver.kinematics import forward_kinematics
 from solver.environment import STANDARD_GRAVITY_VECTOR
+from solver.kinematics import forward_kinematics
 
 DEFAULT_GRAVITY = STANDARD_GRAVITY_VECTOR
 

@@ -9,8 +9,9 @@ from its provenance (:func:`environment_of`): nothing else spells out 9.81 or di
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -54,14 +55,14 @@ class Environment:
         return out
 
     @staticmethod
-    def from_dict(d: Mapping[str, Any] | None) -> "Environment":
+    def from_dict(d: Mapping[str, Any] | None) -> Environment:
         if not d:
             return Environment()
         g = tuple(float(x) for x in d.get("gravity", STANDARD_GRAVITY_VECTOR))
         step = float((d.get("terrain") or {}).get("step_height_m", 0.0))
         return Environment(g, float(d.get("friction", DEFAULT_FRICTION)), step)  # type: ignore[arg-type]
 
-    def with_(self, **changes: Any) -> "Environment":
+    def with_(self, **changes: Any) -> Environment:
         from dataclasses import replace
 
         return replace(self, **changes)

@@ -30,10 +30,9 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from solver import axes as registry
 from solver.continuation import StepControl, Target, extrapolate
 from solver.export import game
-
-from solver import axes as registry
 
 #: the grid axes, in the order of names and manifests (the registry's, solver.axes)
 AXES = tuple(a.name for a in registry.axes() if a.grid)

@@ -24,12 +24,12 @@ import numpy as np
 from solver.capture import Capture, GroundFrame
 from solver.character import FULL_SUPERFLUOUS, LOWER_SUPERFLUOUS, Character, merge_segments
 from solver.contact import estimate_contact_wrenches
+from solver.environment import STANDARD_GRAVITY_VECTOR
 from solver.gait import extract_cycle
 from solver.kinematics import contact_points, markers
 from solver.motion import Motion, foot_schedule_of
 from solver.plausibility import report
 from solver.spacetime import Environment, SolveResult, SpacetimeProblem, Weights
-from solver.environment import STANDARD_GRAVITY_VECTOR
 
 log = logging.getLogger(__name__)
 

@@ -16,12 +16,12 @@ from typing import Any
 import numpy as np
 
 from solver.dynamics import rnea
+from solver.environment import body_weight, ground_of
+from solver.environment import environment_of as _environment_of
 from solver.kinematics import contact_points, segment_frames, standing_leg_length
 from solver.motion import FEET, Motion
 from solver.realism import RealismLimits, problem_lines, realism_report
 from solver.trajectory import dynamics_samples
-from solver.environment import body_weight, ground_of
-from solver.environment import environment_of as _environment_of
 
 
 @dataclass(frozen=True)
@@ -155,8 +155,8 @@ def _contact_checks(motion: Motion, mu: float, weight: float) -> dict:
     cp = contact_points(ch, motion.q)  # (P, 3, T)
     T = motion.T
     feet_ground = ground_of(motion)  # (2, T): the terrain under each foot
-    side = {s: k for k, s in enumerate(FEET)}
-    z = cp[:, 2, :] - feet_ground[[side[c.side] for c in ch.contacts]]  # height above the ground
+    foot_of = {s: k for k, s in enumerate(FEET)}
+    z = cp[:, 2, :] - feet_ground[[foot_of[c.side] for c in ch.contacts]]  # height above the ground
     active_err = float(np.abs(z[A]).max()) if A.any() else 0.0
     penetration = float(max(0.0, -z.min()))
     slip = 0.0

@@ -157,12 +157,13 @@ def cmd_library(args: argparse.Namespace) -> int:
 
 def register(sub: argparse._SubParsersAction) -> None:
     s = add_command(sub, "library", "a motion library: extrapolate a tutor over a grid of targets", """\
-Extrapolate one tutor to every cell of a grid (slopes × curves × speed scales), nearest the tutor first, each cell warm-started from the stored optimum
-furthest along its homotopy (docs/service.md, "Motion libraries"). A cell at an impasse keeps
-its last realistic motion and is marked so. Writes into --out: library.glb (one looping
-animation per cell, the grid in its extras, game-ready data per animation), per cell
-CELL.motion.json and CELL.clip.json, and manifest.json (cell -> parameters, status, files,
-realism figures). Exit status 0 when every cell succeeded or reached an impasse.""")
+Extrapolate one tutor to every cell of a grid (slopes × curves × speed scales), nearest the
+tutor first, each cell warm-started from the stored optimum furthest along its homotopy
+(docs/service.md, "Motion libraries"). A cell at an impasse keeps its last realistic motion
+and is marked so. Writes into --out: library.glb (one looping animation per cell, the grid in
+its extras, game-ready data per animation), per cell CELL.motion.json and CELL.clip.json, and
+manifest.json (cell -> parameters, status, files, realism figures). Exit status 0 when every
+cell succeeded or reached an impasse.""")
     s.add_argument("tutor", metavar="TUTOR.json", help="tutor motion file (from motionx tutor)")
     for ax in registry.axes():  # one flag per grid axis of the registry: --slopes, --curves, --speed-scales
         if ax.grid:

@@ -11,8 +11,8 @@ from dataclasses import asdict
 from pathlib import Path
 
 from service.cli import CliError, add_command, import_message, load_motion, parse_belt_speed, warn_input
-from solver import axes as registry
 from service.commands.outputs import prepare_output_dir, progress_csv, step_stem
+from solver import axes as registry
 
 
 def _write_motion(motion, path: Path, *, with_replay: bool = True) -> dict:

@@ -6,16 +6,27 @@ entry (docs/continuation.md). The service's schemas, the CLI flags, the plots an
 page read the registry.
 """
 
-from solver.axes.base import (NLP_EFFECTS, Axis, Target, axes, axis, environment_at, guide_at, names, nlp_at,
-                              register, values_at)
+from solver.axes import curve as _curve  # noqa: F401
+from solver.axes import friction as _friction  # noqa: F401
+from solver.axes import gravity as _gravity  # noqa: F401
 
 # registration order = display order
-from solver.axes import slope as _slope  # noqa: E402,F401
-from solver.axes import curve as _curve  # noqa: E402,F401
-from solver.axes import friction as _friction  # noqa: E402,F401
-from solver.axes import gravity as _gravity  # noqa: E402,F401
-from solver.axes import speed as _speed  # noqa: E402,F401
-from solver.axes import terrain as _terrain  # noqa: E402,F401
+from solver.axes import slope as _slope  # noqa: F401
+from solver.axes import speed as _speed  # noqa: F401
+from solver.axes import terrain as _terrain  # noqa: F401
+from solver.axes.base import (
+                              NLP_EFFECTS,
+                              Axis,
+                              Target,
+                              axes,
+                              axis,
+                              environment_at,
+                              guide_at,
+                              names,
+                              nlp_at,
+                              register,
+                              values_at,
+)
 
 __all__ = ["NLP_EFFECTS", "Axis", "Target", "axes", "axis", "environment_at", "guide_at", "names", "nlp_at",
            "register", "values_at"]

@@ -17,8 +17,9 @@ the axis's value at the tutor (its ``default``, or read from the tutor's environ
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
-from typing import Any, Callable, Iterator, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -126,6 +127,8 @@ class Target:
     axis's bounds. Axis values read as attributes (``target.slope_deg``)."""
 
     __slots__ = ("_values",)
+
+    _values: dict[str, float | None]
 
     def __init__(self, **values: float | None) -> None:
         out: dict[str, float | None] = {}

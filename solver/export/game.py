@@ -43,8 +43,8 @@ from typing import Any
 import numpy as np
 
 from solver import kinematics
-from solver.motion import FEET, Motion
 from solver.environment import STANDARD_GRAVITY_VECTOR, environment_of
+from solver.motion import FEET, Motion
 
 #: a loop closes when the segment origins at frame P match the loop transform of frame 0 within
 LOOP_TOLERANCE_M = 1e-4

@@ -12,8 +12,15 @@ from solver.spacetime.derivatives import MAP_THREADS
 from solver.spacetime.frame import FrameFunctions, frame_functions
 from solver.spacetime.layout import MARKER_SCALE
 from solver.spacetime.problem import ROOT_PERIODIC, SpacetimeProblem
-from solver.spacetime.types import (DEFAULT_IPOPT, STANDARD_GRAVITY, SUCCESS_STATUSES, Environment, Realism,
-                                    SolveResult, Weights)
+from solver.spacetime.types import (
+                                    DEFAULT_IPOPT,
+                                    STANDARD_GRAVITY,
+                                    SUCCESS_STATUSES,
+                                    Environment,
+                                    Realism,
+                                    SolveResult,
+                                    Weights,
+)
 
 __all__ = ["DEFAULT_IPOPT", "MAP_THREADS", "MARKER_SCALE", "ROOT_PERIODIC", "STANDARD_GRAVITY", "SUCCESS_STATUSES",
            "Environment", "FrameFunctions", "Realism", "SolveResult", "SpacetimeProblem", "Weights", "frame_functions"]

@@ -9,8 +9,8 @@ of frames (a global symbolic Hessian is superlinear) with the same exact second 
 
 from __future__ import annotations
 
-import numpy as np
 import casadi as ca
+import numpy as np
 import scipy.sparse as sps
 
 MAP_THREADS = 2  # heavy per-call derivative evaluations run on this many threads

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import time
 import weakref
+from typing import ClassVar
 
 import casadi as ca
 import numpy as np
@@ -39,7 +40,8 @@ class FrameFunctions:
     """Generic SX functions and their derivatives for one character."""
 
     #: name -> (number of variable inputs, number of them the Hessian involves)
-    VARS = {"cost": (1, 1), "acc": (3, 3), "z": (1, 1), "slip": (2, 2), "feet": (2, 2), "seg": (6, 4), "c2": (5, 5),
+    VARS: ClassVar[dict[str, tuple[int, int]]] = {
+        "cost": (1, 1), "acc": (3, 3), "z": (1, 1), "slip": (2, 2), "feet": (2, 2), "seg": (6, 4), "c2": (5, 5),
             "jerk": (4, 4), "wrate": (2, 2), "frate": (2, 2), "smooth": (3, 3)}
 
     def __init__(self, character: Character, realism: Realism = Realism()) -> None:
@@ -238,7 +240,7 @@ class FrameFunctions:
                                   [ca.vertcat(ca.sumsqr(d2f), ca.sumsqr(d2n))])
 
 
-_FRAME_CACHE: "weakref.WeakKeyDictionary[Character, FrameFunctions]" = weakref.WeakKeyDictionary()
+_FRAME_CACHE: weakref.WeakKeyDictionary[Character, FrameFunctions] = weakref.WeakKeyDictionary()
 
 
 def frame_functions(character: Character) -> FrameFunctions:

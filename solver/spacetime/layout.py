@@ -4,7 +4,8 @@ points and weights map onto the NLP's x and p (a mixin of ``SpacetimeProblem``).
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 
@@ -20,8 +21,24 @@ class Layout:
 
     character: Any
     contacts: Any
+    ff: Any
     T: int
     n: int
+    dt: float
+    dynamics: bool
+    nx: int
+    nq_vars: int
+    nv_vars: int
+    n_markers: int
+    eom_frames: list[int]
+    weight_scale: float
+    moment_scale: float
+    _q_index: np.ndarray
+    _v_index: np.ndarray
+    _w_index: np.ndarray
+    _lbg_raw: np.ndarray
+    _ubg_raw: np.ndarray
+    _h_bounds: list[tuple[np.ndarray, Any]]
 
     def foot_contact(self) -> np.ndarray:
         if self.contacts is None:

@@ -32,7 +32,8 @@ from __future__ import annotations
 import logging
 import math
 import time
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -44,7 +45,7 @@ from solver.spacetime.callback import STOP, STOP_CALLBACK
 from solver.spacetime.derivatives import Term, assemble
 from solver.spacetime.frame import FOOT_ROWS, frame_functions
 from solver.spacetime.layout import Layout
-from solver.spacetime.types import (DEFAULT_IPOPT, SUCCESS_STATUSES, Environment, SolveResult, Weights)
+from solver.spacetime.types import DEFAULT_IPOPT, SUCCESS_STATUSES, Environment, SolveResult, Weights
 from solver.trajectory import spline_velocities
 
 log = logging.getLogger(__name__)
@@ -179,7 +180,8 @@ class SpacetimeProblem(Layout):
             self._dynamic_terms(x, grav, mu, wts, dpsi, REF, ANCHOR)
         else:
             K = list(range(1, Tn - 1))
-            self._cost(Term("acc", ff.acc, 3, np.vstack([qi[:, [t - 1 for t in K]], qi[:, K], qi[:, [t + 1 for t in K]]]),
+            zacc = np.vstack([qi[:, [t - 1 for t in K]], qi[:, K], qi[:, [t + 1 for t in K]]])
+            self._cost(Term("acc", ff.acc, 3, zacc,
                             [ca.repmat(wts[6], 1, len(K))], derivatives=ff.derivatives["acc"], cost=True))
         objective = sum(ca.sum2(t_.outputs(x)) for t_ in self._terms if t_.cost)
         extra = []
@@ -459,6 +461,6 @@ class SpacetimeProblem(Layout):
                 full["jac_g"] = self._jac
             if stoppable:
                 full["iteration_callback"] = STOP_CALLBACK.get(self.nx, self.ng)
-            solver = ca.nlpsol("spacetime", "ipopt", self._nlp, full)
+            solver = ca.nlpsol("spacetime", "ipopt", self._nlp, full)  # type: ignore[arg-type]
             self._solver_cache[key] = solver
         return solver

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
 from solver.environment import STANDARD_GRAVITY, Environment  # noqa: F401  (re-exported)
-
 
 DEFAULT_IPOPT = {
     "ipopt.print_level": 0,
