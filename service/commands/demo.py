@@ -391,7 +391,7 @@ stopped and its temporary folder removed at the end, on Ctrl-C and on SIGTERM.""
                    help="subject mass in kg (default: from the input; required when the input does not state it)")
     s.add_argument("--timeout", type=float, default=900.0, metavar="S", help="seconds to wait for the jobs")
     s.add_argument("--no-library", dest="library", action="store_false",
-                   help="skip the small motion library (3 slopes × 3 curves) after the two jobs")
+                   help="skip the small motion library (3 slopes × 3 curves) after the two jobs (default: it runs)")
     s.add_argument("--serve", action="store_true", help="keep the service running afterwards and print the web "
                    "page's address (Ctrl-C or SIGTERM stops it)")
     s.add_argument("--keep-temp", action="store_true",

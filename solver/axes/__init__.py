@@ -6,14 +6,15 @@ entry (docs/continuation.md). The service's schemas, the CLI flags, the plots an
 page read the registry.
 """
 
+# registration order = display order (CLI flags, schemas, plots, page): keep it, not sorted
+# isort: off
+from solver.axes import slope as _slope  # noqa: F401
 from solver.axes import curve as _curve  # noqa: F401
 from solver.axes import friction as _friction  # noqa: F401
 from solver.axes import gravity as _gravity  # noqa: F401
-
-# registration order = display order
-from solver.axes import slope as _slope  # noqa: F401
 from solver.axes import speed as _speed  # noqa: F401
 from solver.axes import terrain as _terrain  # noqa: F401
+# isort: on
 from solver.axes.base import (
                               NLP_EFFECTS,
                               Axis,
