@@ -182,8 +182,8 @@ def test_page_shows_progress_and_renders_the_character(api, browser, tutor_id):
     try:
         page.goto(f"{api.base_url}/ui/#key={KEY_A}")
         assert "key=" not in page.url  # taken from the fragment, then out of the address bar
+        page.wait_for_selector("#key-status.ok")  # the page's module has run (it stores the key first)
         assert page.evaluate("localStorage.getItem('motionx.apiKey')") == KEY_A
-        page.wait_for_selector("#key-status.ok")
 
         # a job started while the page is open: the list shows it, its progress curve is drawn
         job_id = _start_job(api, tutor_id)
