@@ -113,6 +113,14 @@ def segment_frames(character: Character, q: np.ndarray) -> tuple[np.ndarray, np.
     return rots, poss
 
 
+def centre_of_mass(character: Character, q: np.ndarray) -> np.ndarray:
+    """(3[, T]) whole-body centre of mass from the segments' poses."""
+    R, P = segment_frames(character, q)
+    m = np.array([s.mass for s in character.segments])
+    X = P + np.einsum("sij...,sj->si...", R, np.array([s.com for s in character.segments]))
+    return np.einsum("s,si...->i...", m, X) / m.sum()
+
+
 def standing_leg_length(character: Character) -> float:
     """Height of the root above the lowest contact point at q = 0 (at least 0.3 m; 1 m if the
     character has no contact points): the length scale of moments and residuals."""

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from solver.kinematics import contact_points, markers
+from solver.kinematics import centre_of_mass, contact_points, markers
 from solver.motion import FEET, foot_schedule_of
 from solver.spacetime.types import Environment, Weights
 
@@ -155,13 +155,7 @@ class Layout:
 
     def com_points(self, q: np.ndarray) -> np.ndarray:
         """(3, T) whole-body centre of mass of each frame."""
-        from solver.kinematics import segment_frames
-
-        ch = self.character
-        R, P = segment_frames(ch, q)
-        m = np.array([s.mass for s in ch.segments])
-        X = P + np.einsum("sijt,sj->sit", R, np.array([s.com for s in ch.segments]))
-        return (m[:, None, None] * X).sum(axis=0) / m.sum()
+        return centre_of_mass(self.character, q)
 
     def parameters(self, guide_markers: np.ndarray, guide_q: np.ndarray, env: Environment, weights: Weights,
                    ref: np.ndarray, anchor: np.ndarray, dpsi: float, com: np.ndarray | None = None,
