@@ -278,8 +278,10 @@ def _run(db: Database, job_id: str, attempt: int, token: str, settings: Settings
         return hb.cancel_requested or hb.lost or time.monotonic() > deadline
 
     # each IPOPT solve stops by itself at the job's time limit (IPOPT's own max_wall_time)
+    # (stairs: root z gains a rise over the cycle, a problem of its own structure)
     problem = SpacetimeProblem(tutor.character, tutor.T, tutor.fps, tutor.contacts,
-                               ipopt_options={"ipopt.max_wall_time": float(settings.job_time_limit_s)})
+                               ipopt_options={"ipopt.max_wall_time": float(settings.job_time_limit_s)},
+                               rising=bool(target.step_height_m))
     result = extrapolate(tutor, target, control, on_progress=on_progress, on_step=on_step,
                          should_cancel=should_cancel, problem=problem, start=start)
     status, message = result.status, result.message

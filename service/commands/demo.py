@@ -2,13 +2,15 @@
 
 Starts ``motionx serve`` (SQLite + local process pool) on a free port in a temporary data
 directory, uploads a real captured walk over HTTP (the DeepMimic walk shipped in ``data/``
-by default), asks for two extrapolations of the same capture — a downhill slope and a
-curve — follows both jobs with a progress bar, and downloads into ``--out``, per job: every
+by default), asks for three extrapolations of the same capture — a downhill slope, a
+curve and stairs — and a small motion library (3 slopes × 3 curves, one job per cell, queued
+with them so that the workers never idle), follows the jobs with a progress bar, and
+downloads into ``--out``, per job: every
 λ optimum (``step_NNN_lambda_L.motion.json``, ``.clip.json``, ``.glb``, ``.bvh``,
 ``.validation.json``, named as ``motionx extrapolate`` names them), ``progress.csv`` and
-``progress.png``, and the final motion's GRF and residual plots; then a small motion library
-(3 slopes × 3 curves, one job per cell: ``library/manifest.json`` and ``library/library.glb``,
-one looping animation per cell; ``--no-library`` skips it); then prints a short summary.
+``progress.png``, and the final motion's GRF and residual plots; then the library's
+``library/manifest.json`` and ``library/library.glb`` (one looping animation per cell;
+``--no-library`` skips it); then prints a short summary.
 
 The service is stopped (its whole process group, waited for) when the demo ends, fails, or
 receives Ctrl-C or SIGTERM; the temporary data directory is removed unless ``--keep-temp``.
@@ -38,7 +40,7 @@ EXPORTS = (("motion", "motion.json"), ("json", "clip.json"), ("gltf", "glb"), ("
 MOTION_PLOTS = (("grf", "grf.png"), ("residuals", "residuals.png"))
 #: the demo's walk, in the trials folder (``service.examples.data_dir()``)
 DEMO_TRIAL = ("deepmimic_humanoid3d_walk", ("humanoid3d_walk.txt", "humanoid3d_character.txt"))
-JOB_NAMES = ("downhill", "uphill", "curve")
+JOB_NAMES = ("downhill", "uphill", "curve", "stairs")
 #: without a terminal, a running job's progress line is repeated this often (its clock moves)
 LOG_EVERY_S = 5.0
 
@@ -89,8 +91,10 @@ def _targets(args: argparse.Namespace) -> list[_Job]:
         jobs.append(_Job("downhill" if args.slope < 0 else "uphill", {"slope_deg": args.slope}))
     if args.curve:
         jobs.append(_Job("curve", {"curve_deg": args.curve}))
+    if args.step_height:
+        jobs.append(_Job("stairs", {"step_height_m": args.step_height}))
     if not jobs:
-        raise CliError("nothing to do: give a non-zero --slope and/or --curve")
+        raise CliError("nothing to do: give a non-zero --slope, --curve and/or --step-height")
     return jobs
 
 
@@ -164,11 +168,13 @@ def _run(args, files: list[Path], jobs: list[_Job], out: Path, server: Proc, bas
             j.url = r.headers["Location"]
             j.seen(r.json())
             print(f"[demo] job {j.name}: {j.target} queued at {j.url}")
+        # the library's cells queue behind the jobs: a worker freed by a short job takes a cell
+        library = _queue_library(http, motion["id"], tutor) if args.library else None
         _follow(http, jobs, deadline=time.monotonic() + args.timeout)
         summary = {"input": [f.name for f in files], "character": args.character, "fps": args.fps,
                    "jobs": [_download(http, j, out / j.name) for j in jobs]}
-        if args.library:
-            summary["library"] = _library(http, motion["id"], tutor, out / "library",
+        if library is not None:
+            summary["library"] = _library(http, library, out / "library", t0,
                                           deadline=time.monotonic() + args.timeout)
         summary["wall_time_s"] = round(time.perf_counter() - t0, 2)
         (out / "summary.json").write_text(json.dumps(summary, indent=2))
@@ -192,14 +198,19 @@ def _run(args, files: list[Path], jobs: list[_Job], out: Path, server: Proc, bas
 LIBRARY_GRID = {"slope_deg": [-5.0, 0.0, 5.0], "curve_deg": [-30.0, 0.0, 30.0]}
 
 
-def _library(http, motion_id: str, tutor: dict, out: Path, deadline: float) -> dict:
-    """Queue the small library, follow its overall progress, download its manifest and GLB."""
-    t0 = time.perf_counter()
+def _queue_library(http, motion_id: str, tutor: dict) -> dict:
+    """Queue the small library (one job per cell)."""
     r = http.post(f"/motions/{motion_id}/library", json={"grid": LIBRARY_GRID, "tutor": tutor})
     _check(r, 202, "library")
     lib = r.json()
     print(f"[demo] library {lib['id']}: {len(lib['cells'])} cells (slopes {LIBRARY_GRID['slope_deg']} × curves "
-          f"{LIBRARY_GRID['curve_deg']})", flush=True)
+          f"{LIBRARY_GRID['curve_deg']}) queued", flush=True)
+    return lib
+
+
+def _library(http, lib: dict, out: Path, t0: float, deadline: float) -> dict:
+    """Follow the library's overall progress, download its manifest and GLB; its time runs
+    from the demo's start (``t0``), since its cells share the workers with the jobs."""
     last = None
     while True:
         lib = http.get(f"/libraries/{lib['id']}").json()
@@ -222,8 +233,9 @@ def _library(http, motion_id: str, tutor: dict, out: Path, deadline: float) -> d
     _check(glb, 200, "library GLB")
     (out / "library.glb").write_bytes(glb.content)
     realistic = sum(1 for c in lib["cells"] if c["plausible"])
-    print(f"[demo] library {lib['status']}: {realistic}/{len(lib['cells'])} cells realistic, "
-          f"{time.perf_counter() - t0:.1f} s; wrote {out}/manifest.json and library.glb", flush=True)
+    print(f"[demo] library {lib['status']}: {realistic}/{len(lib['cells'])} cells realistic, done "
+          f"{time.perf_counter() - t0:.1f} s after the demo's start; wrote {out}/manifest.json and library.glb",
+          flush=True)
     return {"id": lib["id"], "status": lib["status"], "cells": len(lib["cells"]), "realistic": realistic,
             "grid": LIBRARY_GRID, "time_s": round(time.perf_counter() - t0, 2)}
 
@@ -372,7 +384,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     s = add_command(sub, "demo", "the main job end to end through the embedded service (make demo)", """\
 Start `motionx serve` on its embedded defaults (SQLite + local process pool, in a temporary
 folder, on a free port), upload a captured walk over HTTP (default: the DeepMimic walk in
-data/), ask for a downhill slope and a curve, follow both jobs with a progress bar and
+data/), ask for a downhill slope, a curve and stairs, and a 3 × 3 motion library (slopes ×
+curves), follow the jobs with a progress bar and
 download every λ optimum (motion file, JSON clip, GLB, BVH, plausibility report), the
 progress curve (CSV, PNG) and the final motion's plots into --out/<job>/. The service is
 stopped and its temporary folder removed at the end, on Ctrl-C and on SIGTERM.""")
@@ -384,6 +397,8 @@ stopped and its temporary folder removed at the end, on Ctrl-C and on SIGTERM.""
                    help="target slope in degrees, negative = downhill; 0 = no slope job")
     s.add_argument("--curve", type=float, default=90.0, metavar="DEG",
                    help="target curve in degrees, positive = left; 0 = no curve job")
+    s.add_argument("--step-height", type=float, default=0.10, metavar="M",
+                   help="stairs: riser height in metres, negative = down; 0 = no stairs job")
     s.add_argument("--character", choices=["halfboy", "fullbody"], default="halfboy",
                    help="synthesis character of the tutor")
     s.add_argument("--fps", type=float, choices=[15.0, 30.0], default=15.0, help="frames per second of the tutor")
@@ -391,7 +406,7 @@ stopped and its temporary folder removed at the end, on Ctrl-C and on SIGTERM.""
                    help="subject mass in kg (default: from the input; required when the input does not state it)")
     s.add_argument("--timeout", type=float, default=900.0, metavar="S", help="seconds to wait for the jobs")
     s.add_argument("--no-library", dest="library", action="store_false",
-                   help="skip the small motion library (3 slopes × 3 curves) after the two jobs (default: it runs)")
+                   help="skip the small motion library (3 slopes × 3 curves, queued with the jobs; default: it runs)")
     s.add_argument("--serve", action="store_true", help="keep the service running afterwards and print the web "
                    "page's address (Ctrl-C or SIGTERM stops it)")
     s.add_argument("--keep-temp", action="store_true",

@@ -84,7 +84,8 @@ class FrameFunctions:
         if self.has_contacts:
             self._contact_functions(q, pose, pts)
             self._segment_functions()
-        self.derivatives = {name: (lagrangian_hessian(fn, self.VARS[name][1]), jacobian(fn, self.VARS[name][0]))
+        self.derivatives = {name: (self.seg_hessian if name == "seg" else lagrangian_hessian(fn, self.VARS[name][1]),
+                                   jacobian(fn, self.VARS[name][0]))
                             for name, fn in self.functions().items()}
         self.build_time = time.perf_counter() - t0
 
@@ -205,7 +206,28 @@ class FrameFunctions:
         nb, fb = ground(wb, rb, turn)
         out = ca.vertcat(residual(h0fn(qa, va, acc_a, g), na, fa, anc_a),
                          residual(h0fn(qm, vm, am, g), (na + nb) / 2, (fa + fb) / 2, (anc_a + anc_b) / 2))
-        self.seg = ca.Function("seg", [qa, va, qb, vb, wa, wb, g, h, ra, rb, anc_a, anc_b, turn], [out])
+        seg_in = [qa, va, qb, vb, wa, wb, g, h, ra, rb, anc_a, anc_b, turn]
+        self.seg = ca.Function("seg", seg_in, [out])
+
+        # The Hessian of its Lagrangian over (qa, va, qb, vb), by structure: the residual is
+        # linear in h0 (multipliers μ = (∂residual/∂h0)ᵀ λ), the ground wrenches do not depend
+        # on the motion, and the points (q, v, a) where h0 is evaluated — the frame and the
+        # midpoint — are linear in (qa, va, qb, vb). So H = Σ Lᵀ ∇²(μ·h0) L with the Hessian
+        # of one RNEA over (q, v, a) (a enters linearly): half the instructions of the
+        # Hessian of the composed expression, the same values.
+        hq, hv, ha, hmu = ca.SX.sym("q", n), ca.SX.sym("v", n), ca.SX.sym("a", n), ca.SX.sym("mu", 6)
+        hh0 = ca.Function("hess_h0", [hq, hv, ha, g, hmu],
+                          [ca.hessian(ca.dot(hmu, h0fn(hq, hv, ha, g)), ca.vertcat(hq, hv, ha))[0]])
+        lam = ca.SX.sym("lam", 12)
+        z = ca.vertcat(qa, va, qb, vb)
+        h0s = ca.SX.sym("h0s", 6)
+        H = ca.SX(4 * n, 4 * n)
+        for k, (pq, pv, pa, anc) in enumerate(((qa, va, acc_a, anc_a), (qm, vm, am, (anc_a + anc_b) / 2))):
+            lk = lam[6 * k : 6 * k + 6]
+            mu_k = ca.jtimes(residual(h0s, na, fa, anc), h0s, lk, True)  # linear in h0: exact
+            Lk = ca.jacobian(ca.vertcat(pq, pv, pa), z)  # constant in the motion (depends on h)
+            H += ca.mtimes([Lk.T, hh0(pq, pv, pa, g, mu_k), Lk])
+        self.seg_hessian = ca.Function("hess_seg", [*seg_in, lam], [ca.triu(H)])
 
         # C² continuity at a knot: v_{k-1} + 4 v_k + v_{k+1} = 3 (q_{k+1} - q_{k-1}) / h
         qm_, qp_, vm_, v0_, vp_ = (ca.SX.sym(s, n) for s in ("qm", "qp", "vm", "v0", "vp"))

@@ -22,6 +22,7 @@ from pathlib import Path
 from types import SimpleNamespace
 
 import httpx
+import numpy as np
 import pytest
 
 from solver.motion import motion_from_dict
@@ -107,15 +108,16 @@ def demo_run(tmp_path_factory, shared_data):
                            page=page, health=health, tree=tree, commands=cmds, left=alive(tree))
 
 
-def test_demo_reaches_both_targets_and_prints_a_summary(demo_run):
+def test_demo_reaches_every_target_and_prints_a_summary(demo_run):
     r, out = demo_run, demo_run.out
     assert r.page, r.stdout[-3000:] + r.stderr[-3000:]
     summary = json.loads((out / "summary.json").read_text())
     assert summary["input"] == ["humanoid3d_walk.txt", "humanoid3d_character.txt"]
     jobs = {j["name"]: j for j in summary["jobs"]}
-    assert set(jobs) == {"downhill", "curve"}
+    assert set(jobs) == {"downhill", "curve", "stairs"}
     assert jobs["downhill"]["target"] == {"slope_deg": -11.25}
     assert jobs["curve"]["target"] == {"curve_deg": 90.0}
+    assert jobs["stairs"]["target"] == {"step_height_m": 0.1}
     for name, j in jobs.items():
         assert j["status"] == "succeeded", (name, j)
         assert j["lambda_reached"] == pytest.approx(1.0)
@@ -127,7 +129,13 @@ def test_demo_reaches_both_targets_and_prints_a_summary(demo_run):
     # -11.25, not -11.2) and where the files are
     tail = r.stdout[r.stdout.index("[demo] job "):]
     assert "downhill" in tail and "curve" in tail and "1.000" in tail and str(out) in r.stdout
-    assert "slope -11.25°" in tail and "curve 90°" in tail
+    assert "slope -11.25°" in tail and "curve 90°" in tail and "stairs" in tail
+    # the stairs' last optimum stands on treads one riser apart (one per stance), as the
+    # page's 3D preview draws them
+    last = sorted((out / "stairs").glob("step_*.validation.json"))[-1]
+    treads = json.loads(last.read_text())["environment"]["treads"]
+    heights = sorted({round(t["center"][2], 6) for t in treads})
+    assert len(treads) >= 2 and np.allclose(np.diff(heights), 0.1), treads
     # a progress bar was drawn while polling (one line per change when not on a terminal),
     # the tutor phase named as such
     assert r.stdout.count("λ=") >= 4 and "#" in r.stdout
