@@ -23,6 +23,15 @@ REACH = {  # further than the thesis
     "moon_gravity": Target(gravity=1.62),
     "friction_0.3": Target(friction=0.3),
     "curve_90_on_uphill_10": Target(slope_deg=10.0, curve_deg=90.0),
+    "stairs_up_0.15": Target(step_height_m=0.15),
+    "stairs_down_0.15": Target(step_height_m=-0.15),
+}
+#: the full body (30 frames/s): curve π/2 and stairs (issue 14: how high a step the full body
+#: reaches; ε = 0.02 bounds an impasse's search)
+FULL_BODY = {
+    "curve_90": (Target(curve_deg=90.0), {}),
+    "stairs_up_0.15": (Target(step_height_m=0.15), {"eps": 0.02}),
+    "stairs_down_0.15": (Target(step_height_m=-0.15), {"eps": 0.02}),
 }
 IMPOSSIBLE = {  # must end in an impasse (issue 11); ε = 0.02 keeps the bench short
     "uphill_80": Target(slope_deg=80.0),
@@ -58,5 +67,6 @@ def run() -> dict:
         out[f"{name}/halfboy_15fps"] = rows
     # full body, 30 frames/s: curve π/2
     full = make_tutor(load_trial(tr["c3d_pig"]), character="fullbody", fps=30.0).motion
-    out["c3d_pig/fullbody_30fps"] = {"curve_90": {"adaptive": _run(full, Target(curve_deg=90.0), "adaptive")}}
+    out["c3d_pig/fullbody_30fps"] = {label: {"adaptive": _run(full, tgt, "adaptive", **ctl)}
+                                     for label, (tgt, ctl) in FULL_BODY.items()}
     return out

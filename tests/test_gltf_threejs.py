@@ -1,6 +1,8 @@
 """Cross-implementation check: three.js's GLTFLoader (the npm package `three` of the web page,
 run in Node by tests/js/load_glb.mjs) loads our GLB, and its AnimationMixer puts every bone,
-and its skinning every mesh, where our forward kinematics says (converted to Y up)."""
+and its skinning every mesh, where our forward kinematics says (converted to Y up); and the
+Khronos glTF-Validator (npm `gltf-validator`, tests/js/validate_glb.mjs) finds no error and no
+warning in it."""
 
 from __future__ import annotations
 
@@ -20,6 +22,7 @@ from solver.export import Y_UP, export_motion
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = ROOT / "tests" / "js" / "load_glb.mjs"
 THREE = ROOT / "service" / "web" / "node_modules" / "three"
+VALIDATOR = ROOT / "service" / "web" / "node_modules" / "gltf-validator"
 NODE = shutil.which("node")
 
 pytestmark = [
@@ -27,6 +30,16 @@ pytestmark = [
     pytest.mark.skipif(not (THREE / "examples" / "jsm" / "loaders" / "GLTFLoader.js").is_file(),
                        reason=f"three.js is not installed in {THREE.parent} (cd service/web && npm ci)"),
 ]
+
+
+def khronos_report(path: Path) -> dict:
+    """The Khronos glTF-Validator's report on the GLB at ``path`` (counts and first messages)."""
+    if NODE is None or not (VALIDATOR / "index.js").is_file():
+        pytest.fail(f"the Khronos glTF validator is not installed in {VALIDATOR} (cd service/web && npm ci)")
+    r = subprocess.run([NODE, str(ROOT / "tests" / "js" / "validate_glb.mjs"), str(path)], capture_output=True,
+                       text=True, timeout=60, check=False, env={**os.environ, "GLTF_VALIDATOR_DIR": str(VALIDATOR)})
+    assert r.returncode == 0, r.stderr
+    return json.loads(r.stdout)
 
 
 def quat_angle(a: np.ndarray, b: np.ndarray) -> float:
@@ -109,3 +122,18 @@ def test_three_rest_pose_is_y_up(loaded):
         hip, knee, ankle = (np.array(rest[f"{s}_{side}"]["position"]) for s in ("thigh", "shank", "foot"))
         for a, b in ((hip, knee), (knee, ankle)):
             np.testing.assert_allclose((b - a) / np.linalg.norm(b - a), [0.0, -1.0, 0.0], atol=1e-6)
+
+
+@pytest.mark.parametrize("character", ["halfboy", "fullbody"])
+def test_khronos_validator_finds_no_error_or_warning(shared_data, tmp_path, character):
+    motion = walk_motion(shared_data, character)
+    path = tmp_path / f"{character}.glb"
+    path.write_bytes(export_motion(motion, "gltf"))
+    rep = khronos_report(path)
+    assert rep["errors"] == 0 and rep["warnings"] == 0, rep["messages"]
+    assert rep["animations"] == 1
+    # a broken file is reported, not passed: the JSON chunk's length cut short
+    bad = bytearray(path.read_bytes())
+    bad[12:16] = (int.from_bytes(bad[12:16], "little") - 8).to_bytes(4, "little")
+    (tmp_path / "bad.glb").write_bytes(bad)
+    assert khronos_report(tmp_path / "bad.glb")["errors"] > 0

@@ -129,6 +129,11 @@ def test_cli_library_writes_the_glb_clips_and_manifest(tutor, tmp_path):
     assert [a["name"] for a in doc["animations"]] == list(cells)
     assert doc["asset"]["extras"]["library"]["axes"] == {"slope_deg": [0.0, 2.5, 5.0]}
     assert all(a["extras"]["frames_in_animation"] == game.loop_frames(tutor) + 1 for a in doc["animations"])
+    # engines' importers follow the Khronos validator: no error, no warning, one animation per cell
+    from test_gltf_threejs import khronos_report
+
+    rep = khronos_report(out / "library.glb")
+    assert rep["errors"] == 0 and rep["warnings"] == 0 and rep["animations"] == len(cells), rep
 
 
 @pytest.mark.parametrize("args, words", [
