@@ -9,9 +9,10 @@ distributed stack with 1, 2 and 4 Celery workers.
   as ``POST /motions/{id}/library``: wall time from the POST to the library's terminal status,
   cells/min, the cells' own times (job start to finish), statuses; the speed-up against 1 worker.
 
-The grid (environment): MOTIONX_BENCH_LIBRARY = ``small`` (default: slopes −5, 0, 5 ×
-curves −20, 0, 20, 9 cells) or ``5x5`` (the issue's must-reach: slopes −15, −7.5, 0, 7.5, 15 ×
-curves −90, −45, 0, 45, 90 on the HalfBoy, 25 cells); MOTIONX_BENCH_LIBRARY_WORKERS (default
+The grid (environment): MOTIONX_BENCH_LIBRARY = ``5x5`` (default, the issue's must-reach:
+slopes −15, −7.5, 0, 7.5, 15 × curves −90, −45, 0, 45, 90 on the HalfBoy, 25 cells; about 14
+minutes for the four runs on a quiet 2-core machine) or ``small`` (slopes −5, 0, 5 × curves
+−20, 0, 20, 9 cells); MOTIONX_BENCH_LIBRARY_WORKERS (default
 ``1,2,4``). The machine has 2 cores shared with the API, the database and the clients: 4
 workers measure oversubscription, not scaling.
 """
@@ -35,7 +36,7 @@ TERMINAL = ("succeeded", "failed", "canceled", "impasse")
 
 
 def _grid() -> tuple[str, dict]:
-    name = os.environ.get("MOTIONX_BENCH_LIBRARY", "small")
+    name = os.environ.get("MOTIONX_BENCH_LIBRARY", "5x5")
     if name not in GRIDS:
         raise ValueError(f"MOTIONX_BENCH_LIBRARY must be one of {sorted(GRIDS)}, got {name!r}")
     return name, GRIDS[name]

@@ -1,5 +1,6 @@
 """``make demo`` end to end: ``motionx demo`` with its defaults (the DeepMimic walk shipped in
-data/, a downhill slope of −11.25° and a 90° curve over HTTP on the embedded service) writes
+data/, a downhill slope of −11.25°, a 90° curve and stairs of 0.10 m over HTTP on the embedded
+service, and a 3 × 3 library) writes
 every λ motion, its exports, plausibility reports, progress curve and plots, and a summary
 that states what was reached. The files are checked with their own formats' readers, not by
 name only.
@@ -125,7 +126,7 @@ def test_demo_reaches_every_target_and_prints_a_summary(demo_run):
         assert j["reached"][key] == pytest.approx(value, abs=1e-9)
         assert j["motions"] >= 2 and j["plausible"] == j["motions"], j
         assert j["max_root_residual_rel_weight"] < 1e-6
-    # the printed summary names both jobs with their λ, the values reached (not rounded:
+    # the printed summary names every job with its λ, the values reached (not rounded:
     # -11.25, not -11.2) and where the files are
     tail = r.stdout[r.stdout.index("[demo] job "):]
     assert "downhill" in tail and "curve" in tail and "1.000" in tail and str(out) in r.stdout
