@@ -238,6 +238,36 @@ def test_page_shows_progress_and_renders_the_character(api, browser, tutor_id):
         context.close()
 
 
+def test_page_draws_the_stairs_treads_under_a_stairs_motion(api, browser, tutor_id):
+    """A stairs optimum (terrain axis) is previewed standing on its treads: one box per stance
+    of the plausibility report, its top at the tread's height (motionx z = glTF y)."""
+    if not THREE_DIR.is_dir():
+        _missing("three.js is not installed: run `npm ci` in service/web")
+    r = api.a.post(f"/motions/{tutor_id}/extrapolate",
+                   json={"target": {"step_height_m": 0.1}, "control": {"delta0": 0.5}})
+    assert r.status_code == 202, r.text
+    job = wait_job(api.a, r.json()["id"], timeout=120)
+    assert job["status"] == "succeeded", job
+    context, page, _, errors = _open(browser, 1200, 900)
+    try:
+        page.goto(f"{api.base_url}/ui/#key={KEY_A}")
+        page.wait_for_selector("#key-status.ok")
+        page.click(f'#job-list button[data-id="{job["id"]}"]')
+        wait_js(page, f"window.motionx.state.jobMotions.length === {job['steps']}", timeout=60)
+        page.locator("#job-motions button").last.click()
+        wait_js(page, "(s => s.previewReady && s.validation)(window.motionx.state)", timeout=60)
+        treads = _state(page)["validation"]["environment"]["treads"]
+        drawn = page.evaluate("(() => { const t = window.motionx.viewer.treads; return t ? t.children.map("
+                              "b => { b.geometry.computeBoundingBox(); const bb = b.geometry.boundingBox;"
+                              " return b.position.y + bb.max.y; }) : null; })()")
+        assert drawn is not None and len(drawn) == len(treads) >= 3, (drawn, treads)
+        assert sorted(drawn) == pytest.approx(sorted(t["center"][2] for t in treads), abs=1e-6)
+        assert max(drawn) - min(drawn) == pytest.approx(0.1 * (len({round(t["center"][2], 6) for t in treads}) - 1))
+        assert not errors, errors
+    finally:
+        context.close()
+
+
 def test_page_without_three_says_so_and_keeps_working(api, browser, tutor_id):
     """What a pip install without ``npm ci`` looks like: no vendor files, the rest works.
     And a raw capture (no contact wrenches) has no GRF plot: the page says why."""
