@@ -65,11 +65,11 @@ class FrameFunctions:
             pts.append(ca.vertcat(*point_world(pose, b, pb)))
         self.kin = ca.Function("kin", [q], [mk, ca.vertcat(*pts) if pts else ca.SX(0, 1)])
 
-        # objective of a frame: wts = (markers, singularity, coordinates prior)
+        # objective of a frame: wts = (markers, singularity, joint coordinates prior, root rotations prior)
         gm = ca.SX.sym("gm", 3 * self.n_markers)
-        wts = ca.SX.sym("wts", 3)
+        wts = ca.SX.sym("wts", 4)
         gq = ca.SX.sym("gq", n)
-        cost = wts[0] * ca.sumsqr(mk - gm) + wts[2] * ca.sumsqr(q[6:] - gq[6:])
+        cost = wts[0] * ca.sumsqr(mk - gm) + wts[2] * ca.sumsqr(q[6:] - gq[6:]) + wts[3] * ca.sumsqr(q[3:6] - gq[3:6])
         sing = list(ch.singular_dofs)
         if sing:
             cost += wts[1] * sum((1 - ca.cos(2 * q[i])) / 2 for i in sing)

@@ -169,7 +169,8 @@ class Layout:
                weights.coordinates / (max(self.n - 6, 1) * nT),  # (0.1 rad)² per coordinate = 0.01
                weights.wrench_rate / K,
                weights.jerk / (max(self.n - 3, 1) * K),
-               weights.smoothness / (max(self.n - 3, 1) * max(nT - 2, 1))]
+               weights.smoothness / (max(self.n - 3, 1) * max(nT - 2, 1)),
+               weights.root_rotation / (max(self.n - 6, 1) * nT)]  # (0.01 rad)² per root rotation = 0.01
         return np.concatenate([
             np.asarray(guide_markers, dtype=float).ravel(order="F"),
             np.asarray(guide_q, dtype=float).ravel(order="F"),

@@ -144,7 +144,7 @@ class SpacetimeProblem(Layout):
 
         x = self._x = ca.MX.sym("x", self.nx)
         nm3 = 3 * ff.n_markers
-        sizes = {"gm": nm3 * Tn, "gq": n * Tn, "g": 3, "mu": 1, "wts": 7, "ref": 6 * Tn, "anchor": 3 * Tn, "dpsi": 1,
+        sizes = {"gm": nm3 * Tn, "gq": n * Tn, "g": 3, "mu": 1, "wts": 8, "ref": 6 * Tn, "anchor": 3 * Tn, "dpsi": 1,
                  "com": 3 * Tn, "h": 1, "ground": max(ff.P, 1) * Tn, "rise": 1}
         self._p_layout, off = {}, 0
         for name in P_LAYOUT:
@@ -173,7 +173,7 @@ class SpacetimeProblem(Layout):
         self._ng = 0
 
         # --- objective ---------------------------------------------------------------------
-        cw = ca.repmat(ca.vertcat(wts[0], wts[1], wts[3]), 1, Tn)
+        cw = ca.repmat(ca.vertcat(wts[0], wts[1], wts[3], wts[7]), 1, Tn)
         self._cost(Term("cost", ff.cost, 1, qi, [GM, GQ, cw], derivatives=ff.derivatives["cost"], cost=True))
         self._cyclic_root(x, dpsi)
         if dynamics:

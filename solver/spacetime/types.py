@@ -43,6 +43,14 @@ class Weights:
     #: [realism] squared jerk of the rotations (the spline's third derivative × h³, rad): no
     #: frame-to-frame zig-zag of a coordinate that the markers hardly see
     jerk: float = 1.0
+    #: [realism] prior of the root's three rotations toward the guide's (the kinematic fit: the
+    #: capture's own pelvis orientation, measured by its markers; the correction and the
+    #: continuation: the simplified or transformed guide's), 100× the joint coordinates' weight:
+    #: 0.01 rad weighs like 1 mm of marker distance. One marker per segment leaves the pelvis's
+    #: turn about the vertical to the fit, which used it to make up for segment lengths that
+    #: differ from the capture's (Plug-in Gait: ±26° with 30° jumps between frames against the
+    #: capture's smooth +3…−13°)
+    root_rotation: float = 100.0
     #: [realism] kinematic fit (simplification) only: squared second difference of the rotations
     #: between frames (rad): a rotation the markers do not see (axial rotation of a straight arm)
     #: stays smooth instead of taking any value frame by frame
