@@ -203,7 +203,7 @@ def execute_job(job_id: str, settings: Settings) -> str:
 
 def _run(db: Database, job_id: str, attempt: int, token: str, settings: Settings, hb: Heartbeat):
     # lazy: the solver loads in the job's process, not the API's
-    from solver.continuation import StepControl, Target, extrapolate
+    from solver.continuation import StepControl, Target, extrapolate, needs_rising
     from solver.pipeline import jsonable
     from solver.spacetime import SpacetimeProblem
 
@@ -278,10 +278,9 @@ def _run(db: Database, job_id: str, attempt: int, token: str, settings: Settings
         return hb.cancel_requested or hb.lost or time.monotonic() > deadline
 
     # each IPOPT solve stops by itself at the job's time limit (IPOPT's own max_wall_time)
-    # (stairs: root z gains a rise over the cycle, a problem of its own structure)
     problem = SpacetimeProblem(tutor.character, tutor.T, tutor.fps, tutor.contacts,
                                ipopt_options={"ipopt.max_wall_time": float(settings.job_time_limit_s)},
-                               rising=bool(target.step_height_m))
+                               rising=needs_rising(target))
     result = extrapolate(tutor, target, control, on_progress=on_progress, on_step=on_step,
                          should_cancel=should_cancel, problem=problem, start=start)
     status, message = result.status, result.message

@@ -20,7 +20,7 @@ from solver.motion import Motion
 from solver.spacetime import SolveResult, SpacetimeProblem
 
 __all__ = ["CancelCheck", "ExtrapolationResult", "ProgressCallback", "ProgressRecord", "StepCallback", "StepControl",
-           "StepResult", "Target", "environment_at", "extrapolate", "guide_at", "motion_at", "nlp_at",
+           "StepResult", "Target", "environment_at", "extrapolate", "guide_at", "motion_at", "needs_rising", "nlp_at",
            "tutor_heading_change"]
 
 
@@ -326,6 +326,12 @@ class _Walk:
         return self.finish("succeeded", lam)
 
 
+def needs_rising(target: Target) -> bool:
+    """Stairs: root z gains a rise over the cycle, a problem of its own structure
+    (``SpacetimeProblem(..., rising=True)``). One rule for whoever builds the problem."""
+    return bool(target.step_height_m)
+
+
 def extrapolate(
     tutor: Motion,
     target: Target,
@@ -350,9 +356,11 @@ def extrapolate(
     _is_tutor(tutor)
     if not 0.0 < lam_end <= 1.0:
         raise ValueError("lam_end must be in (0, 1]")
-    # stairs: root z may gain a rise over the cycle (a problem of its own structure)
-    prob = problem or problem_for(tutor.character, tutor.T, tutor.fps, tutor.contacts,
-                                  rising=bool(target.step_height_m))
+    rising = needs_rising(target)
+    if problem is not None and problem.rising != rising:
+        raise ValueError(f"the problem given was built with rising={problem.rising}, the target needs "
+                         f"rising={rising} (continuation.needs_rising)")
+    prob = problem or problem_for(tutor.character, tutor.T, tutor.fps, tutor.contacts, rising=rising)
     walk = _Walk(tutor, target, control, prob, on_progress, on_step, should_cancel)
     if start is not None:
         lam0, m0 = start
