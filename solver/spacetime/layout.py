@@ -14,6 +14,11 @@ from solver.motion import FEET, foot_schedule_of
 from solver.spacetime.types import Environment, Weights
 
 MARKER_SCALE = 0.01  # m: the objective is in units of (1 cm)²
+#: time scale of the jerk cost (s): the cost is the mean over the cycle of (jerk × JERK_TIME³)²,
+#: so the same motion costs the same at any frame rate (at 15 frames/s it is the spline's
+#: third derivative × h³ per segment, as before; at 30 frames/s the per-segment figure is
+#: 2⁶ times smaller and was, without this scale, 64 times cheaper)
+JERK_TIME = 1.0 / 15.0
 
 
 class Layout:
@@ -163,12 +168,13 @@ class Layout:
         """The parameter vector (``P_LAYOUT`` order); ``h``: frame interval (s), default 1/fps."""
         nT = self.T
         K = max(len(self.eom_frames), 1)
+        hv = float(self.dt if h is None else h)
         wts = [weights.direction / (self.n_markers * nT * MARKER_SCALE**2),
                weights.singularity / (max(self.ff.n_sing, 1) * nT * MARKER_SCALE**2),
                weights.wrench / K,
                weights.coordinates / (max(self.n - 6, 1) * nT),  # (0.1 rad)² per coordinate = 0.01
                weights.wrench_rate / K,
-               weights.jerk / (max(self.n - 3, 1) * K),
+               weights.jerk * (JERK_TIME / hv) ** 6 / (max(self.n - 3, 1) * K),
                weights.smoothness / (max(self.n - 3, 1) * max(nT - 2, 1)),
                weights.root_rotation / (max(self.n - 6, 1) * nT)]  # (0.01 rad)² per root rotation = 0.01
         return np.concatenate([
@@ -177,7 +183,7 @@ class Layout:
             np.asarray(env.gravity, dtype=float), [float(env.friction)], wts,
             ref.ravel(order="F"), anchor.ravel(order="F"), [float(dpsi)],
             (np.zeros((3, nT)) if com is None else com).ravel(order="F"),
-            [float(self.dt if h is None else h)],
+            [hv],
             (np.zeros((max(self.ff.P, 1), nT)) if ground is None else ground).ravel(order="F"), [float(rise)],
         ])
 
