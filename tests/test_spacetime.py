@@ -222,3 +222,43 @@ def test_markers_of_tutor_follow_the_capture_markers(halfboy_tutor, deepmimic_ca
     mk = markers(tut.character, tut.q)
     assert mk.shape[0] == len([s for s in syn.segments if s.length > 0])
     assert np.isfinite(mk).all()
+
+
+def test_jerk_cost_does_not_depend_on_the_frame_rate():
+    """The jerk cost is a time average with a fixed time scale (1/15 s): the same smooth motion
+    costs the same at 15 and 30 frames/s, close to its continuous value. (With the frame
+    interval as the scale, 30 frames/s made it 64 times cheaper and the full body's trunk
+    counter-rotated at 5 Hz to turn.)"""
+    from solver.spacetime import Weights
+    from solver.spacetime.layout import JERK_TIME
+    from solver.trajectory import spline_velocities
+
+    ch = C.halfboy()
+    rng = np.random.default_rng(1)
+    amp = rng.uniform(0.05, 0.3, ch.n)  # rad (and m for the root translation, not in the cost)
+    phase = rng.uniform(0, 2 * np.pi, ch.n)
+    f = 1.0  # Hz: one cycle of 1 s
+    expected = float(np.mean((amp[3:] * (2 * np.pi * f) ** 3 * JERK_TIME**3) ** 2 / 2))
+    costs = {}
+    for fps in (15, 30):
+        N = fps  # frames per cycle; + 2 overlap frames
+        T = N + 2
+        t = np.arange(T) / fps
+        q = amp[:, None] * np.sin(2 * np.pi * f * t[None, :] + phase[:, None])
+        q[2] += 0.9
+        A = np.zeros((4, T), dtype=bool)
+        A[0, : N // 2] = A[1, : N // 2 + 1] = True
+        A[2, N // 2 - 1 :] = A[3, N // 2 - 2 :] = True
+        A[:, -2:] = A[:, :2]
+        prob = SpacetimeProblem(ch, T, float(fps), A)
+        x, p = prob._nlp["x"], prob._nlp["p"]
+        jerk = next(t_ for t_ in prob._terms if t_.name == "jerk")
+        fn = ca.Function("j", [x, p], [ca.sum2(jerk.outputs(x))])
+        w = Weights(jerk=1.0)
+        pv = prob.parameters(prob.guide_markers(q), q, Environment(), w, prob.ref_points(q), prob.anchor_points(q),
+                             0.0, prob.com_points(q))
+        xv = np.concatenate([prob.pack_q(q), prob.pack_v(spline_velocities(q, 1.0 / fps)),
+                             prob.pack_wrenches(None, prob.ref_points(q))])
+        costs[fps] = float(fn(xv, pv))
+    assert costs[15] == pytest.approx(expected, rel=0.05), (costs, expected)
+    assert costs[30] == pytest.approx(expected, rel=0.02), (costs, expected)

@@ -40,8 +40,10 @@ class Weights:
     #: [realism] squared change of each foot's wrench between frames (scaled): the double-support
     #: split and the free moment may not flip from frame to frame
     wrench_rate: float = 1.0
-    #: [realism] squared jerk of the rotations (the spline's third derivative × h³, rad): no
-    #: frame-to-frame zig-zag of a coordinate that the markers hardly see
+    #: [realism] squared jerk of the rotations (the spline's third derivative × (1/15 s)³, rad),
+    #: averaged over the cycle: no frame-to-frame zig-zag of a coordinate that the markers hardly
+    #: see. The time scale is fixed (``layout.JERK_TIME``), so the same motion costs the same at
+    #: 15 and 30 frames/s
     jerk: float = 1.0
     #: [realism] prior of the root's three rotations toward the guide's (the kinematic fit: the
     #: capture's own pelvis orientation, measured by its markers; the correction and the
