@@ -224,13 +224,14 @@ def test_markers_of_tutor_follow_the_capture_markers(halfboy_tutor, deepmimic_ca
     assert np.isfinite(mk).all()
 
 
-def test_jerk_cost_does_not_depend_on_the_frame_rate():
-    """The jerk cost is a time average with a fixed time scale (1/15 s): the same smooth motion
-    costs the same at 15 and 30 frames/s, close to its continuous value. (With the frame
-    interval as the scale, 30 frames/s made it 64 times cheaper and the full body's trunk
-    counter-rotated at 5 Hz to turn.)"""
+def test_rate_costs_do_not_depend_on_the_frame_rate():
+    """The jerk and wrench-change costs are time averages with a fixed time scale (1/15 s):
+    the same smooth motion and ground wrenches cost the same at 15 and 30 frames/s, the jerk
+    close to its continuous value. (With the frame interval as the scale, 30 frames/s made the
+    jerk 64 times and the wrench change 4 times cheaper; the full body's trunk counter-rotated
+    at 5 Hz to turn.)"""
     from solver.spacetime import Weights
-    from solver.spacetime.layout import JERK_TIME
+    from solver.spacetime.layout import RATE_TIME
     from solver.trajectory import spline_velocities
 
     ch = C.halfboy()
@@ -238,8 +239,8 @@ def test_jerk_cost_does_not_depend_on_the_frame_rate():
     amp = rng.uniform(0.05, 0.3, ch.n)  # rad (and m for the root translation, not in the cost)
     phase = rng.uniform(0, 2 * np.pi, ch.n)
     f = 1.0  # Hz: one cycle of 1 s
-    expected = float(np.mean((amp[3:] * (2 * np.pi * f) ** 3 * JERK_TIME**3) ** 2 / 2))
-    costs = {}
+    expected = float(np.mean((amp[3:] * (2 * np.pi * f) ** 3 * RATE_TIME**3) ** 2 / 2))
+    costs: dict[str, dict[int, float]] = {"jerk": {}, "wrate": {}}
     for fps in (15, 30):
         N = fps  # frames per cycle; + 2 overlap frames
         T = N + 2
@@ -252,13 +253,19 @@ def test_jerk_cost_does_not_depend_on_the_frame_rate():
         A[:, -2:] = A[:, :2]
         prob = SpacetimeProblem(ch, T, float(fps), A)
         x, p = prob._nlp["x"], prob._nlp["p"]
-        jerk = next(t_ for t_ in prob._terms if t_.name == "jerk")
-        fn = ca.Function("j", [x, p], [ca.sum2(jerk.outputs(x))])
-        w = Weights(jerk=1.0)
-        pv = prob.parameters(prob.guide_markers(q), q, Environment(), w, prob.ref_points(q), prob.anchor_points(q),
-                             0.0, prob.com_points(q))
-        xv = np.concatenate([prob.pack_q(q), prob.pack_v(spline_velocities(q, 1.0 / fps)),
-                             prob.pack_wrenches(None, prob.ref_points(q))])
-        costs[fps] = float(fn(xv, pv))
-    assert costs[15] == pytest.approx(expected, rel=0.05), (costs, expected)
-    assert costs[30] == pytest.approx(expected, rel=0.02), (costs, expected)
+        ref = prob.ref_points(q)
+        # smooth wrenches: forces through each foot's reference point plus a free moment
+        W = np.zeros((2, 6, T))
+        for k in range(2):
+            W[k, 3:] = 300.0 * np.sin(2 * np.pi * f * t[None, :] + np.arange(3)[:, None] + k)
+            W[k, 2] = 5.0 * np.cos(2 * np.pi * f * t + k)
+            W[k, :3] += np.cross(ref[3 * k : 3 * k + 3].T, W[k, 3:].T).T
+        pv = prob.parameters(prob.guide_markers(q), q, Environment(), Weights(jerk=1.0, wrench_rate=1.0), ref,
+                             prob.anchor_points(q), 0.0, prob.com_points(q))
+        xv = np.concatenate([prob.pack_q(q), prob.pack_v(spline_velocities(q, 1.0 / fps)), prob.pack_wrenches(W, ref)])
+        for name in costs:
+            term = next(t_ for t_ in prob._terms if t_.name == name)
+            costs[name][fps] = float(ca.Function("c", [x, p], [ca.sum2(term.outputs(x))])(xv, pv))
+    assert costs["jerk"][15] == pytest.approx(expected, rel=0.05), (costs, expected)
+    assert costs["jerk"][30] == pytest.approx(expected, rel=0.02), (costs, expected)
+    assert costs["wrate"][30] == pytest.approx(costs["wrate"][15], rel=0.03), costs

@@ -14,11 +14,12 @@ from solver.motion import FEET, foot_schedule_of
 from solver.spacetime.types import Environment, Weights
 
 MARKER_SCALE = 0.01  # m: the objective is in units of (1 cm)²
-#: time scale of the jerk cost (s): the cost is the mean over the cycle of (jerk × JERK_TIME³)²,
-#: so the same motion costs the same at any frame rate (at 15 frames/s it is the spline's
-#: third derivative × h³ per segment, as before; at 30 frames/s the per-segment figure is
-#: 2⁶ times smaller and was, without this scale, 64 times cheaper)
-JERK_TIME = 1.0 / 15.0
+#: time scale of the rate costs (s): the jerk cost is the mean over the cycle of
+#: (jerk × RATE_TIME³)², the wrench-change cost that of (wrench rate × RATE_TIME)², so the same
+#: motion costs the same at any frame rate (at 15 frames/s: the per-segment figures as before;
+#: with the frame interval h as the scale, 30 frames/s made the jerk 2⁶ = 64 and the wrench
+#: change 2² = 4 times cheaper)
+RATE_TIME = 1.0 / 15.0
 
 
 class Layout:
@@ -173,8 +174,8 @@ class Layout:
                weights.singularity / (max(self.ff.n_sing, 1) * nT * MARKER_SCALE**2),
                weights.wrench / K,
                weights.coordinates / (max(self.n - 6, 1) * nT),  # (0.1 rad)² per coordinate = 0.01
-               weights.wrench_rate / K,
-               weights.jerk * (JERK_TIME / hv) ** 6 / (max(self.n - 3, 1) * K),
+               weights.wrench_rate * (RATE_TIME / hv) ** 2 / K,
+               weights.jerk * (RATE_TIME / hv) ** 6 / (max(self.n - 3, 1) * K),
                weights.smoothness / (max(self.n - 3, 1) * max(nT - 2, 1)),
                weights.root_rotation / (max(self.n - 6, 1) * nT)]  # (0.01 rad)² per root rotation = 0.01
         return np.concatenate([

@@ -37,12 +37,13 @@ class Weights:
     #: [beyond] weak prior toward the guide's joint coordinates (not the root): one marker per
     #: segment leaves some rotations unobserved. 0.1 rad weighs like 1 mm of marker distance.
     coordinates: float = 1.0
-    #: [realism] squared change of each foot's wrench between frames (scaled): the double-support
-    #: split and the free moment may not flip from frame to frame
+    #: [realism] squared change of each foot's wrench between frames (scaled, × (1/15 s) / h:
+    #: the same at any frame rate), averaged over the cycle: the double-support split and the
+    #: free moment may not flip from frame to frame
     wrench_rate: float = 1.0
     #: [realism] squared jerk of the rotations (the spline's third derivative × (1/15 s)³, rad),
     #: averaged over the cycle: no frame-to-frame zig-zag of a coordinate that the markers hardly
-    #: see. The time scale is fixed (``layout.JERK_TIME``), so the same motion costs the same at
+    #: see. The time scale is fixed (``layout.RATE_TIME``), so the same motion costs the same at
     #: 15 and 30 frames/s
     jerk: float = 1.0
     #: [realism] prior of the root's three rotations toward the guide's (the kinematic fit: the
