@@ -37,9 +37,9 @@ class Weights:
     #: [beyond] weak prior toward the guide's joint coordinates (not the root): one marker per
     #: segment leaves some rotations unobserved. 0.1 rad weighs like 1 mm of marker distance.
     coordinates: float = 1.0
-    #: [realism] squared change of each foot's wrench between frames (scaled, × (1/15 s) / h:
-    #: the same at any frame rate), averaged over the cycle: the double-support split and the
-    #: free moment may not flip from frame to frame
+    #: [realism] squared change of each foot's (scaled) wrench per 1/15 s (the change between
+    #: frames × (1/15 s) / h, so the same at any frame rate), averaged over the cycle: the
+    #: double-support split and the free moment may not flip from frame to frame
     wrench_rate: float = 1.0
     #: [realism] squared jerk of the rotations (the spline's third derivative × (1/15 s)³, rad),
     #: averaged over the cycle: no frame-to-frame zig-zag of a coordinate that the markers hardly
