@@ -225,11 +225,11 @@ def test_markers_of_tutor_follow_the_capture_markers(halfboy_tutor, deepmimic_ca
 
 
 def test_rate_costs_do_not_depend_on_the_frame_rate():
-    """The jerk and wrench-change costs are time averages with a fixed time scale (1/15 s):
-    the same smooth motion and ground wrenches cost the same at 15 and 30 frames/s, the jerk
-    close to its continuous value. (With the frame interval as the scale, 30 frames/s made the
-    jerk 64 times and the wrench change 4 times cheaper; the full body's trunk counter-rotated
-    at 5 Hz to turn.)"""
+    """The jerk and wrench-change costs (and the kinematic fit's smoothness) are time averages with
+    a fixed time scale (1/15 s): the same smooth motion and ground wrenches cost the same at 15 and
+    30 frames/s, the jerk and the smoothness close to their continuous values. (With the frame
+    interval as the scale, 30 frames/s made the jerk 64 times, the wrench change 4 times and the
+    smoothness 16 times cheaper; the full body's trunk counter-rotated at 5 Hz to turn.)"""
     from solver.spacetime import Weights
     from solver.spacetime.layout import RATE_TIME
     from solver.trajectory import spline_velocities
@@ -240,7 +240,7 @@ def test_rate_costs_do_not_depend_on_the_frame_rate():
     phase = rng.uniform(0, 2 * np.pi, ch.n)
     f = 1.0  # Hz: one cycle of 1 s
     expected = float(np.mean((amp[3:] * (2 * np.pi * f) ** 3 * RATE_TIME**3) ** 2 / 2))
-    costs: dict[str, dict[int, float]] = {"jerk": {}, "wrate": {}}
+    costs: dict[str, dict[int, float]] = {"jerk": {}, "wrate": {}, "smooth": {}}
     for fps in (15, 30):
         N = fps  # frames per cycle; + 2 overlap frames
         T = N + 2
@@ -263,9 +263,20 @@ def test_rate_costs_do_not_depend_on_the_frame_rate():
         pv = prob.parameters(prob.guide_markers(q), q, Environment(), Weights(jerk=1.0, wrench_rate=1.0), ref,
                              prob.anchor_points(q), 0.0, prob.com_points(q))
         xv = np.concatenate([prob.pack_q(q), prob.pack_v(spline_velocities(q, 1.0 / fps)), prob.pack_wrenches(W, ref)])
-        for name in costs:
+        for name in ("jerk", "wrate"):
             term = next(t_ for t_ in prob._terms if t_.name == name)
             costs[name][fps] = float(ca.Function("c", [x, p], [ca.sum2(term.outputs(x))])(xv, pv))
+        # the kinematic fit's smoothness (second differences of the rotations) on the same motion
+        fit = SpacetimeProblem(ch, T, float(fps), A, dynamics=False)
+        pv = fit.parameters(fit.guide_markers(q), q, Environment(), Weights(smoothness=1.0), fit.ref_points(q),
+                            fit.anchor_points(q), 0.0)
+        term = next(t_ for t_ in fit._terms if t_.name == "acc")
+        costs["smooth"][fps] = float(ca.Function("c", [fit._nlp["x"], fit._nlp["p"]],
+                                                 [ca.sum2(term.outputs(fit._nlp["x"]))])(fit.pack_q(q), pv))
     assert costs["jerk"][15] == pytest.approx(expected, rel=0.05), (costs, expected)
     assert costs["jerk"][30] == pytest.approx(expected, rel=0.02), (costs, expected)
     assert costs["wrate"][30] == pytest.approx(costs["wrate"][15], rel=0.03), costs
+    # mean of (second difference × (1/15 s / h)²)² = (acceleration × (1/15 s)²)² (a 16-fold gap before)
+    smooth = float(np.mean((amp[3:] * (2 * np.pi * f) ** 2 * RATE_TIME**2) ** 2 / 2))
+    assert costs["smooth"][15] == pytest.approx(smooth, rel=0.05), (costs, smooth)
+    assert costs["smooth"][30] == pytest.approx(smooth, rel=0.02), (costs, smooth)

@@ -176,7 +176,7 @@ class Layout:
                weights.coordinates / (max(self.n - 6, 1) * nT),  # (0.1 rad)² per coordinate = 0.01
                weights.wrench_rate * (RATE_TIME / hv) ** 2 / K,
                weights.jerk * (RATE_TIME / hv) ** 6 / (max(self.n - 3, 1) * K),
-               weights.smoothness / (max(self.n - 3, 1) * max(nT - 2, 1)),
+               weights.smoothness * (RATE_TIME / hv) ** 4 / (max(self.n - 3, 1) * max(nT - 2, 1)),
                weights.root_rotation / (max(self.n - 6, 1) * nT)]  # (0.01 rad)² per root rotation = 0.01
         return np.concatenate([
             np.asarray(guide_markers, dtype=float).ravel(order="F"),
