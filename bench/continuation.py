@@ -40,6 +40,9 @@ IMPOSSIBLE = {  # must end in an impasse (issue 11); ε = 0.02 keeps the bench s
 }
 
 
+DEFAULT = StepControl().method  # the controller extrapolate() uses unless told otherwise
+
+
 def _run(tutor, target, method: str, **control) -> dict:
     t = time.perf_counter()
     res = extrapolate(tutor, target, StepControl(method=method, **control))
@@ -60,13 +63,13 @@ def run() -> dict:
     for name in ("deepmimic_walk", "c3d_pig"):
         tutor = make_tutor(load_trial(tr[name]), character="halfboy", fps=15.0).motion
         rows: dict = {label: {m: _run(tutor, tgt, m) for m in ("thesis", "adaptive")} for label, tgt in TIMED.items()}
-        if name == "deepmimic_walk":
-            rows.update({label: {"adaptive": _run(tutor, tgt, "adaptive")} for label, tgt in REACH.items()})
-            rows.update({label: {"adaptive": _run(tutor, tgt, "adaptive", eps=0.02)}
-                         for label, tgt in IMPOSSIBLE.items()})
+        if name == "deepmimic_walk":  # reach: the default controller
+            rows.update({label: {DEFAULT: _run(tutor, tgt, DEFAULT)} for label, tgt in REACH.items()})
+            rows.update({label: {DEFAULT: _run(tutor, tgt, DEFAULT, eps=0.02)} for label, tgt in IMPOSSIBLE.items()})
         out[f"{name}/halfboy_15fps"] = rows
-    # full body, 30 frames/s: curve π/2
+    # full body, 30 frames/s: curve π/2 (both controllers) and stairs (the default)
     full = make_tutor(load_trial(tr["c3d_pig"]), character="fullbody", fps=30.0).motion
-    out["c3d_pig/fullbody_30fps"] = {label: {"adaptive": _run(full, tgt, "adaptive", **ctl)}
-                                     for label, (tgt, ctl) in FULL_BODY.items()}
+    out["c3d_pig/fullbody_30fps"] = {
+        label: {m: _run(full, tgt, m, **ctl) for m in ((DEFAULT, "adaptive") if label == "curve_90" else (DEFAULT,))}
+        for label, (tgt, ctl) in FULL_BODY.items()}
     return out

@@ -36,8 +36,8 @@ def _realistic(r: dict) -> str:
 
 
 def continuation_table(res: dict) -> str:
-    rows = ["| trial | target | Algorithm 3 (thesis): status, λ, solves, time | adaptive: status, λ, solves, time |",
-            "|---|---|---|---|"]
+    rows = ["| trial | target | Algorithm 3 (thesis, the default): status, λ, solves, time "
+            "| adaptive: status, λ, solves, time |", "|---|---|---|---|"]
     for trial, targets in res.items():
         for tgt, r in targets.items():
             cells = []

@@ -342,9 +342,9 @@ motion's grf.png and residuals.png. Exit status 0 for `succeeded` and `impasse`.
     s.add_argument("--force", "--overwrite", action="store_true",
                    help="write into a non-empty --out: first remove the files an extrapolation writes there "
                         "(step_*, progress.*, summary.json, grf.png, residuals.png), keep the others")
-    s.add_argument("--method", choices=["adaptive", "thesis"], default="adaptive",
-                   help="step control: adaptive (secant predictor, steps from the recent history) or thesis "
-                        "(Algorithm 3: double on success, halve on failure)")
+    s.add_argument("--method", choices=["adaptive", "thesis"], default="thesis",
+                   help="step control: thesis (default; Algorithm 3: double on success, halve on failure) or "
+                        "adaptive (secant predictor, steps from the recent history)")
     s.add_argument("--delta0", type=_finite("--delta0"), default=0.05, metavar="D", help="first step Δ0 in λ")
     s.add_argument("--eps", type=_finite("--eps"), default=0.005, metavar="E",
                    help="smallest step ε in λ before an impasse")
