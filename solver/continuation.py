@@ -35,7 +35,8 @@ class StepControl:
 
     The default is the thesis's controller since stop 20: with the realistic transcription it was
     faster on the timed targets in three sessions running and reached as far or further on every
-    reach target but the 45° uphill (docs/continuation.md, "Step control").
+    reach target but the 45° uphill and the 180° curve, a few degrees short there
+    (docs/continuation.md, "Step control").
     """
 
     method: str = "thesis"

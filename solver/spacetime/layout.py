@@ -15,7 +15,8 @@ from solver.spacetime.types import Environment, Weights
 
 MARKER_SCALE = 0.01  # m: the objective is in units of (1 cm)²
 #: time scale of the rate costs (s): the jerk cost is the mean over the cycle of
-#: (jerk × RATE_TIME³)², the wrench-change cost that of (wrench rate × RATE_TIME)², so the same
+#: (jerk × RATE_TIME³)², the wrench-change cost that of (wrench rate × RATE_TIME)² and the kinematic
+#: fit's smoothness that of (second difference × (RATE_TIME / h)²)², so the same
 #: motion costs the same at any frame rate (at 15 frames/s: the per-segment figures as before;
 #: with the frame interval h as the scale, 30 frames/s made the jerk 2⁶ = 64 and the wrench
 #: change 2² = 4 times cheaper)
