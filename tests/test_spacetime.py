@@ -224,6 +224,13 @@ def test_markers_of_tutor_follow_the_capture_markers(halfboy_tutor, deepmimic_ca
     assert np.isfinite(mk).all()
 
 
+def _term_cost(prob, name: str, xv: np.ndarray, pv: np.ndarray) -> float:
+    """The summed value of the problem's cost term ``name`` at (x, p)."""
+    x = prob._nlp["x"]
+    term = next(t_ for t_ in prob._terms if t_.name == name)
+    return float(ca.Function("c", [x, prob._nlp["p"]], [ca.sum2(term.outputs(x))])(xv, pv))
+
+
 def test_rate_costs_do_not_depend_on_the_frame_rate():
     """The jerk and wrench-change costs (and the kinematic fit's smoothness) are time averages with
     a fixed time scale (1/15 s): the same smooth motion and ground wrenches cost the same at 15 and
@@ -252,7 +259,6 @@ def test_rate_costs_do_not_depend_on_the_frame_rate():
         A[2, N // 2 - 1 :] = A[3, N // 2 - 2 :] = True
         A[:, -2:] = A[:, :2]
         prob = SpacetimeProblem(ch, T, float(fps), A)
-        x, p = prob._nlp["x"], prob._nlp["p"]
         ref = prob.ref_points(q)
         # smooth wrenches: forces through each foot's reference point plus a free moment
         W = np.zeros((2, 6, T))
@@ -264,15 +270,12 @@ def test_rate_costs_do_not_depend_on_the_frame_rate():
                              prob.anchor_points(q), 0.0, prob.com_points(q))
         xv = np.concatenate([prob.pack_q(q), prob.pack_v(spline_velocities(q, 1.0 / fps)), prob.pack_wrenches(W, ref)])
         for name in ("jerk", "wrate"):
-            term = next(t_ for t_ in prob._terms if t_.name == name)
-            costs[name][fps] = float(ca.Function("c", [x, p], [ca.sum2(term.outputs(x))])(xv, pv))
+            costs[name][fps] = _term_cost(prob, name, xv, pv)
         # the kinematic fit's smoothness (second differences of the rotations) on the same motion
         fit = SpacetimeProblem(ch, T, float(fps), A, dynamics=False)
         pv = fit.parameters(fit.guide_markers(q), q, Environment(), Weights(smoothness=1.0), fit.ref_points(q),
                             fit.anchor_points(q), 0.0)
-        term = next(t_ for t_ in fit._terms if t_.name == "acc")
-        costs["smooth"][fps] = float(ca.Function("c", [fit._nlp["x"], fit._nlp["p"]],
-                                                 [ca.sum2(term.outputs(fit._nlp["x"]))])(fit.pack_q(q), pv))
+        costs["smooth"][fps] = _term_cost(fit, "acc", fit.pack_q(q), pv)
     assert costs["jerk"][15] == pytest.approx(expected, rel=0.05), (costs, expected)
     assert costs["jerk"][30] == pytest.approx(expected, rel=0.02), (costs, expected)
     assert costs["wrate"][30] == pytest.approx(costs["wrate"][15], rel=0.03), costs

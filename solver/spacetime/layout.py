@@ -18,8 +18,8 @@ MARKER_SCALE = 0.01  # m: the objective is in units of (1 cm)²
 #: (jerk × RATE_TIME³)², the wrench-change cost that of (wrench rate × RATE_TIME)² and the kinematic
 #: fit's smoothness that of (second difference × (RATE_TIME / h)²)², so the same
 #: motion costs the same at any frame rate (at 15 frames/s: the per-segment figures as before;
-#: with the frame interval h as the scale, 30 frames/s made the jerk 2⁶ = 64 and the wrench
-#: change 2² = 4 times cheaper)
+#: with the frame interval h as the scale, 30 frames/s made the jerk 2⁶ = 64, the smoothness
+#: 2⁴ = 16 and the wrench change 2² = 4 times cheaper)
 RATE_TIME = 1.0 / 15.0
 
 
@@ -171,13 +171,14 @@ class Layout:
         nT = self.T
         K = max(len(self.eom_frames), 1)
         hv = float(self.dt if h is None else h)
+        rate = RATE_TIME / hv  # the rate costs' fixed time scale over the frame interval
         wts = [weights.direction / (self.n_markers * nT * MARKER_SCALE**2),
                weights.singularity / (max(self.ff.n_sing, 1) * nT * MARKER_SCALE**2),
                weights.wrench / K,
                weights.coordinates / (max(self.n - 6, 1) * nT),  # (0.1 rad)² per coordinate = 0.01
-               weights.wrench_rate * (RATE_TIME / hv) ** 2 / K,
-               weights.jerk * (RATE_TIME / hv) ** 6 / (max(self.n - 3, 1) * K),
-               weights.smoothness * (RATE_TIME / hv) ** 4 / (max(self.n - 3, 1) * max(nT - 2, 1)),
+               weights.wrench_rate * rate**2 / K,
+               weights.jerk * rate**6 / (max(self.n - 3, 1) * K),
+               weights.smoothness * rate**4 / (max(self.n - 3, 1) * max(nT - 2, 1)),
                weights.root_rotation / (max(self.n - 6, 1) * nT)]  # (0.01 rad)² per root rotation = 0.01
         return np.concatenate([
             np.asarray(guide_markers, dtype=float).ravel(order="F"),
