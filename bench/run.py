@@ -3,7 +3,9 @@
     python -m bench.run [--only SECTION ...] [--out bench/results.json]
 
 Each section lives in its own module exposing ``run() -> dict``. Existing results of
-sections not re-run are kept, so ``--only`` refreshes part of the file.
+sections not re-run are kept, so ``--only`` refreshes part of the file. Each section also
+records ``machine_probe`` (``bench.machine``: a fixed IPOPT solve, independent of our code),
+measured just before it: divide seconds by the probe's to compare runs across machines.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ import time
 from datetime import UTC, datetime
 from pathlib import Path
 
-SECTIONS = ["dynamics", "grf", "tutor", "continuation", "service", "library"]
+SECTIONS = ["dynamics", "grf", "tutor", "continuation", "compiled", "service", "library"]
 
 
 def main() -> int:
@@ -28,12 +30,15 @@ def main() -> int:
     out = Path(args.out)
     results = json.loads(out.read_text()) if out.exists() else {}
     results.setdefault("sections", {})
+    from bench.machine import probe
+
     for name in args.only or SECTIONS:
+        speed = probe()
         t = time.perf_counter()
         mod = importlib.import_module(f"bench.{name}")
         data = mod.run()
         results["sections"][name] = {"results": data, "wall_s": round(time.perf_counter() - t, 2),
-                                     "at": datetime.now(UTC).isoformat(timespec="seconds")}
+                                     "at": datetime.now(UTC).isoformat(timespec="seconds"), "machine_probe": speed}
         print(f"[bench] {name}: {json.dumps(data)[:400]}")
     results["machine"] = {"platform": platform.platform(), "python": platform.python_version(),
                           "cpus": os.cpu_count()}

@@ -179,7 +179,7 @@ def problem_for(character: Character, T: int, fps: float, contacts: np.ndarray |
     key = (id(character), T, float(fps), None if contacts is None else np.asarray(contacts, bool).tobytes(),
            dynamics, cyclic, rising)
     prob = _PROBLEMS.get(key)
-    if prob is None or prob.character is not character:
+    if prob is None or prob.character is not character or prob.stale:
         prob = SpacetimeProblem(character, T, fps, contacts, dynamics=dynamics, cyclic=cyclic, rising=rising)
         if len(_PROBLEMS) >= _MAX_CACHED:
             _PROBLEMS.pop(next(iter(_PROBLEMS)))

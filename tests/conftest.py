@@ -1,8 +1,13 @@
+import os
 from pathlib import Path
 
 import pytest
 
 from service.examples import data_dir
+
+# compiled derivatives (solver.spacetime.compiled) are tested on their own (tests/test_compiled.py);
+# elsewhere a background compiler per character would only load the CI's two cores
+os.environ.setdefault("MOTIONX_COMPILED_DERIVATIVES", "0")
 
 SHARED_DATA = data_dir()  # the repository's data/ (or $MOTIONX_DATA)
 

@@ -5,9 +5,11 @@
 * ``frame``: the generic functions of a frame, a pair of frames, a spline segment;
 * ``derivatives``: the mapped-derivative scatter engine;
 * ``layout``: how motions, wrenches and weights map onto x and p; ``callback``: stopping a solve;
-* ``problem``: the NLP of one structure, re-solved with new parameters.
+* ``problem``: the NLP of one structure, re-solved with new parameters;
+* ``compiled``: the derivative functions in machine code, cached per character (opt-in).
 """
 
+from solver.spacetime import compiled
 from solver.spacetime.derivatives import MAP_THREADS
 from solver.spacetime.frame import FrameFunctions, frame_functions
 from solver.spacetime.layout import MARKER_SCALE
@@ -23,4 +25,5 @@ from solver.spacetime.types import (
 )
 
 __all__ = ["DEFAULT_IPOPT", "MAP_THREADS", "MARKER_SCALE", "ROOT_PERIODIC", "STANDARD_GRAVITY", "SUCCESS_STATUSES",
-           "Environment", "FrameFunctions", "Realism", "SolveResult", "SpacetimeProblem", "Weights", "frame_functions"]
+           "Environment", "FrameFunctions", "Realism", "SolveResult", "SpacetimeProblem", "Weights", "compiled",
+           "frame_functions"]

@@ -35,7 +35,9 @@ def jacobian(fn: ca.Function, n_var_inputs: int) -> ca.Function:
 
 def mapped(fn: ca.Function, ncalls: int) -> ca.Function:
     """``fn`` over ``ncalls`` columns; threads pay off only for the heavy functions."""
-    if ncalls > 1 and fn.n_instructions() > 20000 * MAP_THREADS:
+    # a compiled function (solver.spacetime.compiled) carries its virtual-machine size
+    size = getattr(fn, "vm_instructions", None)
+    if ncalls > 1 and (fn.n_instructions() if size is None else size) > 20000 * MAP_THREADS:
         return fn.map(ncalls, "thread", MAP_THREADS)
     return fn.map(ncalls) if ncalls > 1 else fn
 

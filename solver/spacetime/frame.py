@@ -23,6 +23,7 @@ from solver.character import Character
 from solver.dynamics import casadi_functions
 from solver.kinematics import forward_kinematics, marker_points, markers, point_world, standing_leg_length
 from solver.motion import FEET
+from solver.spacetime import compiled
 from solver.spacetime.derivatives import jacobian, lagrangian_hessian
 from solver.spacetime.types import STANDARD_GRAVITY, Realism
 
@@ -84,6 +85,7 @@ class FrameFunctions:
         if self.has_contacts:
             self._contact_functions(q, pose, pts)
             self._segment_functions()
+        self.compiled = False  # True once compiled.start has swapped in machine-code derivatives
         self.derivatives = {name: (self.seg_hessian if name == "seg" else lagrangian_hessian(fn, self.VARS[name][1]),
                                    jacobian(fn, self.VARS[name][0]))
                             for name, fn in self.functions().items()}
@@ -270,4 +272,5 @@ def frame_functions(character: Character) -> FrameFunctions:
     if ff is None:
         ff = FrameFunctions(character)
         _FRAME_CACHE[character] = ff
+        compiled.start(ff)  # a background compile when enabled (solver.spacetime.compiled)
     return ff

@@ -106,6 +106,7 @@ class SpacetimeProblem(Layout):
         if not self.cyclic:
             raise ValueError("the spacetime problem transcribes a gait cycle: cyclic=True")
         ff = self.ff = frame_functions(character)
+        self.derivatives_used = ff.derivatives  # compiled later? (stale, solver.spacetime.compiled)
         if dynamics:
             if not ff.has_contacts:
                 raise ValueError("the character needs heel/toe contact points and a foot box on both feet")
@@ -344,6 +345,11 @@ class SpacetimeProblem(Layout):
                         derivatives=D["wrate"], cost=True))
         self._cost(Term("jerk", ff.jerk, 4, np.vstack([qi[:, K], vi[:, K], qi[:, kp], vi[:, kp]]),
                         [ca.repmat(h, 1, len(K)), ca.repmat(wts[5], 1, len(K))], derivatives=D["jerk"], cost=True))
+
+    @property
+    def stale(self) -> bool:
+        """Built before its character's compiled derivative functions were ready."""
+        return self.derivatives_used is not self.ff.derivatives
 
     # --- solve -----------------------------------------------------------------------------
     def solve(
