@@ -15,7 +15,7 @@ from pathlib import Path
 from bench.trials import trials
 from solver.continuation import Target, extrapolate
 from solver.io import load_trial
-from solver.pipeline import correct, make_tutor
+from solver.pipeline import correct, estimate_wrenches, make_tutor
 from solver.spacetime import FrameFunctions, compiled, frame_functions
 
 TARGETS = {"uphill_11.25": Target(slope_deg=11.25), "downhill_11.25": Target(slope_deg=-11.25),
@@ -23,8 +23,10 @@ TARGETS = {"uphill_11.25": Target(slope_deg=11.25), "downhill_11.25": Target(slo
 
 
 def _correct(res) -> dict:
+    """The tutor's correction again (as make_tutor runs it: from the estimated wrenches)."""
     m = res.motion
-    out = correct(m.character, res.simplified.q, m.contacts, m.fps, init_wrenches=None,
+    w0, _ = estimate_wrenches(m.character, res.simplified.q, m.fps, m.contacts)
+    out = correct(m.character, res.simplified.q, m.contacts, m.fps, init_wrenches=w0,
                   heading_change=float(m.q[3, -2] - m.q[3, 0]))
     return {"time_s": out.wall_time, "iterations": out.iterations, "status": out.status}
 

@@ -52,7 +52,27 @@ def continuation_table(res: dict) -> str:
     return "\n".join(rows)
 
 
-FILL = {"tutor": ("docs/spacetime.md", tutor_table), "continuation": ("docs/continuation.md", continuation_table)}
+def compiled_table(res: dict) -> str:
+    rows = ["| case | compile (fresh cache) / load (cached) | solve | VM: time (iterations) "
+            "| compiled: time (iterations) | speed-up |", "|---|---|---|---|---|---|"]
+    for case, r in res.items():
+        if "vm" not in r:
+            rows.append(f"| {case} | – | – | {r.get('status')} | – | – |")
+            continue
+        head = f"{r['compile_s']:.1f} s / {r['load_from_cache_s']:.2f} s"
+        head += "" if r.get("compiled_ok") else " (FAILED)"
+        for solve, v in r["vm"].items():
+            c = r["compiled"][solve]
+            its = v.get("iterations")
+            ok = "" if v.get("all_plausible", True) and c.get("all_plausible", True) else " (implausible step!)"
+            rows.append(f"| {case} | {head} | {solve} | {v['time_s']:.2f} s ({its}) | {c['time_s']:.2f} s "
+                        f"({c.get('iterations')}){ok} | {v['time_s'] / c['time_s']:.2f}× |")
+            head = ""
+    return "\n".join(rows)
+
+
+FILL = {"tutor": ("docs/spacetime.md", tutor_table), "continuation": ("docs/continuation.md", continuation_table),
+        "compiled": ("docs/spacetime.md", compiled_table)}
 
 
 def fill(sec: dict) -> None:
@@ -80,6 +100,8 @@ def main() -> int:
         print("### Tutor\n\n" + tutor_table(sec["tutor"]["results"]) + "\n")
     if "continuation" in sec:
         print("### Continuation\n\n" + continuation_table(sec["continuation"]["results"]) + "\n")
+    if "compiled" in sec:
+        print("### Compiled derivatives\n\n" + compiled_table(sec["compiled"]["results"]) + "\n")
     return 0
 
 

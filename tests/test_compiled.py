@@ -88,3 +88,16 @@ def test_settings_turn_it_on_and_off(tmp_path):
         assert not compiled.enabled()
     finally:
         compiled.enable(None)
+
+
+def test_the_cache_keeps_the_most_recent_libraries(tmp_path):
+    import os
+
+    for i, size in enumerate((300, 300, 300)):
+        lib = tmp_path / f"derivatives-{i}.so"
+        lib.write_bytes(b"\0" * size)
+        os.utime(lib, (1000 + i, 1000 + i))  # 0 oldest, 2 newest
+    gone = compiled.prune(tmp_path, keep=tmp_path / "derivatives-0.so", max_bytes=700)
+    assert gone == [tmp_path / "derivatives-1.so"]  # the new library stays, then the most recent
+    assert sorted(p.name for p in tmp_path.glob("*.so")) == ["derivatives-0.so", "derivatives-2.so"]
+    assert compiled.prune(tmp_path, max_bytes=300) == [tmp_path / "derivatives-0.so"]

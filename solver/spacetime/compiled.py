@@ -37,6 +37,8 @@ log = logging.getLogger(__name__)
 
 FLAGS = ("-O0",)  # -O1 halves the evaluation time again but compiles 4× longer (HalfBoy 61 s)
 COMPILE_TIMEOUT_S = 1800.0
+#: the cache keeps the most recently used libraries within this size (HalfBoy ~5 MB, full body ~18 MB)
+MAX_CACHE_BYTES = 2 * 1024**3
 CHECK_RTOL = 1e-9
 
 _state: dict[str, Any] = {"dir": None, "compiler": None}
@@ -74,6 +76,7 @@ def start(ff: Any, *, wait: bool = False) -> threading.Thread | None:
     try:
         lib = cache / f"derivatives-{_key(ff)}.so"
         if lib.exists():
+            os.utime(lib)  # recently used: pruned last
             _load(ff, lib)
             return None
     except Exception as e:  # a failed load costs speed, never a result
@@ -137,6 +140,7 @@ def _build(ff: Any, lib: Path, cc: str) -> None:
         while time.monotonic() < deadline:
             if lib.exists():
                 _load(ff, lib)
+                prune(lib.parent, keep=lib)
                 return
             if failed.exists():
                 raise RuntimeError(f"the compile failed ({failed})")
@@ -147,6 +151,19 @@ def _build(ff: Any, lib: Path, cc: str) -> None:
     finally:
         with _lock:
             _building.discard(id(ff))
+
+
+def prune(cache: Path, keep: Path | None = None, max_bytes: int = MAX_CACHE_BYTES) -> list[Path]:
+    """Delete the least recently used libraries beyond ``max_bytes`` (a process that has one
+    loaded keeps its mapping). Returns the deleted paths."""
+    libs = sorted(cache.glob("derivatives-*.so"), key=lambda p: (p == keep, p.stat().st_mtime), reverse=True)
+    total, gone = 0, []
+    for lib in libs:
+        total += lib.stat().st_size
+        if total > max_bytes and lib != keep:
+            lib.unlink(missing_ok=True)
+            gone.append(lib)
+    return gone
 
 
 def _claim(building: Path) -> bool:
