@@ -52,11 +52,12 @@ def enable(cache_dir: str | os.PathLike[str] | None, compiler: str | None = None
     if cache_dir is None:
         _state.update(dir=None, compiler=None)
         return False
-    cc = shutil.which(compiler or os.environ.get("CC") or "cc")
+    name = compiler or os.environ.get("CC") or "cc"
+    cc = shutil.which(name)
     if cc is None:
-        log.warning("no C compiler (%s): the NLP derivatives stay in CasADi's virtual machine",
-                    compiler or os.environ.get("CC") or "cc")
-        _state.update(dir=None, compiler=None)
+        if _state.get("missing") != name:  # once per process (jobs call enable every time)
+            log.warning("no C compiler (%s): the NLP derivatives stay in CasADi's virtual machine", name)
+        _state.update(dir=None, compiler=None, missing=name)
         return False
     _state.update(dir=Path(cache_dir).expanduser(), compiler=cc)
     return True
