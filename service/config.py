@@ -11,6 +11,7 @@ database also answers to ``DATABASE_URL`` and the broker to ``REDIS_URL``.
 
 from __future__ import annotations
 
+import os
 from functools import lru_cache
 from pathlib import Path
 from typing import Literal
@@ -21,6 +22,11 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 
 def _default_data_dir() -> Path:
     return Path.home() / ".local" / "share" / "motionx"
+
+
+def _default_compiled_dir() -> Path:
+    """A cache, not state: shared by every data directory (the demo's is temporary)."""
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "motionx" / "compiled"
 
 
 #: the runners' names (service.runners.RUNNERS maps each to its class; a test checks they agree)
@@ -88,7 +94,8 @@ class Settings(BaseSettings):
     compiled_derivatives: bool = Field(
         True, description="compile each character's NLP derivative functions to machine code (a C compiler, "
         "cached under compiled_dir; ~35 % faster solves after a one-off compile per character)")
-    compiled_dir: Path | None = Field(None, description="cache of compiled derivatives; default <data_dir>/compiled")
+    compiled_dir: Path = Field(default_factory=_default_compiled_dir,
+                               description="cache of compiled derivatives (default ~/.cache/motionx/compiled)")
     default_tutor_fps: float = Field(15.0, ge=5, le=30)
 
     # --- the API's compute processes (uploads, exports, reports, plots) --------------------
@@ -154,7 +161,7 @@ def enable_compiled_derivatives(settings: Settings) -> None:
     from solver.spacetime import compiled
 
     if settings.compiled_derivatives:
-        compiled.enable(settings.compiled_dir or settings.data_dir / "compiled")
+        compiled.enable(settings.compiled_dir)
     else:
         compiled.enable(None)
 

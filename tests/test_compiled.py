@@ -81,9 +81,11 @@ def test_no_compiler_means_off(compile_dir, caplog):
 
 
 def test_settings_turn_it_on_and_off(tmp_path):
-    enable_compiled_derivatives(Settings(data_dir=tmp_path, compiled_derivatives=True))
+    enable_compiled_derivatives(Settings(data_dir=tmp_path, compiled_derivatives=True,
+                                         compiled_dir=tmp_path / "cache"))
     try:
         assert compiled.enabled()
+        assert Settings(data_dir=tmp_path).compiled_dir.parts[-2:] == ("motionx", "compiled")  # a cache
         enable_compiled_derivatives(Settings(data_dir=tmp_path, compiled_derivatives=False))
         assert not compiled.enabled()
     finally:
