@@ -93,7 +93,7 @@ class Settings(BaseSettings):
     default_character: str = "halfboy"
     compiled_derivatives: bool = Field(
         True, description="compile each character's NLP derivative functions to machine code (a C compiler, "
-        "cached under compiled_dir; ~35 % faster solves after a one-off compile per character)")
+        "cached under compiled_dir; 1.3-1.6x faster HalfBoy solves after a one-off compile per character)")
     compiled_dir: Path = Field(default_factory=_default_compiled_dir,
                                description="cache of compiled derivatives (default ~/.cache/motionx/compiled)")
     default_tutor_fps: float = Field(15.0, ge=5, le=30)

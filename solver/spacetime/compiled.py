@@ -2,14 +2,14 @@
 
 CasADi evaluates the per-term Hessian and Jacobian blocks (``derivatives.py``) in its virtual
 machine. Compiled by a C compiler (CasADi's code generator, ``cc -O0``) they give the same
-values with fewer instructions per evaluation: the same IPOPT iterations, ~35–40 % less wall
-time per continuation solve on HalfBoy (docs/spacetime.md, "Compiled derivatives").
+values with fewer instructions per evaluation: the same IPOPT iterations, 1.3–1.6× faster
+HalfBoy solves, 1.14–1.23× full-body ones (docs/spacetime.md, "Compiled derivatives").
 
 The expressions hold the character's constants (segment lengths, masses, axes), so a library
 is per character. It is cached in a directory under the hash of its generated source, so each
 character is compiled once, by whichever process first needs it, and reused by every later
-process (workers, the CLI). Compiling takes seconds to minutes (HalfBoy ~15 s, the full body
-~75 s on a 2-core machine), so it runs in a background thread: problems built before it
+process (workers, the CLI). Compiling takes seconds to minutes (HalfBoy ~14 s, the full body
+~66–75 s on a 2-core machine), so it runs in a background thread: problems built before it
 finishes use the virtual machine; ``solver.pipeline.problem_for`` rebuilds a cached problem
 once its character's compiled functions are ready. Off unless ``enable(cache_dir)`` is called
 (the service and the CLI do it from their settings); without a C compiler it stays off with a
