@@ -160,10 +160,7 @@ def enable_compiled_derivatives(settings: Settings) -> None:
     and the CLI's solving commands call it; it loads CasADi)."""
     from solver.spacetime import compiled
 
-    if settings.compiled_derivatives:
-        compiled.enable(settings.compiled_dir)
-    else:
-        compiled.enable(None)
+    compiled.enable(settings.compiled_dir if settings.compiled_derivatives else None)
 
 
 @lru_cache(maxsize=1)

@@ -6,11 +6,12 @@ values with fewer instructions per evaluation: the same IPOPT iterations, 1.3–
 HalfBoy solves, 1.14–1.23× full-body ones (docs/spacetime.md, "Compiled derivatives").
 
 The expressions hold the character's constants (segment lengths, masses, axes), so a library
-is per character. It is cached in a directory under the hash of its generated source, so each
-character is compiled once, by whichever process first needs it, and reused by every later
-process (workers, the CLI). Compiling takes seconds to minutes (HalfBoy ~14 s, the full body
-~66–75 s on a 2-core machine), so it runs in a background thread: problems built before it
-finishes use the virtual machine; ``solver.pipeline.problem_for`` rebuilds a cached problem
+is per character. It is cached in a directory under a hash of the character's functions and
+the code that derives them, so each character is compiled once, by whichever process first
+needs it, and reused by every later process (workers, the CLI). Compiling takes seconds to
+minutes (HalfBoy ~14 s, the full body ~66–75 s on a 2-core machine), so a background thread
+starts a detached compiler and loads its library when it appears: problems built before that
+use the virtual machine; ``solver.pipeline.problem_for`` rebuilds a cached problem
 once its character's compiled functions are ready. Off unless ``enable(cache_dir)`` is called
 (the service and the CLI do it from their settings); without a C compiler it stays off with a
 warning. Every library is checked against the virtual machine on a random input before use.
@@ -19,6 +20,7 @@ warning. Every library is checked against the virtual machine on a random input 
 from __future__ import annotations
 
 import hashlib
+import inspect
 import logging
 import os
 import shutil
@@ -35,13 +37,13 @@ from solver.spacetime import derivatives as derivatives_module
 
 log = logging.getLogger(__name__)
 
-FLAGS = ("-O0",)  # -O1 halves the evaluation time again but compiles 4× longer (HalfBoy 61 s)
+FLAGS = ("-O0",)  # -O1 evaluates ~5 % faster but compiles 4× longer (HalfBoy 61 s instead of 15 s)
 COMPILE_TIMEOUT_S = 1800.0
 #: the cache keeps the most recently used libraries within this size (HalfBoy ~5 MB, full body ~18 MB)
 MAX_CACHE_BYTES = 2 * 1024**3
 CHECK_RTOL = 1e-9
 
-_state: dict[str, Any] = {"dir": None, "compiler": None}
+_state: dict[str, Any] = {"dir": None, "compiler": None, "missing": None}
 _lock = threading.Lock()
 _building: set[int] = set()
 
@@ -101,16 +103,10 @@ def _key(ff: Any) -> str:
     for name, f in sorted(ff.functions().items()):
         h.update(name.encode())
         h.update(f.serialize().encode())
-    for module in (_frame_module(), derivatives_module):
-        h.update(Path(str(module.__file__)).read_bytes())
+    for source in (inspect.getfile(type(ff)), inspect.getfile(derivatives_module)):  # frame.py, derivatives.py
+        h.update(Path(source).read_bytes())
     h.update("\0".join([str(getattr(ca, "__version__", "")), *FLAGS]).encode())
     return h.hexdigest()[:24]
-
-
-def _frame_module() -> Any:
-    from solver.spacetime import frame  # (frame imports this module)
-
-    return frame
 
 
 def _build(ff: Any, lib: Path, cc: str) -> None:
@@ -121,9 +117,8 @@ def _build(ff: Any, lib: Path, cc: str) -> None:
         if failed.exists():
             raise RuntimeError(f"an earlier compile failed ({failed})")
         if _claim(building):
-            fns = {f.name(): f for pair in ff.derivatives.values() for f in pair}
             cg = ca.CodeGenerator("motionx_derivatives.c")
-            for f in fns.values():
+            for f in _functions(ff.derivatives).values():
                 cg.add(f)
             c_file = lib.with_suffix(f".{os.getpid()}.c")
             c_file.write_text(cg.dump())
@@ -185,9 +180,14 @@ def _claim(building: Path) -> bool:
     return False
 
 
+def _functions(derivs: dict) -> dict[str, ca.Function]:
+    """Every Hessian and Jacobian function of a character, by name."""
+    return {f.name(): f for pair in derivs.values() for f in pair}
+
+
 def _load(ff: Any, lib: Path) -> None:
     derivs = ff.derivatives
-    fns = {f.name(): f for pair in derivs.values() for f in pair}
+    fns = _functions(derivs)
     ext = {name: ca.external(name, str(lib)) for name in fns}
     for name, f in fns.items():
         _check(f, ext[name])
