@@ -30,7 +30,7 @@ from typing import Any
 from sqlalchemy.exc import DBAPIError
 
 from service import limits, store
-from service.config import Settings, enable_compiled_derivatives
+from service.config import Settings, enable_native_code
 from service.db import Database, get_database
 from service.limits import LimitError
 
@@ -176,7 +176,7 @@ def execute_job(job_id: str, settings: Settings) -> str:
         log.info("job %s: %s, nothing to do", job_id, claim.outcome)
         return claim.outcome
     log.info("job %s: attempt %d (%s)", job_id, claim.attempt, token)
-    enable_compiled_derivatives(settings)
+    enable_native_code(settings)
     deadline = time.monotonic() + settings.job_time_limit_s
     with Heartbeat(db, job_id, token, settings.job_lease_s, deadline=deadline, grace=settings.job_stop_grace_s,
                    time_limit_s=settings.job_time_limit_s) as hb:

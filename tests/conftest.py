@@ -8,6 +8,7 @@ from service.examples import data_dir
 # compiled derivatives (solver.spacetime.compiled) are tested on their own (tests/test_compiled.py);
 # elsewhere a background compiler per character would only load the CI's two cores
 os.environ.setdefault("MOTIONX_COMPILED_DERIVATIVES", "0")
+os.environ.setdefault("MOTIONX_OPTIMIZED_BLAS", "0")  # on in tests/test_blas.py (a child process)
 
 SHARED_DATA = data_dir()  # the repository's data/ (or $MOTIONX_DATA)
 

@@ -8,7 +8,7 @@ compiler failure that costs speed, never a result.
 import numpy as np
 import pytest
 
-from service.config import Settings, enable_compiled_derivatives
+from service.config import Settings, enable_native_code
 from solver.pipeline import correct, make_tutor, problem_for
 from solver.spacetime import FrameFunctions, compiled, frame_functions
 
@@ -81,12 +81,12 @@ def test_no_compiler_means_off(compile_dir, caplog):
 
 
 def test_settings_turn_it_on_and_off(tmp_path):
-    enable_compiled_derivatives(Settings(data_dir=tmp_path, compiled_derivatives=True,
+    enable_native_code(Settings(data_dir=tmp_path, compiled_derivatives=True,
                                          compiled_dir=tmp_path / "cache"))
     try:
         assert compiled.enabled()
         assert Settings(data_dir=tmp_path).compiled_dir.parts[-2:] == ("motionx", "compiled")  # a cache
-        enable_compiled_derivatives(Settings(data_dir=tmp_path, compiled_derivatives=False))
+        enable_native_code(Settings(data_dir=tmp_path, compiled_derivatives=False))
         assert not compiled.enabled()
     finally:
         compiled.enable(None)

@@ -13,7 +13,7 @@ import time
 from pathlib import Path
 
 from service.cli import CliError, add_command, load_motion
-from service.config import enable_compiled_derivatives, get_settings
+from service.config import enable_native_code, get_settings
 from solver import axes as registry
 
 #: what a library folder holds besides the per-cell files
@@ -82,7 +82,7 @@ def cmd_library(args: argparse.Namespace) -> int:
     from solver.export.clip import to_clip_json
     from solver.export.gltf import to_library_glb
 
-    enable_compiled_derivatives(get_settings())
+    enable_native_code(get_settings())
     axes = {}
     for name in L.AXES:
         vals = getattr(args, name)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from service.cli import CliError, add_command, import_message, load_motion, parse_belt_speed, warn_input
 from service.commands.outputs import prepare_output_dir, progress_csv, step_stem
-from service.config import enable_compiled_derivatives, get_settings
+from service.config import enable_native_code, get_settings
 from solver import axes as registry
 
 
@@ -83,7 +83,7 @@ def cmd_tutor(args: argparse.Namespace) -> int:
     from solver.io import load_trial
     from solver.pipeline import PipelineError, make_tutor
 
-    enable_compiled_derivatives(get_settings())
+    enable_native_code(get_settings())
     t0 = time.perf_counter()
     try:
         capture = load_trial(args.inputs, mass=args.mass, belt_speed=parse_belt_speed(args.belt_speed))
@@ -230,7 +230,7 @@ def cmd_extrapolate(args: argparse.Namespace) -> int:
     from service.commands.plot import write_motion_plots
     from solver.continuation import StepControl, Target, extrapolate
 
-    enable_compiled_derivatives(get_settings())
+    enable_native_code(get_settings())
 
     try:  # the target first: a wrong value is told before any file is read
         target = Target(**{ax.name: getattr(args, ax.name) for ax in registry.axes()})
