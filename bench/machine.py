@@ -4,15 +4,27 @@ The figures of ``make bench`` are seconds on whatever machine ran them, and the 
 (sessions have measured the same correction at 0.89 s on one and 1.6–2.2 s on another, and one
 machine slowing by 25 % within a session). Every section therefore records this probe when it
 runs: the same kind of work as a spacetime solve — CasADi SX functions with dense blocks,
-IPOPT with MUMPS and CasADi's OpenBLAS — on a problem that is fixed here (seeded, no project
+IPOPT with MUMPS on the BLAS it is bound to (recorded) — on a problem that is fixed here (seeded, no project
 code). Its iteration count is fixed by the libraries; its seconds per iteration are the
 machine's speed for our workload. Divide a section's seconds by its probe's to compare runs
 made on different machines or at different times.
+
+The seconds per iteration are not the whole story: IPOPT's *iteration counts* on our problems
+depend on the CPU too, through the floating-point rounding of the BLAS kernel OpenBLAS picks for
+it (measured at stop 22: the DeepMimic HalfBoy correction takes 109 iterations with the SkylakeX
+kernel of NumPy's OpenBLAS, 104 on the same machine with ``OPENBLAS_CORETYPE=Haswell``, 103 on an
+AMD machine; CasADi's own OpenBLAS is a CORE2 build, the same kernel everywhere), and
+a continuation magnifies that (the PiG full-body curve 90°: 230 iterations there, 665 here). So
+the probe also records the CPU model and MUMPS' BLAS kernel: compare iteration counts only
+between runs that agree on both.
 """
 
 from __future__ import annotations
 
+import ctypes
+import platform
 import time
+from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -42,6 +54,32 @@ def _nlp() -> tuple[dict, dict]:
     return nlp, args
 
 
+def cpu() -> dict:
+    """The CPU model and the BLAS kernel MUMPS runs on: CasADi's OpenBLAS (built for CORE2) or
+    scipy-openblas32's kernel for this CPU (solver.spacetime.blas)."""
+    model = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    from solver.spacetime import blas
+
+    if blas.loaded() is not None:
+        return {"cpu_model": model, "mumps_blas": f"scipy-openblas32 {blas.corename()}"}
+    core = None
+    lib = Path(ca.__file__).with_name("libcasadi-tp-openblas.so.0")
+    try:
+        fn = ctypes.CDLL(str(lib)).openblas_get_corename
+        fn.restype = ctypes.c_char_p
+        core = fn().decode()
+    except (OSError, AttributeError):
+        pass
+    return {"cpu_model": model, "mumps_blas": f"casadi openblas {core}"}
+
+
 def probe(repeats: int = 3) -> dict:
     """Median wall time and iterations of the fixed NLP (IPOPT + MUMPS, as the solver runs it)."""
     nlp, args = _nlp()
@@ -57,7 +95,7 @@ def probe(repeats: int = 3) -> dict:
         its, status = int(st["iter_count"]), str(st["return_status"])
     med = float(np.median(times))
     return {"probe_s": round(med, 4), "probe_iterations": its, "probe_status": status,
-            "probe_ms_per_iteration": round(1e3 * med / max(its, 1), 3)}
+            "probe_ms_per_iteration": round(1e3 * med / max(its, 1), 3), **cpu()}
 
 
 def run() -> dict:

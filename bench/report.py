@@ -71,8 +71,19 @@ def compiled_table(res: dict) -> str:
     return "\n".join(rows)
 
 
+def blas_table(res: dict) -> str:
+    rows = ["| correction (compiled derivatives) | CasADi's OpenBLAS: time (iterations), ms/iteration "
+            "| scipy-openblas32: time (iterations), ms/iteration | per iteration |", "|---|---|---|---|"]
+    for case, o in res.get("optimized", {}).items():
+        b = res["casadi_openblas"][case]
+        rows.append(f"| {case} | {b['time_s']:.2f} s ({b['iterations']}), {b['ms_per_iteration']:.1f} "
+                    f"| {o['time_s']:.2f} s ({o['iterations']}), {o['ms_per_iteration']:.1f} "
+                    f"| {o['speedup_per_iteration']:.2f}× |")
+    return "\n".join(rows)
+
+
 FILL = {"tutor": ("docs/spacetime.md", tutor_table), "continuation": ("docs/continuation.md", continuation_table),
-        "compiled": ("docs/spacetime.md", compiled_table)}
+        "compiled": ("docs/spacetime.md", compiled_table), "blas": ("docs/spacetime.md", blas_table)}
 
 
 def fill(sec: dict) -> None:
@@ -102,6 +113,8 @@ def main() -> int:
         print("### Continuation\n\n" + continuation_table(sec["continuation"]["results"]) + "\n")
     if "compiled" in sec:
         print("### Compiled derivatives\n\n" + compiled_table(sec["compiled"]["results"]) + "\n")
+    if "blas" in sec:
+        print("### Optimized BLAS\n\n" + blas_table(sec["blas"]["results"]) + "\n")
     return 0
 
 

@@ -19,7 +19,7 @@ import time
 from datetime import UTC, datetime
 from pathlib import Path
 
-SECTIONS = ["dynamics", "grf", "tutor", "continuation", "compiled", "service", "library"]
+SECTIONS = ["dynamics", "grf", "tutor", "continuation", "compiled", "blas", "service", "library"]
 
 
 def main() -> int:
@@ -31,6 +31,12 @@ def main() -> int:
     results = json.loads(out.read_text()) if out.exists() else {}
     results.setdefault("sections", {})
     from bench.machine import probe
+    from service.config import get_settings
+    from solver.spacetime import blas
+
+    settings = get_settings()  # MUMPS on the optimized BLAS, as the service runs it (before any solve)
+    if settings.optimized_blas:
+        blas.enable(settings.compiled_dir)
 
     for name in args.only or SECTIONS:
         speed = probe()
