@@ -31,6 +31,7 @@ import logging
 import os
 import shutil
 import subprocess
+import threading
 from pathlib import Path
 from typing import Any
 
@@ -45,6 +46,7 @@ PREFIX = "scipy_"
 THREADS = 1
 
 _state: dict[str, Any] = {"loaded": None, "tried": False}
+_lock = threading.Lock()  # the in-process runner starts jobs on threads
 
 
 def loaded() -> Path | None:
@@ -55,11 +57,16 @@ def loaded() -> Path | None:
 def enable(cache_dir: str | os.PathLike[str] | None, compiler: str | None = None) -> bool:
     """Bind MUMPS to the optimized BLAS in this process (once; ``None``: do nothing). Returns
     whether it is in use."""
-    if _state["loaded"] is not None:
-        return True
-    if cache_dir is None or _state["tried"]:
-        return False
-    _state["tried"] = True
+    with _lock:
+        if _state["loaded"] is not None:
+            return True
+        if cache_dir is None or _state["tried"]:
+            return False
+        _state["tried"] = True
+        return _enable(Path(cache_dir).expanduser(), compiler)
+
+
+def _enable(cache_dir: Path, compiler: str | None) -> bool:
     try:
         if _mumps_loaded():
             log.info("optimized BLAS not loaded: this process already runs IPOPT on CasADi's OpenBLAS")
@@ -68,7 +75,7 @@ def enable(cache_dir: str | os.PathLike[str] | None, compiler: str | None = None
         cc = shutil.which(compiler or os.environ.get("CC") or "cc")
         if cc is None:
             raise RuntimeError("no C compiler")
-        shim = _build(Path(cache_dir).expanduser(), target, cc)
+        shim = _build(cache_dir, target, cc)
         ctypes.CDLL(str(shim))
         lib = ctypes.CDLL(str(target))
         lib[f"{PREFIX}openblas_set_num_threads"](ctypes.c_int(THREADS))
