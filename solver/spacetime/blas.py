@@ -5,7 +5,7 @@ CasADi's wheels ship IPOPT and MUMPS linked to their own OpenBLAS
 MUMPS spends most of its factorization time in dense BLAS (``dgemm_``, ``dtrsm_``) on the KKT
 fronts (up to ~620 rows for the full body), so the kernel matters: with OpenBLAS's kernel for
 the CPU it runs on (``scipy-openblas32``, the SciPy project's build, kernel chosen at run
-time) an IPOPT iteration costs ~25 % less on a spacetime problem (measured at stop 22:
+time) an IPOPT iteration costs 22–43 % less on a spacetime problem (measured at stop 22:
 docs/spacetime.md, "Optimized BLAS").
 
 How: a tiny library whose soname is CasADi's OpenBLAS' and whose every BLAS/LAPACK entry point
@@ -153,11 +153,12 @@ def _symbols(target: Path) -> list[str]:
     if nm is None:
         raise RuntimeError("no nm (binutils)")
 
-    def dynsyms(path: Path, flag: str) -> set[str]:
+    def dynsyms(path: Path, flag: str, kinds: str | None = None) -> set[str]:
         out = subprocess.run([nm, "-D", flag, str(path)], check=True, capture_output=True, text=True).stdout
-        return {line.split()[-1] for line in out.splitlines() if line.split()}
+        rows = [line.split() for line in out.splitlines() if line.split()]
+        return {r[-1] for r in rows if kinds is None or (len(r) >= 2 and r[-2] in kinds)}
 
-    exported = {s for s in dynsyms(casadi_dir / SONAME, "--defined-only")}
+    exported = dynsyms(casadi_dir / SONAME, "--defined-only", kinds="TWi")  # functions only
     imported: set[str] = set()
     for lib in casadi_dir.glob("*.so*"):
         if lib.is_file() and not lib.name.startswith("libcasadi-tp-openblas"):
