@@ -18,7 +18,7 @@ CASES = [("c3d_pig", "halfboy", 15.0), ("deepmimic_walk", "halfboy", 15.0), ("c3
 CHILD = r"""
 import json, sys
 from pathlib import Path
-from bench.compiled import _correct
+from bench.compiled import tutor_correction
 from bench.trials import trials
 from solver.io import load_trial
 from solver.pipeline import make_tutor
@@ -31,7 +31,7 @@ out = {}
 for trial, kind, fps in cases:
     res = make_tutor(load_trial(trials()[trial]), character=kind, fps=fps)
     compiled.start(frame_functions(res.motion.character), wait=True)
-    row = min((_correct(res) for _ in range(2)), key=lambda r: r["time_s"])
+    row = min((tutor_correction(res) for _ in range(2)), key=lambda r: r["time_s"])
     row["ms_per_iteration"] = 1e3 * row["time_s"] / max(row["iterations"], 1)
     out[f"{trial}/{kind}_{fps:g}fps"] = row
 print(json.dumps(out))

@@ -22,7 +22,7 @@ TARGETS = {"uphill_11.25": Target(slope_deg=11.25), "downhill_11.25": Target(slo
            "curve_90": Target(curve_deg=90.0)}
 
 
-def _correct(res) -> dict:
+def tutor_correction(res) -> dict:
     """The tutor's correction again (as make_tutor runs it: from the estimated wrenches)."""
     m = res.motion
     w0, _ = estimate_wrenches(m.character, res.simplified.q, m.fps, m.contacts)
@@ -45,7 +45,7 @@ def _case(capture, kind: str, fps: float, targets: dict, cache: Path) -> dict:
     if res.motion is None:
         return {"status": res.status}
     tutor = res.motion
-    row: dict = {"vm": {"correct": _correct(res)}, "compiled": {}}
+    row: dict = {"vm": {"correct": tutor_correction(res)}, "compiled": {}}
     row["vm"].update({k: _extrapolate(tutor, t) for k, t in targets.items()})
     compiled.enable(cache)
     ff = frame_functions(tutor.character)
@@ -60,7 +60,7 @@ def _case(capture, kind: str, fps: float, targets: dict, cache: Path) -> dict:
     row["load_from_cache_s"] = time.perf_counter() - t
     row["frame_functions_build_s"] = t_build
     row["compiled_ok"] = bool(ff.compiled and again.compiled)
-    row["compiled"]["correct"] = _correct(res)
+    row["compiled"]["correct"] = tutor_correction(res)
     row["compiled"].update({k: _extrapolate(tutor, t) for k, t in targets.items()})
     compiled.enable(None)
     return row

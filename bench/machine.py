@@ -4,8 +4,8 @@ The figures of ``make bench`` are seconds on whatever machine ran them, and the 
 (sessions have measured the same correction at 0.89 s on one and 1.6–2.2 s on another, and one
 machine slowing by 25 % within a session). Every section therefore records this probe when it
 runs: the same kind of work as a spacetime solve — CasADi SX functions with dense blocks,
-IPOPT with MUMPS on the BLAS it is bound to (recorded) — on a problem that is fixed here (seeded, no project
-code). Its iteration count is fixed by the libraries; its seconds per iteration are the
+IPOPT with MUMPS on the BLAS it is bound to (recorded) — on a problem that is fixed here
+(seeded, no project code). Its iteration count is fixed by the libraries; its seconds per iteration are the
 machine's speed for our workload. Divide a section's seconds by its probe's to compare runs
 made on different machines or at different times.
 
