@@ -15,8 +15,8 @@ it (measured at stop 22: the DeepMimic HalfBoy correction takes 109 iterations w
 kernel of NumPy's OpenBLAS, 104 on the same machine with ``OPENBLAS_CORETYPE=Haswell``, 103 on an
 AMD machine; CasADi's own OpenBLAS is a CORE2 build, the same kernel everywhere), and
 a continuation magnifies that (the PiG full-body curve 90°: 230 iterations there, 665 here). So
-the probe also records the CPU model and MUMPS' BLAS kernel: compare iteration counts only
-between runs that agree on both.
+the probe also records the CPU (OpenBLAS's name for it) and MUMPS' BLAS kernel: compare
+iteration counts only between runs that agree on both.
 """
 
 from __future__ import annotations
@@ -55,20 +55,13 @@ def _nlp() -> tuple[dict, dict]:
 
 
 def cpu() -> dict:
-    """The CPU model and the BLAS kernel MUMPS runs on: CasADi's OpenBLAS (built for CORE2) or
-    scipy-openblas32's kernel for this CPU (solver.spacetime.blas)."""
-    model = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
+    """The CPU as OpenBLAS detects it (the kernel family its rounding depends on) and the BLAS
+    MUMPS runs on: CasADi's OpenBLAS (built for CORE2) or scipy-openblas32 (solver.spacetime.blas)."""
     from solver.spacetime import blas
 
+    info = {"cpu": f"{platform.machine()} {blas.corename() or ''}".strip()}
     if blas.loaded() is not None:
-        return {"cpu_model": model, "mumps_blas": f"scipy-openblas32 {blas.corename()}"}
+        return {**info, "mumps_blas": f"scipy-openblas32 {blas.corename()}"}
     core = None
     lib = Path(ca.__file__).with_name("libcasadi-tp-openblas.so.0")
     try:
@@ -77,7 +70,7 @@ def cpu() -> dict:
         core = fn().decode()
     except (OSError, AttributeError):
         pass
-    return {"cpu_model": model, "mumps_blas": f"casadi openblas {core}"}
+    return {**info, "mumps_blas": f"casadi openblas {core}"}
 
 
 def probe(repeats: int = 3) -> dict:

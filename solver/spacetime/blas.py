@@ -104,8 +104,10 @@ def _target() -> Path:
 
 
 def _mumps_loaded() -> bool:
+    """Whether this process has loaded CasADi's MUMPS (asked of the dynamic loader by soname)."""
     try:
-        return "libcoinmumps" in Path("/proc/self/maps").read_text()
+        ctypes.CDLL("libcoinmumps.so.3", mode=os.RTLD_NOLOAD)
+        return True
     except OSError:
         return False
 
