@@ -27,8 +27,11 @@ lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/mypy
 
+# the tests in parallel, one process per core (at most 4), each test file in one process (its module
+# fixtures are computed once); PYTEST_PARALLEL= runs them in this process
+PYTEST_PARALLEL ?= -n auto --maxprocesses 4 --dist loadfile
 test: $(STAMP) $(WEB_STAMP) lint
-	$(PY) -m pytest -q $(PYTEST_ARGS)
+	$(PY) -m pytest -q $(PYTEST_PARALLEL) $(PYTEST_ARGS)
 
 demo: $(STAMP) $(WEB_STAMP)
 	$(VENV)/bin/motionx demo --out out/demo
