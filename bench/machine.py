@@ -21,7 +21,6 @@ iteration counts only between runs that agree on both.
 
 from __future__ import annotations
 
-import ctypes
 import platform
 import time
 from pathlib import Path
@@ -62,14 +61,7 @@ def cpu() -> dict:
     info = {"cpu": f"{platform.machine()} {blas.corename() or ''}".strip()}
     if blas.loaded() is not None:
         return {**info, "mumps_blas": f"scipy-openblas32 {blas.corename()}"}
-    core = None
-    lib = Path(ca.__file__).with_name("libcasadi-tp-openblas.so.0")
-    try:
-        fn = ctypes.CDLL(str(lib)).openblas_get_corename
-        fn.restype = ctypes.c_char_p
-        core = fn().decode()
-    except (OSError, AttributeError):
-        pass
+    core = blas.corename(Path(ca.__file__).with_name(blas.SONAME))
     return {**info, "mumps_blas": f"casadi openblas {core}"}
 
 

@@ -31,12 +31,11 @@ def main() -> int:
     results = json.loads(out.read_text()) if out.exists() else {}
     results.setdefault("sections", {})
     from bench.machine import probe
-    from service.config import get_settings
-    from solver.spacetime import blas
+    from service.config import enable_native_code, get_settings
 
-    settings = get_settings()  # MUMPS on the optimized BLAS, as the service runs it (before any solve)
-    if settings.optimized_blas:
-        blas.enable(settings.compiled_dir)
+    # MUMPS on the optimized BLAS, as the service runs it (before any solve); the sections turn the
+    # compiled derivatives on where they measure them
+    enable_native_code(get_settings().model_copy(update={"compiled_derivatives": False}))
 
     for name in args.only or SECTIONS:
         speed = probe()

@@ -3,6 +3,7 @@ from pathlib import Path
 
 import pytest
 
+from service.config import Settings, enable_native_code
 from service.examples import data_dir
 
 # compiled derivatives (solver.spacetime.compiled) are tested on their own (tests/test_compiled.py);
@@ -11,15 +12,7 @@ os.environ.setdefault("MOTIONX_COMPILED_DERIVATIVES", "0")
 # MUMPS on the optimized BLAS, as in jobs and the CLI (the product's default; CasADi's own OpenBLAS is
 # tested in tests/test_blas.py's child processes): bound before this process first loads IPOPT
 os.environ.setdefault("MOTIONX_OPTIMIZED_BLAS", "1")
-
-
-def _native_code() -> None:
-    from service.config import Settings, enable_native_code
-
-    enable_native_code(Settings())
-
-
-_native_code()
+enable_native_code(Settings())
 SHARED_DATA = data_dir()  # the repository's data/ (or $MOTIONX_DATA)
 
 

@@ -81,8 +81,7 @@ def test_no_compiler_means_off(compile_dir, caplog):
 
 
 def test_settings_turn_it_on_and_off(tmp_path):
-    enable_native_code(Settings(data_dir=tmp_path, compiled_derivatives=True,
-                                         compiled_dir=tmp_path / "cache"))
+    enable_native_code(Settings(data_dir=tmp_path, compiled_derivatives=True, compiled_dir=tmp_path / "cache"))
     try:
         assert compiled.enabled()
         assert Settings(data_dir=tmp_path).compiled_dir.parts[-2:] == ("motionx", "compiled")  # a cache

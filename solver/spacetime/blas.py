@@ -87,10 +87,14 @@ def _enable(cache_dir: Path, compiler: str | None) -> bool:
         return False
 
 
-def corename() -> str | None:
-    """The kernel of the optimized OpenBLAS (None when it is not installed)."""
+def corename(library: Path | None = None) -> str | None:
+    """The kernel an OpenBLAS runs (None when it cannot be asked): the optimized one by default, or
+    the OpenBLAS at ``library`` (unprefixed symbols, e.g. CasADi's own)."""
     try:
-        fn = ctypes.CDLL(str(_target()))[f"{PREFIX}openblas_get_corename"]
+        if library is None:
+            fn = ctypes.CDLL(str(_target()))[f"{PREFIX}openblas_get_corename"]
+        else:
+            fn = ctypes.CDLL(str(library)).openblas_get_corename
         fn.restype = ctypes.c_char_p
         return fn().decode()
     except Exception:
