@@ -311,6 +311,39 @@ def test_page_without_three_says_so_and_keeps_working(api, browser, tutor_id):
         context.close()
 
 
+def test_a_key_entered_while_the_page_starts_is_kept(api, browser, tutor_id):
+    """The page starts with the stored key (none here) once GET /axes has answered. A key a
+    user enters before that answer is theirs: the start must not put the empty key back (on a
+    loaded server /axes answered after the key was submitted, the lists went empty and the job
+    never showed)."""
+    job_id = _start_job(api, tutor_id)
+    assert wait_job(api.a, job_id, timeout=60)["status"] == "succeeded"
+    context = browser.new_context(viewport={"width": 1200, "height": 900})
+    held = []
+    context.route("**/axes", lambda route: held.append(route))  # answered below, after the key
+    page = context.new_page()
+    page.set_default_timeout(TIMEOUT_MS)
+    try:
+        page.goto(f"{api.base_url}/ui/")
+        for _ in range(200):
+            if held:
+                break
+            page.wait_for_timeout(50)
+        assert held, "the page did not ask for /axes"
+        page.fill("#key-input", KEY_A)
+        page.click("#key-form button[type=submit]")
+        page.wait_for_selector(f'#job-list button[data-id="{job_id}"]')
+        held[0].continue_()
+        wait_js(page, "window.motionx.state.jobs.length > 0 && window.motionx.state.keyStatus === 'ok'")
+        page.wait_for_timeout(500)  # the start's late useKey would have emptied the lists by now
+        state = _state(page)
+        assert state["keyStatus"] == "ok" and any(j["id"] == job_id for j in state["jobs"]), state["keyStatus"]
+        page.click(f'#job-list button[data-id="{job_id}"]')
+        wait_js(page, "window.motionx.state.jobStatus === 'succeeded'")
+    finally:
+        context.close()
+
+
 def test_docs_page_is_swagger_ui_from_local_files(api, browser):
     """/docs: Swagger UI from swagger-ui-dist (npm), every request to the API's own host, no
     Content-Security-Policy violation, and the operations of the OpenAPI document listed."""

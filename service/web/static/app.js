@@ -49,6 +49,7 @@ let apiKey = '';
 let jobToken = 0; // bumped on every selection, so late answers for a previous one are dropped
 let motionToken = 0;
 let libraryToken = 0;
+let keyToken = 0; // bumped when the key changes: list answers fetched with an earlier key are dropped
 let lastProgress = [];
 let viewerPromise = null;
 const objectUrls = new Map(); // <img> id -> object URL to revoke
@@ -152,6 +153,7 @@ function useKey(key) {
   jobToken += 1;
   motionToken += 1;
   libraryToken += 1;
+  keyToken += 1;
   Object.assign(state, { motions: [], jobs: [], libraries: [], jobId: null, jobStatus: null, motionId: null,
     libraryId: null, libraryStatus: null, cellKey: null });
   $('job-panel').hidden = $('motion-panel').hidden = $('library-panel').hidden = true;
@@ -173,12 +175,15 @@ function keyFromFragment() {
 // ---------------------------------------------------------------- lists
 
 async function refreshLists() {
+  const token = keyToken;
   try {
     const [motions, jobs, libraries] = await Promise.all([newest('/motions'), newest('/jobs'), newest('/libraries', 50)]);
+    if (token !== keyToken) return;
     state.motions = motions;
     state.jobs = jobs;
     state.libraries = libraries;
   } catch (err) {
+    if (token !== keyToken) return;
     if (!(err instanceof ApiError && err.status === 401)) noteError('lists', err);
     else state.motions = state.jobs = state.libraries = [];
   }
@@ -705,7 +710,11 @@ function start() {
   });
 
   const key = keyFromFragment() ?? localStorage.getItem(KEY_STORAGE) ?? '';
-  loadAxes().finally(() => useKey(key)); // the target words and grid labels come from GET /axes
+  // the target words and grid labels come from GET /axes; a key entered meanwhile is kept
+  const before = keyToken;
+  loadAxes().finally(() => {
+    if (keyToken === before) useKey(key);
+  });
   setInterval(() => {
     if (!document.hidden) refreshLists();
   }, LIST_POLL_MS);
