@@ -333,9 +333,9 @@ def test_a_key_entered_while_the_page_starts_is_kept(api, browser, tutor_id):
         page.fill("#key-input", KEY_A)
         page.click("#key-form button[type=submit]")
         page.wait_for_selector(f'#job-list button[data-id="{job_id}"]')
-        held[0].continue_()
-        wait_js(page, "window.motionx.state.jobs.length > 0 && window.motionx.state.keyStatus === 'ok'")
-        page.wait_for_timeout(500)  # the start's late useKey would have emptied the lists by now
+        with page.expect_response("**/axes"):
+            held[0].continue_()
+        page.wait_for_timeout(500)  # the start's late useKey(stored key) would have emptied the lists by now
         state = _state(page)
         assert state["keyStatus"] == "ok" and any(j["id"] == job_id for j in state["jobs"]), state["keyStatus"]
         page.click(f'#job-list button[data-id="{job_id}"]')
