@@ -58,9 +58,10 @@ def cpu() -> dict:
     MUMPS runs on: CasADi's OpenBLAS (built for CORE2) or scipy-openblas32 (solver.spacetime.blas)."""
     from solver.spacetime import blas
 
-    info = {"cpu": f"{platform.machine()} {blas.corename() or ''}".strip()}
+    kernel = blas.corename()
+    info = {"cpu": f"{platform.machine()} {kernel or ''}".strip()}
     if blas.loaded() is not None:
-        return {**info, "mumps_blas": f"scipy-openblas32 {blas.corename()}"}
+        return {**info, "mumps_blas": f"scipy-openblas32 {kernel}"}
     core = blas.corename(Path(ca.__file__).with_name(blas.SONAME))
     return {**info, "mumps_blas": f"casadi openblas {core}"}
 
