@@ -16,8 +16,10 @@ import numpy as np
 
 from solver.axes import Target, environment_at, guide_at, nlp_at
 from solver.environment import Environment, environment_of
+from solver.jsonable import jsonable
 from solver.motion import Motion
-from solver.spacetime import SolveResult, SpacetimeProblem
+from solver.naturalness import motion_figures
+from solver.spacetime import SolveResult, SpacetimeProblem, Weights
 
 __all__ = ["CancelCheck", "ExtrapolationResult", "ProgressCallback", "ProgressRecord", "StepCallback", "StepControl",
            "StepResult", "Target", "environment_at", "extrapolate", "guide_at", "motion_at", "needs_rising", "nlp_at",
@@ -123,8 +125,17 @@ def _is_tutor(motion: Motion) -> None:
                          "(run the tutor pipeline first)")
 
 
+def gait_reference(tutor: Motion) -> dict[str, Any]:
+    """What a λ optimum's naturalness is judged against besides the published limits: the
+    captured walk's figures (recorded in the tutor) and the tutor's own."""
+    ref = tutor.provenance.get("gait_reference")
+    capture = ref.get("capture") if isinstance(ref, Mapping) else None
+    return {"capture": capture, "tutor": jsonable(motion_figures(tutor))}
+
+
 def _motion(tutor: Motion, lam: float, target: Target, env: Environment, values: Mapping[str, float],
-            res: SolveResult, control: StepControl, step: int, fps: float) -> Motion:
+            res: SolveResult, control: StepControl, step: int, fps: float,
+            reference: Mapping[str, Any] | None = None) -> Motion:
     from solver.plausibility import report
 
     prov = {
@@ -141,6 +152,7 @@ def _motion(tutor: Motion, lam: float, target: Target, env: Environment, values:
     }
     prov["heading_change_deg"] = math.degrees(res.heading_change)
     prov["tutor_heading_change_deg"] = math.degrees(tutor_heading_change(tutor))
+    prov["gait_reference"] = dict(reference) if reference is not None else gait_reference(tutor)
     m = Motion(tutor.character, fps, res.q, contacts=tutor.contacts, wrenches=res.wrenches, provenance=prov,
                interpolation="cubic-spline", cyclic=True)
     return m.evolve(report=report(m))
@@ -176,8 +188,9 @@ class _Walk:
 
     def __init__(self, tutor: Motion, target: Target, control: StepControl, prob: SpacetimeProblem,
                  on_progress: ProgressCallback | None, on_step: StepCallback | None,
-                 should_cancel: CancelCheck | None) -> None:
+                 should_cancel: CancelCheck | None, weights: Weights = Weights()) -> None:
         self.tutor, self.target, self.control, self.prob = tutor, target, control, prob
+        self.weights = weights
         self.on_progress, self.on_step, self.should_cancel = on_progress, on_step, should_cancel
         self.env0 = environment_of(tutor)
         self.t0 = time.perf_counter()
@@ -186,6 +199,7 @@ class _Walk:
         self.solves = 0
         self.dpsi0 = tutor_heading_change(tutor)
         self._guides: dict[float, np.ndarray] = {}
+        self.reference = gait_reference(tutor)
 
     def guide(self, lam: float) -> np.ndarray:
         g = self._guides.get(lam)
@@ -210,16 +224,21 @@ class _Walk:
         """The frame rate at λ: the frame count is fixed, the frame interval follows the axes."""
         return self.tutor.fps / self.nlp(lam)["frame_interval"]
 
-    def accept(self, lam: float, env: Environment, values: Mapping[str, float], res: SolveResult) -> bool:
-        m = _motion(self.tutor, lam, self.target, env, values, res, self.control, len(self.steps), self.fps(lam))
+    def accept(self, lam: float, env: Environment, values: Mapping[str, float], res: SolveResult) -> str:
+        """"" when the optimum is kept (plausible and natural), else why not ("implausible",
+        "unnatural: CHECK, …")."""
+        m = _motion(self.tutor, lam, self.target, env, values, res, self.control, len(self.steps), self.fps(lam),
+                    self.reference)
         if m.report is None or not m.report["plausible"]:
-            return False
+            return "implausible"
+        if not m.report.get("natural", True):
+            return "unnatural: " + ", ".join((m.report.get("naturalness") or {}).get("failed") or [])
         sr = StepResult(len(self.steps), float(lam), m, {"iterations": res.iterations, "solve_s": res.wall_time,
                                                           "status": res.status, "marker_rms_mm": 1e3 * res.marker_rms})
         self.steps.append(sr)
         if self.on_step:
             self.on_step(sr)
-        return True
+        return ""
 
     def finish(self, status: str, lam: float, message: str = "") -> ExtrapolationResult:
         return ExtrapolationResult(status, float(lam), tuple(self.steps), tuple(self.records), self.solves,
@@ -240,7 +259,8 @@ class _Walk:
         try:
             eff = self.nlp(lam)
             dpsi = self.dpsi0 + math.radians(eff["heading_change_deg"])
-            res = self.prob.solve(guide, env=env, frame_interval=self.prob.dt * eff["frame_interval"],
+            res = self.prob.solve(guide, env=env, weights=self.weights,
+                                  frame_interval=self.prob.dt * eff["frame_interval"],
                                   init_q=init[0], init_wrenches=init[1], max_iter=max_iter,
                                   heading_change=dpsi, should_stop=self.should_cancel,
                                   lam_x0=warm_from.lam_x if warm and warm_from is not None else None,
@@ -263,14 +283,15 @@ class _Walk:
             env, values = environment_at(self.env0, self.target, 0.0)
             res = SolveResult(True, "tutor", 0, 0.0, tut.q, tut.wrenches, math.nan, 0.0, None, None, 0.0,
                               heading_change=self.dpsi0)
-            ok = self.accept(0.0, env, values, res)
-            self.record(0.0, values, res, ok, "tutor", 0.0)
-            if ok:
+            why = self.accept(0.0, env, values, res)
+            self.record(0.0, values, res, not why, "tutor" if not why else f"tutor {why}", 0.0)
+            if not why:
                 return _State(0.0, res)
         solved, ok, status, env, values = self.solve(0.0, (tut.q, tut.wrenches), None,
                                                      max(self.control.max_iter, 500), guide=tut.q)
-        ok = ok and solved is not None and self.accept(0.0, env, values, solved)
-        self.record(0.0, values, solved, ok, status, 0.0)
+        why = "" if not ok or solved is None else self.accept(0.0, env, values, solved)
+        ok = ok and solved is not None and not why
+        self.record(0.0, values, solved, ok, why or status, 0.0)
         return _State(0.0, solved) if ok and solved is not None else None
 
     def run(self, history: list[_State], lam_end: float) -> ExtrapolationResult:
@@ -304,7 +325,8 @@ class _Walk:
                 warm_from = history[-1].res if use_warm else None
                 res, ok, status, env, values = self.solve(lam_try, init, warm_from, c.max_iter,
                                                           restart_mu=c.restart_mu if adaptive else None)
-            if ok and self.accept(lam_try, env, values, res):  # type: ignore[arg-type]
+            why = self.accept(lam_try, env, values, res) if ok else ""  # type: ignore[arg-type]
+            if ok and not why:
                 self.record(lam_try, values, res, True, status, lam_try)
                 step = lam_try - lam
                 last_step = step
@@ -322,7 +344,7 @@ class _Walk:
                 else:
                     delta = 2.0 * delta
             else:
-                self.record(lam_try, values, res, False, status if not ok else "implausible", lam)
+                self.record(lam_try, values, res, False, why or status, lam)
                 if adaptive:
                     cap = 0.9 * delta  # do not retry this size right after success (the thesis does)
                 delta /= 2.0
@@ -349,13 +371,15 @@ def extrapolate(
     problem: SpacetimeProblem | None = None,
     lam_end: float = 1.0,
     start: tuple[float, Motion] | None = None,
+    weights: Weights = Weights(),
 ) -> ExtrapolationResult:
     """Walk the homotopy from the base problem (λ = 0, solved by the tutor) to the target.
 
     Every accepted λ is a plausible motion (``on_step``); every solve, accepted or not, is a
     progress record (``on_progress``). An impasse (Δ < ε) and a cancellation are results.
     ``start=(λ0, optimum)`` continues the same homotopy from a stored optimum instead of
-    solving the base problem; ``lam_end`` stops the walk early.
+    solving the base problem; ``lam_end`` stops the walk early; ``weights``: the NLP's cost
+    weights (those the tutor was made with, by default the same defaults).
     """
     from solver.pipeline import problem_for
 
@@ -367,7 +391,7 @@ def extrapolate(
         raise ValueError(f"the problem given was built with rising={problem.rising}, the target needs "
                          f"rising={rising} (continuation.needs_rising)")
     prob = problem or problem_for(tutor.character, tutor.T, tutor.fps, tutor.contacts, rising=rising)
-    walk = _Walk(tutor, target, control, prob, on_progress, on_step, should_cancel)
+    walk = _Walk(tutor, target, control, prob, on_progress, on_step, should_cancel, weights)
     if start is not None:
         lam0, m0 = start
         if not 0.0 <= lam0 < lam_end:

@@ -24,10 +24,13 @@ import numpy as np
 from solver.capture import Capture, GroundFrame
 from solver.character import FULL_SUPERFLUOUS, LOWER_SUPERFLUOUS, Character, merge_segments
 from solver.contact import estimate_contact_wrenches
-from solver.environment import STANDARD_GRAVITY_VECTOR
-from solver.gait import extract_cycle
+from solver.environment import STANDARD_GRAVITY, STANDARD_GRAVITY_VECTOR
+from solver.gait import ensure_double_support, extract_cycle
+from solver.io.fit import CONTACT_INSET
+from solver.jsonable import jsonable
 from solver.kinematics import contact_points, markers
 from solver.motion import Motion, foot_schedule_of
+from solver.naturalness import against_plates, capture_figures, joint_rms_deg
 from solver.plausibility import report
 from solver.spacetime import Environment, SolveResult, SpacetimeProblem, Weights
 
@@ -49,23 +52,6 @@ class TutorResult:
     stats: Mapping[str, Any] = field(default_factory=dict)
     simplified: Motion | None = None
     last_iterate: Mapping[str, Any] | None = None  # failed solves only: kept apart, not a solution
-
-
-def jsonable(x: Any) -> Any:
-    """Numpy-free, finite JSON data (non-finite floats become None)."""
-    if isinstance(x, Mapping):
-        return {str(k): jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return jsonable(x.tolist())
-    if isinstance(x, (np.floating, float)):
-        return float(x) if math.isfinite(float(x)) else None
-    if isinstance(x, (np.integer,)):
-        return int(x)
-    if isinstance(x, (np.bool_,)):
-        return bool(x)
-    return x
 
 
 def _shifted_frame(frame: GroundFrame, h: float) -> GroundFrame:
@@ -150,11 +136,13 @@ def simplify(capture_character: Character, q_capture: np.ndarray, synthesis: Cha
 
 def correct(synthesis: Character, q_sim: np.ndarray, contacts: np.ndarray, fps: float, *,
             init_wrenches: np.ndarray | None, env: Environment = Environment(),
-            weights: Weights = Weights(), max_iter: int = 1000, heading_change: float | None = None) -> SolveResult:
-    """Table 5.3: physically plausible motion closest to the simplified one (the tutor)."""
+            weights: Weights = Weights(), max_iter: int = 1000, heading_change: float | None = None,
+            prior_q: np.ndarray | None = None) -> SolveResult:
+    """Table 5.3: physically plausible motion closest to the simplified one (the tutor);
+    ``prior_q``: the joint angles the coordinates prior keeps it near (default: the simplified's)."""
     problem = problem_for(synthesis, q_sim.shape[1], fps, contacts)
     return problem.solve(q_sim, init_q=q_sim, init_wrenches=init_wrenches, env=env, weights=weights,
-                         max_iter=max_iter, heading_change=heading_change)
+                         max_iter=max_iter, heading_change=heading_change, prior_q=prior_q)
 
 
 def tutor_heading_change(q_capture: np.ndarray, q_simplified: np.ndarray) -> float:
@@ -218,6 +206,65 @@ def contact_plane_calibration(character: Character, q: np.ndarray, contacts: np.
     return out, h
 
 
+#: a foot's heel and toe contact points more than this apart in height at flat foot are levelled (m)
+SOLE_LEVEL_TOL = 0.003
+
+
+def sole_calibration(character: Character, q: np.ndarray, contacts: np.ndarray) -> tuple[Character, dict]:
+    """Level each foot's sole: heel and toe contact points at the same height while the foot is
+    flat on the ground (the frames where both are in contact).
+
+    The capture skeleton's sole is the line through its heel and toe landmarks (foot frame
+    ``x``); where the landmarks sit at different heights above the real sole (a retargeted
+    skeleton, markers on the shoe), a flat foot stands on its heel or toe point alone, and
+    heel rise and toe clearance mean nothing. The two points are moved in opposite directions
+    along the foot's vertical axis (by half the median difference each) and the foot box
+    follows (its bottom stays 1 cm below the lower point). Returns the character and what was
+    moved, per foot (mm)."""
+    from dataclasses import replace
+
+    from solver.kinematics import segment_frames
+
+    A = np.asarray(contacts, dtype=bool)
+    N = A.shape[1] - 2 if A.shape[1] > 4 else A.shape[1]
+    cp = contact_points(character, q)
+    rots, _ = segment_frames(character, q)
+    names = [sg.name for sg in character.segments]
+    pts = list(character.contacts)
+    feet = list(character.feet)
+    moved: dict[str, float] = {}
+    for side in ("right", "left"):
+        idx = sorted((j for j, c in enumerate(pts) if c.side == side), key=lambda j: float(pts[j].position[0]))
+        if len(idx) != 2:
+            continue
+        heel, toe = idx
+        if pts[heel].segment != pts[toe].segment:
+            continue
+        flat = A[heel, :N] & A[toe, :N]
+        if flat.sum() < 2:
+            continue
+        dz = float(np.median(cp[heel, 2, :N][flat] - cp[toe, 2, :N][flat]))
+        if abs(dz) < SOLE_LEVEL_TOL:
+            continue
+        seg = pts[heel].segment
+        kz = float(np.median(rots[names.index(seg), 2, 2, :N][flat]))  # world z of the segment's z axis
+        if kz < 0.5:
+            continue
+        s_ = 0.5 * dz / kz
+        pts[heel] = replace(pts[heel], position=np.asarray(pts[heel].position) - np.array([0.0, 0.0, s_]))
+        pts[toe] = replace(pts[toe], position=np.asarray(pts[toe].position) + np.array([0.0, 0.0, s_]))
+        for i, f in enumerate(feet):
+            if f.side == side:
+                top = float(f.center[2] + f.half[2])
+                bottom = min(float(pts[heel].position[2]), float(pts[toe].position[2])) - CONTACT_INSET
+                feet[i] = replace(f, center=np.array([f.center[0], f.center[1], 0.5 * (top + bottom)]),
+                                  half=np.array([f.half[0], f.half[1], 0.5 * (top - bottom)]))
+        moved[side] = 1e3 * dz
+    if not moved:
+        return character, {}
+    return replace(character, contacts=tuple(pts), feet=tuple(feet)), {"heel_above_toe_mm": moved}
+
+
 def make_tutor(
     source: Capture | Motion,
     *,
@@ -226,9 +273,10 @@ def make_tutor(
     cycle: int = 0,
     start: str = "auto",
     max_iter: int = 1000,
+    weights: Weights = Weights(),
 ) -> TutorResult:
     """import → cycle → simplify → estimate → correct. ``source`` is a Capture, or a motion of
-    step "capture" (e.g. stored by the service)."""
+    step "capture" (e.g. stored by the service); ``weights``: the correction's cost weights."""
     t_start = time.perf_counter()
     capture = motion_capture(source) if isinstance(source, Motion) else source
     if not (math.isfinite(fps) and fps > 0):
@@ -236,17 +284,23 @@ def make_tutor(
     stats: dict[str, Any] = {}
     t = time.perf_counter()
     cyc, contacts = extract_cycle(capture, fps, start=start, cycle=cycle)
-    mean_pose = dict(zip(capture.character.coordinate_names, np.mean(cyc.q[:, :-2], axis=1)))
-    syn, cap_char = synthesis_character(capture.character, character, pose=mean_pose)
     contacts = np.array(contacts, dtype=bool)
     contacts[:, -2:] = contacts[:, :2]  # the overlap frames repeat frames 1-2
+    mean_pose = dict(zip(capture.character.coordinate_names, np.mean(cyc.q[:, :-2], axis=1)))
+    levelled, soles = sole_calibration(capture.character, cyc.q, contacts)
+    if soles:
+        stats["sole_calibration"] = soles
+    syn, cap_char = synthesis_character(levelled, character, pose=mean_pose)
     stats["cycle_s"] = time.perf_counter() - t
-    q_cap = _select(capture.character, cyc.q, cap_char)
+    q_cap = _select(levelled, cyc.q, cap_char)
     q_cap, shift = contact_plane_calibration(cap_char, q_cap, contacts)
     stats["contact_plane_shift_mm"] = 1e3 * shift
+    contacts, shared = ensure_double_support(cap_char, q_cap, contacts)
+    if shared:
+        stats["double_support_added"] = shared
 
     t = time.perf_counter()
-    simp = simplify(cap_char, q_cap, syn, fps)
+    simp = simplify(cap_char, q_cap, syn, fps, weights=weights)
     stats["simplify"] = {"status": simp.status, "iterations": simp.iterations, "time_s": time.perf_counter() - t,
                          "marker_rms_mm": 1e3 * simp.marker_rms}
     if not simp.success:
@@ -269,12 +323,14 @@ def make_tutor(
     stats["heading_change_deg"] = {"capture": math.degrees(float(q_cap[3, -2] - q_cap[3, 0])),
                                    "simplified": math.degrees(float(q_sim[3, -2] - q_sim[3, 0])),
                                    "tutor": math.degrees(dpsi)}
-    res = correct(syn, q_sim, contacts, fps, init_wrenches=w0, env=env, max_iter=max_iter, heading_change=dpsi)
+    q_joints = _select(cap_char, q_cap, syn)  # the capture's own angles: what the tutor keeps of its details
+    res = correct(syn, q_sim, contacts, fps, init_wrenches=w0, env=env, max_iter=max_iter, heading_change=dpsi,
+                  weights=weights, prior_q=q_joints)
     attempts.append({"init": "estimated wrenches", "status": res.status, "iterations": res.iterations,
                      "time_s": res.wall_time})
     if not res.success:
         res2 = correct(syn, q_sim, contacts, fps, init_wrenches=None, env=env, max_iter=max_iter,
-                       heading_change=dpsi)
+                       heading_change=dpsi, weights=weights, prior_q=q_joints)
         attempts.append({"init": "zero wrenches", "status": res2.status, "iterations": res2.iterations,
                          "time_s": res2.wall_time})
         res = res2 if res2.success else res
@@ -297,6 +353,14 @@ def make_tutor(
     dist = np.linalg.norm(mk_tut - mk_cap, axis=1)
     stats["marker_distance_to_capture_mm"] = {"mean": 1e3 * float(dist.mean()), "max": 1e3 * float(dist.max())}
     stats["marker_distance_to_simplified_mm"] = 1e3 * res.marker_rms
+    # the capture's own gait features (naturalness checks are judged against them too), how far the
+    # tutor's joints moved from the capture's, and its ground reactions against the plates
+    stats["joint_rms_to_capture_deg"] = joint_rms_deg(syn, res.q, cap_char, q_cap)
+    stats["joint_rms_simplified_to_capture_deg"] = joint_rms_deg(syn, q_sim, cap_char, q_cap)
+    assert res.wrenches is not None  # a dynamic solve
+    plates = against_plates(res.wrenches[:, 3:], cyc.measured, res.q, syn.total_mass * STANDARD_GRAVITY)
+    if plates:
+        stats["grf_against_plates"] = plates
     tutor = Motion(
         syn, fps, res.q, contacts=contacts, wrenches=res.wrenches, interpolation="cubic-spline", cyclic=True,
         provenance=jsonable({
@@ -309,6 +373,7 @@ def make_tutor(
             "solver": {"name": "ipopt", "status": res.status, "iterations": res.iterations,
                        "time_s": res.wall_time},
             "pipeline": stats,
+            "gait_reference": {"capture": capture_figures(cap_char, q_cap, fps, contacts, cyc.measured)},
         }),
     )
     tutor = tutor.evolve(report=report(tutor))

@@ -20,6 +20,8 @@ from solver.environment import body_weight, ground_of
 from solver.environment import environment_of as _environment_of
 from solver.kinematics import contact_points, segment_frames, standing_leg_length
 from solver.motion import FEET, Motion
+from solver.naturalness import naturalness_report
+from solver.naturalness import problem_lines as naturalness_lines
 from solver.realism import RealismLimits, problem_lines, realism_report
 from solver.trajectory import dynamics_samples
 
@@ -120,6 +122,12 @@ def report(motion: Motion, tol: Tolerances = Tolerances(), realism: RealismLimit
     out["checks"] = checks
     out["problems"] = problems + problem_lines(real)
     out["plausible"] = not failed
+    # the naturalness section (solver.naturalness): the gait's human features, against published
+    # limits and the captured walk's own figures; its failures make the motion not ``natural``
+    nat = naturalness_report(motion)
+    out["naturalness"] = nat
+    out["natural"] = bool(nat["passed"])
+    out["problems"] += naturalness_lines(nat)
     return out
 
 
@@ -206,7 +214,11 @@ def summary(rep: Mapping[str, Any]) -> str:
     r = rep["root_residual"]
     real = rep.get("realism") or {}
     failed = real.get("failed") or []
-    return (f"plausible={rep['plausible']} root residual {r['max_force_N']:.2e} N / {r['max_moment_Nm']:.2e} N·m "
-            f"(rel {r['max_force_rel_weight']:.1e}), slip {rep.get('slip_mm', float('nan')):.3f} mm, "
-            f"penetration {rep.get('penetration_mm', float('nan')):.3f} mm, realism "
-            + ("passed" if real.get("passed") else f"failed ({', '.join(failed) or 'not checked'})"))
+    nat = rep.get("naturalness") or {}
+    unnatural = ", ".join(nat.get("failed") or [])
+    return (f"plausible={rep['plausible']} natural={rep.get('natural')} root residual {r['max_force_N']:.2e} N / "
+            f"{r['max_moment_Nm']:.2e} N·m (rel {r['max_force_rel_weight']:.1e}), "
+            f"slip {rep.get('slip_mm', float('nan')):.3f} mm, "
+            f"penetration {rep.get('penetration_mm', float('nan')):.3f} mm, "
+            "realism " + ("passed" if real.get("passed") else f"failed ({', '.join(failed) or 'not checked'})")
+            + ", naturalness " + ("passed" if nat.get("passed", True) else f"failed ({unnatural})"))

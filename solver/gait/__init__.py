@@ -5,6 +5,7 @@
     detect_contacts(character, q, fps, ...) -> (P, T) bool               (solver.gait.contacts)
     contacts_from_plates(measured, *, threshold=20.0, ...) -> (P, T) bool (solver.gait.contacts)
     gait_events(contacts, times) -> dict                                  (solver.gait.contacts)
+    ensure_double_support(character, q, contacts) -> (contacts, changes)  (solver.gait.contacts)
     extract_cycle(capture, fps=None, *, start=..., contacts=None, cycle=0)
         -> (Capture, contacts (P, T))                                     (solver.gait.cycles)
     unroll_loop(capture, repeats=2) -> Capture                            (solver.gait.cycles)
@@ -19,7 +20,7 @@ which re-exports this package), an :class:`solver.errors.InputError`. The treadm
 
 from solver.gait.base import GaitError, PreprocessError, lowpass, resample, unwrap_hinges
 from solver.gait.belt import belt_speed
-from solver.gait.contacts import contacts_from_plates, detect_contacts, gait_events
+from solver.gait.contacts import contacts_from_plates, detect_contacts, ensure_double_support, gait_events
 from solver.gait.cycles import LOOP_PERIOD_S, extract_cycle, unroll_loop
 
 __all__ = [
@@ -29,6 +30,7 @@ __all__ = [
     "belt_speed",
     "contacts_from_plates",
     "detect_contacts",
+    "ensure_double_support",
     "extract_cycle",
     "gait_events",
     "lowpass",

@@ -192,3 +192,53 @@ def gait_events(contacts: np.ndarray, times: np.ndarray) -> dict[str, list[float
         out[f"{side}_heel_strike"] = [float(t[i + 1]) for i in np.where(d == 1)[0]]
         out[f"{side}_toe_off"] = [float(t[i]) for i in np.where(d == -1)[0]]
     return out
+
+
+def ensure_double_support(character: Character, q: np.ndarray, contacts: np.ndarray, *,
+                          height_tol: float = 0.03) -> tuple[np.ndarray, list[dict]]:
+    """A gait cycle's schedule (P, T, frames T−2, T−1 repeating frames 0, 1) with at least one
+    frame of double support at every change of support.
+
+    At a coarse frame rate a double support shorter than a frame can vanish: one foot's last
+    contact frame is the frame before the other's first (the DeepMimic walk at 15 frames/s).
+    The change of support is then given one shared frame — the leading foot's heel a frame
+    earlier or the trailing foot's toe a frame later, whichever point is lower at that frame
+    (and within ``height_tol`` of its stance height, the median of its heights in contact).
+    Walking keeps both feet loaded at every change of support (Perry; Winter: ~10 % of the
+    cycle each), which the optimizer's shared-load bounds need frames for. Returns the
+    schedule and what was changed."""
+    A = np.array(contacts, dtype=bool, copy=True)
+    T = A.shape[1]
+    N = T - 2
+    if N < 4 or A.shape[0] != len(character.contacts):
+        return A, []
+    cp = contact_points(character, q)
+    rows = {s: [i for i, c in enumerate(character.contacts) if c.side == s] for s in ("right", "left")}
+    heel = {s: min(r, key=lambda i: character.contacts[i].position[0]) for s, r in rows.items()}
+    toe = {s: max(r, key=lambda i: character.contacts[i].position[0]) for s, r in rows.items()}
+
+    def foot(s: str) -> np.ndarray:
+        return np.asarray(A[rows[s], :N].any(axis=0))
+
+    changes = []
+    for lead, trail in (("right", "left"), ("left", "right")):
+        fl, ft = foot(lead), foot(trail)
+        for a in range(N):
+            if not (fl[a] and not fl[a - 1]):  # a touch-down of the leading foot at frame a
+                continue
+            if ft[a] or not ft[a - 1]:  # already shared, or a flight phase: left as it is
+                continue
+            cands = []
+            for i, t in ((heel[lead], (a - 1) % N), (toe[trail], a % N)):
+                on = A[i, :N]
+                stance_z = float(np.median(cp[i, 2, :N][on])) if on.any() else 0.0
+                dz = float(cp[i, 2, t]) - stance_z
+                if dz < height_tol:
+                    cands.append((dz, i, t))
+            if not cands:
+                continue
+            dz, i, t = min(cands)
+            A[i, t] = True
+            changes.append({"point": character.contacts[i].name, "frame": int(t), "height_above_stance_m": dz})
+    A[:, N:] = A[:, :2]
+    return A, changes

@@ -11,6 +11,7 @@ velocities v, the segment [a, b] of duration h is the Hermite cubic of (q_a, v_a
 
 from __future__ import annotations
 
+import math
 import time
 import weakref
 from typing import ClassVar
@@ -23,11 +24,14 @@ from solver.character import Character
 from solver.dynamics import casadi_functions
 from solver.kinematics import forward_kinematics, marker_points, markers, point_world, standing_leg_length
 from solver.motion import FEET
+from solver.naturalness import trunk_axis
 from solver.spacetime import compiled
 from solver.spacetime.derivatives import jacobian, lagrangian_hessian
-from solver.spacetime.types import STANDARD_GRAVITY, Realism
+from solver.spacetime.types import STANDARD_GRAVITY, Naturalness, Realism
 
-FOOT_ROWS = 11  # per foot: friction cone, 6 CoP half-spaces, 2 torsion, 2 free-moment cap
+FOOT_ROWS = 15  # per foot: friction cone, 6 CoP half-spaces, 2 torsion, 2 free-moment cap, pitch under load,
+#   push toward the centre of mass, fore-aft force cap (2)
+SOLE_CORNERS = 4  # per foot: the drawn sole's corners (heel and toe ends, both edges)
 CONE_EPS = 1e-4  # smoothing of the friction cone's norm (scaled force units)
 
 
@@ -42,13 +46,16 @@ class FrameFunctions:
 
     #: name -> (number of variable inputs, number of them the Hessian involves)
     VARS: ClassVar[dict[str, tuple[int, int]]] = {
-        "cost": (1, 1), "acc": (3, 3), "z": (1, 1), "slip": (2, 2), "feet": (2, 2), "seg": (6, 4), "c2": (5, 5),
-            "jerk": (4, 4), "wrate": (2, 2), "frate": (2, 2), "smooth": (3, 3)}
+        "cost": (1, 1), "acc": (3, 3), "z": (1, 1), "sole": (1, 1), "slip": (2, 2), "feet": (2, 2), "seg": (6, 4),
+        "c2": (5, 5), "jerk": (4, 4), "wrate": (2, 2), "frate": (2, 2), "smooth": (3, 3), "wcom": (1, 1),
+        "cross": (1, 1), "lean": (1, 1)}
 
-    def __init__(self, character: Character, realism: Realism = Realism()) -> None:
+    def __init__(self, character: Character, realism: Realism = Realism(),
+                 naturalness: Naturalness = Naturalness()) -> None:
         t0 = time.perf_counter()
         ch = self.character = character
         self.realism = realism
+        self.naturalness = naturalness
         n = self.n = ch.n
         model = ch.model
         self.n_markers = len(marker_points(ch))
@@ -66,16 +73,20 @@ class FrameFunctions:
             pts.append(ca.vertcat(*point_world(pose, b, pb)))
         self.kin = ca.Function("kin", [q], [mk, ca.vertcat(*pts) if pts else ca.SX(0, 1)])
 
-        # objective of a frame: wts = (markers, singularity, joint coordinates prior, root rotations prior)
+        # objective of a frame: wts = (markers, singularity, joint coordinates prior, root rotations prior,
+        # joint-range prior beyond [lo, hi])
         gm = ca.SX.sym("gm", 3 * self.n_markers)
-        wts = ca.SX.sym("wts", 4)
+        wts = ca.SX.sym("wts", 5)
         gq = ca.SX.sym("gq", n)
+        lo_, hi_ = ca.SX.sym("lo", n), ca.SX.sym("hi", n)
         cost = wts[0] * ca.sumsqr(mk - gm) + wts[2] * ca.sumsqr(q[6:] - gq[6:]) + wts[3] * ca.sumsqr(q[3:6] - gq[3:6])
+        if n > 6:  # the joint-range prior (bounds per coordinate: ``Layout.joint_range``)
+            cost += wts[4] * sum(ca.fmax(0, q[i] - hi_[i]) ** 2 + ca.fmax(0, lo_[i] - q[i]) ** 2 for i in range(6, n))
         sing = list(ch.singular_dofs)
         if sing:
             cost += wts[1] * sum((1 - ca.cos(2 * q[i])) / 2 for i in sing)
         self.n_sing = len(sing)
-        self.cost = ca.Function("cost", [q, gm, gq, wts], [cost])
+        self.cost = ca.Function("cost", [q, gm, gq, wts, lo_, hi_], [cost])
         self.marker_cost = ca.Function("marker_cost", [q, gm], [ca.sumsqr(mk - gm)])
         # kinematic fit: squared second difference of the rotations over three frames (rad)
         qm_, qp_, ws_ = ca.SX.sym("qm", n), ca.SX.sym("qp", n), ca.SX.sym("ws")
@@ -94,9 +105,9 @@ class FrameFunctions:
     def functions(self) -> dict[str, ca.Function]:
         out = {"cost": self.cost, "acc": self.acc}
         if self.has_contacts:
-            out.update({"z": self.z, "slip": self.slip, "feet": self.feet, "seg": self.seg, "c2": self.c2,
-                        "jerk": self.jerk, "wrate": self.wrate, "frate": self.frate,
-                        "smooth": self.smooth})
+            out.update({"z": self.z, "sole": self.sole, "slip": self.slip, "feet": self.feet, "seg": self.seg,
+                        "c2": self.c2, "jerk": self.jerk, "wrate": self.wrate, "frate": self.frate,
+                        "smooth": self.smooth, "wcom": self.wcom, "cross": self.cross, "lean": self.lean})
         return out
 
     # --- contact rows ---------------------------------------------------------------------
@@ -117,8 +128,43 @@ class FrameFunctions:
         model = ch.model
         rl = self.realism
         self._foot_indices()
+        self._rest_points = np.asarray(self.kin(np.zeros(ch.n))[1]).reshape(-1, 3)  # contact points at q = 0
         gnd = ca.SX.sym("ground", self.P)
         self.z = ca.Function("z", [q, gnd], [ca.vertcat(*[p[2] for p in pts]) - gnd])  # height above the ground
+        # the drawn sole's corners (solver.naturalness.sole_corners): heights above the ground under
+        # each foot (its heel point's), SOLE_CORNERS rows per foot
+        corners = []
+        for side in FEET:
+            half_w = float(ch.foot(side).half[1])
+            for j in (self.heel_of[side], self.toe_of[side]):
+                c = ch.contacts[j]
+                for sgn in (-1.0, 1.0):
+                    b, pb = model.point_on_body(c.segment, np.asarray(c.position) + np.array([0.0, sgn * half_w, 0.0]))
+                    corners.append(point_world(pose, b, pb)[2] - gnd[self.heel_of[side]])
+        self.sole = ca.Function("sole", [q, gnd], [ca.vertcat(*corners)])
+        # [naturalness] how far each foot (the mean of its contact points) stands on the far side of
+        # the pelvis across the direction of travel (a per-frame parameter): right foot, left foot
+        th = ca.SX.sym("path")
+        left = ca.vertcat(-ca.sin(th), ca.cos(th))
+        far = []
+        for sgn, side in ((1.0, "right"), (-1.0, "left")):
+            c = (pts[self.heel_of[side]][:2] + pts[self.toe_of[side]][:2]) / 2
+            far.append(sgn * ca.dot(c - q[:2], left))
+        self.cross = ca.Function("cross", [q, th], [ca.vertcat(*far)])
+        # [naturalness] the trunk's lean against gravity in the sagittal plane of the direction of
+        # travel (sine; + forward), and its prior toward a target per frame (the guide's)
+        seg, trunk_local = trunk_axis(ch)
+        body = model.seg_body[seg]
+        rot = sp.matmul(pose.rot[body], sp.const_mat(model.seg_rot[seg]))
+        u = ca.vertcat(*[sum(rot[i][j] * float(trunk_local[j]) for j in range(3)) for i in range(3)])
+        g = ca.SX.sym("g", 3)
+        up = -g / ca.norm_2(g)
+        fwd = ca.vertcat(ca.cos(th), ca.sin(th), 0)
+        fp = fwd - up * ca.dot(up, fwd)
+        sin_lean = ca.dot(u, fp / ca.norm_2(fp))
+        self.lean_of = ca.Function("lean_of", [q, g, th], [sin_lean])
+        target, wl = ca.SX.sym("target"), ca.SX.sym("wl")
+        self.lean = ca.Function("lean", [q, g, th, target, wl], [wl * (sin_lean - target) ** 2])
 
         # no slip between consecutive frames (x, y of pinned points; the toe's sideways
         # component when the heel is pinned too), and no spin of each foot about the vertical
@@ -143,6 +189,8 @@ class FrameFunctions:
         w = ca.SX.sym("w", 12)
         mu = ca.SX.sym("mu")
         ref = ca.SX.sym("ref", 6)  # per foot: the reference point (x, y, ground height)
+        com = ca.SX.sym("com", 3)  # the frame's centre of mass
+        path, fa_cap = ca.SX.sym("path"), ca.SX.sym("fa_cap")  # direction of travel; fore-aft force bound
         L = self.length_scale
         rows = []
         for k, side in enumerate(FEET):
@@ -171,8 +219,23 @@ class FrameFunctions:
             rows += [ktor * mu * fs[2] ** 2 - nf, ktor * mu * fs[2] ** 2 + nf]
             cap = rl.free_moment_cap / L
             rows += [cap * fs[2] - nf, cap * fs[2] + nf]
+            # [naturalness] a loaded foot is not pitched far onto its toe: f_z (sin p − sin p_free) ≤ C
+            ph, pt = pts[self.heel_of[side]], pts[self.toe_of[side]]
+            d0 = float(np.linalg.norm(self._rest_points[self.toe_of[side]] - self._rest_points[self.heel_of[side]]))
+            sin_p = (ph[2] - pt[2]) / d0
+            nt = self.naturalness
+            rows.append(nt.pitch_coefficient - fs[2] * (sin_p - math.sin(math.radians(nt.pitch_free_deg))))
+            # [naturalness] the ground pushes the body: the foot's horizontal force does not point away
+            # from the centre of mass (a parameter), beyond push_margin × f_z × leg (in double support
+            # the feet would otherwise squeeze the ground between them)
+            d = (com[:2] - ref[3 * k : 3 * k + 2]) / L
+            rows.append(fs[0] * d[0] + fs[1] * d[1] + nt.push_margin * fs[2])
+            # [naturalness] the fore-aft force along the direction of travel within ± fa_cap (BW; a
+            # parameter: ``Naturalness.fore_aft`` on level ground, unbounded elsewhere)
+            f_fwd = fs[0] * ca.cos(path) + fs[1] * ca.sin(path)
+            rows += [fa_cap - f_fwd, fa_cap + f_fwd]
         rows.append(rl.support_max - w[5] - w[11])
-        self.feet = ca.Function("feet", [q, w, mu, ref], [ca.vertcat(*rows)])  # 2 * FOOT_ROWS + 1
+        self.feet = ca.Function("feet", [q, w, mu, ref, com, path, fa_cap], [ca.vertcat(*rows)])  # 2 * FOOT_ROWS + 1
 
     # --- spline segments --------------------------------------------------------------------
     def _segment_functions(self) -> None:
@@ -246,6 +309,19 @@ class FrameFunctions:
         self.wrate = ca.Function("wrate", [wa, wb, turn, ww], [ww * ca.sumsqr(dw)])
         dF = rz(turn, wb[3:6] + wb[9:12]) - (wa[3:6] + wa[9:12])
         self.frate = ca.Function("frate", [wa, wb, turn], [ca.sumsqr(dF)])
+
+        # [naturalness] each foot's ground reaction points at the centre of mass: the squared moment
+        # of each foot's (scaled) wrench about the frame's centre of mass (a parameter). In single
+        # support it is the rate of the whole body's angular momentum, which walking keeps small;
+        # in double support it takes the split the optimum is otherwise free to choose (the feet
+        # squeezing the ground between them costs nothing else) toward legs pushing along their
+        # length: the leading foot braking, the trailing one propelling
+        wcw, com_k = ca.SX.sym("wcw"), ca.SX.sym("com", 3)
+        mc = ca.SX(0)
+        for k in range(2):
+            lever = (ra[3 * k : 3 * k + 3] - com_k) / self.length_scale
+            mc += ca.sumsqr(wa[6 * k : 6 * k + 3] + ca.cross(lever, wa[6 * k + 3 : 6 * k + 6]))
+        self.wcom = ca.Function("wcom", [wa, ra, com_k, wcw], [wcw * mc])
 
         # second difference over three frames of the total ground force and of its moment about
         # the centre of mass (per-frame parameter): whole-body Newton–Euler from positions sees

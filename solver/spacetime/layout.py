@@ -11,7 +11,7 @@ import numpy as np
 
 from solver.kinematics import centre_of_mass, contact_points, markers
 from solver.motion import FEET, foot_schedule_of
-from solver.spacetime.types import Environment, Weights
+from solver.spacetime.types import STANDARD_GRAVITY, Environment, Weights
 
 MARKER_SCALE = 0.01  # m: the objective is in units of (1 cm)²
 #: time scale of the rate costs (s): the jerk cost is the mean over the cycle of
@@ -137,13 +137,44 @@ class Layout:
             put(Tn - 1, 0, dpsi)
         return out
 
-    def bounds(self, locks: Mapping[int, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def shared_load_frames(self) -> list[int]:
+        """Frames (1..T−2) where both feet must carry a share of the load: the middle of every
+        double support of the cycle (a run of one or two frames: all of it; longer: its inner
+        frames)."""
+        B = self.foot_contact()
+        N = self.T - 2
+        if N < 2 or not self.eom_frames:
+            return []
+        both = B[0, :N] & B[1, :N]
+        out: list[int] = []
+        if both.all():
+            return []
+        k0 = int(np.flatnonzero(~both)[0])
+        t = k0
+        while t < k0 + N:
+            if both[t % N]:
+                a = t
+                while both[t % N] and t < k0 + N:
+                    t += 1
+                run = [u % N for u in range(a, t)]
+                out += run if len(run) <= 2 else run[1:-1]
+            else:
+                t += 1
+        return sorted(u if u >= 1 else N for u in out)
+
+    def bounds(self, locks: Mapping[int, float] | None = None, shared_load: float = 0.0
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """Variable bounds: joint limits (``Naturalness.limit_margin_deg`` inside the model's), locks,
+        feet not in contact carry nothing, f_z ≥ 0 and,
+        at ``shared_load_frames``, f_z ≥ ``shared_load`` (scaled: body weights of standard gravity)."""
         lbx = np.full(self.nx, -np.inf)
         ubx = np.full(self.nx, np.inf)
         lo, hi = self.character.lower, self.character.upper
+        margin = np.radians(self.ff.naturalness.limit_margin_deg)  # a joint is not held at its limit
         for i in range(self.n):
             idx = np.unique(self._q_index[i])
-            lbx[idx], ubx[idx] = lo[i], hi[i]
+            m = margin if i >= 6 and hi[i] - lo[i] > 4 * margin else 0.0
+            lbx[idx], ubx[idx] = lo[i] + m, hi[i] - m
         for i, v in (locks or {}).items():
             idx = np.unique(self._q_index[i])
             lbx[idx] = ubx[idx] = v
@@ -158,6 +189,11 @@ class Layout:
                     lbx[idx] = ubx[idx] = 0.0
                 else:
                     lbx[idx[5]] = 0.0  # f_z >= 0
+        if shared_load > 0:
+            for t in self.shared_load_frames():
+                c = self.eom_frames.index(t)
+                for k in range(2):
+                    lbx[self._w_index[6 * k + 5, c]] = shared_load
         return lbx, ubx
 
     def com_points(self, q: np.ndarray) -> np.ndarray:
@@ -166,8 +202,13 @@ class Layout:
 
     def parameters(self, guide_markers: np.ndarray, guide_q: np.ndarray, env: Environment, weights: Weights,
                    ref: np.ndarray, anchor: np.ndarray, dpsi: float, com: np.ndarray | None = None,
-                   h: float | None = None, ground: np.ndarray | None = None, rise: float = 0.0) -> np.ndarray:
-        """The parameter vector (``P_LAYOUT`` order); ``h``: frame interval (s), default 1/fps."""
+                   h: float | None = None, ground: np.ndarray | None = None, rise: float = 0.0,
+                   joint_range: np.ndarray | None = None, path: np.ndarray | None = None,
+                   lean: np.ndarray | None = None, fore_aft_cap: float = 1e3) -> np.ndarray:
+        """The parameter vector (``P_LAYOUT`` order); ``h``: frame interval (s), default 1/fps;
+        ``joint_range`` (2, n) the joint-range prior's bounds (default: none); ``path`` (T,) the
+        direction of travel per frame (rad); ``lean`` (T,) the trunk's target lean (sine);
+        ``fore_aft_cap`` each foot's fore-aft force bound (scaled)."""
         nT = self.T
         K = max(len(self.eom_frames), 1)
         hv = float(self.dt if h is None else h)
@@ -179,7 +220,10 @@ class Layout:
                weights.wrench_rate * rate**2 / K,
                weights.jerk * rate**6 / (max(self.n - 3, 1) * K),
                weights.smoothness * rate**4 / (max(self.n - 3, 1) * max(nT - 2, 1)),
-               weights.root_rotation / (max(self.n - 6, 1) * nT)]  # (0.01 rad)² per root rotation = 0.01
+               weights.root_rotation / (max(self.n - 6, 1) * nT),  # (0.01 rad)² per root rotation = 0.01
+               weights.com_moment / K,
+               weights.joint_range / (max(self.n - 6, 1) * nT),  # (0.1 rad)² beyond the range = 1
+               weights.trunk_lean / nT]
         return np.concatenate([
             np.asarray(guide_markers, dtype=float).ravel(order="F"),
             np.asarray(guide_q, dtype=float).ravel(order="F"),
@@ -188,7 +232,49 @@ class Layout:
             (np.zeros((3, nT)) if com is None else com).ravel(order="F"),
             [hv],
             (np.zeros((max(self.ff.P, 1), nT)) if ground is None else ground).ravel(order="F"), [float(rise)],
+            (np.array([[-1e3] * self.n, [1e3] * self.n]) if joint_range is None else joint_range).ravel(),
+            np.zeros(nT) if path is None else np.asarray(path, dtype=float),
+            np.zeros(nT) if lean is None else np.asarray(lean, dtype=float),
+            [float(fore_aft_cap)],
         ])
+
+    def fore_aft_cap(self, env: Environment) -> float:
+        """Each foot's fore-aft force bound (scaled by the standard body weight): on level ground
+        (gravity along −z within ``Naturalness.level_deg``, no stairs) ``Naturalness.fore_aft`` body
+        weights of the environment's gravity; elsewhere none (slopes and stairs need more)."""
+        g = np.asarray(env.gravity, dtype=float)
+        gn = float(np.linalg.norm(g))
+        level = gn > 0 and -g[2] / gn >= np.cos(np.radians(self.ff.naturalness.level_deg)) and not env.step_height_m
+        return self.ff.naturalness.fore_aft * gn / STANDARD_GRAVITY if level else 1e3
+
+    def trunk_lean(self, guide_q: np.ndarray, gravity, path: np.ndarray) -> np.ndarray:
+        """(T,) the guide's trunk lean against ``gravity`` per frame (sine, + forward): the trunk
+        prior's target. The slope's guide is the tutor turned with gravity, so on a slope the
+        target is the tutor's own posture against gravity."""
+        f = self.ff.lean_of.map(self.T)
+        g = np.repeat(np.asarray(gravity, dtype=float).reshape(3, 1), self.T, axis=1)
+        return np.asarray(f(np.asarray(guide_q, dtype=float), g, np.asarray(path, dtype=float).reshape(1, -1))).ravel()
+
+    def joint_range(self, guide_q: np.ndarray) -> np.ndarray:
+        """(2, n) the joint-range prior's bounds per coordinate (``Weights.joint_range``): every
+        joint coordinate stays out of the last ``Naturalness.limit_band_deg`` of its model range;
+        a non-sagittal one (ab/adduction, axial rotation, bending: not a hinge about the segment's
+        lateral axis) also within the guide's own range over its frames widened by
+        ``Naturalness.joint_range_margin_deg``. Root coordinates: none."""
+        nat = self.ff.naturalness
+        m, b = np.radians(nat.joint_range_margin_deg), np.radians(nat.limit_band_deg)
+        g = np.asarray(guide_q, dtype=float)
+        lo = np.asarray(self.character.lower, dtype=float) + b
+        hi = np.asarray(self.character.upper, dtype=float) - b
+        dofs = [d for s in self.character.segments for d in s.dofs]
+        for i, d in enumerate(dofs):
+            axis = np.asarray(d.axis, dtype=float)
+            if i >= 6 and d.kind == "hinge" and abs(axis[1]) < 0.9 * np.linalg.norm(axis):
+                lo[i], hi[i] = max(lo[i], g[i].min() - m), min(hi[i], g[i].max() + m)
+            if lo[i] > hi[i]:
+                lo[i] = hi[i] = 0.5 * (lo[i] + hi[i])
+        lo[:6], hi[:6] = -1e3, 1e3
+        return np.stack([np.nan_to_num(lo, neginf=-1e3), np.nan_to_num(hi, posinf=1e3)])
 
     def constraint_bounds(self, h: float) -> tuple[np.ndarray, np.ndarray]:
         """(lbg, ubg) at the frame interval ``h``: the spin, force-rate and wrench-curvature

@@ -41,11 +41,12 @@ import numpy as np
 from solver.character import Character
 from solver.environment import stair_heights, stair_rise
 from solver.motion import FEET
+from solver.naturalness import path_heading
 from solver.spacetime.callback import STOP, STOP_CALLBACK
 from solver.spacetime.derivatives import Term, assemble
-from solver.spacetime.frame import FOOT_ROWS, frame_functions
+from solver.spacetime.frame import FOOT_ROWS, SOLE_CORNERS, frame_functions
 from solver.spacetime.layout import Layout
-from solver.spacetime.types import DEFAULT_IPOPT, SUCCESS_STATUSES, Environment, SolveResult, Weights
+from solver.spacetime.types import DEFAULT_IPOPT, STANDARD_GRAVITY, SUCCESS_STATUSES, Environment, SolveResult, Weights
 from solver.trajectory import spline_velocities
 
 log = logging.getLogger(__name__)
@@ -57,7 +58,12 @@ YAW = 3
 #: parameter blocks in order; "h" is the frame interval (s) of the spline: the speed axis changes it
 #: "ground": per contact point and frame, the ground height (terrain); "rise": the cycle's
 #: height gain (root z of frames T−2, T−1 over frames 0, 1; stairs)
-P_LAYOUT = ("gm", "gq", "g", "mu", "wts", "ref", "anchor", "dpsi", "com", "h", "ground", "rise")
+#: "range": per coordinate, the joint-range prior's lower then upper bound; "path": per frame, the
+#: direction of travel (rad) the feet's crossover is measured across
+#: "lean": per frame, the trunk's target lean against gravity (sine); "facap": the fore-aft force bound
+#: of a foot (scaled: body weights of standard gravity)
+P_LAYOUT = ("gm", "gq", "g", "mu", "wts", "ref", "anchor", "dpsi", "com", "h", "ground", "rise", "range", "path",
+            "lean", "facap")
 
 
 def _heading(vx, vy, psi):
@@ -145,8 +151,9 @@ class SpacetimeProblem(Layout):
 
         x = self._x = ca.MX.sym("x", self.nx)
         nm3 = 3 * ff.n_markers
-        sizes = {"gm": nm3 * Tn, "gq": n * Tn, "g": 3, "mu": 1, "wts": 8, "ref": 6 * Tn, "anchor": 3 * Tn, "dpsi": 1,
-                 "com": 3 * Tn, "h": 1, "ground": max(ff.P, 1) * Tn, "rise": 1}
+        sizes = {"gm": nm3 * Tn, "gq": n * Tn, "g": 3, "mu": 1, "wts": 11, "ref": 6 * Tn, "anchor": 3 * Tn, "dpsi": 1,
+                 "com": 3 * Tn, "h": 1, "ground": max(ff.P, 1) * Tn, "rise": 1, "range": 2 * n, "path": Tn,
+                 "lean": Tn, "facap": 1}
         self._p_layout, off = {}, 0
         for name in P_LAYOUT:
             self._p_layout[name] = (off, sizes[name])
@@ -174,8 +181,11 @@ class SpacetimeProblem(Layout):
         self._ng = 0
 
         # --- objective ---------------------------------------------------------------------
-        cw = ca.repmat(ca.vertcat(wts[0], wts[1], wts[3], wts[7]), 1, Tn)
-        self._cost(Term("cost", ff.cost, 1, qi, [GM, GQ, cw], derivatives=ff.derivatives["cost"], cost=True))
+        cw = ca.repmat(ca.vertcat(wts[0], wts[1], wts[3], wts[7], wts[9]), 1, Tn)
+        rng = par("range")
+        self._PATH, self._LEAN, self._FACAP = par("path"), par("lean"), par("facap")
+        self._cost(Term("cost", ff.cost, 1, qi, [GM, GQ, cw, ca.repmat(rng[:n], 1, Tn), ca.repmat(rng[n:], 1, Tn)],
+                        derivatives=ff.derivatives["cost"], cost=True))
         self._cyclic_root(x, dpsi)
         if dynamics:
             self._dynamic_terms(x, grav, mu, wts, dpsi, REF, ANCHOR)
@@ -272,6 +282,15 @@ class SpacetimeProblem(Layout):
                 hi.append(0.0 if A[j, t] else math.inf)
         self._rows(Term("z", ff.z, 1, qi[:, frames], [self._GROUND[:, frames]], derivatives=D["z"]), sel, 0.0,
                    np.array(hi), "contact")
+        # [naturalness] a swinging foot's sole (its four corners) clears the ground
+        sel = [(c, SOLE_CORNERS * k_ + r) for c, t in enumerate(frames) for k_ in range(2) if not B[k_, t]
+               for r in range(SOLE_CORNERS)]
+        self._rows(Term("sole", ff.sole, 1, qi[:, frames], [self._GROUND[:, frames]], derivatives=D["sole"]), sel,
+                   ff.naturalness.clearance_m, math.inf, "clearance")
+        # [naturalness] a foot in contact does not cross to the far side of the pelvis
+        sel = [(c, k_) for c, t in enumerate(frames) for k_ in range(2) if B[k_, t]]
+        self._rows(Term("cross", ff.cross, 1, qi[:, frames], [self._PATH[frames].T], derivatives=D["cross"]), sel,
+                   -math.inf, ff.naturalness.crossover_m, "crossover")
         # no slip, no spin between consecutive frames
         pairs = frames
         sel, lo, hi = [], [], []
@@ -312,7 +331,9 @@ class SpacetimeProblem(Layout):
                     sel += [(c, FOOT_ROWS * k_ + r) for r in range(FOOT_ROWS)]
             if B[:, t].any():
                 sel.append((c, 2 * FOOT_ROWS))
-        self._rows(Term("feet", ff.feet, 2, np.vstack([qi[:, E], W]), [ca.repmat(mu, 1, len(E)), REF[:, E]],
+        self._rows(Term("feet", ff.feet, 2, np.vstack([qi[:, E], W]), [ca.repmat(mu, 1, len(E)), REF[:, E],
+                                                                        self._COM[:, E], self._PATH[E].T,
+                                                                        ca.repmat(self._FACAP, 1, len(E))],
                         derivatives=D["feet"]), sel, 0.0, math.inf)
         # spline continuity at the knots 1..T−2
         K = list(range(1, Tn - 1))
@@ -343,6 +364,11 @@ class SpacetimeProblem(Layout):
                    [(c, r) for c in range(len(K)) for r in range(2)], -math.inf, math.inf, "smooth_ground_wrench")
         self._cost(Term("wrate", ff.wrate, 2, np.vstack([W, Wb]), [turn, ca.repmat(wts[4], 1, len(K))],
                         derivatives=D["wrate"], cost=True))
+        self._cost(Term("lean", ff.lean, 1, qi[:, frames], [ca.repmat(grav, 1, len(frames)), self._PATH[frames].T,
+                                                           self._LEAN[frames].T, ca.repmat(wts[10], 1, len(frames))],
+                        derivatives=D["lean"], cost=True))
+        self._cost(Term("wcom", ff.wcom, 1, W, [REF[:, E], self._COM[:, E], ca.repmat(wts[8], 1, len(E))],
+                        derivatives=D["wcom"], cost=True))
         self._cost(Term("jerk", ff.jerk, 4, np.vstack([qi[:, K], vi[:, K], qi[:, kp], vi[:, kp]]),
                         [ca.repmat(h, 1, len(K)), ca.repmat(wts[5], 1, len(K))], derivatives=D["jerk"], cost=True))
 
@@ -370,11 +396,14 @@ class SpacetimeProblem(Layout):
         ipopt_options: Mapping[str, Any] | None = None,
         should_stop: Any = None,
         frame_interval: float | None = None,
+        prior_q: np.ndarray | None = None,
     ) -> SolveResult:
         """Solve at the given parameters. ``heading_change`` Δψ (rad): yaw[T−2] − yaw[0] of the
         optimum (default: the initial motion's). ``should_stop()`` is polled at every iteration
         (IPOPT stops with ``User_Requested_Stop``). ``frame_interval``: the spline's frame
-        interval h (s), default 1/fps (the speed axis changes it; the frame count is fixed)."""
+        interval h (s), default 1/fps (the speed axis changes it; the frame count is fixed).
+        ``prior_q``: the coordinates the joint and root-rotation priors pull toward (default: the
+        guide's; the tutor's correction: the capture's own joint angles)."""
         h = self.dt if frame_interval is None else float(frame_interval)
         if not (math.isfinite(h) and h > 0):
             raise ValueError(f"the frame interval must be a positive number of seconds, got {frame_interval!r}")
@@ -407,16 +436,23 @@ class SpacetimeProblem(Layout):
             feet_ground = stair_heights(self.foot_contact(), env.step_height_m)
             rise = stair_rise(self.foot_contact(), env.step_height_m)
         ref = self.ref_points(q0, feet_ground) if self.dynamics else np.zeros((6, self.T))
+        path = path_heading(gq, self.T - 2)
         anchor = self.anchor_points(q0)
-        p = self.parameters(guide_markers, gq, env, weights, ref, anchor, dpsi,
+        prior = gq if prior_q is None else np.asarray(prior_q, dtype=float)
+        if prior.shape != (self.n, self.T) or not np.all(np.isfinite(prior)):
+            raise ValueError(f"prior_q must be finite with shape ({self.n}, {self.T})")
+        p = self.parameters(guide_markers, prior, env, weights, ref, anchor, dpsi,
                             self.com_points(q0) if self.dynamics else None, h=h,
-                            ground=self.contact_ground(feet_ground), rise=rise)
+                            ground=self.contact_ground(feet_ground), rise=rise, joint_range=self.joint_range(gq),
+                            path=path, lean=self.trunk_lean(gq, env.gravity, path),
+                            fore_aft_cap=self.fore_aft_cap(env))
         lbg, ubg = self.constraint_bounds(h)
         parts = [self.pack_q(q0)]
         if self.dynamics:
             parts += [self.pack_v(spline_velocities(q0, h)), self.pack_wrenches(init_wrenches, ref)]
         x0 = np.concatenate(parts)
-        lbx, ubx = self.bounds(locks)
+        g_ratio = float(np.linalg.norm(env.gravity)) / STANDARD_GRAVITY  # loads in the environment's body weights
+        lbx, ubx = self.bounds(locks, shared_load=self.ff.naturalness.shared_load * g_ratio)
         x0 = np.clip(x0, lbx, ubx)
         args: dict[str, Any] = dict(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
         opts: dict[str, Any] = {"ipopt.max_iter": int(max_iter)}

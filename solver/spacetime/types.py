@@ -60,6 +60,22 @@ class Weights:
     #: markers do not see (axial rotation of a straight arm) stays smooth instead of taking any
     #: value frame by frame
     smoothness: float = 0.01
+    #: [naturalness] squared moment of each foot's ground reaction about the centre of mass
+    #: (scaled by body weight × leg length), averaged over the cycle: ground reactions that
+    #: point at the centre of mass, as a walker's legs push (in double support: the leading foot
+    #: braking and the trailing one propelling, not the two feet squeezing the ground)
+    com_moment: float = 3.0
+    #: [naturalness] squared excursion of each joint coordinate into the last few degrees of its
+    #: model range, and of each non-sagittal one (ab/adduction, axial rotation, bending) beyond the
+    #: guide's own range (``Naturalness``, ``Layout.joint_range``): 0.1 rad beyond weighs like 3.2 cm
+    #: of marker distance (1000× the coordinates prior). A turn is not taken in the hips at their
+    #: limits when stance-foot pivot and foot placement can share it
+    joint_range: float = 1000.0
+    #: [naturalness] squared difference of the trunk's lean against gravity (sine, in the sagittal
+    #: plane of the direction of travel) from the guide's, per frame, averaged over the cycle: 2°
+    #: weighs like ~1 cm of marker distance. On a slope the guide is the tutor turned with gravity,
+    #: so the walker keeps its posture against gravity instead of leaning with the ground
+    trunk_lean: float = 1000.0
 
 
 @dataclass(frozen=True)
@@ -78,6 +94,49 @@ class Realism:
     force_curvature: float = 0.42
     moment_curvature: float = 0.16
     spin_rate_deg_s: float = 60.0  # a foot in contact turns ≤ 60°/s about the vertical (validator: 75)
+
+
+@dataclass(frozen=True)
+class Naturalness:
+    """Bounds that keep an optimum's gait human (``solver.naturalness`` checks the result), each
+    inside the check's limit by a margin."""
+
+    #: a swinging foot's sole (its four corners, the plane through its heel and toe contact
+    #: points) stays this far above the ground (check: 5 mm; walking clears ~1-2 cm)
+    clearance_m: float = 0.006
+    #: heel-up pitch of a loaded foot: below ``pitch_free_deg`` any load; above it the load is at
+    #: most ``pitch_load`` × (sin 40° − sin p_free) / (sin p − sin p_free) BW — ``pitch_load`` at
+    #: 40° (check: a foot over 0.5 BW pitched at most 40°), ~0.85 BW at 30°, ~0.26 BW at 60°
+    pitch_free_deg: float = 20.0
+    pitch_load: float = 0.45
+    #: both feet carry at least this (BW) at the middle frame(s) of every double support
+    #: (check: ≥ 0.1 BW at some frame of every change of support)
+    shared_load: float = 0.12
+    #: the ground pushes the body: a foot's horizontal force along the line from the foot to the
+    #: centre of mass is at least −push_margin × f_z × leg length (the force plates of the shared
+    #: trials: ≥ −0.008; a double support whose feet squeeze the ground between them: −0.36)
+    push_margin: float = 0.02
+    #: on level ground a foot's fore-aft force stays within this (BW; check: 0.35; walking peaks
+    #: ~0.2): the flat ground is walked on without braking and pushing twice as hard as people do
+    fore_aft: float = 0.32
+    level_deg: float = 1.0
+    #: a foot in contact stands at most this far on the far side of the pelvis, across the
+    #: direction of travel (check: 3 cm for a loaded foot)
+    crossover_m: float = 0.02
+    #: the joint-range prior (``Weights.joint_range``) acts beyond the guide's own range of each
+    #: non-sagittal joint coordinate (ab/adduction, axial rotation, bending) widened by this, and on
+    #: every joint coordinate within ``limit_band_deg`` of its model limit (check: a joint within
+    #: 1° of its limit for more than one frame)
+    joint_range_margin_deg: float = 10.0
+    limit_band_deg: float = 5.0
+    #: the NLP's joint bounds lie this far inside the model's limits (check: a joint within 1° of
+    #: its limit for more than one frame)
+    limit_margin_deg: float = 2.0
+
+    @property
+    def pitch_coefficient(self) -> float:
+        """C of the pitch rows: f_z (sin p − sin p_free) ≤ C (f_z in BW)."""
+        return self.pitch_load * (math.sin(math.radians(40.0)) - math.sin(math.radians(self.pitch_free_deg)))
 
 
 @dataclass(frozen=True, eq=False)
