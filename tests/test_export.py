@@ -366,9 +366,13 @@ def test_gltf_animation_reproduces_forward_kinematics(case, kind):
         p = ch.segments[i].parent
         rest[i] = local if p is None else rest[[s.name for s in ch.segments].index(p)] @ local
     np.testing.assert_allclose(np.einsum("sij,sjk->sik", rest, ibm), np.broadcast_to(np.eye(4), (S, 4, 4)), atol=1e-6)
-    # meshes: every skinned vertex lies, at every frame, on its segment's ellipsoid
+    # meshes: every skinned vertex lies, at every frame, on its segment's ellipsoid — a foot's, on a corner
+    # of its shoe (its sole through the heel and toe contact points); a welded toes segment has none
     mesh_nodes = [n for n in g.nodes[S:] if n.mesh is not None]
-    assert len(mesh_nodes) == sum(1 for s in ch.segments if s.length > 0 and s.radius > 0)
+    feet = {f.segment: f.side for f in ch.feet}
+    welded = {s.name for s in ch.segments if s.parent in feet and not s.dofs}
+    drawn = [s for s in ch.segments if ((s.length > 0 and s.radius > 0) or s.name in feet) and s.name not in welded]
+    assert len(mesh_nodes) == len(drawn)
     for n in mesh_nodes:
         assert n.skin == 0
         prim = g.meshes[n.mesh].primitives[0]
@@ -383,6 +387,11 @@ def test_gltf_animation_reproduces_forward_kinematics(case, kind):
             skinned = (world[k, f] @ ibm[k] @ np.c_[v, np.ones(len(v))].T)[:3].T
             ours = (skinned @ Y_UP) - pos[k, f]  # back to our axes, relative to the segment origin
             local = ours @ rot[k, f]  # segment coordinates
+            if seg.name in feet:
+                corners = np.vstack(G.foot_shape(ch, feet[seg.name]))  # (8, 3)
+                np.testing.assert_allclose(np.abs(local[:, None] - corners[None]).max(axis=2).min(axis=1), 0.0,
+                                           atol=1e-5)
+                continue
             a, b = seg.length / 2, seg.radius
             along = local @ seg.direction
             across = np.linalg.norm(local - np.outer(along, seg.direction), axis=1)

@@ -75,7 +75,11 @@ def test_three_loads_the_skinned_character_and_its_clip(loaded):
     assert out["three_revision"] == "187" and out["same_three_instance"]
     assert out["bone_names"] == names and out["bones"] == len(names)
     assert out["skins"] == 1 and out["skeletons"] == 1
-    with_mesh = sum(1 for s in ch.segments if s.length > 0 and s.radius > 0)
+    # an ellipsoid per segment with a length and a radius, the feet drawn as their soles, none for a welded toe
+    feet = {f.segment for f in ch.feet}
+    welded = {s.name for s in ch.segments if s.parent in feet and not s.dofs}
+    drawn = [s for s in ch.segments if ((s.length > 0 and s.radius > 0) or s.name in feet) and s.name not in welded]
+    with_mesh = len(drawn)
     assert out["skinned_meshes"] == out["meshes"] == with_mesh
     assert out["nodes"] == len(names) + with_mesh
     (clip,) = out["animations"]
@@ -104,15 +108,31 @@ def test_three_evaluates_our_forward_kinematics(loaded):
             d = np.linalg.norm(np.array(b["position"]) - Y_UP @ pos[i, :, f])
             a = quat_angle(np.array(b["quaternion"]), matrix_quat(Y_UP @ rot[i, :, :, f] @ Y_UP.T))
             worst["position"], worst["rotation"] = max(worst["position"], d), max(worst["rotation"], a)
-            # three.js's skinning of the ellipsoid's vertex 0, its pole at the bone tip
+            # three.js's skinning of the ellipsoid's vertex 0, its pole at the bone tip (feet: their soles)
             v = p["vertex0"].get(f"{s.name}_mesh")
-            if v is not None:
+            if v is not None and s.name not in {f.segment for f in ch.feet}:
                 worst["vertex"] = max(worst["vertex"], np.linalg.norm(np.array(v) - Y_UP @ tips[i, :, f]))
     print(f"three.js vs our FK, {ch.name}: {worst}")
     assert worst["position"] < 1e-4 and worst["vertex"] < 1e-4 and worst["rotation"] < 1e-4, worst
     # the root really moves: it walks forward (+Z in Y-up) between the first and the last frame
     start, end = (np.array(out["poses"][k]["bones"][ch.segments[0].name]["position"]) for k in (0, -1))
     assert end[2] - start[2] > 0.3
+
+
+def test_three_draws_the_feet_standing_where_their_contact_points_stand(loaded):
+    """The exported foot is a shoe whose sole is the plane through its heel and toe contact points
+    (``solver.export.gltf.foot_shape``): three.js's lowest skinned vertex of each foot mesh is our
+    lowest sole corner (forward kinematics), which stands on the ground with the contact points
+    (tests/test_naturalness.py)."""
+    from solver.naturalness import sole_corners
+
+    motion, frames, out = loaded
+    ch = motion.character
+    corners = sole_corners(ch, motion.q)  # (2, 4, 3, T)
+    for f, p in zip(frames, out["poses"]):
+        for k, foot in enumerate(ch.feet):
+            low = p["lowest"][f"{foot.segment}_mesh"]
+            assert low == pytest.approx(float((Y_UP @ corners[k, :, :, f].T)[1].min()), abs=1e-4)
 
 
 def test_three_rest_pose_is_y_up(loaded):

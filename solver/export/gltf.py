@@ -43,6 +43,7 @@ from solver.export import (
     matrix_to_quaternion,
 )
 from solver.motion import Motion
+from solver.naturalness import heel_toe
 
 log = logging.getLogger(__name__)
 
@@ -137,6 +138,46 @@ def ellipsoid_mesh(center: np.ndarray, axis: np.ndarray, a: float,
     return verts_a, norms_a, tris_a
 
 
+def sole_mesh(bottom: np.ndarray, top: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A shoe-like convex hexahedron (flat-shaded: vertices (24, 3), normals, triangles (12, 3))
+    from its bottom and top faces, four corners each ordered (heel-right, heel-left,
+    toe-right, toe-left)."""
+    c = np.vstack([bottom, top])  # 0-3 bottom, 4-7 top
+    centre = c.mean(axis=0)
+    faces = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
+    verts: list[np.ndarray] = []
+    norms: list[np.ndarray] = []
+    tris: list[tuple[int, int, int]] = []
+    for f in faces:
+        p = c[list(f)]
+        n = np.cross(p[1] - p[0], p[2] - p[0]) + np.cross(p[2] - p[0], p[3] - p[0])
+        if n @ (p.mean(axis=0) - centre) < 0:
+            p, n = p[::-1], -n
+        k = len(verts)
+        verts += list(p)
+        norms += [n / np.linalg.norm(n)] * 4
+        tris += [(k, k + 1, k + 2), (k, k + 2, k + 3)]
+    return np.array(verts), np.array(norms), np.array(tris)
+
+
+def foot_shape(character, side: str) -> tuple[np.ndarray, np.ndarray]:
+    """The drawn foot of a side (foot segment frame): its sole is the rectangle through the heel
+    and toe contact points as wide as the foot box (``solver.naturalness.sole_corners``: the foot
+    stands on the ground where its contact points do), its top the foot box's top face.
+    Returns (bottom (4, 3), top (4, 3)), corners (heel-right, heel-left, toe-right, toe-left)."""
+    foot = character.foot(side)
+    heel, toe = heel_toe(character, side)
+    w = float(foot.half[1])
+    lo_x, hi_x = float(foot.center[0] - foot.half[0]), float(foot.center[0] + foot.half[0])
+    top_z = float(foot.center[2] + foot.half[2])
+    bottom, top = [], []
+    for c, x_top in ((heel, lo_x), (toe, hi_x)):
+        for sgn in (-1.0, 1.0):
+            bottom.append(np.asarray(c.position) + np.array([0.0, sgn * w, 0.0]))
+            top.append(np.array([x_top, float(c.position[1]) + sgn * w, top_z]))
+    return np.array(bottom), np.array(top)
+
+
 def _animation(buf: _Buffer, motion: Motion, name: str, *, loop: bool = False) -> dict:
     """One animation of ``motion`` (frames 0 … P, one cycle, with ``loop``; else every frame),
     with the game-ready data (:mod:`solver.export.game`, Y up) in its ``extras``."""
@@ -221,10 +262,20 @@ def _document(motion: Motion, meshes: bool, loop: bool = False,
         ibm_acc = buf.add(np.transpose(ibm, (0, 2, 1)).reshape(S, 16), FLOAT, "MAT4")
         skins.append({"name": ch.name, "joints": list(range(S)), "inverseBindMatrices": ibm_acc, "skeleton": 0})
         joint_type = UNSIGNED_BYTE if S <= 256 else UNSIGNED_SHORT
+        # feet are drawn standing where their contact points stand (``foot_shape``); a welded toes
+        # segment is inside that shape
+        foot_of = {f.segment: f.side for f in ch.feet if sum(c.side == f.side for c in ch.contacts) == 2
+                   and all(c.segment == f.segment for c in ch.contacts if c.side == f.side)}
+        welded = {s.name for s in segs if s.parent in foot_of and not s.dofs}
         for i, s in enumerate(segs):
-            if not (s.length > 0 and s.radius > 0):
+            if s.name in welded:
                 continue
-            v, n, f = ellipsoid_mesh(s.direction * (s.length / 2.0), s.direction, s.length / 2.0, s.radius)
+            if s.name in foot_of:
+                v, n, f = sole_mesh(*foot_shape(ch, foot_of[s.name]))
+            elif s.length > 0 and s.radius > 0:
+                v, n, f = ellipsoid_mesh(s.direction * (s.length / 2.0), s.direction, s.length / 2.0, s.radius)
+            else:
+                continue
             # segment frame (ours) -> segment frame (Y-up) -> bind-pose (mesh) space
             v = (v @ Y_UP.T) @ bind[i, :3, :3].T + bind[i, :3, 3]
             n = (n @ Y_UP.T) @ bind[i, :3, :3].T

@@ -10,7 +10,8 @@
 // animation's duration and tracks (name, type, key count, interpolation), the world position
 // and quaternion of every bone at rest and, for each TIME, after an AnimationMixer has
 // evaluated the first animation at that time; plus the skinned world position of vertex 0
-// of every skinned mesh (three.js's own skinning: SkinnedMesh.getVertexPosition).
+// of every skinned mesh and the height (Y) of its lowest skinned vertex (three.js's own
+// skinning: SkinnedMesh.getVertexPosition).
 //
 // Shims: none. GLTFLoader.parse() on an ArrayBuffer needs only TextDecoder, which Node has;
 // it touches the DOM (document, createImageBitmap, URL from `self`) only to decode images,
@@ -64,11 +65,18 @@ function pose() {
     };
   }
   const vertex0 = {};
+  const lowest = {};
   for (const m of skinned) {
     const v = m.getVertexPosition(0, new THREE.Vector3()); // skinned, in the mesh's space
     vertex0[m.name] = vec(v.applyMatrix4(m.matrixWorld));
+    let low = Infinity;
+    const n = m.geometry.attributes.position.count;
+    for (let i = 0; i < n; i += 1) {
+      low = Math.min(low, m.getVertexPosition(i, new THREE.Vector3()).applyMatrix4(m.matrixWorld).y);
+    }
+    lowest[m.name] = low;
   }
-  return { bones: world, vertex0 };
+  return { bones: world, vertex0, lowest };
 }
 
 const rest = pose();
