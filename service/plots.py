@@ -403,3 +403,143 @@ def residuals_png(motion, tolerance: float = 1e-6) -> bytes:
                  fontsize=10)
     fig.tight_layout(rect=(0, 0.05, 1, 1))
     return _png(fig)
+
+
+# --- filmstrip -----------------------------------------------------------------------------------
+
+
+def _stick_lines(character, q: np.ndarray) -> np.ndarray:
+    """(S, 2, 3, T) each segment with a length as a line from its origin to its tip."""
+    from solver.kinematics import segment_frames
+
+    rots, poss = segment_frames(character, q)
+    segs = [i for i, s in enumerate(character.segments) if s.length > 0]
+    tips = np.stack([poss[i] + np.einsum("ijt,j->it", rots[i], character.segments[i].direction
+                                         * character.segments[i].length) for i in segs])
+    return np.stack([poss[segs], tips], axis=1)
+
+
+def filmstrip_figure(motion, *, title: str | None = None, max_frames: int = 16):
+    """Side, rear and top views of a motion's cycle. Side and rear: one stick figure per frame,
+    side by side (each frame centred on its pelvis), with each foot's sole as the exports draw
+    it (filled while the foot is in contact), the ground under it, and each loaded foot's ground
+    reaction force as an arrow at its centre of pressure (1 BW = the standing leg length). The
+    views are turned so that gravity points down: a slope shows as an inclined ground. Top: the
+    cycle in the ground plane — the pelvis path and heading, and the soles of the stance feet."""
+    from solver.environment import environment_of, ground_of
+    from solver.kinematics import standing_leg_length
+    from solver.motion import FEET, Motion
+    from solver.naturalness import path_heading, sole_corners
+
+    if not isinstance(motion, Motion):
+        raise PlotError(f"expected a motion (solver.motion.Motion), got {type(motion).__name__}")
+    ch, q, T = motion.character, motion.q, motion.T
+    N = T - 2 if motion.cyclic else T
+    frames = np.arange(N) if max_frames >= N else np.unique(np.linspace(0, N - 1, max_frames).round().astype(int))
+    env = environment_of(motion)
+    g = np.asarray(env.gravity, dtype=float)
+    up = -g / max(float(np.linalg.norm(g)), 1e-12)
+    path = path_heading(q, N) if motion.cyclic else np.full(T, float(q[3, 0]))
+
+    def display(t: int) -> np.ndarray:
+        """World -> display at frame t: x along the direction of travel (⊥ gravity), y to the
+        walker's left, z against gravity — each frame seen from the walker's own side."""
+        fwd = np.array([math.cos(path[t]), math.sin(path[t]), 0.0])
+        ex = fwd - up * (up @ fwd)
+        ex /= np.linalg.norm(ex)
+        return np.stack([ex, np.cross(up, ex), up])
+
+    Ds = np.stack([display(t) for t in range(T)])  # (T, 3, 3)
+    lines = np.einsum("tij,sejt->seit", Ds, _stick_lines(ch, q))
+    soles = np.einsum("tij,kcjt->kcit", Ds, sole_corners(ch, q))  # (2, 4, 3, T)
+    root = np.einsum("tij,jt->it", Ds, q[:3])
+    B = motion.foot_contact() if motion.contacts is not None else np.zeros((2, T), bool)
+    W = body_weight(motion)
+    leg = standing_leg_length(ch)
+    G = ground_of(motion)
+    arrows = None
+    if motion.wrenches is not None:
+        from solver.export import ground_reactions
+
+        gr = ground_reactions(motion)
+        cop = np.nan_to_num(gr.cop, nan=0.0)
+        cop[..., 2] = G
+        arrows = (np.einsum("tij,ktj->kti", Ds, cop), np.einsum("tij,ktj->kti", Ds, gr.force) / W * leg, gr.loaded)
+    slot = 0.75 * leg
+    strip_w = 8.6  # inches
+    strip_h = max(0.8, strip_w * 1.4 * leg / (len(frames) * slot + 0.3))
+    fig = _figure(strip_w + 3.6, 2 * strip_h + 1.9)
+    gs = fig.add_gridspec(2, 3, height_ratios=[1.0, 1.0], width_ratios=[1.0, 1.0, 0.8])
+    side, rear, top = fig.add_subplot(gs[0, :2]), fig.add_subplot(gs[1, :2]), fig.add_subplot(gs[:, 2])
+    cols = {"right": "tab:red", "left": "tab:blue"}
+    names = [s.name for s in ch.segments if s.length > 0]
+    def ground_line(ax, centre_u, t, u, offset):
+        """The ground under frame t near display abscissa centre_u: world z = ground height."""
+        D = Ds[t]
+        tang = D @ np.array([math.cos(path[t]), math.sin(path[t]), 0.0])  # the ground along the walk
+        for k in range(2):
+            o = D @ np.array([0.0, 0.0, G[k, t]])
+            if u == 0:
+                s_ = (np.array([centre_u - 0.45 * slot, centre_u + 0.45 * slot]) - o[0]) / tang[0]
+                ax.plot(o[0] + s_ * tang[0] + offset, o[2] + s_ * tang[2], color="0.45", lw=0.8)
+            else:
+                ax.plot([centre_u - 0.4 * slot + offset, centre_u + 0.4 * slot + offset],
+                        [o[2] - (centre_u - o[1]) * 0.0] * 2, color="0.45", lw=0.8)
+
+    def draw(ax, u, t, offset):
+        sg = -1.0 if u == 1 else 1.0  # the rear view is seen from behind: the walker's left on the left
+        for si, nm in enumerate(names):
+            c = "tab:red" if nm.endswith("_r") else "tab:blue" if nm.endswith("_l") else "0.15"
+            ax.plot(sg * lines[si, :, u, t] + offset, lines[si, :, 2, t], color=c, lw=2.2 if c == "0.15" else 1.5)
+        for k, s in enumerate(FEET):
+            c = soles[k][[0, 2, 3, 1, 0]][:, [u, 2], t]
+            if B[k, t]:
+                ax.fill(sg * c[:, 0] + offset, c[:, 1], color=cols[s], alpha=0.45, lw=0)
+            ax.plot(sg * c[:, 0] + offset, c[:, 1], color=cols[s], lw=0.9)
+            if arrows is not None and arrows[2][k, t]:
+                p, f = arrows[0][k, t], arrows[1][k, t]
+                ax.annotate("", xy=(sg * (p[u] + f[u]) + offset, p[2] + f[2]), xytext=(sg * p[u] + offset, p[2]),
+                            arrowprops={"arrowstyle": "->", "color": cols[s], "lw": 1.1})
+
+    for i, t in enumerate(frames):
+        for ax, u in ((side, 0), (rear, 1)):
+            off = i * slot - (-root[u, t] if u == 1 else root[u, t])
+            ground_line(ax, -root[u, t] if u == 1 else root[u, t], t, u, off)
+            draw(ax, u, t, off)
+            ax.text(i * slot, -0.12 * leg, f"{t}", ha="center", va="top", fontsize=7, color="0.3")
+    # top: pelvis path and heading, soles (stance filled), in the ground plane (world x, y)
+    top.plot(q[0, :N + 1], q[1, :N + 1], "-", color="0.15", lw=1.2)
+    sw = sole_corners(ch, q)
+    for t in range(N):
+        top.annotate("", xy=(q[0, t] + 0.12 * leg * math.cos(q[3, t]), q[1, t] + 0.12 * leg * math.sin(q[3, t])),
+                     xytext=(q[0, t], q[1, t]), arrowprops={"arrowstyle": "->", "color": "0.3", "lw": 0.8})
+        for k, s in enumerate(FEET):
+            c = sw[k][[0, 2, 3, 1, 0]][:, :2, t]
+            if B[k, t]:
+                top.fill(c[:, 0], c[:, 1], color=cols[s], alpha=0.25, lw=0)
+            else:
+                top.plot(c[:, 0], c[:, 1], color=cols[s], lw=0.5, alpha=0.5)
+    side.set_title("side: frames side by side, each seen across its direction of travel, gravity down; stance "
+                   "soles filled; arrows: ground force (1 BW = leg length)", fontsize=8, loc="left")
+    rear.set_title("rear: from behind the walker (left foot blue, on the left)", fontsize=8, loc="left")
+    top.set_title("top: pelvis path and heading,\nstance soles filled", fontsize=8, loc="left")
+    for ax in (side, rear):
+        ax.set_aspect("equal")
+        ax.set_xticks([])
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.2)
+    top.set_aspect("equal")
+    top.tick_params(labelsize=7)
+    top.grid(alpha=0.2)
+    fig.suptitle((title + "\n" if title else "") + motion_caption(motion), fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def filmstrip_png(motion, *, title: str | None = None) -> bytes:
+    """:func:`filmstrip_figure` as PNG bytes."""
+    return _png(filmstrip_figure(motion, title=title))
+
+
+#: the motion plots by kind (``motionx plot --kind``, ``GET /motions/{id}/plots/{kind}.png``)
+MOTION_PLOTS = {"grf": grf_png, "residuals": residuals_png, "filmstrip": filmstrip_png}

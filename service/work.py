@@ -110,9 +110,9 @@ def validation(data: bytes) -> dict | None:
 
 def motion_plot(data: bytes, kind: str) -> bytes:
     # lazy: runs in a compute process; the API process does not load the solver
-    from service.plots import PlotError, grf_png, residuals_png
+    from service.plots import MOTION_PLOTS, PlotError
 
-    render = {"grf": grf_png, "residuals": residuals_png}[kind]
+    render = MOTION_PLOTS[kind]
     try:
         return render(_load(data))
     except PlotError as e:

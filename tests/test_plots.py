@@ -239,12 +239,22 @@ def test_motionx_plot_writes_the_pngs(tutor_file, tmp_path):
     r = motionx("plot", tutor_file, "--out", tmp_path / "all")
     assert r.returncode == 0, r.stderr
     info = json.loads(r.stdout)
-    assert info["files"] == ["grf.png", "residuals.png"] and info["frames"] == Motion.load(tutor_file).T
+    assert info["files"] == ["grf.png", "residuals.png", "filmstrip.png"]
+    assert info["frames"] == Motion.load(tutor_file).T
     for name in info["files"]:
         assert_png((tmp_path / "all" / name).read_bytes())
     r = motionx("plot", tutor_file, "--kind", "grf", "--out", tmp_path / "grf")
     assert r.returncode == 0, r.stderr
     assert sorted(p.name for p in (tmp_path / "grf").iterdir()) == ["grf.png"]
+
+
+def test_motionx_plot_draws_the_filmstrip_of_any_motion(tutor, tmp_path):
+    """The filmstrip needs no ground reactions: a motion without them (a capture) is drawn too."""
+    tutor.evolve(wrenches=None, report=None).save(tmp_path / "raw.json")
+    r = motionx("plot", tmp_path / "raw.json", "--kind", "filmstrip", "--out", tmp_path / "film")
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["files"] == ["filmstrip.png"]
+    assert_png((tmp_path / "film" / "filmstrip.png").read_bytes())
 
 
 def test_motionx_plot_refuses_bad_input(tutor, tutor_file, tmp_path):
@@ -265,8 +275,9 @@ def test_motionx_extrapolate_writes_the_final_motions_plots(tutor_file, tmp_path
     r = motionx("extrapolate", tutor_file, "--friction", "0.7", "--delta0", "0.5", "--out", out, "--quiet")
     assert r.returncode == 0, r.stderr
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["status"] == "succeeded" and summary["final"]["plots"] == ["grf.png", "residuals.png"]
-    for name in ("progress.png", "grf.png", "residuals.png"):
+    assert summary["status"] == "succeeded" and summary["final"]["plots"] == ["grf.png", "residuals.png",
+                                                                              "filmstrip.png"]
+    for name in ("progress.png", "grf.png", "residuals.png", "filmstrip.png"):
         assert_png((out / name).read_bytes())
     # the residual plot is of the last λ motion, which is plausible
     last = Motion.load(out / summary["final"]["file"])

@@ -37,7 +37,7 @@ TERMINAL = ("succeeded", "failed", "canceled", "impasse")
 #: what each λ optimum is downloaded as: (query format, file suffix)
 EXPORTS = (("motion", "motion.json"), ("json", "clip.json"), ("gltf", "glb"), ("bvh", "bvh"))
 #: the plots of a job's final motion: (endpoint name, file)
-MOTION_PLOTS = (("grf", "grf.png"), ("residuals", "residuals.png"))
+MOTION_PLOTS = (("grf", "grf.png"), ("residuals", "residuals.png"), ("filmstrip", "filmstrip.png"))
 #: the demo's walk, in the trials folder (``service.examples.data_dir()``)
 DEMO_TRIAL = ("deepmimic_humanoid3d_walk", ("humanoid3d_walk.txt", "humanoid3d_character.txt"))
 JOB_NAMES = ("downhill", "uphill", "curve", "stairs")
@@ -356,6 +356,7 @@ def _download(http, job: _Job, out: Path) -> dict:
         "motions": len(motions), "solves": s.get("solves"),
         "job_time_s": round(_job_time(prog), 2),
         "plausible": sum(bool(rep.get("plausible")) for rep in reports),
+        "natural": sum(bool(rep.get("natural")) for rep in reports),
         "max_root_residual_rel_weight": max((rep["root_residual"]["max_force_rel_weight"] for rep in reports),
                                             default=None),
         "max_mujoco_agreement_rel_weight": max(
@@ -368,16 +369,17 @@ def _print_summary(summary: dict, out: Path) -> None:
     from service.plots import environment_text
 
     print(f"[demo] {'job':9s} {'status':9s} {'λ':>6s} {'reached':>18s} {'motions':>7s} {'plausible':>9s} "
-          f"{'time':>6s} {'max residual/weight':>19s}")
+          f"{'natural':>9s} {'time':>6s} {'max residual/weight':>19s}")
     for j in summary["jobs"]:
         reached = environment_text(j["reached"])
         res = j["max_root_residual_rel_weight"]
         print(f"[demo] {j['name']:9s} {j['status']:9s} {j['lambda_reached']:6.3f} {reached:>18s} "
-              f"{j['motions']:7d} {j['plausible']:>4d}/{j['motions']:<4d} {j['job_time_s']:5.1f}s "
+              f"{j['motions']:7d} {j['plausible']:>4d}/{j['motions']:<4d} {j['natural']:>4d}/{j['motions']:<4d} "
+              f"{j['job_time_s']:5.1f}s "
               f"{res if res is None else format(res, '.1e'):>19s}")
     print(f"[demo] total {summary['wall_time_s']:.1f} s; in {out}/<job>/: every λ optimum as "
           f"step_NNN_lambda_L.motion.json, .clip.json, .glb, .bvh, .validation.json; progress.csv, progress.png, "
-          f"final.grf.png, final.residuals.png (summary.json)")
+          f"final.grf.png, final.residuals.png, final.filmstrip.png (summary.json)")
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -129,14 +129,15 @@ def cmd_validate(args: argparse.Namespace) -> int:
         print(json.dumps(rep, indent=2 if args.pretty else None))
     else:
         print(_validate_summary(rep, args.motion))
-    return 0 if rep["plausible"] else 1
+    return 0 if rep["plausible"] and rep.get("natural", True) else 1
 
 
 def _validate_summary(rep: dict, path) -> str:
     """The plausibility report for a person: the verdict, the checks at the frames in one line,
     then every realism check with its figure and limit (failures first), warnings and notes."""
     r, mj = rep["root_residual"], rep.get("mujoco_replay") or {}
-    head = (f"{path}: {'plausible' if rep['plausible'] else 'NOT plausible'} ({rep['character']}, "
+    natural = {True: ", natural", False: ", NOT natural"}.get(rep.get("natural"), "")
+    head = (f"{path}: {'plausible' if rep['plausible'] else 'NOT plausible'}{natural} ({rep['character']}, "
             f"{rep['frames']} frames at {rep['fps']:g} fps)")
     frames = [f"root residual {max(r['max_force_rel_weight'], r['max_moment_rel_weight_leg']):.1e} x body weight "
               f"(tolerance {rep['tolerances']['residual']:g})"]
@@ -147,22 +148,33 @@ def _validate_summary(rep: dict, path) -> str:
     other = [k for k, v in rep["checks"].items() if not v and not k.startswith("realism_")]
     frames.append("contact checks ok" if not other else "failed: " + ", ".join(other))
     lines = [head, "  at the frames: " + "; ".join(frames)]
-    real = rep.get("realism") or {}
-    checks = real.get("checks") or {}
+    lines += _section_lines(rep.get("realism") or {}, "realism (between the frames")
+    lines += _section_lines(rep.get("naturalness") or {}, "naturalness (the gait's human features")
+    return "\n".join(lines)
+
+
+def _section_lines(sec: dict, title: str) -> list[str]:
+    """A report section of checks (``solver.realism``, ``solver.naturalness``): its verdict, then
+    every check with its figure and limit (failures first, then warnings), the captured walk's
+    figure where the section has one, and its notes."""
+    lines = []
+    checks = {k: c for k, c in (sec.get("checks") or {}).items() if c.get("applies", True)}
     if checks:
-        failed = real.get("failed") or []
-        lines.append(f"  realism (between the frames, {1e3 * real.get('time_s', 0.0):.0f} ms): "
+        failed = sec.get("failed") or []
+        lines.append(f"  {title}, {1e3 * sec.get('time_s', 0.0):.0f} ms): "
                      + (f"{len(failed)} of {sum(c['severity'] == 'failure' for c in checks.values())} checks failed"
                         if failed else "every check passed"))
         order = sorted(checks.items(), key=lambda kv: (kv[1]["passed"], kv[1]["severity"] != "failure"))
         for name, c in order:
             mark = ("ok  " if c["passed"] else ("FAIL" if c["severity"] == "failure" else "warn"))
             rel = ">=" if c.get("bound") == "min" else "<="
-            lines.append(f"    {mark} {name:22s} {c['value']:9.3g} {c['unit']:6s} (limit {rel} {c['limit']:.3g}): "
+            value = "–" if c["value"] is None else f"{c['value']:.3g}"
+            capture = f"; capture {c['capture']:.3g}" if c.get("capture") is not None else ""
+            lines.append(f"    {mark} {name:22s} {value:>9s} {c['unit']:6s} (limit {rel} {c['limit']:.3g}{capture}): "
                          f"{c['what']}")
-    for note in real.get("notes") or []:
+    for note in sec.get("notes") or []:
         lines.append(f"  note: {note}")
-    return "\n".join(lines)
+    return lines
 
 
 # --- extrapolate --------------------------------------------------------------------------
@@ -364,8 +376,11 @@ Check a motion file against the equations of motion: root residual (ours and MuJ
 mj_inverse replay on the motion's MJCF), foot slip, penetration, friction cone, centre of
 pressure, and the realism checks that hold between the frames (whole-body Newton-Euler
 from positions, inverse dynamics on a 6x finer spline, torsional friction, foot spin,
-ground force ranges, heading). Prints a summary (--json: the report as JSON); exit status 1
-when the motion is not plausible.""")
+ground force ranges, heading), and the naturalness checks of its gait (swing clearance, foot
+pitch under load, joints at their limits, crossover, shared load at each change of support,
+force shape, trunk lean on slopes, pelvis ranges), each beside the captured walk's own
+figure. Prints a summary (--json: the report as JSON); exit status 1 when the motion is not
+plausible or not natural.""")
     s.add_argument("motion", metavar="MOTION.json", help="motion file v1 (JSON)")
     s.add_argument("--residual-tol", type=_finite("--residual-tol"), default=None, metavar="R",
                    help="root residual tolerance relative to body weight (default: 1e-6)")

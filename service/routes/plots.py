@@ -1,4 +1,4 @@
-"""Plots as PNG: a job's progress curve, a motion's ground reaction forces and root residuals.
+"""Plots as PNG: a job's progress curve, a motion's ground reaction forces, root residuals and filmstrip.
 
 The URLs are a contract (the web page and ``motionx demo`` fetch them). Rendering is
 ``service.plots``, in the API's compute processes (:mod:`service.work`); the motion plots are
@@ -70,7 +70,8 @@ def _motion_plot_png(data: bytes, kind: str) -> tuple[bytes, str]:
     return work.motion_plot(data, kind), PNG
 
 
-async def _motion_plot(request: Request, db: Database, owner: str, motion_id: str, kind: str) -> Response:
+async def _motion_plot(request: Request, db: Database, owner: str, motion_id: str, kind: str,
+                       wrenches: bool = True) -> Response:
     known_id("motion", motion_id)
 
     def load():
@@ -78,7 +79,7 @@ async def _motion_plot(request: Request, db: Database, owner: str, motion_id: st
             row = store.get_motion(s, motion_id=motion_id, owner=owner)
             if row is None:
                 raise not_found("motion", motion_id)
-            if not row.has_wrenches:
+            if wrenches and not row.has_wrenches:
                 raise Problem(422, f"motion {motion_id!r} has no contact wrenches (a raw capture): "
                               "extrapolate it to get its tutor, whose plots exist")
             return row.sha256, row.data
@@ -109,3 +110,15 @@ async def grf_plot(motion_id: str, request: Request, owner: str = Depends(get_ow
 async def residuals_plot(motion_id: str, request: Request, owner: str = Depends(get_owner),
                          db: Database = Depends(get_db)) -> Response:
     return await _motion_plot(request, db, owner, motion_id, "residuals")
+
+
+@router.get(
+    "/motions/{motion_id}/plots/filmstrip.png",
+    response_class=Response,
+    summary="the motion's cycle seen from the side, from behind and from above: stick figures, the feet's soles, "
+            "the ground and the ground-force arrows",
+    responses=_png_responses("motion"),
+)
+async def filmstrip_plot(motion_id: str, request: Request, owner: str = Depends(get_owner),
+                         db: Database = Depends(get_db)) -> Response:
+    return await _motion_plot(request, db, owner, motion_id, "filmstrip", wrenches=False)

@@ -124,7 +124,7 @@ def test_demo_reaches_every_target_and_prints_a_summary(demo_run):
         assert j["lambda_reached"] == pytest.approx(1.0)
         key, value = next(iter(j["target"].items()))
         assert j["reached"][key] == pytest.approx(value, abs=1e-9)
-        assert j["motions"] >= 2 and j["plausible"] == j["motions"], j
+        assert j["motions"] >= 2 and j["plausible"] == j["natural"] == j["motions"], j
         assert j["max_root_residual_rel_weight"] < 1e-6
     # the printed summary names every job with its λ, the values reached (not rounded:
     # -11.25, not -11.2) and where the files are
@@ -204,14 +204,14 @@ def test_demo_files_are_what_they_claim(demo_run):
             bvh = (d / f"{stem}.bvh").read_text()
             assert bvh.startswith("HIERARCHY") and f"Frames: {m.T}" in bvh
             rep = json.loads((d / f"{stem}.validation.json").read_text())
-            assert rep["plausible"] is True
+            assert rep["plausible"] is True and rep["natural"] is True
         assert lams == sorted(lams) and max(lams) == pytest.approx(1.0)
         # the last λ motion of the job stands on the target ground
         env = m.provenance["environment_values"]
         want = next(j["target"] for j in summary["jobs"] if j["name"] == job)
         for k, v in want.items():
             assert env[k] == pytest.approx(v)
-        for png in ("progress.png", "final.grf.png", "final.residuals.png"):
+        for png in ("progress.png", "final.grf.png", "final.residuals.png", "final.filmstrip.png"):
             data = (d / png).read_bytes()
             assert data[:8] == PNG and len(data) > 5000, (job, png)
         record = json.loads((d / "job.json").read_text())

@@ -69,6 +69,7 @@ BAD_IDS = ["%00", "m_%00", "a%00b", "m_" + "0" * 300, "x" * 5000, "%C3%A9t%C3%A9
 
 @pytest.mark.parametrize("path", [
     "/motions/{}", "/motions/{}/validation", "/motions/{}/plots/grf.png", "/motions/{}/plots/residuals.png",
+    "/motions/{}/plots/filmstrip.png",
     "/jobs/{}", "/jobs/{}/motions", "/jobs/{}/events", "/jobs/{}/plots/progress.png",
 ])
 def test_malformed_ids_are_404_not_database_errors(api, path):

@@ -70,13 +70,14 @@ def test_grf_and_residual_plots_of_the_tutor_and_the_last_optimum(api, tutor_id,
     last = items[-1]
     assert last["lam"] == 1.0
     for mid in (tutor_id, last["id"]):
-        for name in ("grf", "residuals"):
+        for name in ("grf", "residuals", "filmstrip"):
             assert_png_response(api.a.get(f"/motions/{mid}/plots/{name}.png"))
 
 
-def test_a_motion_without_wrenches_gets_422(api, capture_id):
+def test_a_motion_without_wrenches_gets_422_but_its_filmstrip(api, capture_id):
     for name in ("grf", "residuals"):
         assert_problem(api.a.get(f"/motions/{capture_id}/plots/{name}.png"), 422, "no contact wrenches")
+    assert_png_response(api.a.get(f"/motions/{capture_id}/plots/filmstrip.png"))
 
 
 def test_other_keys_and_unknown_ids_get_404(api, tutor_id, capture_id, finished_job):
@@ -94,7 +95,7 @@ def test_other_keys_and_unknown_ids_get_404(api, tutor_id, capture_id, finished_
 def test_openapi_documents_the_png_routes(api):
     doc = api.anon.get("/openapi.json").json()
     for path in ("/jobs/{job_id}/plots/progress.png", "/motions/{motion_id}/plots/grf.png",
-                 "/motions/{motion_id}/plots/residuals.png"):
+                 "/motions/{motion_id}/plots/residuals.png", "/motions/{motion_id}/plots/filmstrip.png"):
         op = doc["paths"][path]["get"]
         assert list(op["responses"]["200"]["content"]) == ["image/png"]
         assert "404" in op["responses"]

@@ -210,6 +210,12 @@ def test_page_shows_progress_and_renders_the_character(api, browser, tutor_id):
         table = page.text_content("#validation")
         assert "plausible" in table and "not plausible" not in table, table
         assert state["validation"]["plausible"] is True
+        # the naturalness verdict and checks, each with the captured walk's own figure where it has one
+        assert "natural" in table and "not natural" not in table and "swing clearance" in table, table
+        assert state["validation"]["natural"] is True and "(capture " in table
+        wait_js(page, "window.motionx.state.filmstripLoaded || window.motionx.state.filmstripError")
+        assert _state(page)["filmstripError"] is None
+        assert page.evaluate("document.getElementById('filmstrip-img').naturalWidth") > 800
 
         # the character, paused: present when shown, gone when hidden
         canvas = page.locator("#viewer-canvas")

@@ -33,6 +33,8 @@ const state = {
   grfError: null,
   residualsLoaded: false,
   residualsError: null,
+  filmstripLoaded: false,
+  filmstripError: null,
   validation: null,
   libraries: [],
   libraryId: null,
@@ -231,6 +233,11 @@ function renderMotionList() {
   )));
   if (!motions.length) ul.append(h('li', { class: 'empty' }, emptyText('motions')));
   ul.dataset.count = motions.length;
+}
+
+function naturalBadge(natural) {
+  if (natural === null || natural === undefined) return h('span', { class: 'badge' }, 'unchecked');
+  return h('span', { class: `badge ${natural ? 'yes' : 'no'}` }, natural ? 'natural' : 'not natural');
 }
 
 function plausibleBadge(plausible) {
@@ -508,7 +515,7 @@ async function selectMotion(id) {
   const token = ++motionToken;
   Object.assign(state, {
     motionId: id, previewReady: false, previewError: null, grfLoaded: false, grfError: null,
-    residualsLoaded: false, residualsError: null, validation: null,
+    residualsLoaded: false, residualsError: null, filmstripLoaded: false, filmstripError: null, validation: null,
   });
   $('intro').hidden = true;
   $('motion-panel').hidden = false;
@@ -529,6 +536,7 @@ async function selectMotion(id) {
     loadPreview(id, token, validation),
     loadImage('grf', `/motions/${id}/plots/grf.png`, token),
     loadImage('residuals', `/motions/${id}/plots/residuals.png`, token),
+    loadImage('filmstrip', `/motions/${id}/plots/filmstrip.png`, token),
     validation,
   ]);
 }
@@ -564,6 +572,8 @@ function renderValidation(r) {
   const rows = [
     h('tr', { class: 'verdict' }, h('th', {}, 'plausible'),
       h('td', { colspan: 3 }, plausibleBadge(r.plausible === undefined ? null : r.plausible))),
+    h('tr', { class: 'verdict' }, h('th', {}, 'natural'),
+      h('td', { colspan: 3 }, naturalBadge(r.natural === undefined ? null : r.natural))),
   ];
   if (r.error) rows.push(h('tr', { class: 'problems' }, h('td', { colspan: 4 }, r.error)));
   rows.push(
@@ -586,6 +596,20 @@ function renderValidation(r) {
     rows.push(row(`realism: ${name.replaceAll('_', ' ')} (${c.unit})`, fmt(c.value),
       `${c.bound === 'min' ? '≥' : '≤'} ${fmt(c.limit)}`,
       h('td', { class: c.passed ? 'check-yes' : (warn ? '' : 'check-no'), title: c.what },
+        c.passed ? '✓' : (warn ? '!' : '✗'))));
+  }
+  // naturalness checks (solver.naturalness): the gait's human features against published limits, with the
+  // captured walk's own figure beside each (capture column); warnings do not fail
+  const nat = Object.entries((r.naturalness && r.naturalness.checks) || {}).filter(([, c]) => c.applies !== false);
+  if (nat.length) {
+    rows.push(h('tr', {}, h('th', {}, 'naturalness'), h('th', {}, 'value'), h('th', {}, 'limit'), h('th', {}, '')));
+  }
+  for (const [name, c] of nat) {
+    const warn = c.severity === 'warning';
+    const capture = c.capture !== undefined ? ` (capture ${fmt(c.capture)})` : '';
+    rows.push(row(`${name.replaceAll('_', ' ')} (${c.unit})`, c.value === null ? '–' : `${fmt(c.value)}${capture}`,
+      `${c.bound === 'min' ? '≥' : '≤'} ${fmt(c.limit)}`,
+      h('td', { class: c.passed ? 'check-yes' : (warn ? '' : 'check-no'), title: `${c.what}. Source: ${c.source}` },
         c.passed ? '✓' : (warn ? '!' : '✗'))));
   }
   const env = r.environment || {};
