@@ -112,13 +112,14 @@ def test_simplify_removes_superfluous_coordinates_close_to_the_capture(c3d_captu
 
 
 def test_base_problem_returns_the_tutor(halfboy_tutor):
-    """A plausible motion used as its own guide is close to the optimum: only the weak priors
-    (coordinates, jerk, wrench change, now measured against the tutor itself) move it."""
+    """A plausible motion used as its own guide is close to the optimum: only the costs that do not
+    measure the distance to the guide (jerk, wrench change, the ground reactions' moment about the
+    centre of mass) move it, by the markers' worth of their weight (about a centimetre)."""
     tut = halfboy_tutor.motion
     prob = problem_for(tut.character, tut.T, tut.fps, tut.contacts)
     res = prob.solve(tut.q, init_q=tut.q, init_wrenches=tut.wrenches, heading_change=0.0)
-    assert res.success
-    assert res.marker_rms < 5e-3
+    assert res.success and res.iterations < 60
+    assert res.marker_rms < 0.015
 
 
 def test_solver_failure_is_a_status_not_a_solution(halfboy_tutor, deepmimic_capture):
