@@ -19,7 +19,7 @@ import time
 from datetime import UTC, datetime
 from pathlib import Path
 
-SECTIONS = ["dynamics", "grf", "tutor", "continuation", "compiled", "blas", "service", "library"]
+SECTIONS = ["dynamics", "grf", "tutor", "continuation", "naturalness", "compiled", "blas", "service", "library"]
 
 
 def main() -> int:

@@ -36,3 +36,22 @@ def trials() -> dict[str, list[Path]]:
                                / "loadedwalking_subject05_noload_free_trial03_ik_solution.mot"],
         "c3d_pig": [d / "btk_pig_flatfoot_full" / "PiG_Motion-FlatFoot-Full.c3d"],
     }
+
+
+def shared_trials() -> dict[str, tuple[list[Path], dict]]:
+    """Every shared walking trial the naturalness targets name (issue: natural walks): the two
+    OpenSim walks, the two C3D walks, the DeepMimic walk and the CMU straight walk, with the
+    options ``load_trial`` needs."""
+    d = data_dir()
+    tm, lw = d / "opensim_gait2354_subject01_treadmill", d / "opensim_loadedwalking_subject05"
+    return {
+        "opensim_overground": ([lw / "Rajagopal2016_subject05_v30516.osim",
+                                lw / "loadedwalking_subject05_noload_free_trial03_ik_solution.mot",
+                                lw / "loadedwalking_subject05_noload_free_trial03_grf.mot"], {}),
+        "opensim_treadmill": ([tm / "subject01.osim", tm / "subject01_walk1_ik.mot", tm / "subject01_walk1_grf.mot",
+                               tm / "subject01_walk1_grf.xml"], {"belt_speed": "auto"}),
+        "c3d_pig": ([d / "btk_pig_flatfoot_full" / "PiG_Motion-FlatFoot-Full.c3d"], {}),
+        "c3d_qualisys": ([d / "qualisys_ior_walk" / "Qualisys.c3d"], {"mass": 66.0}),
+        "deepmimic_walk": (trials()["deepmimic_walk"], {}),
+        "cmu_straight": ([d / "cmu16_bvh" / "16_15_walk.bvh"], {"mass": 60.0}),
+    }

@@ -451,7 +451,9 @@ def filmstrip_figure(motion, *, title: str | None = None, max_frames: int = 16):
 
     Ds = np.stack([display(t) for t in range(T)])  # (T, 3, 3)
     lines = np.einsum("tij,sejt->seit", Ds, _stick_lines(ch, q))
-    soles = np.einsum("tij,kcjt->kcit", Ds, sole_corners(ch, q))  # (2, 4, 3, T)
+    has_soles = len(ch.feet) == 2 and all(sum(c.side == side for c in ch.contacts) == 2 for side in FEET)
+    world_soles = sole_corners(ch, q) if has_soles else np.zeros((2, 4, 3, T))  # (2, 4, 3, T)
+    soles = np.einsum("tij,kcjt->kcit", Ds, world_soles)
     root = np.einsum("tij,jt->it", Ds, q[:3])
     B = motion.foot_contact() if motion.contacts is not None else np.zeros((2, T), bool)
     W = body_weight(motion)
@@ -473,47 +475,54 @@ def filmstrip_figure(motion, *, title: str | None = None, max_frames: int = 16):
     side, rear, top = fig.add_subplot(gs[0, :2]), fig.add_subplot(gs[1, :2]), fig.add_subplot(gs[:, 2])
     cols = {"right": "tab:red", "left": "tab:blue"}
     names = [s.name for s in ch.segments if s.length > 0]
-    def ground_line(ax, centre_u, t, u, offset):
-        """The ground under frame t near display abscissa centre_u: world z = ground height."""
+    def ground_line(ax, t, u, h_off, v_off):
+        """The ground under frame t's feet (world z = its height), through the point below the
+        pelvis: inclined along the walk in the side view (a slope), level across it (the rear view)."""
         D = Ds[t]
         tang = D @ np.array([math.cos(path[t]), math.sin(path[t]), 0.0])  # the ground along the walk
-        for k in range(2):
-            o = D @ np.array([0.0, 0.0, G[k, t]])
+        for h in np.unique(np.round(G[:, t], 6)):
+            o = D @ np.array([q[0, t], q[1, t], h])
             if u == 0:
-                s_ = (np.array([centre_u - 0.45 * slot, centre_u + 0.45 * slot]) - o[0]) / tang[0]
-                ax.plot(o[0] + s_ * tang[0] + offset, o[2] + s_ * tang[2], color="0.45", lw=0.8)
-            else:
-                ax.plot([centre_u - 0.4 * slot + offset, centre_u + 0.4 * slot + offset],
-                        [o[2] - (centre_u - o[1]) * 0.0] * 2, color="0.45", lw=0.8)
+                s_ = np.array([-0.6, 0.6]) * slot / tang[0]
+                ax.plot(o[0] + s_ * tang[0] + h_off, o[2] + s_ * tang[2] + v_off, color="0.45", lw=0.8)
+            else:  # the ground seen along the walk: at the height of the stance feet's soles
+                z = soles[B[:, t], :, 2, t].mean() if B[:, t].any() and has_soles else o[2]
+                ax.plot(np.array([-0.4, 0.4]) * slot - o[1] + h_off, [z + v_off] * 2, color="0.45", lw=0.8)
 
-    def draw(ax, u, t, offset):
+    def draw(ax, u, t, h_off, v_off):
         sg = -1.0 if u == 1 else 1.0  # the rear view is seen from behind: the walker's left on the left
         for si, nm in enumerate(names):
             c = "tab:red" if nm.endswith("_r") else "tab:blue" if nm.endswith("_l") else "0.15"
-            ax.plot(sg * lines[si, :, u, t] + offset, lines[si, :, 2, t], color=c, lw=2.2 if c == "0.15" else 1.5)
+            ax.plot(sg * lines[si, :, u, t] + h_off, lines[si, :, 2, t] + v_off, color=c,
+                    lw=2.2 if c == "0.15" else 1.5)
         for k, s in enumerate(FEET):
             c = soles[k][[0, 2, 3, 1, 0]][:, [u, 2], t]
-            if B[k, t]:
-                ax.fill(sg * c[:, 0] + offset, c[:, 1], color=cols[s], alpha=0.45, lw=0)
-            ax.plot(sg * c[:, 0] + offset, c[:, 1], color=cols[s], lw=0.9)
+            if B[k, t] and has_soles:
+                ax.fill(sg * c[:, 0] + h_off, c[:, 1] + v_off, color=cols[s], alpha=0.45, lw=0)
+            if has_soles:
+                ax.plot(sg * c[:, 0] + h_off, c[:, 1] + v_off, color=cols[s], lw=0.9)
             if arrows is not None and arrows[2][k, t]:
                 p, f = arrows[0][k, t], arrows[1][k, t]
-                ax.annotate("", xy=(sg * (p[u] + f[u]) + offset, p[2] + f[2]), xytext=(sg * p[u] + offset, p[2]),
+                ax.annotate("", xy=(sg * (p[u] + f[u]) + h_off, p[2] + f[2] + v_off),
+                            xytext=(sg * p[u] + h_off, p[2] + v_off),
                             arrowprops={"arrowstyle": "->", "color": cols[s], "lw": 1.1})
 
     for i, t in enumerate(frames):
+        # each frame centred on its pelvis, the ground below the pelvis at height 0
+        stance = G[B[:, t], t] if B[:, t].any() else G[:, t]
+        v_off = -float((Ds[t] @ np.array([q[0, t], q[1, t], stance.min()]))[2])
         for ax, u in ((side, 0), (rear, 1)):
-            off = i * slot - (-root[u, t] if u == 1 else root[u, t])
-            ground_line(ax, -root[u, t] if u == 1 else root[u, t], t, u, off)
-            draw(ax, u, t, off)
+            h_off = i * slot - (-root[u, t] if u == 1 else root[u, t])
+            ground_line(ax, t, u, h_off, v_off)
+            draw(ax, u, t, h_off, v_off)
             ax.text(i * slot, -0.12 * leg, f"{t}", ha="center", va="top", fontsize=7, color="0.3")
     # top: pelvis path and heading, soles (stance filled), in the ground plane (world x, y)
     top.plot(q[0, :N + 1], q[1, :N + 1], "-", color="0.15", lw=1.2)
-    sw = sole_corners(ch, q)
+    sw = world_soles
     for t in range(N):
         top.annotate("", xy=(q[0, t] + 0.12 * leg * math.cos(q[3, t]), q[1, t] + 0.12 * leg * math.sin(q[3, t])),
                      xytext=(q[0, t], q[1, t]), arrowprops={"arrowstyle": "->", "color": "0.3", "lw": 0.8})
-        for k, s in enumerate(FEET):
+        for k, s in enumerate(FEET if has_soles else ()):
             c = sw[k][[0, 2, 3, 1, 0]][:, :2, t]
             if B[k, t]:
                 top.fill(c[:, 0], c[:, 1], color=cols[s], alpha=0.25, lw=0)

@@ -58,7 +58,7 @@ class NaturalnessLimits:
     pelvis_roll_range_deg: float = 20.0
     pelvis_yaw_range_deg: float = 25.0
     foot_heading_deg: float = 35.0  # warning: a loaded foot's heading off the pelvis's
-    friction_use: float = 0.9  # warning: required friction at most this fraction of μ (loaded feet)
+    friction_use: float = 0.9  # required friction at most this fraction of μ (loaded feet)
     friction_load: float = 0.2  # BW: "loaded" for the friction margin
     peak_vertical: float = 1.5  # BW per foot on level ground (warning)
     push: float = -0.05  # warning: a loaded foot's horizontal force along foot → centre of mass ≥ this × f_z × leg
@@ -498,7 +498,7 @@ def checks_of(fig: Mapping[str, Any], *, reference: Mapping[str, Any] | None = N
         checks["friction_margin"] = _item(
             rf["max"] / rf["mu"], lim.friction_use, "μ",
             f"largest friction a foot loaded over {lim.friction_load:g} BW needs, as a fraction of μ",
-            SOURCES["friction_margin"], warning=True, capture=None if cap_rf is None else cap_rf / rf["mu"])
+            SOURCES["friction_margin"], capture=None if cap_rf is None else cap_rf / rf["mu"])
         checks["push"] = _item(
             _get(fig, "push", "min"), lim.push, "f_z·leg",
             "least horizontal force of a loaded foot along the line from the foot to the centre of mass",

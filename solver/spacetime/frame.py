@@ -205,7 +205,8 @@ class FrameFunctions:
             ns, fs = wk[:3], wk[3:]
             nmom = ns * self.moment_scale
             fz = fs[2] * self.weight_scale
-            rows.append(mu * fs[2] - ca.sqrt(fs[0] ** 2 + fs[1] ** 2 + CONE_EPS**2))
+            # friction cone, with the walker's margin to slipping (``Naturalness.friction_use`` of μ)
+            rows.append(self.naturalness.friction_use * mu * fs[2] - ca.sqrt(fs[0] ** 2 + fs[1] ** 2 + CONE_EPS**2))
             # f_z × the CoP (on the ground plane at the reference point's height)
             fu = ca.vertcat(fz * ref[3 * k] - nmom[1], fz * ref[3 * k + 1] + nmom[0], fz * ref[3 * k + 2])
             local = ca.mtimes(R.T, fu - fz * pc) / self.weight_scale

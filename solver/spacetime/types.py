@@ -116,6 +116,9 @@ class Naturalness:
     #: centre of mass is at least −push_margin × f_z × leg length (the force plates of the shared
     #: trials: ≥ −0.008; a double support whose feet squeeze the ground between them: −0.36)
     push_margin: float = 0.02
+    #: a loaded foot uses at most this fraction of the friction μ (check: 0.9): a walk that needs all
+    #: of it slips at the slightest disturbance
+    friction_use: float = 0.85
     #: on level ground a foot's fore-aft force stays within this (BW; check: 0.35; walking peaks
     #: ~0.2): the flat ground is walked on without braking and pushing twice as hard as people do
     fore_aft: float = 0.32
