@@ -1,5 +1,6 @@
 """Plots as PNG bytes (matplotlib, Agg canvas): the continuation's progress curve, the
-ground reaction forces per foot, and the root residual of the equations of motion.
+ground reaction forces per foot, the root residual of the equations of motion, and the
+filmstrip of a cycle (side, rear and top views with soles and ground forces).
 
 Presentation only: the numbers come from ``solver``/``mjcf`` (``solver.export.ground_reactions``,
 ``solver.plausibility.root_residual``, ``mjcf.validate.mujoco_residual``). Used by the API
@@ -429,7 +430,7 @@ def filmstrip_figure(motion, *, title: str | None = None, max_frames: int = 16):
     from solver.environment import environment_of, ground_of
     from solver.kinematics import standing_leg_length
     from solver.motion import FEET, Motion
-    from solver.naturalness import path_heading, sole_corners
+    from solver.naturalness import has_two_point_feet, path_heading, sole_corners
 
     if not isinstance(motion, Motion):
         raise PlotError(f"expected a motion (solver.motion.Motion), got {type(motion).__name__}")
@@ -451,7 +452,7 @@ def filmstrip_figure(motion, *, title: str | None = None, max_frames: int = 16):
 
     Ds = np.stack([display(t) for t in range(T)])  # (T, 3, 3)
     lines = np.einsum("tij,sejt->seit", Ds, _stick_lines(ch, q))
-    has_soles = len(ch.feet) == 2 and all(sum(c.side == side for c in ch.contacts) == 2 for side in FEET)
+    has_soles = has_two_point_feet(ch)
     world_soles = sole_corners(ch, q) if has_soles else np.zeros((2, 4, 3, T))  # (2, 4, 3, T)
     soles = np.einsum("tij,kcjt->kcit", Ds, world_soles)
     root = np.einsum("tij,jt->it", Ds, q[:3])

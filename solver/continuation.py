@@ -18,7 +18,7 @@ from solver.axes import Target, environment_at, guide_at, nlp_at
 from solver.environment import Environment, environment_of
 from solver.jsonable import jsonable
 from solver.motion import Motion
-from solver.naturalness import motion_figures
+from solver.naturalness import has_two_point_feet, motion_figures
 from solver.spacetime import SolveResult, SpacetimeProblem, Weights
 
 __all__ = ["CancelCheck", "ExtrapolationResult", "ProgressCallback", "ProgressRecord", "StepCallback", "StepControl",
@@ -130,6 +130,8 @@ def gait_reference(tutor: Motion) -> dict[str, Any]:
     captured walk's figures (recorded in the tutor) and the tutor's own."""
     ref = tutor.provenance.get("gait_reference")
     capture = ref.get("capture") if isinstance(ref, Mapping) else None
+    if tutor.contacts is None or not has_two_point_feet(tutor.character):
+        return {"capture": capture, "tutor": None}
     return {"capture": capture, "tutor": jsonable(motion_figures(tutor))}
 
 
@@ -231,7 +233,7 @@ class _Walk:
                     self.reference)
         if m.report is None or not m.report["plausible"]:
             return "implausible"
-        if not m.report.get("natural", True):
+        if m.report.get("natural") is False:
             return "unnatural: " + ", ".join((m.report.get("naturalness") or {}).get("failed") or [])
         sr = StepResult(len(self.steps), float(lam), m, {"iterations": res.iterations, "solve_s": res.wall_time,
                                                           "status": res.status, "marker_rms_mm": 1e3 * res.marker_rms})

@@ -16,9 +16,10 @@ Failures (a λ optimum breaking one is rejected by the continuation, like an unr
 are what an observer sees at once and what people do not do: a foot dragging (trip), a toe
 tip carrying the weight, a joint jammed at its limit, a loaded foot across the body's
 midline, the load jumping between the feet, a level walk braking and pushing twice as hard
-as people do, the trunk leaning back going uphill. Warnings are figures where gait varies
-between people and environments (force shape, pelvis ranges, step width, foot heading,
-friction margin).
+as people do, the trunk leaning back going uphill, a walk using all the friction there is.
+Warnings are figures where gait varies between people and environments (force shape, lateral
+force, push toward the centre of mass, pelvis ranges, foot heading). Step widths are reported
+as figures (``step_width_m``), not judged: crossover is the failure they lead to.
 """
 
 from __future__ import annotations
@@ -115,6 +116,12 @@ def sole_corners(character, q: np.ndarray) -> np.ndarray:
                 pts.append((c.segment, np.asarray(c.position) + np.array([0.0, sgn * w, 0.0])))
     out = np.asarray(points_world(character, q, pts))  # (8, 3[, T])
     return out.reshape((2, 4) + out.shape[1:])
+
+
+def has_two_point_feet(character) -> bool:
+    """Two feet, each a box with exactly two contact points (a heel and a toe): the feet the
+    naturalness checks (sole, pitch, heading) and the drawn shoes are defined on."""
+    return len(character.feet) == 2 and all(sum(c.side == side for c in character.contacts) == 2 for side in FEET)
 
 
 def heel_toe(character, side: str) -> tuple:
@@ -254,13 +261,32 @@ def _foot_pitch(w: _Walk, lim: NaturalnessLimits) -> tuple[np.ndarray, dict[str,
     return pitch, {"max_deg": float(pv[k, t]), "at": {"foot": FEET[k], "frame": int(t), "load_bw": float(w.fz[k, t])}}
 
 
+#: a hinge whose model range is at most this is not judged (nor kept off) at its limits: its whole
+#: range is a few degrees, so it is as good as locked
+MIN_LIMITED_RANGE_DEG = 8.0
+
+
+def limited_coordinates(character) -> np.ndarray:
+    """(n,) the joint coordinates whose limits a natural walk keeps off: hinges (the root's six
+    and slides excluded) with finite limits more than ``MIN_LIMITED_RANGE_DEG`` apart. The
+    optimizer bounds these inside their limits; ``joint_limits`` checks them."""
+    lo, hi = np.asarray(character.lower, dtype=float), np.asarray(character.upper, dtype=float)
+    kinds = np.array(character.dof_kinds)
+    with np.errstate(invalid="ignore"):
+        ok = (kinds == "hinge") & np.isfinite(lo) & np.isfinite(hi) & (hi - lo > math.radians(MIN_LIMITED_RANGE_DEG))
+    ok[:6] = False
+    return ok
+
+
 def _joint_limits(w: _Walk, lim: NaturalnessLimits) -> dict[str, Any]:
-    """Frames each joint coordinate spends within ``limit_band_deg`` of its model limit."""
+    """Frames each limited joint coordinate (``limited_coordinates``) spends within
+    ``limit_band_deg`` of its model limit."""
     band = math.radians(lim.limit_band_deg)
     lo, hi = w.character.lower, w.character.upper
     frames: dict[str, int] = {}
+    limited = limited_coordinates(w.character)
     for i, name in enumerate(w.character.coordinate_names):
-        if i < 6 or not (math.isfinite(lo[i]) and math.isfinite(hi[i])):
+        if not limited[i]:
             continue
         x = w.q[i, : w.N]
         n_at = int(np.sum((x <= lo[i] + band) | (x >= hi[i] - band)))
@@ -543,12 +569,14 @@ def naturalness_report(motion: Motion, reference: Mapping[str, Any] | None = Non
                        lim: NaturalnessLimits = NaturalnessLimits()) -> dict[str, Any]:
     """The naturalness section of the validation report: every check as a figure with its limit,
     its source and the capture's own figure; ``reference`` defaults to the motion's provenance
-    ``gait_reference`` ({"capture": …, "tutor": …} figures)."""
+    ``gait_reference`` ({"capture": …, "tutor": …} figures). ``passed`` is None when the motion
+    cannot be checked (no contact schedule, or feet without a heel and a toe point)."""
     t0 = time.perf_counter()
     out: dict[str, Any] = {"limits": asdict(lim), "notes": []}
-    if motion.contacts is None or len(motion.character.feet) != 2:
-        out.update(checks={}, passed=True, failed=[], warnings=[], time_s=time.perf_counter() - t0)
-        out["notes"].append("no contact schedule or foot boxes: naturalness not checked")
+    if motion.contacts is None or not has_two_point_feet(motion.character):
+        out.update(checks={}, passed=None, failed=[], warnings=[], time_s=time.perf_counter() - t0)
+        out["notes"].append("no contact schedule, or feet without a heel and a toe contact point: "
+                            "naturalness not checked")
         return out
     if reference is None:
         ref = motion.provenance.get("gait_reference")

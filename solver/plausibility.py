@@ -126,7 +126,7 @@ def report(motion: Motion, tol: Tolerances = Tolerances(), realism: RealismLimit
     # limits and the captured walk's own figures; its failures make the motion not ``natural``
     nat = naturalness_report(motion)
     out["naturalness"] = nat
-    out["natural"] = bool(nat["passed"])
+    out["natural"] = nat["passed"]  # None: not checked (no contact schedule or two-point feet)
     out["problems"] += naturalness_lines(nat)
     return out
 

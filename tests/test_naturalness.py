@@ -91,6 +91,27 @@ def test_a_joint_held_at_its_limit_fails_beyond_one_frame(frames, passed):
     assert c["value"] == frames and c["passed"] is passed and "hip_rotation_r" in c["what"]
 
 
+def test_only_hinges_with_a_range_are_judged_at_their_limits_and_kept_off_them():
+    """The check and the optimizer's bounds share one rule (``limited_coordinates``): the root's
+    six coordinates and a hinge whose whole range is a few degrees are neither judged at their
+    limits nor bounded inside them."""
+    from dataclasses import replace
+
+    from solver.naturalness import limited_coordinates
+
+    ch, q, _ = stand()
+    i = ch.index("hip_rotation_r")
+    seg = next(s for s in ch.segments if any(d.name == "hip_rotation_r" for d in s.dofs))
+    dofs = tuple(replace(d, lower=-math.radians(3.0), upper=math.radians(3.0)) if d.name == "hip_rotation_r" else d
+                 for d in seg.dofs)
+    narrow = replace(ch, segments=tuple(replace(s, dofs=dofs) if s is seg else s for s in ch.segments))
+    assert limited_coordinates(ch)[6:].all() and not limited_coordinates(ch)[:6].any()
+    assert not limited_coordinates(narrow)[i]
+    q[i] = narrow.upper[i]  # held at its (narrow) limit all cycle: not judged
+    A = schedule(ch, right=list(range(N)), left=list(range(N)))
+    assert checks(narrow, q, A)["joint_limits"]["value"] == 0
+
+
 def test_a_loaded_foot_across_the_pelvis_fails_by_its_distance():
     ch, q, W = stand(speed=1.0)
     q[ch.index("hip_adduction_r")] = math.radians(15.0)  # the right foot swings in, to the left of the pelvis
@@ -204,6 +225,14 @@ def test_the_tutor_keeps_the_optimizers_naturalness_bounds(tutor):
     fz = m.wrenches[:, 5, : m.T - 2] / W
     assert both.any() and fz[:, both].max(axis=0).min() > 0.3
     assert np.minimum(fz[0], fz[1])[both].max() >= nat.shared_load - 1e-6
+    # the limited joints (the check's) stay the margin inside their limits
+    from solver.naturalness import limited_coordinates
+
+    lim = limited_coordinates(m.character)
+    ch, margin = m.character, math.radians(nat.limit_margin_deg)
+    assert lim.sum() >= 10
+    assert (m.q[lim] >= (ch.lower[lim] + margin - 1e-6)[:, None]).all()
+    assert (m.q[lim] <= (ch.upper[lim] - margin + 1e-6)[:, None]).all()
 
 
 def test_a_change_of_support_without_a_shared_frame_gets_one(tutor):
@@ -252,6 +281,21 @@ def test_sole_calibration_levels_a_retargeted_foot(shared_data):
     after = heel_minus_toe(levelled)
     assert min(before) > 0.02 and set(moved["heel_above_toe_mm"]) == {"right", "left"}
     assert max(abs(x) for x in after) < 0.001
+
+
+def test_feet_without_a_heel_and_a_toe_point_are_not_checked_and_not_called_natural(tutor):
+    from dataclasses import replace
+
+    from solver.plausibility import report
+
+    m = tutor.motion
+    ch = m.character
+    keep = [j for j, c in enumerate(ch.contacts) if c.name != "toe_l"]
+    one_point = replace(ch, contacts=tuple(ch.contacts[j] for j in keep))
+    m1 = replace(m, character=one_point, contacts=m.contacts[keep], report=None)
+    nat = naturalness_report(m1)
+    assert nat["passed"] is None and nat["checks"] == {} and "not checked" in nat["notes"][0]
+    assert report(m1)["natural"] is None
 
 
 def test_a_report_without_wrenches_checks_the_kinematics_only(tutor):

@@ -54,9 +54,10 @@ def test_halfboy_tutor_from_deepmimic_is_plausible(halfboy_tutor):
     tut = halfboy_tutor.motion
     assert tut.character.n == 16 and tut.fps == 15
     _assert_plausible(tut)
-    # the thesis calls ~3 mm per marker imperceptible; the realistic transcription moves the
-    # 15 fps capture (itself not dynamically consistent) by about two centimetres
-    assert halfboy_tutor.stats["marker_distance_to_capture_mm"]["mean"] < 25.0
+    # the thesis calls ~3 mm per marker imperceptible; the realistic and natural transcription
+    # moves the 15 fps capture (itself not dynamically consistent; its swing toes skim the floor
+    # and its change of support has no shared frame) by about three centimetres
+    assert halfboy_tutor.stats["marker_distance_to_capture_mm"]["mean"] < 35.0
     # the total ground reaction carries the body: mean vertical force over the cycle ≈ weight
     fz = tut.wrenches[:, 5, 1:-1].sum(axis=0)
     assert np.mean(fz) == pytest.approx(tut.character.weight, rel=0.05)

@@ -129,12 +129,13 @@ def cmd_validate(args: argparse.Namespace) -> int:
         print(json.dumps(rep, indent=2 if args.pretty else None))
     else:
         print(_validate_summary(rep, args.motion))
-    return 0 if rep["plausible"] and rep.get("natural", True) else 1
+    return 0 if rep["plausible"] and rep.get("natural") is not False else 1
 
 
 def _validate_summary(rep: dict, path) -> str:
-    """The plausibility report for a person: the verdict, the checks at the frames in one line,
-    then every realism check with its figure and limit (failures first), warnings and notes."""
+    """The plausibility report for a person: the verdicts (plausible, natural), the checks at the
+    frames in one line, then every realism and naturalness check with its figure and limit
+    (failures first), warnings and notes."""
     r, mj = rep["root_residual"], rep.get("mujoco_replay") or {}
     natural = {True: ", natural", False: ", NOT natural"}.get(rep.get("natural"), "")
     head = (f"{path}: {'plausible' if rep['plausible'] else 'NOT plausible'}{natural} ({rep['character']}, "

@@ -24,7 +24,7 @@ from solver.character import Character
 from solver.dynamics import casadi_functions
 from solver.kinematics import forward_kinematics, marker_points, markers, point_world, standing_leg_length
 from solver.motion import FEET
-from solver.naturalness import trunk_axis
+from solver.naturalness import heel_toe, trunk_axis
 from solver.spacetime import compiled
 from solver.spacetime.derivatives import jacobian, lagrangian_hessian
 from solver.spacetime.types import STANDARD_GRAVITY, Naturalness, Realism
@@ -116,12 +116,8 @@ class FrameFunctions:
         self.heel_of: dict[str, int] = {}
         self.toe_of: dict[str, int] = {}
         for side in FEET:
-            idx = [j for j, c in enumerate(ch.contacts) if c.side == side]
-            if len(idx) != 2:
-                raise ValueError(f"the {side} foot needs exactly two contact points (heel, toe)")
-            xs = [ch.contacts[j].position[0] for j in idx]
-            self.heel_of[side] = idx[int(np.argmin(xs))]
-            self.toe_of[side] = idx[int(np.argmax(xs))]
+            heel, toe = heel_toe(ch, side)
+            self.heel_of[side], self.toe_of[side] = ch.contacts.index(heel), ch.contacts.index(toe)
 
     def _contact_functions(self, q: ca.SX, pose, pts: list) -> None:
         ch = self.character
@@ -191,6 +187,7 @@ class FrameFunctions:
         ref = ca.SX.sym("ref", 6)  # per foot: the reference point (x, y, ground height)
         com = ca.SX.sym("com", 3)  # the frame's centre of mass
         path, fa_cap = ca.SX.sym("path"), ca.SX.sym("fa_cap")  # direction of travel; fore-aft force bound
+        g_ratio = ca.SX.sym("g_ratio")  # the environment's gravity over the standard: its body weight
         L = self.length_scale
         rows = []
         for k, side in enumerate(FEET):
@@ -221,11 +218,12 @@ class FrameFunctions:
             cap = rl.free_moment_cap / L
             rows += [cap * fs[2] - nf, cap * fs[2] + nf]
             # [naturalness] a loaded foot is not pitched far onto its toe: f_z (sin p − sin p_free) ≤ C
+            # (C in the environment's body weights, as the check counts them)
             ph, pt = pts[self.heel_of[side]], pts[self.toe_of[side]]
             d0 = float(np.linalg.norm(self._rest_points[self.toe_of[side]] - self._rest_points[self.heel_of[side]]))
             sin_p = (ph[2] - pt[2]) / d0
             nt = self.naturalness
-            rows.append(nt.pitch_coefficient - fs[2] * (sin_p - math.sin(math.radians(nt.pitch_free_deg))))
+            rows.append(nt.pitch_coefficient * g_ratio - fs[2] * (sin_p - math.sin(math.radians(nt.pitch_free_deg))))
             # [naturalness] the ground pushes the body: the foot's horizontal force does not point away
             # from the centre of mass (a parameter), beyond push_margin × f_z × leg (in double support
             # the feet would otherwise squeeze the ground between them)
@@ -236,7 +234,8 @@ class FrameFunctions:
             f_fwd = fs[0] * ca.cos(path) + fs[1] * ca.sin(path)
             rows += [fa_cap - f_fwd, fa_cap + f_fwd]
         rows.append(rl.support_max - w[5] - w[11])
-        self.feet = ca.Function("feet", [q, w, mu, ref, com, path, fa_cap], [ca.vertcat(*rows)])  # 2 * FOOT_ROWS + 1
+        # 2 * FOOT_ROWS + 1 rows
+        self.feet = ca.Function("feet", [q, w, mu, ref, com, path, fa_cap, g_ratio], [ca.vertcat(*rows)])
 
     # --- spline segments --------------------------------------------------------------------
     def _segment_functions(self) -> None:

@@ -11,6 +11,7 @@ import numpy as np
 
 from solver.kinematics import centre_of_mass, contact_points, markers
 from solver.motion import FEET, foot_schedule_of
+from solver.naturalness import limited_coordinates
 from solver.spacetime.types import STANDARD_GRAVITY, Environment, Weights
 
 MARKER_SCALE = 0.01  # m: the objective is in units of (1 cm)²
@@ -171,9 +172,10 @@ class Layout:
         ubx = np.full(self.nx, np.inf)
         lo, hi = self.character.lower, self.character.upper
         margin = np.radians(self.ff.naturalness.limit_margin_deg)  # a joint is not held at its limit
+        limited = limited_coordinates(self.character)
         for i in range(self.n):
             idx = np.unique(self._q_index[i])
-            m = margin if i >= 6 and hi[i] - lo[i] > 4 * margin else 0.0
+            m = margin if limited[i] else 0.0
             lbx[idx], ubx[idx] = lo[i] + m, hi[i] - m
         for i, v in (locks or {}).items():
             idx = np.unique(self._q_index[i])
@@ -204,11 +206,13 @@ class Layout:
                    ref: np.ndarray, anchor: np.ndarray, dpsi: float, com: np.ndarray | None = None,
                    h: float | None = None, ground: np.ndarray | None = None, rise: float = 0.0,
                    joint_range: np.ndarray | None = None, path: np.ndarray | None = None,
-                   lean: np.ndarray | None = None, fore_aft_cap: float = 1e3) -> np.ndarray:
+                   lean: np.ndarray | None = None, fore_aft_cap: float = 1e3,
+                   g_ratio: float = 1.0) -> np.ndarray:
         """The parameter vector (``P_LAYOUT`` order); ``h``: frame interval (s), default 1/fps;
         ``joint_range`` (2, n) the joint-range prior's bounds (default: none); ``path`` (T,) the
         direction of travel per frame (rad); ``lean`` (T,) the trunk's target lean (sine);
-        ``fore_aft_cap`` each foot's fore-aft force bound (scaled)."""
+        ``fore_aft_cap`` each foot's fore-aft force bound (scaled); ``g_ratio`` the environment's
+        gravity over the standard (the loads the naturalness rows allow are in its body weights)."""
         nT = self.T
         K = max(len(self.eom_frames), 1)
         hv = float(self.dt if h is None else h)
@@ -235,7 +239,7 @@ class Layout:
             (np.array([[-1e3] * self.n, [1e3] * self.n]) if joint_range is None else joint_range).ravel(),
             np.zeros(nT) if path is None else np.asarray(path, dtype=float),
             np.zeros(nT) if lean is None else np.asarray(lean, dtype=float),
-            [float(fore_aft_cap)],
+            [float(fore_aft_cap), float(g_ratio)],
         ])
 
     def fore_aft_cap(self, env: Environment) -> float:

@@ -60,10 +60,10 @@ YAW = 3
 #: height gain (root z of frames T−2, T−1 over frames 0, 1; stairs)
 #: "range": per coordinate, the joint-range prior's lower then upper bound; "path": per frame, the
 #: direction of travel (rad) the feet's crossover is measured across
-#: "lean": per frame, the trunk's target lean against gravity (sine); "facap": the fore-aft force bound
-#: of a foot (scaled: body weights of standard gravity)
+#: "lean": per frame, the trunk's target lean against gravity (sine); "loads": a foot's fore-aft force
+#: bound (scaled: body weights of standard gravity) and the environment's gravity over the standard
 P_LAYOUT = ("gm", "gq", "g", "mu", "wts", "ref", "anchor", "dpsi", "com", "h", "ground", "rise", "range", "path",
-            "lean", "facap")
+            "lean", "loads")
 
 
 def _heading(vx, vy, psi):
@@ -153,7 +153,7 @@ class SpacetimeProblem(Layout):
         nm3 = 3 * ff.n_markers
         sizes = {"gm": nm3 * Tn, "gq": n * Tn, "g": 3, "mu": 1, "wts": 11, "ref": 6 * Tn, "anchor": 3 * Tn, "dpsi": 1,
                  "com": 3 * Tn, "h": 1, "ground": max(ff.P, 1) * Tn, "rise": 1, "range": 2 * n, "path": Tn,
-                 "lean": Tn, "facap": 1}
+                 "lean": Tn, "loads": 2}
         self._p_layout, off = {}, 0
         for name in P_LAYOUT:
             self._p_layout[name] = (off, sizes[name])
@@ -183,7 +183,7 @@ class SpacetimeProblem(Layout):
         # --- objective ---------------------------------------------------------------------
         cw = ca.repmat(ca.vertcat(wts[0], wts[1], wts[3], wts[7], wts[9]), 1, Tn)
         rng = par("range")
-        self._PATH, self._LEAN, self._FACAP = par("path"), par("lean"), par("facap")
+        self._PATH, self._LEAN, self._LOADS = par("path"), par("lean"), par("loads")
         self._cost(Term("cost", ff.cost, 1, qi, [GM, GQ, cw, ca.repmat(rng[:n], 1, Tn), ca.repmat(rng[n:], 1, Tn)],
                         derivatives=ff.derivatives["cost"], cost=True))
         self._cyclic_root(x, dpsi)
@@ -333,7 +333,8 @@ class SpacetimeProblem(Layout):
                 sel.append((c, 2 * FOOT_ROWS))
         self._rows(Term("feet", ff.feet, 2, np.vstack([qi[:, E], W]), [ca.repmat(mu, 1, len(E)), REF[:, E],
                                                                         self._COM[:, E], self._PATH[E].T,
-                                                                        ca.repmat(self._FACAP, 1, len(E))],
+                                                                        ca.repmat(self._LOADS[0], 1, len(E)),
+                                                                        ca.repmat(self._LOADS[1], 1, len(E))],
                         derivatives=D["feet"]), sel, 0.0, math.inf)
         # spline continuity at the knots 1..T−2
         K = list(range(1, Tn - 1))
@@ -444,8 +445,9 @@ class SpacetimeProblem(Layout):
         p = self.parameters(guide_markers, prior, env, weights, ref, anchor, dpsi,
                             self.com_points(q0) if self.dynamics else None, h=h,
                             ground=self.contact_ground(feet_ground), rise=rise, joint_range=self.joint_range(gq),
-                            path=path, lean=self.trunk_lean(gq, env.gravity, path),
-                            fore_aft_cap=self.fore_aft_cap(env))
+                            path=path, lean=self.trunk_lean(gq, env.gravity, path) if self.ff.has_contacts else None,
+                            fore_aft_cap=self.fore_aft_cap(env),
+                            g_ratio=float(np.linalg.norm(env.gravity)) / STANDARD_GRAVITY)
         lbg, ubg = self.constraint_bounds(h)
         parts = [self.pack_q(q0)]
         if self.dynamics:
