@@ -437,7 +437,9 @@ class SpacetimeProblem(Layout):
             feet_ground = stair_heights(self.foot_contact(), env.step_height_m)
             rise = stair_rise(self.foot_contact(), env.step_height_m)
         ref = self.ref_points(q0, feet_ground) if self.dynamics else np.zeros((6, self.T))
-        path = path_heading(gq, self.T - 2)
+        # the direction of travel the crossover rows are measured across: the start iterate's (at a
+        # λ step the previous optimum, which the optimum stays closer to than to the guide)
+        path = path_heading(q0, self.T - 2)
         anchor = self.anchor_points(q0)
         prior = gq if prior_q is None else np.asarray(prior_q, dtype=float)
         if prior.shape != (self.n, self.T) or not np.all(np.isfinite(prior)):
