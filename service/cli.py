@@ -25,6 +25,7 @@ import threading
 from importlib.metadata import PackageNotFoundError
 from importlib.metadata import version as dist_version
 from pathlib import Path
+from typing import ClassVar
 
 from solver.formats import reader_suffixes
 
@@ -68,6 +69,47 @@ class stop_on_signals:
         if self._active:
             for sig in self._old:
                 signal.signal(sig, signal.SIG_IGN)
+
+    def __exit__(self, *exc) -> None:
+        if self._active:
+            for sig, handler in self._old.items():
+                signal.signal(sig, handler)
+
+
+class cancel_on_signals:
+    """Within ``with cancel_on_signals() as cancel:`` Ctrl-C (SIGINT) and SIGTERM do not raise:
+    they set ``cancel.signal`` and ``cancel()`` turns true, so a long solve given ``cancel`` as its
+    ``should_cancel`` stops at its next IPOPT iteration and returns "canceled" with what it has
+    (an exception raised inside IPOPT's callbacks would be swallowed by CasADi and the solve go
+    on). ``cancel.exit_status`` is 130 or 143 after a signal. Outside the main thread it does
+    nothing and ``cancel()`` stays false."""
+
+    STATUS: ClassVar[dict[int, int]] = {signal.SIGINT: 130, signal.SIGTERM: 143}
+
+    def __enter__(self) -> cancel_on_signals:
+        self.signal: int | None = None
+        self._active = threading.current_thread() is threading.main_thread()
+        if self._active:
+            self._old = {sig: signal.getsignal(sig) for sig in self.STATUS}
+            for sig in self.STATUS:
+                signal.signal(sig, self._note)
+        return self
+
+    def _note(self, signum, frame) -> None:
+        if self.signal is None:
+            self.signal = signum
+
+    def __call__(self) -> bool:
+        return self.signal is not None
+
+    @property
+    def exit_status(self) -> int | None:
+        return None if self.signal is None else self.STATUS[signal.Signals(self.signal)]
+
+    @property
+    def reason(self) -> str:
+        return {signal.SIGINT: "interrupted (Ctrl-C)", signal.SIGTERM: "terminated (SIGTERM)"}.get(
+            signal.Signals(self.signal), "") if self.signal is not None else ""
 
     def __exit__(self, *exc) -> None:
         if self._active:
@@ -200,7 +242,7 @@ def add_command(sub: argparse._SubParsersAction, name: str, summary: str, descri
     """A subcommand with its one-line summary (the command list) and its description (its
     own ``--help``)."""
     return sub.add_parser(name, help=summary, description=description or (summary[:1].upper() + summary[1:] + "."),
-                          formatter_class=HelpFormatter, **kw)
+                          formatter_class=HelpFormatter, allow_abbrev=False, **kw)
 
 
 def version() -> str:
@@ -213,7 +255,8 @@ def version() -> str:
 def build_parser() -> argparse.ArgumentParser:
     from service.commands import MODULES  # lazy: import cycle (the command modules import this one)
 
-    p = argparse.ArgumentParser(prog="motionx", formatter_class=HelpFormatter, description="""\
+    # no abbreviations: "--slop" is an error, not "--slope"
+    p = argparse.ArgumentParser(prog="motionx", formatter_class=HelpFormatter, allow_abbrev=False, description="""\
 Turn one captured human walk into physically plausible walks on new ground: make the capture
 plausible (the tutor), then extrapolate it to a slope, a curve, another friction or gravity,
 keeping every intermediate motion.""", epilog="""\

@@ -104,6 +104,14 @@ def test_usage_errors_are_one_line_and_status_2():
         assert "Traceback" not in r.stderr and "error:" in r.stderr.strip().splitlines()[-1]
 
 
+def test_an_abbreviated_option_is_refused_not_guessed():
+    """`--slop 5` is a typo, not `--slope 5`: argparse's prefix matching is off on every command."""
+    code, _, err = run("extrapolate", "x.json", "--slop", "5", "--out", "x")
+    assert code == 2 and "unrecognized arguments: --slop" in err
+    code, _, err = run("tutor", "x.c3d", "--out", "t.json", "--char", "fullbody")
+    assert code == 2 and "unrecognized arguments: --char" in err
+
+
 # --- user mistakes: one clear line, status 2 ---------------------------------------------------
 
 

@@ -184,3 +184,36 @@ def test_tutor_refuses_unreadable_input(tmp_path):
     (tmp_path / "x.bvh").write_text("not a bvh")
     r = motionx("tutor", tmp_path / "x.bvh", "--mass", "60", "--out", tmp_path / "t.json")
     assert r.returncode == 2 and "cannot import" in r.stderr
+
+
+@pytest.mark.parametrize("sig, status", [("SIGINT", 130), ("SIGTERM", 143)])
+def test_a_signal_cancels_extrapolate_keeping_what_it_has(tutor_file, tmp_path, sig, status):
+    """Ctrl-C (or SIGTERM) in the middle of `motionx extrapolate`: the solve stops at its next
+    IPOPT iteration, the λ optima kept so far stay, progress.csv and summary.json say
+    "canceled", and the exit status is 130 (143)."""
+    import signal
+    import time
+
+    exe = shutil.which("motionx") or str(Path(sys.executable).with_name("motionx"))
+    out = tmp_path / "ex"
+    p = subprocess.Popen([exe, "extrapolate", str(tutor_file), "--slope", "30", "--method", "thesis", "--delta0",
+                          "0.005", "--eps", "0.001", "--out", str(out), "--quiet"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not list(out.glob("step_001_*.motion.json")) and time.monotonic() < deadline and p.poll() is None:
+            time.sleep(0.05)
+        assert p.poll() is None, "the walk ended before it could be interrupted"
+        p.send_signal(getattr(signal, sig))
+        stdout, stderr = p.communicate(timeout=120)
+    finally:
+        p.kill()
+    assert p.returncode == status, stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "canceled" and summary["message"].startswith(
+        "interrupted" if sig == "SIGINT" else "terminated")
+    assert 0 < summary["lambda_reached"] < 1 and summary["motions"]
+    assert all((out / f).is_file() for f in summary["motions"])
+    rows = list(csv.DictReader((out / "progress.csv").open()))
+    assert rows and float(rows[-1]["lambda_reached"]) == pytest.approx(summary["lambda_reached"])
+    assert "Traceback" not in stderr

@@ -10,7 +10,15 @@ import time
 from dataclasses import asdict
 from pathlib import Path
 
-from service.cli import CliError, add_command, import_message, load_motion, parse_belt_speed, warn_input
+from service.cli import (
+    CliError,
+    add_command,
+    cancel_on_signals,
+    import_message,
+    load_motion,
+    parse_belt_speed,
+    warn_input,
+)
 from service.commands.outputs import prepare_output_dir, progress_csv, step_stem
 from service.config import enable_native_code, get_settings
 from solver import axes as registry
@@ -235,7 +243,7 @@ def _extrapolate_summary(summary: dict, out: Path) -> str:
                      f"{final['root_residual_rel_weight']:.1e} x body weight, MuJoCo's replay agrees to "
                      f"{final['mujoco_agreement_rel_weight']:.1e}{_realism_words(final)})")
     lines.append(f"  wrote {out}/: step_NNN_lambda_L.motion.json per λ, progress.csv, progress.png, summary.json"
-                 + (", grf.png, residuals.png" if final else ""))
+                 + (", grf.png, residuals.png, filmstrip.png" if final else ""))
     return "\n".join(lines)
 
 
@@ -267,12 +275,15 @@ def cmd_extrapolate(args: argparse.Namespace) -> int:
         step.motion.save(out / name)  # our plausibility report inside; MuJoCo replay for the last one
         files.append(name)
 
-    try:
-        res = extrapolate(tutor, target, control, on_progress=bar, on_step=on_step)
-    except ValueError as e:
-        raise CliError(str(e)) from None
-    finally:
-        bar.close()
+    # Ctrl-C or SIGTERM cancels the walk: the motions kept so far, progress and summary are written
+    # and the exit status is 130 / 143
+    with cancel_on_signals() as cancel:
+        try:
+            res = extrapolate(tutor, target, control, on_progress=bar, on_step=on_step, should_cancel=cancel)
+        except ValueError as e:
+            raise CliError(str(e)) from None
+        finally:
+            bar.close()
     (out / "progress.csv").write_text(progress_csv(asdict(r) for r in res.records))
     plot_progress(res.records, target, out / "progress.png")
     final = None
@@ -290,7 +301,7 @@ def cmd_extrapolate(args: argparse.Namespace) -> int:
     summary = {
         "status": res.status,
         "lambda_reached": res.lam_reached,
-        "message": res.message,
+        "message": cancel.reason if cancel() and res.status == "canceled" else res.message,
         "target": target.to_dict(),
         "control": {"method": control.method, "delta0": control.delta0, "eps": control.eps,
                     "max_iter": control.max_iter, "max_solves": control.max_solves},
@@ -302,6 +313,8 @@ def cmd_extrapolate(args: argparse.Namespace) -> int:
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2, allow_nan=False))
     print(json.dumps(summary) if args.json else _extrapolate_summary(summary, out))
+    if cancel.exit_status is not None:
+        return cancel.exit_status
     return 0 if res.status in ("succeeded", "impasse") else 1
 
 
@@ -346,10 +359,11 @@ file v1 with its plausibility report (MuJoCo replay included). It is the input o
 
     s = add_command(sub, "extrapolate", "continuation from a tutor to a new environment (the main job)", """\
 Walk the homotopy λ from 0 (the tutor's ground) to 1 (the target: slope, curve, friction,
-gravity, speed, combinable; the axes of solver.axes), solving the spacetime NLP at each λ and keeping every optimum as a
-plausible motion of its own. Writes into --out, per accepted step,
+gravity, speed, stairs, combinable; the axes of solver.axes), solving the spacetime NLP at each λ
+and keeping every plausible and natural optimum as a motion of its own (the walk ends at an
+impasse at the last natural λ). Writes into --out, per accepted step,
 step_NNN_lambda_L.motion.json, then progress.csv, progress.png, summary.json and the last
-motion's grf.png and residuals.png. Exit status 0 for `succeeded` and `impasse`.""")
+motion's grf.png, residuals.png and filmstrip.png. Exit status 0 for `succeeded` and `impasse`.""")
     s.add_argument("tutor", metavar="TUTOR.json", help="tutor motion file (from motionx tutor)")
     for ax in registry.axes():  # one flag per registered homotopy axis
         s.add_argument(ax.cli, dest=ax.name, type=_finite(ax.cli), metavar=ax.metavar,
