@@ -32,6 +32,8 @@ from typing import Any
 
 from service import limits
 from service.limits import LimitError, clip
+from solver import axes as registry
+from solver.environment import environment_of
 from solver.formats import reader_suffixes
 from solver.motion import Motion, MotionError, motion_from_dict
 
@@ -154,6 +156,23 @@ def check_motion(motion: Motion) -> None:
         if not nm or len(nm) > limits.MAX_NAME_CHARS or _CONTROL.search(nm):
             raise UploadError(f"{what} {clip(nm, 60)!r} must be 1 to {limits.MAX_NAME_CHARS} characters without "
                               "control characters")
+    _check_environment(motion)
+
+
+def _check_environment(motion: Motion) -> None:
+    """The motion's environment (``provenance.environment``) within the axes' domains: gravity
+    magnitude, friction and riser height a job can start from (a stored motion whose environment
+    no solve, plot or export can use would answer errors later)."""
+    try:
+        env = environment_of(motion)
+    except (ValueError, TypeError, AttributeError, OverflowError) as e:
+        raise UploadError(clip(f"provenance.environment: {e}", 300)) from None
+    for name, value in (("gravity", env.gravity_magnitude), ("friction", env.friction),
+                        ("step_height_m", env.step_height_m)):
+        try:
+            registry.axis(name).check(value)
+        except ValueError as e:
+            raise UploadError(f"provenance.environment: {e}") from None
 
 
 def motion_from_upload(d: Any) -> Motion:

@@ -146,9 +146,17 @@ def count_motions(api) -> int:
         (lambda d: d.__setitem__("fps", -3), "fps"),
         (lambda d: d.__setitem__("frames", d["frames"][:2]), "frames"),
         (lambda d: d.pop("format"), "format"),
+        # an environment no job, plot or export could use is refused at upload, not answered 500 later
+        (lambda d: d.setdefault("provenance", {}).__setitem__("environment", {"friction": 0}), "friction"),
+        (lambda d: d.setdefault("provenance", {}).__setitem__("environment", {"friction": -1}), "friction"),
+        (lambda d: d.setdefault("provenance", {}).__setitem__("environment", {"gravity": [0, 0, 1e300]}),
+         "gravity must be finite"),
+        (lambda d: d.setdefault("provenance", {}).__setitem__("environment", {"gravity": [0, 0, 0]}), "gravity"),
+        (lambda d: d.setdefault("provenance", {}).__setitem__("environment", {"friction": "slippery"}),
+         "provenance/environment/friction"),
     ],
     ids=["nan", "infinity", "overflow", "ragged", "unknown-joint", "unknown-character", "fps", "too-short",
-         "not-a-motion-file"],
+         "not-a-motion-file", "friction-0", "friction-negative", "gravity-huge", "gravity-0", "friction-text"],
 )
 def test_bad_motion_files(api, mutate, needle):
     before = count_motions(api)
