@@ -3,16 +3,25 @@ PYTHON ?= python3
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
+RUNTIME_STAMP := $(VENV)/.installed-runtime
 WEB    := service/web
 WEB_STAMP := $(WEB)/node_modules/.installed
 
 .PHONY: venv test lint bench demo clean reliability stack fuzz
 
+# the test extras (pytest, schemathesis, playwright, ruff, mypy, ...) for make test, lint, bench
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e ".[test]"
-	touch $(STAMP)
+	touch $(STAMP) $(RUNTIME_STAMP)
+
+# the runtime only, for make demo and make stack (the test extras' venv has it too)
+$(RUNTIME_STAMP): pyproject.toml
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e .
+	touch $(RUNTIME_STAMP)
 
 # three.js for the web page (served locally by the API); skipped with a note when npm is missing
 $(WEB_STAMP): $(WEB)/package.json $(WEB)/package-lock.json
@@ -33,7 +42,7 @@ PYTEST_PARALLEL ?= -n auto --maxprocesses 4 --dist loadfile
 test: $(STAMP) $(WEB_STAMP) lint
 	$(PY) -m pytest -q $(PYTEST_PARALLEL) $(PYTEST_ARGS)
 
-demo: $(STAMP) $(WEB_STAMP)
+demo: $(RUNTIME_STAMP) $(WEB_STAMP)
 	$(VENV)/bin/motionx demo --out out/demo
 
 bench: $(STAMP)
@@ -46,7 +55,7 @@ reliability: $(STAMP)
 fuzz: $(STAMP) $(WEB_STAMP)
 	$(PY) tests/service/fuzz.py --cases $${FUZZ_CASES:-10000}
 
-stack: $(STAMP) $(WEB_STAMP)
+stack: $(RUNTIME_STAMP) $(WEB_STAMP)
 	$(VENV)/bin/motionx stack --workers $${WORKERS:-2}
 
 clean:
