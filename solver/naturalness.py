@@ -36,6 +36,7 @@ from solver.environment import STANDARD_GRAVITY_VECTOR, body_weight, environment
 from solver.jsonable import jsonable
 from solver.kinematics import centre_of_mass, contact_points, points_world, segment_frames, standing_leg_length
 from solver.motion import FEET, Motion, foot_schedule_of
+from solver.realism import check_item, verdict
 
 
 @dataclass(frozen=True)
@@ -196,7 +197,6 @@ class _Walk:
     N: int  # distinct frames of the cycle
     dt: float
     up: np.ndarray  # (3,) against gravity
-    gravity: np.ndarray
     weight: float
     B: np.ndarray  # (2, T) feet in contact
     ground: np.ndarray  # (2, T) ground height under each foot
@@ -422,7 +422,7 @@ def gait_figures(character, q: np.ndarray, fps: float, contacts: np.ndarray, *, 
     path = path_heading(q, N) if cyclic else np.full(T, math.atan2(q[1, -1] - q[1, 0], q[0, -1] - q[0, 0]))
     F = None if forces is None else np.asarray(forces, dtype=float)
     w = _Walk(character=character, q=q, T=T, N=N, dt=1.0 / fps, up=-g / max(float(np.linalg.norm(g)), 1e-12),
-              gravity=g, weight=W, B=foot_schedule_of(character, np.asarray(contacts, dtype=bool)),
+              weight=W, B=foot_schedule_of(character, np.asarray(contacts, dtype=bool)),
               ground=np.zeros((2, T)) if ground is None else np.asarray(ground, dtype=float),
               contacts_xyz=np.asarray(contact_points(character, q)), soles=sole_corners(character, q),
               fwd=np.stack([np.cos(path), np.sin(path), np.zeros(T)]),
@@ -443,13 +443,11 @@ def gait_figures(character, q: np.ndarray, fps: float, contacts: np.ndarray, *, 
 
 def _item(value: float | None, limit: float, unit: str, what: str, source: str, *, warning: bool = False,
           at_least: bool = False, capture: float | None = None, applies: bool = True) -> dict[str, Any]:
-    if value is None or not applies:
-        passed = True
-    else:
-        passed = value >= limit if at_least else value <= limit
-    item = {"value": None if value is None else float(value), "limit": float(limit),
-            "bound": "min" if at_least else "max", "unit": unit, "passed": bool(passed),
-            "severity": "warning" if warning else "failure", "what": what, "source": source}
+    """``realism.check_item`` with its published source, the captured walk's figure, and whether
+    it applies here (a check that does not apply passes)."""
+    item = check_item(value, limit, unit, what, warning=warning, at_least=at_least)
+    item["passed"] = item["passed"] or not applies
+    item["source"] = source
     if capture is not None:
         item["capture"] = float(capture)
         item["capture_passed"] = bool(capture >= limit if at_least else capture <= limit)
@@ -587,21 +585,8 @@ def naturalness_report(motion: Motion, reference: Mapping[str, Any] | None = Non
         out["notes"].append("no figures of the captured walk recorded: checked against the published limits only")
     out["checks"] = checks
     out["figures"] = jsonable(fig)
-    out["failed"] = [k for k, v in checks.items() if v["severity"] == "failure" and not v["passed"]]
-    out["warnings"] = [k for k, v in checks.items() if v["severity"] == "warning" and not v["passed"]]
-    out["passed"] = not out["failed"]
+    out.update(verdict(checks))
     out["time_s"] = time.perf_counter() - t0
-    return out
-
-
-def problem_lines(rep: Mapping[str, Any]) -> list[str]:
-    """One line per failed naturalness check or warning."""
-    out = []
-    for name, c in (rep.get("checks") or {}).items():
-        if not c["passed"]:
-            rel = "<" if c.get("bound") == "min" else ">"
-            out.append(f"naturalness {c['severity']}: {name} {c['value']:.3g} {c['unit']} {rel} limit "
-                       f"{c['limit']:.3g} ({c['what']})")
     return out
 
 

@@ -16,7 +16,7 @@ import logging
 import math
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -28,7 +28,7 @@ from solver.environment import STANDARD_GRAVITY, STANDARD_GRAVITY_VECTOR
 from solver.gait import ensure_double_support, extract_cycle
 from solver.io.fit import CONTACT_INSET
 from solver.jsonable import jsonable
-from solver.kinematics import contact_points, markers
+from solver.kinematics import contact_points, markers, segment_frames
 from solver.motion import Motion, foot_schedule_of
 from solver.naturalness import against_plates, capture_figures, joint_rms_deg
 from solver.plausibility import report
@@ -221,10 +221,6 @@ def sole_calibration(character: Character, q: np.ndarray, contacts: np.ndarray) 
     along the foot's vertical axis (by half the median difference each) and the foot box
     follows (its bottom stays 1 cm below the lower point). Returns the character and what was
     moved, per foot (mm)."""
-    from dataclasses import replace
-
-    from solver.kinematics import segment_frames
-
     A = np.asarray(contacts, dtype=bool)
     N = A.shape[1] - 2 if A.shape[1] > 4 else A.shape[1]
     cp = contact_points(character, q)

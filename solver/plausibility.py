@@ -21,7 +21,6 @@ from solver.environment import environment_of as _environment_of
 from solver.kinematics import contact_points, segment_frames, standing_leg_length
 from solver.motion import FEET, Motion
 from solver.naturalness import naturalness_report
-from solver.naturalness import problem_lines as naturalness_lines
 from solver.realism import RealismLimits, problem_lines, realism_report
 from solver.trajectory import dynamics_samples
 
@@ -127,7 +126,7 @@ def report(motion: Motion, tol: Tolerances = Tolerances(), realism: RealismLimit
     nat = naturalness_report(motion)
     out["naturalness"] = nat
     out["natural"] = nat["passed"]  # None: not checked (no contact schedule or two-point feet)
-    out["problems"] += naturalness_lines(nat)
+    out["problems"] += problem_lines(nat, "naturalness")
     return out
 
 
