@@ -409,15 +409,5 @@ class ProcPool:
             s.proc, s.conn_in, s.conn_out, s.task = None, None, None, None
 
 
-def run_in_child(fn: Callable[..., Any], *args: Any, timeout: float | None = None,
-                 memory_mb: float | None = None) -> Any:
-    """Run one call in a fresh supervised process (tests and one-off commands)."""
-    pool = ProcPool("oneoff", 1, memory_mb=memory_mb).start()
-    try:
-        return pool.submit(fn, *args, timeout=timeout).result()
-    finally:
-        pool.close()
-
-
 if __name__ == "__main__":
     sys.exit(_child_main(sys.argv[1:]))

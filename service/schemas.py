@@ -89,11 +89,6 @@ class ExtrapolateIn(Strict):
     tutor: TutorIn = Field(default_factory=TutorIn)
 
 
-class Links(BaseModel):
-    model_config = ConfigDict(extra="allow")
-    self: str
-
-
 class MotionOut(BaseModel):
     id: str
     kind: MotionKind

@@ -52,15 +52,6 @@ class LibraryError(ValueError):
     """A library request the method cannot take (unknown or unsupported axis, too many cells)."""
 
 
-def target_fields() -> tuple[str, ...]:
-    return registry.names()
-
-
-def supported_axes() -> tuple[str, ...]:
-    """The grid axes the solver can extrapolate along."""
-    return AXES
-
-
 @dataclass(frozen=True)
 class Cell:
     """One target of the library: its axis values (every axis of the library, in AXES order)."""

@@ -117,10 +117,6 @@ def vsub(a: Vec3, b: Vec3) -> Vec3:
     return (sub(a[0], b[0]), sub(a[1], b[1]), sub(a[2], b[2]))
 
 
-def vneg(a: Vec3) -> Vec3:
-    return (neg(a[0]), neg(a[1]), neg(a[2]))
-
-
 def vscale(s: Scalar, a: Vec3) -> Vec3:
     return (mul(s, a[0]), mul(s, a[1]), mul(s, a[2]))
 
@@ -171,13 +167,6 @@ def mat_rotz(m: Mat3, c: Scalar, s: Scalar) -> Mat3:
 
 
 # --- spatial (6D) operations, Featherstone conventions ---------------------------
-
-
-def motion_cross_motion(v: tuple[Vec3, Vec3], m: tuple[Vec3, Vec3]) -> tuple[Vec3, Vec3]:
-    """v x m for motion vectors v = (w, vl), m = (wm, vm)."""
-    w, vl = v
-    wm, vm = m
-    return cross(w, wm), vadd(cross(w, vm), cross(vl, wm))
 
 
 def motion_cross_force(v: tuple[Vec3, Vec3], f: tuple[Vec3, Vec3]) -> tuple[Vec3, Vec3]:

@@ -135,12 +135,6 @@ def _qp_batch(
     )
 
 
-
-def _row_scale(batch: _QPBatch, i: int) -> float:
-    """Tolerance scale for frame i's rows: |c_fz| × a length (rows are N·m)."""
-    return max(abs(batch.c[i, 5]), 1.0)
-
-
 def _solve_qp(P: np.ndarray, qv: np.ndarray, G: np.ndarray, h: np.ndarray) -> np.ndarray | None:
     """min yᵀPy + 2qᵀy s.t. G y ≤ h with quadprog; None if infeasible."""
 
