@@ -14,16 +14,16 @@ from typing import Any
 import numpy as np
 
 from mjcf.replay import MujocoReplay
+from solver.environment import environment_of
 from solver.motion import FEET, Motion
-from solver.plausibility import Tolerances, about_root, environment_of, report, root_residual
+from solver.plausibility import Tolerances, about_root, report, root_residual
 from solver.trajectory import dynamics_samples
 
 
 def mujoco_residual(motion: Motion) -> np.ndarray:
     """(6, S) residual root wrench from MuJoCo at the dynamics samples, moment about the root position."""
-    env = environment_of(motion)
     ch = motion.character
-    replay = MujocoReplay.create(ch, env["gravity"])
+    replay = MujocoReplay.create(ch, environment_of(motion).gravity)
     s = dynamics_samples(motion)
     fext = None
     if s.wrenches is not None:
@@ -36,7 +36,7 @@ def validate(motion: Motion, tol: Tolerances = Tolerances()) -> dict[str, Any]:
     """Our plausibility report plus the MuJoCo replay; ``plausible`` requires both."""
     rep = report(motion, tol)
     weight, leg = rep["body_weight_N"], rep["leg_length_m"]
-    ours = root_residual(motion, environment_of(motion)["gravity"])
+    ours = root_residual(motion, environment_of(motion).gravity)
     mj = mujoco_residual(motion)
     diff = mj - ours
     mjr: dict[str, Any] = {

@@ -358,11 +358,12 @@ class ResidualSeries:
 def residual_series(motion) -> ResidualSeries:
     """The per-frame root residuals that :func:`residuals_png` draws (ours and MuJoCo's)."""
     from mjcf.validate import mujoco_residual
+    from solver.environment import environment_of
     from solver.kinematics import standing_leg_length
-    from solver.plausibility import environment_of, root_residual
+    from solver.plausibility import root_residual
 
     motion = _motion_with_wrenches(motion)
-    ours = root_residual(motion, environment_of(motion)["gravity"])
+    ours = root_residual(motion, environment_of(motion).gravity)
     mj = mujoco_residual(motion)
     from solver.trajectory import dynamics_samples
 

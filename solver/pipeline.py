@@ -145,9 +145,9 @@ def correct(synthesis: Character, q_sim: np.ndarray, contacts: np.ndarray, fps: 
                          max_iter=max_iter, heading_change=heading_change, prior_q=prior_q)
 
 
-def tutor_heading_change(q_capture: np.ndarray, q_simplified: np.ndarray) -> float:
-    """The tutor's heading change over its cycle (rad): the simplified motion's (the cyclic fit
-    to the capture's markers), or exactly 0 when the captured cycle turns less than
+def heading_change_to_impose(q_capture: np.ndarray, q_simplified: np.ndarray) -> float:
+    """The heading change over its cycle (rad) the tutor's optimizer is asked for: the
+    simplified motion's (the cyclic fit to the capture's markers), or exactly 0 when the captured cycle turns less than
     ``STRAIGHT_WALK_DEG`` (a straight walk's drift is not a curve)."""
     if abs(math.degrees(float(q_capture[3, -2] - q_capture[3, 0]))) < STRAIGHT_WALK_DEG:
         return 0.0
@@ -315,7 +315,7 @@ def make_tutor(
     t = time.perf_counter()
     env = Environment()
     attempts = []
-    dpsi = tutor_heading_change(q_cap, q_sim)
+    dpsi = heading_change_to_impose(q_cap, q_sim)
     stats["heading_change_deg"] = {"capture": math.degrees(float(q_cap[3, -2] - q_cap[3, 0])),
                                    "simplified": math.degrees(float(q_sim[3, -2] - q_sim[3, 0])),
                                    "tutor": math.degrees(dpsi)}

@@ -16,8 +16,7 @@ from typing import Any
 import numpy as np
 
 from solver.dynamics import rnea
-from solver.environment import body_weight, ground_of
-from solver.environment import environment_of as _environment_of
+from solver.environment import body_weight, environment_of, ground_of
 from solver.kinematics import contact_points, segment_frames, standing_leg_length
 from solver.motion import FEET, Motion
 from solver.naturalness import naturalness_report
@@ -33,11 +32,6 @@ class Tolerances:
     contact_height_mm: float = 1.0
     friction: float = 1e-4  # cone excess, negative normal force, wrench in the air / body weight
     cop_mm: float = 1.0
-
-
-def environment_of(motion: Motion) -> dict:
-    """The motion's environment as a dict (gravity, friction): :func:`solver.environment.environment_of`."""
-    return _environment_of(motion).to_dict()
 
 
 def root_residual(motion: Motion, gravity: Any) -> np.ndarray:
@@ -59,8 +53,8 @@ def about_root(wrench: np.ndarray, q: np.ndarray) -> np.ndarray:
 def report(motion: Motion, tol: Tolerances = Tolerances(), realism: RealismLimits = RealismLimits()) -> dict:
     ch = motion.character
     env = environment_of(motion)
-    g = np.asarray(env["gravity"], dtype=float)
-    mu = float(env["friction"])
+    g = np.asarray(env.gravity, dtype=float)
+    mu = env.friction
     weight = body_weight(motion)
     leg = standing_leg_length(ch)
     res = root_residual(motion, g)
@@ -133,7 +127,7 @@ def report(motion: Motion, tol: Tolerances = Tolerances(), realism: RealismLimit
 def _terrain(motion: Motion) -> dict:
     """Stairs: the riser height and one tread per stance (foot, frames, centre (x, y, ground
     height) under the foot's contact points) — what a preview draws as steps."""
-    step = _environment_of(motion).step_height_m
+    step = environment_of(motion).step_height_m
     if not step or motion.contacts is None:
         return {}
     B, G = motion.foot_contact(), ground_of(motion)
