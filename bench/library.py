@@ -49,7 +49,7 @@ def in_process(tutor_json: str, grid: dict) -> dict:
     tutor = Motion.from_dict(__import__("json").loads(tutor_json))
     cells = L.grid_cells(grid)
     t0 = time.perf_counter()
-    results = L.solve_library(tutor, cells)
+    results = L.solve_library(tutor, cells).cells
     wall = time.perf_counter() - t0
     times = [r.wall_time_s for r in results]
     return {

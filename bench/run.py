@@ -19,7 +19,8 @@ import time
 from datetime import UTC, datetime
 from pathlib import Path
 
-SECTIONS = ["dynamics", "grf", "tutor", "continuation", "naturalness", "compiled", "blas", "service", "library"]
+SECTIONS = ["dynamics", "grf", "tutor", "continuation", "naturalness", "compiled", "blas", "service", "library",
+            "front_door"]
 
 
 def main() -> int:

@@ -168,7 +168,7 @@ def _a_capture(path: Path, what: str) -> CliError:
 
 
 def load_motion(path: str | Path):
-    """A motion file v1, or a :class:`CliError` that says what the file is instead (binary,
+    """A motion file (v2; v1 read too), or a :class:`CliError` that says what the file is instead (binary,
     not JSON, a captured trial, a motion file with errors)."""
     from solver.motion import Motion, MotionError  # lazy: command-line start-up time (motionx --help, 0.75 s)
 

@@ -11,7 +11,6 @@ database also answers to ``DATABASE_URL`` and the broker to ``REDIS_URL``.
 
 from __future__ import annotations
 
-import os
 from functools import lru_cache
 from pathlib import Path
 from typing import Literal
@@ -19,14 +18,11 @@ from typing import Literal
 from pydantic import AliasChoices, Field, field_validator, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+from solver.native import default_cache_dir
+
 
 def _default_data_dir() -> Path:
     return Path.home() / ".local" / "share" / "motionx"
-
-
-def _default_compiled_dir() -> Path:
-    """A cache, not state: shared by every data directory (the demo's is temporary)."""
-    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "motionx" / "compiled"
 
 
 #: the runners' names (service.runners.RUNNERS maps each to its class; a test checks they agree)
@@ -94,7 +90,7 @@ class Settings(BaseSettings):
     compiled_derivatives: bool = Field(
         True, description="compile each character's NLP derivative functions to machine code (a C compiler, "
         "cached under compiled_dir; 1.3-1.6x faster HalfBoy solves after a one-off compile per character)")
-    compiled_dir: Path = Field(default_factory=_default_compiled_dir,
+    compiled_dir: Path = Field(default_factory=default_cache_dir,
                                description="cache of compiled derivatives and of the BLAS shim "
                                "(default ~/.cache/motionx/compiled)")
     optimized_blas: bool = Field(
@@ -160,14 +156,13 @@ class Settings(BaseSettings):
 
 
 def enable_native_code(settings: Settings) -> None:
-    """Turn on solver.spacetime.compiled and solver.spacetime.blas in this process as the
-    settings say (job processes and the CLI's solving commands call it before they solve; it
-    loads CasADi)."""
-    from solver.spacetime import blas, compiled
+    """Turn on compiled derivatives and the optimized BLAS in this process as the settings say
+    (``solver.native``; job processes and the CLI's solving commands call it before they solve;
+    it loads CasADi)."""
+    from solver import native
 
-    compiled.enable(settings.compiled_dir if settings.compiled_derivatives else None)
-    if settings.optimized_blas:
-        blas.enable(settings.compiled_dir)
+    native.enable(compiled=settings.compiled_derivatives, blas=settings.optimized_blas,
+                  cache_dir=settings.compiled_dir)
 
 
 @lru_cache(maxsize=1)

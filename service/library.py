@@ -27,6 +27,7 @@ from service.db import Database
 from service.models import TERMINAL, JobRow, LibraryRow, MotionRow
 from service.views import iso
 from solver import library as L
+from solver.status import Status, combined
 
 log = logging.getLogger(__name__)
 
@@ -102,16 +103,8 @@ def _cell_view(c: dict, job: JobRow | None, clip: tuple | None) -> dict:
     }
 
 
-def status_of(cells: list[dict], cancel_requested: bool) -> str:
-    st = [c["status"] for c in cells]
-    if not all(s in TERMINAL for s in st):
-        return "queued" if all(s == "queued" for s in st) else "running"
-    if cancel_requested and "canceled" in st:
-        return "canceled"
-    for s in ("failed", "canceled", "impasse"):
-        if s in st:
-            return s
-    return "succeeded"
+def status_of(cells: list[dict], cancel_requested: bool) -> Status:
+    return combined((c["status"] for c in cells), cancel_requested=cancel_requested)
 
 
 def library_out(session, row: LibraryRow) -> dict:

@@ -12,8 +12,11 @@ from typing import Any
 from sqlalchemy import JSON, Boolean, Float, ForeignKey, Index, Integer, LargeBinary, String, Text, UniqueConstraint
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
-JOB_STATUSES = ("queued", "running", "succeeded", "failed", "canceled", "impasse")
-TERMINAL = frozenset({"succeeded", "failed", "canceled", "impasse"})
+from solver.status import TERMINAL as STATUS_TERMINAL
+from solver.status import Status
+
+JOB_STATUSES = tuple(s.value for s in Status)  # one status type: solver.status
+TERMINAL = frozenset(s.value for s in STATUS_TERMINAL)
 MOTION_KINDS = ("capture", "motion", "tutor", "step")
 
 

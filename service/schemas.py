@@ -4,15 +4,16 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, create_model, model_validator
+from pydantic import BaseModel, ConfigDict, Field, computed_field, create_model, model_validator
 
 from service.limits import MAX_TUTOR_FPS, MAX_TUTOR_FRAMES, MAX_TUTOR_S, MIN_TUTOR_FPS
 from solver import axes as registry
 from solver.continuation import StepControl
+from solver.status import Status
 
 _SC = StepControl()
 
-JobStatus = Literal["queued", "running", "succeeded", "failed", "canceled", "impasse"]
+JobStatus = Status  # one status type: solver.status
 MotionKind = Literal["capture", "motion", "tutor", "step"]
 
 
@@ -145,6 +146,11 @@ class JobOut(BaseModel):
     progress: list[ProgressPoint]
     links: dict[str, str]
 
+    @computed_field(description="the status will not change any more (succeeded, impasse, canceled or failed)")
+    @property
+    def terminal(self) -> bool:
+        return Status(self.status).terminal
+
 
 class Page(BaseModel):
     total: int
@@ -226,9 +232,6 @@ class LibraryIn(Strict):
         return self
 
 
-LibraryStatus = Literal["queued", "running", "succeeded", "failed", "canceled", "impasse"]
-
-
 class LibraryCellOut(BaseModel):
     key: str
     clip_motion_id: str | None = Field(description="the cell's clip: its last realistic λ optimum")
@@ -263,7 +266,7 @@ class LibraryProgress(BaseModel):
 
 class LibraryOut(BaseModel):
     id: str
-    status: LibraryStatus
+    status: Status
     motion_id: str
     axes: list[str]
     grid: dict[str, Any] | None
@@ -275,6 +278,11 @@ class LibraryOut(BaseModel):
     progress: LibraryProgress
     cells: list[LibraryCellOut]
     links: dict[str, str]
+
+    @computed_field(description="the status will not change any more (succeeded, impasse, canceled or failed)")
+    @property
+    def terminal(self) -> bool:
+        return Status(self.status).terminal
 
 
 class LibraryPage(Page):

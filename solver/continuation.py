@@ -6,20 +6,25 @@ a test can consume it (crocoddyl's CallbackLogger / mujoco's IterLog habit).
 
 from __future__ import annotations
 
+import json
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from solver import native
 from solver.axes import Target, environment_at, guide_at, nlp_at
 from solver.environment import Environment, environment_of
 from solver.jsonable import jsonable
 from solver.motion import Motion
 from solver.naturalness import has_two_point_feet, motion_figures
+from solver.outputs import progress_csv, step_stem
 from solver.spacetime import SolveResult, SpacetimeProblem, Weights
+from solver.status import Status
 
 __all__ = ["CancelCheck", "ExtrapolationResult", "ProgressCallback", "ProgressRecord", "StepCallback", "StepControl",
            "StepResult", "Target", "environment_at", "extrapolate", "guide_at", "motion_at", "needs_rising", "nlp_at",
@@ -96,13 +101,38 @@ class StepResult:
 
 @dataclass(frozen=True)
 class ExtrapolationResult:
-    status: str  # "succeeded" | "impasse" | "canceled" | "failed"
+    """A walk in λ: every accepted optimum (``steps``), every solve (``records``) and how it
+    ended (``status``: succeeded, impasse, canceled or failed)."""
+
+    status: Status
     lam_reached: float
     steps: tuple[StepResult, ...]
     records: tuple[ProgressRecord, ...]
     solves: int
     wall_time: float
     message: str = ""
+    target: Target | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "status", Status(self.status))
+
+    def summary(self) -> dict[str, Any]:
+        """What the walk reached, as ``summary.json`` holds it."""
+        return {"status": str(self.status), "lambda_reached": round(self.lam_reached, 9), "message": self.message,
+                "target": self.target.to_dict() if self.target is not None else None,
+                "solves": self.solves, "accepted": len(self.steps), "wall_time_s": round(self.wall_time, 3),
+                "motions": [f"{step_stem(s.step, s.lam)}.motion.json" for s in self.steps]}
+
+    def save(self, folder: str | Path) -> Path:
+        """Write every optimum as ``step_NNN_lambda_L.motion.json``, ``progress.csv`` and
+        ``summary.json`` into ``folder`` (created when missing)."""
+        out = Path(folder)
+        out.mkdir(parents=True, exist_ok=True)
+        for s in self.steps:
+            s.motion.save(out / f"{step_stem(s.step, s.lam)}.motion.json")
+        (out / "progress.csv").write_text(progress_csv(asdict(r) for r in self.records))
+        (out / "summary.json").write_text(json.dumps(self.summary(), indent=2, allow_nan=False))
+        return out
 
 
 ProgressCallback = Callable[[ProgressRecord], None]
@@ -244,7 +274,7 @@ class _Walk:
 
     def finish(self, status: str, lam: float, message: str = "") -> ExtrapolationResult:
         return ExtrapolationResult(status, float(lam), tuple(self.steps), tuple(self.records), self.solves,
-                                   time.perf_counter() - self.t0, message)
+                                   time.perf_counter() - self.t0, message, self.target)
 
     def solve(self, lam: float, init: tuple[np.ndarray, np.ndarray | None], warm_from: SolveResult | None,
               max_iter: int, guide: np.ndarray | None = None,
@@ -385,6 +415,7 @@ def extrapolate(
     """
     from solver.pipeline import problem_for
 
+    native.ensure()
     _is_tutor(tutor)
     if not 0.0 < lam_end <= 1.0:
         raise ValueError("lam_end must be in (0, 1]")

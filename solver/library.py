@@ -24,15 +24,18 @@ from __future__ import annotations
 import dataclasses
 import functools
 import itertools
+import json
 import math
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from solver import axes as registry
 from solver.continuation import StepControl, Target, extrapolate
 from solver.export import game
+from solver.status import Status, combined
 
 #: the grid axes, in the order of names and manifests (the registry's, solver.axes)
 AXES = tuple(a.name for a in registry.axes() if a.grid)
@@ -221,7 +224,7 @@ def realism(report: Mapping[str, Any] | None) -> dict[str, Any] | None:
 @dataclass
 class CellResult:
     cell: Cell
-    status: str  # succeeded | impasse | failed | canceled
+    status: Status  # succeeded | impasse | failed | canceled
     lam_reached: float
     message: str
     motion: Any | None  # the cell's clip: its last realistic optimum (see :func:`last_realistic`)
@@ -231,16 +234,99 @@ class CellResult:
     warm_start: WarmStart | None
     clip_lam: float | None = None
 
+    def __post_init__(self) -> None:
+        self.status = Status(self.status)
+
+
+#: files a library folder holds besides its cells' CELL.motion.json and CELL.clip.json
+LIBRARY_FILES = ("manifest.json", "library.glb")
+CELL_KINDS = ("motion.json", "clip.json")
+
+
+@dataclass(frozen=True)
+class LibraryResult:
+    """Every cell of a library (in the order given) and how the whole ended."""
+
+    tutor: Any  # the tutor motion
+    cells: tuple[CellResult, ...]
+    control: StepControl
+    wall_time_s: float
+    grid: Mapping[str, Sequence[float]] | None = None  # the axes' values when the cells are a grid
+
+    @property
+    def status(self) -> Status:
+        """failed, canceled or impasse when a cell ended so (in that order), else succeeded."""
+        return combined(r.status for r in self.cells)
+
+    def entries(self) -> list[dict[str, Any]]:
+        """The manifest's cells (:func:`cell_entry`), with the file names :meth:`save` writes."""
+        out = []
+        for r in self.cells:
+            files = {}
+            if r.motion is not None:
+                files = {"motion": f"{r.cell.key}.motion.json", "clip": f"{r.cell.key}.clip.json",
+                         "glb": "library.glb", "animation": r.cell.key}
+            out.append(cell_entry(r.cell, status=r.status, lam_reached=r.lam_reached, message=r.message,
+                                  motion=r.motion, clip_lam=r.clip_lam, files=files, warm_start=r.warm_start,
+                                  solves=r.solves, wall_time_s=r.wall_time_s))
+        return out
+
+    def manifest(self, tutor_file: str | None = None) -> dict[str, Any]:
+        """The library's ``manifest.json`` (format ``motionx.library``)."""
+        entries = self.entries()
+        t, c, wall = self.tutor, self.control, self.wall_time_s
+        grid = {"axes": {k: list(v) for k, v in (self.grid or {}).items()}, "cells": [r.cell.key for r in self.cells]}
+        return {
+            "format": FORMAT, "version": VERSION, "status": str(self.status),
+            "tutor": {"file": tutor_file, "character": t.character.name, "frames": t.T, "fps": float(t.fps),
+                      "loop_frames": game.loop_frames(t)},
+            "grid": grid,
+            "control": {"method": c.method, "delta0": c.delta0, "eps": c.eps, "max_iter": c.max_iter,
+                        "max_solves": c.max_solves},
+            "cells": entries,
+            "summary": {**summary(entries), "wall_time_s": round(wall, 3),
+                        "cells_per_minute": round(60.0 * len(entries) / wall, 2) if wall > 0 else None},
+            "files": {"glb": "library.glb" if any(r.motion is not None for r in self.cells) else None},
+        }
+
+    def save(self, folder: str | Path, tutor_file: str | None = None) -> Path:
+        """Write ``manifest.json``, ``library.glb`` (one animation per cell with a clip) and each
+        cell's ``CELL.motion.json`` and ``CELL.clip.json`` into ``folder`` (created when missing;
+        earlier files of these names are replaced)."""
+        from solver.export.clip import to_clip_json
+        from solver.export.gltf import to_library_glb
+
+        out = Path(folder)
+        out.mkdir(parents=True, exist_ok=True)
+        for p in [*(out / n for n in LIBRARY_FILES), *(p for k in CELL_KINDS for p in out.glob(f"*.{k}"))]:
+            if p.is_file():
+                p.unlink()
+        manifest = self.manifest(tutor_file)
+        clips = []
+        for r in self.cells:
+            if r.motion is not None:
+                r.motion.save(out / f"{r.cell.key}.motion.json")
+                (out / f"{r.cell.key}.clip.json").write_text(to_clip_json(r.motion))
+                clips.append((r.cell.key, r.motion))
+        if clips:
+            (out / "library.glb").write_bytes(to_library_glb(clips, extras={**manifest["grid"],
+                                                                            "manifest": "manifest.json"}))
+        (out / "manifest.json").write_text(json.dumps(manifest, indent=1, allow_nan=False))
+        return out
+
 
 def solve_library(tutor, cells: Sequence[Cell], control=None, *,
                   on_cell: Callable[[CellResult, int, int], None] | None = None,
                   on_progress: Callable[[Cell, Any], None] | None = None,
-                  should_cancel: Callable[[], bool] | None = None) -> list[CellResult]:
+                  should_cancel: Callable[[], bool] | None = None,
+                  grid: Mapping[str, Sequence[float]] | None = None) -> LibraryResult:
     """Extrapolate every cell in one process, nearest the tutor first, each warm-started from
-    the best stored optimum (:func:`best_start`). The CLI's engine; the service runs the same
-    cells as jobs."""
+    the best stored optimum (:func:`best_start`); the result lists the cells in the order given
+    (``grid``: the axes' values the cells come from, for the manifest). The CLI's engine; the
+    service runs the same cells as jobs."""
 
 
+    t_start = time.perf_counter()
     control = control or StepControl()
     check_cells(cells)
     stored: list[tuple[Cell, float, Any]] = []
@@ -277,7 +363,8 @@ def solve_library(tutor, cells: Sequence[Cell], control=None, *,
         if on_cell:
             on_cell(r, i + 1, len(todo))
     by_key = {r.cell.key: r for r in results}
-    return [by_key[c.key] for c in cells]
+    return LibraryResult(tutor, tuple(by_key[c.key] for c in cells), control, time.perf_counter() - t_start,
+                         {k: tuple(v) for k, v in grid.items()} if grid is not None else None)
 
 
 def realistic(motion) -> bool:

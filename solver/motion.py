@@ -206,7 +206,10 @@ class Motion:
         return json.dumps(self.to_dict(), allow_nan=False, separators=(",", ":"))
 
     def save(self, path: str | Path) -> None:
-        Path(path).write_text(self.to_json())
+        """Write the motion file (its folder created when missing)."""
+        p = Path(path)
+        p.parent.mkdir(parents=True, exist_ok=True)
+        p.write_text(self.to_json())
 
     @staticmethod
     def from_dict(d: Mapping[str, Any]) -> Motion:

@@ -77,9 +77,9 @@ def test_speed_splits_into_stride_and_cadence_and_scales_the_frame_interval():
 
 
 def test_service_schema_and_cli_flags_are_derived_from_the_registry():
-    from service.commands.outputs import ENVIRONMENT_KEYS
     from service.plots import TARGET_KEYS
     from service.schemas import GridIn, LibraryTargetIn, TargetIn
+    from solver.outputs import ENVIRONMENT_KEYS
 
     props = TargetIn.model_json_schema()["properties"]
     assert tuple(props) == registry.names() == ENVIRONMENT_KEYS == TARGET_KEYS

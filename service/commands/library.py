@@ -9,16 +9,13 @@ import argparse
 import json
 import math
 import sys
-import time
 from pathlib import Path
 
-from service.cli import CliError, add_command, load_motion
+from tqdm import tqdm
+
+from service.cli import CliError, add_command, cancel_on_signals, load_motion
 from service.config import enable_native_code, get_settings
 from solver import axes as registry
-
-#: what a library folder holds besides the per-cell files
-LIBRARY_FILES = ("manifest.json", "library.glb")
-CELL_KINDS = ("motion.json", "clip.json")
 
 
 def _values(flag: str):
@@ -39,24 +36,21 @@ def _values(flag: str):
 
 
 class _Bar:
-    """Cells done and the running cell's λ, on stderr: redrawn in place on a terminal, else one
-    line per finished cell; nothing with ``--quiet``."""
+    """Cells done and the running cell's λ, on stderr: a tqdm bar on a terminal (a line above
+    it per finished cell), else one line per finished cell; nothing with ``--quiet``."""
 
     def __init__(self, total: int, enabled: bool) -> None:
         self.total, self.done = total, 0
-        self.tty = enabled and sys.stderr.isatty()
-        self.lines = enabled and not self.tty
-        self.t0 = time.perf_counter()
+        tty = enabled and sys.stderr.isatty()
+        self.lines = enabled and not tty
+        self.bar = tqdm(total=total, file=sys.stderr, disable=not tty, ascii=".#", desc=f"0/{total} cells",
+                        bar_format="[{bar:24}] {desc} {elapsed}")
 
     def draw(self, key: str, lam: float) -> None:
-        if not self.tty:
+        if self.bar.disable:
             return
-        width = 24
-        frac = (self.done + lam) / self.total
-        fill = int(round(width * frac))
-        sys.stderr.write(f"\r[{'#' * fill}{'.' * (width - fill)}] {self.done}/{self.total} cells, "
-                         f"{key} λ={lam:.3f} {time.perf_counter() - self.t0:6.1f}s   ")
-        sys.stderr.flush()
+        self.bar.n = self.done + lam
+        self.bar.set_description_str(f"{self.done}/{self.total} cells, {key} λ={lam:.3f}")
 
     def cell(self, r, i: int, n: int) -> None:
         self.done = i
@@ -64,23 +58,27 @@ class _Bar:
                 if r.warm_start else "")
         text = (f"cell {i}/{n} {r.cell.key}: {r.status} λ={r.lam_reached:.3f} ({r.solves} solves, "
                 f"{r.wall_time_s:.1f} s{warm})")
-        if self.tty:
-            sys.stderr.write("\r" + text + " " * 20 + "\n")
+        if not self.bar.disable:
+            self.bar.write(text, file=sys.stderr)
             self.draw("", 0.0)
         elif self.lines:
             sys.stderr.write(text + "\n")
 
     def close(self) -> None:
-        if self.tty:
-            sys.stderr.write("\n")
+        self.bar.close()
 
 
 def cmd_library(args: argparse.Namespace) -> int:
+    # Ctrl-C or SIGTERM cancels: the running cell stops at its next IPOPT iteration, the cells not
+    # started are not, the cells solved so far are written with the manifest (status "canceled")
+    # and the exit status is 130 / 143
+    with cancel_on_signals() as cancel:
+        return _library(args, cancel)
+
+
+def _library(args: argparse.Namespace, cancel: cancel_on_signals) -> int:
     from solver import library as L
     from solver.continuation import StepControl
-    from solver.export import game
-    from solver.export.clip import to_clip_json
-    from solver.export.gltf import to_library_glb
 
     enable_native_code(get_settings())
     axes = {}
@@ -107,46 +105,16 @@ def cmd_library(args: argparse.Namespace) -> int:
     if out.is_dir() and any(out.iterdir()) and not args.force:
         raise CliError(f"--out {out} is not empty; choose a new folder, or pass --force to replace the files "
                        "this command writes there")
-    out.mkdir(parents=True, exist_ok=True)
-    for p in [*(out / n for n in LIBRARY_FILES), *(p for k in CELL_KINDS for p in out.glob(f"*.{k}"))]:
-        if p.is_file():
-            p.unlink()
     bar = _Bar(len(cells), not args.quiet)
-    t0 = time.perf_counter()
     try:
-        results = L.solve_library(tutor, cells, control, on_cell=bar.cell,
-                                  on_progress=lambda c, r: bar.draw(c.key, r.lam_reached))
+        result = L.solve_library(tutor, cells, control, on_cell=bar.cell,
+                                 on_progress=lambda c, r: bar.draw(c.key, r.lam_reached), grid=axes,
+                                 should_cancel=cancel)
     finally:
         bar.close()
-    wall = time.perf_counter() - t0
-    entries, clips = [], []
-    for r in results:
-        files = {}
-        if r.motion is not None:
-            files = {"motion": f"{r.cell.key}.motion.json", "clip": f"{r.cell.key}.clip.json",
-                     "glb": "library.glb", "animation": r.cell.key}
-            r.motion.save(out / files["motion"])
-            (out / files["clip"]).write_text(to_clip_json(r.motion))
-            clips.append((r.cell.key, r.motion))
-        entries.append(L.cell_entry(r.cell, status=r.status, lam_reached=r.lam_reached, message=r.message,
-                                    motion=r.motion, clip_lam=r.clip_lam, files=files, warm_start=r.warm_start,
-                                    solves=r.solves, wall_time_s=r.wall_time_s))
-    grid = {"axes": {k: list(v) for k, v in axes.items()}, "cells": [c.key for c in cells]}
-    if clips:
-        (out / "library.glb").write_bytes(to_library_glb(clips, extras={**grid, "manifest": "manifest.json"}))
-    manifest = {
-        "format": L.FORMAT, "version": L.VERSION,
-        "tutor": {"file": str(args.tutor), "character": tutor.character.name, "frames": tutor.T,
-                  "fps": float(tutor.fps), "loop_frames": game.loop_frames(tutor)},
-        "grid": grid,
-        "control": {"method": control.method, "delta0": control.delta0, "eps": control.eps,
-                    "max_iter": control.max_iter, "max_solves": control.max_solves},
-        "cells": entries,
-        "summary": {**L.summary(entries), "wall_time_s": round(wall, 3),
-                    "cells_per_minute": round(60.0 * len(cells) / wall, 2) if wall > 0 else None},
-        "files": {"glb": "library.glb" if clips else None},
-    }
-    (out / "manifest.json").write_text(json.dumps(manifest, indent=1, allow_nan=False))
+    result.save(out, tutor_file=str(args.tutor))
+    manifest = json.loads((out / "manifest.json").read_text())
+    wall = result.wall_time_s
     s = manifest["summary"]
     if args.json:
         print(json.dumps(manifest["summary"]))
@@ -154,7 +122,11 @@ def cmd_library(args: argparse.Namespace) -> int:
         print(f"{s['cells']} cells in {wall:.1f} s ({s['cells_per_minute']} cells/min): {s['succeeded']} succeeded, "
               f"{s['impasse']} at impasse, {s['failed']} failed\n  wrote {out}/: manifest.json, library.glb, "
               "CELL.motion.json and CELL.clip.json per cell")
-    return 0 if all(e["status"] in ("succeeded", "impasse") for e in entries) else 1
+    if cancel.exit_status is not None:
+        print(f"motionx library: {cancel.reason}: {s['canceled']} cells canceled; the {s['done'] - s['canceled']} "
+              f"finished before are in {out}/", file=sys.stderr)
+        return cancel.exit_status
+    return 0 if all(r.status.ok for r in result.cells) else 1
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -165,7 +137,9 @@ tutor first, each cell warm-started from the stored optimum furthest along its h
 and is marked so. Writes into --out: library.glb (one looping animation per cell, the grid in
 its extras, game-ready data per animation), per cell CELL.motion.json and CELL.clip.json, and
 manifest.json (cell -> parameters, status, files, realism figures). Exit status 0 when every
-cell succeeded or reached an impasse.""")
+cell succeeded or reached an impasse; Ctrl-C or SIGTERM stops the running cell at its next
+IPOPT iteration, writes the cells reached so far and the manifest (status canceled) and exits
+130 (143).""")
     s.add_argument("tutor", metavar="TUTOR.json", help="tutor motion file (from motionx tutor)")
     for ax in registry.axes():  # one flag per grid axis of the registry: --slopes, --curves, --speed-scales
         if ax.grid:

@@ -26,6 +26,7 @@ import importlib
 import inspect
 import math
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -267,9 +268,9 @@ def export_options(fmt: str) -> tuple[str, ...]:
     return tuple(p.name for p in sig.parameters.values() if p.kind is inspect.Parameter.KEYWORD_ONLY)
 
 
-def export_motion(motion: Motion, fmt: str, **options: Any) -> str | bytes:
+def export_motion(motion: Motion, fmt: str, path: str | Path | None = None, **options: Any) -> str | bytes:
     """Export ``motion`` as ``fmt`` (json, gltf, glb, bvh): text for text formats, bytes for
-    binary glTF (``gltf`` by default, ``glb``).
+    binary glTF (``gltf`` by default, ``glb``); written to ``path`` too when given.
 
     Unknown options are refused with an :class:`ExportError` naming the accepted ones.
     """
@@ -278,4 +279,8 @@ def export_motion(motion: Motion, fmt: str, **options: Any) -> str | bytes:
     unknown = sorted(set(options) - set(known))
     if unknown:
         raise ExportError(f"unknown option(s) {unknown} for format {fmt!r}; accepted: {list(known)}")
-    return func(motion, **options)
+    data = func(motion, **options)
+    if path is not None:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        Path(path).write_bytes(data if isinstance(data, bytes) else data.encode())
+    return data

@@ -10,7 +10,7 @@ KEY_A, KEY_B = "test-key-a-" + secrets.token_hex(8), "test-key-b-" + secrets.tok
 
 
 def halfboy_motion(T: int = 12, *, capture: bool = True, seed: int = 0):
-    """A small, valid motion file v1 of the reference HalfBoy (upload/validation tests)."""
+    """A small, valid motion file of the reference HalfBoy (upload/validation tests)."""
     from solver.character import reference
     from solver.motion import Motion
 

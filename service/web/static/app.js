@@ -5,7 +5,9 @@
 //
 // Every API call carries the key (X-API-Key). The key comes from the input box or from the
 // URL fragment (#key=...), and is remembered in localStorage. Authenticated images are
-// fetched as blobs and shown through object URLs.
+// fetched as blobs and shown through object URLs. A running job or library is followed
+// through its Server-Sent Events (GET /jobs/{id}/events, /libraries/{id}/events), read
+// with fetch() since the browser's EventSource cannot send the key in a header.
 //
 // Test hook: window.motionx.state (flags such as progressPoints, previewReady, grfLoaded,
 // libraryCells, cellKey).
@@ -14,8 +16,8 @@ import { drawProgress } from './progress.js';
 
 const KEY_STORAGE = 'motionx.apiKey';
 const LIST_POLL_MS = 3000;
-const JOB_POLL_MS = 1000;
-const TERMINAL = new Set(['succeeded', 'failed', 'canceled', 'impasse']);
+const STREAM_RETRY_MS = 1000; // a broken event stream is opened again after this
+const TERMINAL = new Set(['succeeded', 'failed', 'canceled', 'impasse']); // service.models.TERMINAL
 const PREVIEW_UNAVAILABLE = '3D preview unavailable: run npm ci in service/web';
 
 const state = {
@@ -53,6 +55,7 @@ let motionToken = 0;
 let libraryToken = 0;
 let keyToken = 0; // bumped when the key changes: list answers fetched with an earlier key are dropped
 let lastProgress = [];
+const streams = { job: null, library: null }; // the AbortController of each open event stream
 let viewerPromise = null;
 const objectUrls = new Map(); // <img> id -> object URL to revoke
 
@@ -130,6 +133,63 @@ async function api(path, { as = 'json', method = 'GET' } = {}) {
   return res[as]();
 }
 
+/**
+ * Reads the Server-Sent Events of `path` with the key, calling onEvent(name, data, id) for
+ * each, until the stream ends (resolves true when an `end` event came) or `kind`'s stream is
+ * replaced (a new selection aborts the previous one).
+ */
+async function followEvents(kind, path, onEvent) {
+  if (!apiKey) throw new ApiError(401, 'no API key');
+  if (streams[kind]) streams[kind].abort();
+  const controller = new AbortController();
+  streams[kind] = controller;
+  let ended = false;
+  try {
+    const res = await fetch(path, { headers: { 'X-API-Key': apiKey, Accept: 'text/event-stream' },
+      signal: controller.signal, cache: 'no-store' });
+    if (!res.ok) {
+      let detail = `${res.status} ${res.statusText}`;
+      try {
+        const problem = await res.json();
+        if (problem && problem.detail) detail = problem.detail;
+      } catch { /* not JSON */ }
+      throw new ApiError(res.status, detail);
+    }
+    const reader = res.body.pipeThrough(new TextDecoderStream()).getReader();
+    let buffer = '';
+    for (;;) {
+      const { value, done } = await reader.read();
+      if (done) break;
+      buffer = (buffer + value).replace(/\r\n/g, '\n');
+      let cut;
+      while ((cut = buffer.indexOf('\n\n')) >= 0) {
+        const block = buffer.slice(0, cut);
+        buffer = buffer.slice(cut + 2);
+        let name = 'message', id = null;
+        const data = [];
+        for (const line of block.split('\n')) {
+          const colon = line.indexOf(':');
+          if (colon === 0) continue; // a comment (the server's keep-alive ping)
+          const field = colon < 0 ? line : line.slice(0, colon);
+          const text = colon < 0 ? '' : line.slice(colon + 1).replace(/^ /, '');
+          if (field === 'event') name = text;
+          else if (field === 'data') data.push(text);
+          else if (field === 'id') id = text;
+        }
+        if (!data.length) continue;
+        if (name === 'end') ended = true;
+        onEvent(name, JSON.parse(data.join('\n')), id);
+      }
+    }
+  } catch (err) {
+    if (controller.signal.aborted) return false;
+    throw err;
+  } finally {
+    if (streams[kind] === controller) streams[kind] = null;
+  }
+  return ended;
+}
+
 /** The newest `n` items of a paginated list (the API lists oldest first), newest first. */
 async function newest(path, n = 200) {
   let page = await api(`${path}?limit=${n}`);
@@ -156,6 +216,7 @@ function useKey(key) {
   motionToken += 1;
   libraryToken += 1;
   keyToken += 1;
+  for (const c of Object.values(streams)) if (c) c.abort();
   Object.assign(state, { motions: [], jobs: [], libraries: [], jobId: null, jobStatus: null, motionId: null,
     libraryId: null, libraryStatus: null, cellKey: null });
   $('job-panel').hidden = $('motion-panel').hidden = $('library-panel').hidden = true;
@@ -259,21 +320,47 @@ async function selectJob(id) {
   renderJobList();
   drawProgress($('progress-canvas'), []);
 
-  // poll every second while the job runs; one last time when it has ended
+  // the job as it is; while it runs, its event stream (which starts with every progress point
+  // and λ optimum so far); once more when the stream ends, or after a pause if it broke off
   while (token === jobToken) {
     try {
       const job = await api(`/jobs/${id}`);
       if (token !== jobToken) return;
       renderJob(job);
       await loadJobMotions(id, token);
-      if (TERMINAL.has(job.status)) return;
+      if (job.terminal) return;
+      if (await followJob(id, token)) continue; // it ended: read the job's final state at once
     } catch (err) {
       if (token !== jobToken) return;
       $('job-facts').replaceChildren(h('dt', {}, 'error'), h('dd', {}, err.message));
       if (err instanceof ApiError && err.status < 500) return;
     }
-    await sleep(JOB_POLL_MS);
+    if (token === jobToken) await sleep(STREAM_RETRY_MS);
   }
+}
+
+/** Follows a running job's events: status (the job without its curve), progress points (of
+ * the current attempt: the id is attempt:seq) and λ optima, redrawn as they come. */
+async function followJob(id, token) {
+  let attempt = null, job = null;
+  const curve = [];
+  const motions = [];
+  return followEvents('job', `/jobs/${id}/events`, (name, data, eventId) => {
+    if (token !== jobToken) return;
+    if (name === 'progress') {
+      const a = eventId ? eventId.split(':')[0] : attempt;
+      if (a !== attempt) curve.length = 0; // a new attempt draws its own curve
+      attempt = a;
+      curve.push(data);
+      if (job) renderJob({ ...job, progress: curve });
+    } else if (name === 'status') {
+      job = { ...data, terminal: TERMINAL.has(data.status) };
+      renderJob({ ...job, progress: curve });
+    } else if (name === 'motion') {
+      motions.push(data);
+      showJobMotions(motions);
+    }
+  });
 }
 
 function renderJob(job) {
@@ -281,7 +368,7 @@ function renderJob(job) {
   const status = $('job-status');
   status.className = `badge ${job.status}`;
   status.textContent = job.status;
-  $('job-cancel').hidden = TERMINAL.has(job.status);
+  $('job-cancel').hidden = job.terminal;
   const facts = [
     ['target', targetText(job.target)],
     ['λ reached', fmt(job.lam_reached, 4)],
@@ -311,6 +398,10 @@ async function loadJobMotions(id, token) {
     url = page.next;
   }
   if (token !== jobToken) return;
+  showJobMotions(items);
+}
+
+function showJobMotions(items) {
   state.jobMotions = items;
   const ol = $('job-motions');
   ol.replaceChildren(...items.map((m) => h('li', {}, h('button', {
@@ -371,18 +462,32 @@ async function selectLibrary(id) {
   $('library-facts').replaceChildren();
   $('library-grid').replaceChildren();
   renderLibraryList();
+  // as for a job: the library, then its event stream while it runs (cells and overall progress)
   while (token === libraryToken) {
     try {
       const lib = await api(`/libraries/${id}`);
       if (token !== libraryToken) return;
       renderLibrary(lib);
-      if (TERMINAL.has(lib.status)) return;
+      if (lib.terminal) return;
+      const ended = await followEvents('library', `/libraries/${id}/events`, (name, data) => {
+        if (token !== libraryToken) return;
+        if (name === 'cell') {
+          const i = lib.cells.findIndex((c) => c.key === data.key);
+          if (i >= 0) lib.cells[i] = data;
+        } else if (name === 'status') {
+          Object.assign(lib, data, { terminal: TERMINAL.has(data.status) });
+        } else {
+          return;
+        }
+        renderLibrary(lib);
+      });
+      if (ended) continue; // read the library's final state at once
     } catch (err) {
       if (token !== libraryToken) return;
       $('library-facts').replaceChildren(h('dt', {}, 'error'), h('dd', {}, err.message));
       if (err instanceof ApiError && err.status < 500) return;
     }
-    await sleep(JOB_POLL_MS);
+    if (token === libraryToken) await sleep(STREAM_RETRY_MS);
   }
 }
 
@@ -413,7 +518,7 @@ function renderLibrary(lib) {
   const status = $('library-status');
   status.className = `badge ${lib.status}`;
   status.textContent = lib.status;
-  $('library-cancel').hidden = TERMINAL.has(lib.status);
+  $('library-cancel').hidden = lib.terminal;
   const p = lib.progress;
   const times = lib.cells.map((c) => c.wall_time_s).filter((t) => typeof t === 'number');
   const facts = [

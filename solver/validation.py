@@ -1,0 +1,30 @@
+"""A motion's validation report, whole: plausibility, realism, naturalness and the replays.
+
+``solver.plausibility.report`` computes our checks (root residual, contacts, friction, realism,
+naturalness). Replays with independent physics plug in through the entry-point group
+``motionx.replay`` (``pyproject.toml``): ``mjcf`` registers the MuJoCo inverse-dynamics replay
+(``mjcf.validate.validate``), which extends our report with its ``mujoco_replay`` section, so
+this package reaches MuJoCo without importing ``mjcf`` (which imports it).
+"""
+
+from __future__ import annotations
+
+from importlib.metadata import entry_points
+from typing import Any
+
+from solver.motion import Motion
+from solver.plausibility import Tolerances, report
+
+#: the entry-point group of replays: ``name = "module:function"``, function(motion, tolerances) -> report
+REPLAY_GROUP = "motionx.replay"
+
+
+def validate(motion: Motion, tolerances: Tolerances = Tolerances()) -> dict[str, Any]:
+    """The validation report of ``motion``: our checks, extended by the installed replay (the
+    MuJoCo one when the project is installed; ``plausible`` then requires it too)."""
+    replays = sorted(entry_points(group=REPLAY_GROUP), key=lambda e: e.name)
+    if not replays:
+        return report(motion, tolerances)
+    if len(replays) > 1:
+        raise RuntimeError(f"more than one replay installed in {REPLAY_GROUP}: {[e.name for e in replays]}")
+    return replays[0].load()(motion, tolerances)
