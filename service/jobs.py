@@ -28,6 +28,7 @@ import uuid
 from typing import Any
 
 from sqlalchemy.exc import DBAPIError
+from tenacity import Retrying, retry_if_result, stop_after_delay, wait_fixed
 
 from service import limits, store
 from service.config import Settings, enable_native_code
@@ -156,14 +157,19 @@ class Heartbeat:
 
 
 def _claim(db: Database, job_id: str, token: str, settings: Settings) -> store.Claim:
-    deadline = time.monotonic() + BUSY_WAIT_LEASES * settings.job_lease_s
-    while True:
+    """The claim of the job; while another live holder has it ("busy"), asked again for up to
+    ``BUSY_WAIT_LEASES`` leases (then the busy claim is the answer)."""
+
+    def claim() -> store.Claim:
         with db.write() as s:
-            claim = store.claim_job(s, job_id=job_id, token=token, lease_s=settings.job_lease_s,
-                                    holder_alive=holder_alive)
-        if claim.outcome != "busy" or time.monotonic() > deadline:
-            return claim
-        time.sleep(min(1.0, settings.job_lease_s / 4.0))
+            return store.claim_job(s, job_id=job_id, token=token, lease_s=settings.job_lease_s,
+                                   holder_alive=holder_alive)
+
+    retrying = Retrying(stop=stop_after_delay(BUSY_WAIT_LEASES * settings.job_lease_s),
+                        wait=wait_fixed(min(1.0, settings.job_lease_s / 4.0)),
+                        retry=retry_if_result(lambda c: c.outcome == "busy"),
+                        retry_error_callback=lambda state: state.outcome.result())
+    return retrying(claim)
 
 
 def execute_job(job_id: str, settings: Settings) -> str:

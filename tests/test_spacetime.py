@@ -233,6 +233,48 @@ def _term_cost(prob, name: str, xv: np.ndarray, pv: np.ndarray) -> float:
     return float(ca.Function("c", [x, prob._nlp["p"]], [ca.sum2(term.outputs(x))])(xv, pv))
 
 
+def _sine_walk(ch, fps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One 1 s cycle (+ 2 overlap frames) of every coordinate on a sine of random amplitude and
+    phase, with a two-step contact schedule: (q, contacts, amplitudes)."""
+    rng = np.random.default_rng(1)
+    amp = rng.uniform(0.05, 0.3, ch.n)  # rad (and m for the root translation, not in the cost)
+    phase = rng.uniform(0, 2 * np.pi, ch.n)
+    N = fps  # frames per cycle
+    T = N + 2
+    t = np.arange(T) / fps
+    q = amp[:, None] * np.sin(2 * np.pi * t[None, :] + phase[:, None])
+    q[2] += 0.9
+    A = np.zeros((4, T), dtype=bool)
+    A[0, : N // 2] = A[1, : N // 2 + 1] = True
+    A[2, N // 2 - 1 :] = A[3, N // 2 - 2 :] = True
+    A[:, -2:] = A[:, :2]
+    return q, A, amp
+
+
+def test_each_weight_reaches_the_nlp_in_its_named_slot():
+    """The parameter vector carries each of ``Weights``' fields in its own named slot
+    (``WEIGHT_SLOTS``): doubling one weight doubles that slot and leaves every other one."""
+    from dataclasses import replace
+
+    from solver.spacetime import Weights
+    from solver.spacetime.types import WEIGHT_SLOTS, weight_slots
+
+    ch = C.halfboy()
+    q, A, _ = _sine_walk(ch, 15)
+    prob = SpacetimeProblem(ch, q.shape[1], 15.0, A)
+    o, s = prob._p_layout["wts"]
+
+    def slots(w: Weights) -> dict[str, float]:
+        p = prob.parameters(prob.guide_markers(q), q, Environment(), w, prob.ref_points(q), prob.anchor_points(q), 0.0)
+        return weight_slots(p[o : o + s])
+
+    base = slots(Weights())
+    assert set(base) == {f for f in Weights.__dataclass_fields__} and all(v > 0 for v in base.values())
+    for name in WEIGHT_SLOTS:
+        got = slots(replace(Weights(), **{name: 2.0 * getattr(Weights(), name)}))
+        assert got == pytest.approx({k: (2.0 if k == name else 1.0) * v for k, v in base.items()}, rel=1e-12), name
+
+
 def test_rate_costs_do_not_depend_on_the_frame_rate():
     """The jerk and wrench-change costs (and the kinematic fit's smoothness) are time averages with
     a fixed time scale (1/15 s): the same smooth motion and ground wrenches cost the same at 15 and
@@ -244,22 +286,13 @@ def test_rate_costs_do_not_depend_on_the_frame_rate():
     from solver.trajectory import spline_velocities
 
     ch = C.halfboy()
-    rng = np.random.default_rng(1)
-    amp = rng.uniform(0.05, 0.3, ch.n)  # rad (and m for the root translation, not in the cost)
-    phase = rng.uniform(0, 2 * np.pi, ch.n)
+    amp = _sine_walk(ch, 15)[2]
     f = 1.0  # Hz: one cycle of 1 s
     expected = float(np.mean((amp[3:] * (2 * np.pi * f) ** 3 * RATE_TIME**3) ** 2 / 2))
     costs: dict[str, dict[int, float]] = {"jerk": {}, "wrate": {}, "smooth": {}}
     for fps in (15, 30):
-        N = fps  # frames per cycle; + 2 overlap frames
-        T = N + 2
-        t = np.arange(T) / fps
-        q = amp[:, None] * np.sin(2 * np.pi * f * t[None, :] + phase[:, None])
-        q[2] += 0.9
-        A = np.zeros((4, T), dtype=bool)
-        A[0, : N // 2] = A[1, : N // 2 + 1] = True
-        A[2, N // 2 - 1 :] = A[3, N // 2 - 2 :] = True
-        A[:, -2:] = A[:, :2]
+        q, A, _ = _sine_walk(ch, fps)
+        T, t = q.shape[1], np.arange(q.shape[1]) / fps
         prob = SpacetimeProblem(ch, T, float(fps), A)
         ref = prob.ref_points(q)
         # smooth wrenches: forces through each foot's reference point plus a free moment

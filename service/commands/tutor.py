@@ -10,6 +10,8 @@ import time
 from dataclasses import asdict
 from pathlib import Path
 
+from tqdm import tqdm
+
 from service.cli import (
     CliError,
     add_command,
@@ -190,31 +192,30 @@ def _section_lines(sec: dict, title: str) -> list[str]:
 
 
 class _ProgressBar:
-    """Progress on stderr: a bar redrawn in place on a terminal (λ reached, environment,
-    elapsed), else one line per solve; nothing with ``--quiet``."""
+    """Progress on stderr: a tqdm bar of λ reached on a terminal (with the last solve, the
+    environment and the elapsed time), else one line per solve; nothing with ``--quiet``."""
 
     def __init__(self, enabled: bool) -> None:
-        self.enabled = enabled and sys.stderr.isatty()
-        self.verbose = enabled and not self.enabled
+        tty = enabled and sys.stderr.isatty()
+        self.verbose = enabled and not tty
+        self.bar = tqdm(total=1.0, file=sys.stderr, disable=not tty, ascii=".#",
+                        bar_format="[{bar:30}] λ={n:.3f} {desc}")
 
     def __call__(self, rec) -> None:
         from service.plots import number_text
 
         env = ", ".join(f"{k}={number_text(v)}" for k, v in rec.environment.items())
         mark = "ok" if rec.accepted else "retry"
-        if self.enabled:
-            width = 30
-            fill = int(round(width * rec.lam_reached))
-            sys.stderr.write(f"\r[{'#' * fill}{'.' * (width - fill)}] λ={rec.lam_reached:.3f} "
-                             f"(tried {rec.lam:.3f} {mark}, {rec.iterations} it) {env} {rec.wall_time:6.1f}s  ")
-            sys.stderr.flush()
+        if not self.bar.disable:
+            self.bar.n = rec.lam_reached
+            self.bar.set_description_str(f"(tried {rec.lam:.3f} {mark}, {rec.iterations} it) {env} "
+                                         f"{rec.wall_time:6.1f}s")
         elif self.verbose:
             sys.stderr.write(f"λ {rec.lam:.4f} {mark:5s} {rec.iterations:4d} it  reached {rec.lam_reached:.4f}  "
                              f"{rec.wall_time:7.2f}s  {env}\n")
 
     def close(self) -> None:
-        if self.enabled:
-            sys.stderr.write("\n")
+        self.bar.close()
 
 
 def plot_progress(records, target, path: Path) -> None:

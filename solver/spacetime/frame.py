@@ -33,6 +33,8 @@ FOOT_ROWS = 15  # per foot: friction cone, 6 CoP half-spaces, 2 torsion, 2 free-
 #   push toward the centre of mass, fore-aft force cap (2)
 SOLE_CORNERS = 4  # per foot: the drawn sole's corners (heel and toe ends, both edges)
 CONE_EPS = 1e-4  # smoothing of the friction cone's norm (scaled force units)
+#: the weight slots (``types.WEIGHT_SLOTS`` names) a frame's cost takes, in its ``wts`` input's order
+FRAME_COST_WEIGHTS = ("direction", "singularity", "coordinates", "root_rotation", "joint_range")
 
 
 def rz(turn, v):
@@ -73,18 +75,21 @@ class FrameFunctions:
             pts.append(ca.vertcat(*point_world(pose, b, pb)))
         self.kin = ca.Function("kin", [q], [mk, ca.vertcat(*pts) if pts else ca.SX(0, 1)])
 
-        # objective of a frame: wts = (markers, singularity, joint coordinates prior, root rotations prior,
-        # joint-range prior beyond [lo, hi])
+        # objective of a frame: its weights (``FRAME_COST_WEIGHTS``): markers, singularity, joint
+        # coordinates prior, root rotations prior, joint-range prior beyond [lo, hi]
         gm = ca.SX.sym("gm", 3 * self.n_markers)
-        wts = ca.SX.sym("wts", 5)
+        wts = ca.SX.sym("wts", len(FRAME_COST_WEIGHTS))
+        w = {name: wts[i] for i, name in enumerate(FRAME_COST_WEIGHTS)}
         gq = ca.SX.sym("gq", n)
         lo_, hi_ = ca.SX.sym("lo", n), ca.SX.sym("hi", n)
-        cost = wts[0] * ca.sumsqr(mk - gm) + wts[2] * ca.sumsqr(q[6:] - gq[6:]) + wts[3] * ca.sumsqr(q[3:6] - gq[3:6])
+        cost = (w["direction"] * ca.sumsqr(mk - gm) + w["coordinates"] * ca.sumsqr(q[6:] - gq[6:])
+                + w["root_rotation"] * ca.sumsqr(q[3:6] - gq[3:6]))
         if n > 6:  # the joint-range prior (bounds per coordinate: ``Layout.joint_range``)
-            cost += wts[4] * sum(ca.fmax(0, q[i] - hi_[i]) ** 2 + ca.fmax(0, lo_[i] - q[i]) ** 2 for i in range(6, n))
+            cost += w["joint_range"] * sum(ca.fmax(0, q[i] - hi_[i]) ** 2 + ca.fmax(0, lo_[i] - q[i]) ** 2
+                                           for i in range(6, n))
         sing = list(ch.singular_dofs)
         if sing:
-            cost += wts[1] * sum((1 - ca.cos(2 * q[i])) / 2 for i in sing)
+            cost += w["singularity"] * sum((1 - ca.cos(2 * q[i])) / 2 for i in sing)
         self.n_sing = len(sing)
         self.cost = ca.Function("cost", [q, gm, gq, wts, lo_, hi_], [cost])
         self.marker_cost = ca.Function("marker_cost", [q, gm], [ca.sumsqr(mk - gm)])

@@ -12,7 +12,7 @@ import numpy as np
 from solver.kinematics import centre_of_mass, contact_points, markers
 from solver.motion import FEET, foot_schedule_of
 from solver.naturalness import limited_coordinates
-from solver.spacetime.types import STANDARD_GRAVITY, Environment, Weights
+from solver.spacetime.types import STANDARD_GRAVITY, WEIGHT_SLOTS, Environment, Weights
 
 MARKER_SCALE = 0.01  # m: the objective is in units of (1 cm)²
 #: time scale of the rate costs (s): the jerk cost is the mean over the cycle of
@@ -217,17 +217,20 @@ class Layout:
         K = max(len(self.eom_frames), 1)
         hv = float(self.dt if h is None else h)
         rate = RATE_TIME / hv  # the rate costs' fixed time scale over the frame interval
-        wts = [weights.direction / (self.n_markers * nT * MARKER_SCALE**2),
-               weights.singularity / (max(self.ff.n_sing, 1) * nT * MARKER_SCALE**2),
-               weights.wrench / K,
-               weights.coordinates / (max(self.n - 6, 1) * nT),  # (0.1 rad)² per coordinate = 0.01
-               weights.wrench_rate * rate**2 / K,
-               weights.jerk * rate**6 / (max(self.n - 3, 1) * K),
-               weights.smoothness * rate**4 / (max(self.n - 3, 1) * max(nT - 2, 1)),
-               weights.root_rotation / (max(self.n - 6, 1) * nT),  # (0.01 rad)² per root rotation = 0.01
-               weights.com_moment / K,
-               weights.joint_range / (max(self.n - 6, 1) * nT),  # (0.1 rad)² beyond the range = 1
-               weights.trunk_lean / nT]
+        scaled = {
+            "direction": weights.direction / (self.n_markers * nT * MARKER_SCALE**2),
+            "singularity": weights.singularity / (max(self.ff.n_sing, 1) * nT * MARKER_SCALE**2),
+            "wrench": weights.wrench / K,
+            "coordinates": weights.coordinates / (max(self.n - 6, 1) * nT),  # (0.1 rad)² per coordinate = 0.01
+            "wrench_rate": weights.wrench_rate * rate**2 / K,
+            "jerk": weights.jerk * rate**6 / (max(self.n - 3, 1) * K),
+            "smoothness": weights.smoothness * rate**4 / (max(self.n - 3, 1) * max(nT - 2, 1)),
+            "root_rotation": weights.root_rotation / (max(self.n - 6, 1) * nT),  # (0.01 rad)² per root rotation
+            "com_moment": weights.com_moment / K,
+            "joint_range": weights.joint_range / (max(self.n - 6, 1) * nT),  # (0.1 rad)² beyond the range = 1
+            "trunk_lean": weights.trunk_lean / nT,
+        }
+        wts = [scaled[name] for name in WEIGHT_SLOTS]
         return np.concatenate([
             np.asarray(guide_markers, dtype=float).ravel(order="F"),
             np.asarray(guide_q, dtype=float).ravel(order="F"),

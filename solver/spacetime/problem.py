@@ -44,9 +44,18 @@ from solver.motion import FEET
 from solver.naturalness import path_heading
 from solver.spacetime.callback import STOP, STOP_CALLBACK
 from solver.spacetime.derivatives import Term, assemble
-from solver.spacetime.frame import FOOT_ROWS, SOLE_CORNERS, frame_functions
+from solver.spacetime.frame import FOOT_ROWS, FRAME_COST_WEIGHTS, SOLE_CORNERS, frame_functions
 from solver.spacetime.layout import Layout
-from solver.spacetime.types import DEFAULT_IPOPT, STANDARD_GRAVITY, SUCCESS_STATUSES, Environment, SolveResult, Weights
+from solver.spacetime.types import (
+    DEFAULT_IPOPT,
+    STANDARD_GRAVITY,
+    SUCCESS_STATUSES,
+    WEIGHT_SLOTS,
+    Environment,
+    SolveResult,
+    Weights,
+    weight_slots,
+)
 from solver.trajectory import spline_velocities
 
 log = logging.getLogger(__name__)
@@ -151,9 +160,9 @@ class SpacetimeProblem(Layout):
 
         x = self._x = ca.MX.sym("x", self.nx)
         nm3 = 3 * ff.n_markers
-        sizes = {"gm": nm3 * Tn, "gq": n * Tn, "g": 3, "mu": 1, "wts": 11, "ref": 6 * Tn, "anchor": 3 * Tn, "dpsi": 1,
-                 "com": 3 * Tn, "h": 1, "ground": max(ff.P, 1) * Tn, "rise": 1, "range": 2 * n, "path": Tn,
-                 "lean": Tn, "loads": 2}
+        sizes = {"gm": nm3 * Tn, "gq": n * Tn, "g": 3, "mu": 1, "wts": len(WEIGHT_SLOTS), "ref": 6 * Tn,
+                 "anchor": 3 * Tn, "dpsi": 1, "com": 3 * Tn, "h": 1, "ground": max(ff.P, 1) * Tn, "rise": 1,
+                 "range": 2 * n, "path": Tn, "lean": Tn, "loads": 2}
         self._p_layout, off = {}, 0
         for name in P_LAYOUT:
             self._p_layout[name] = (off, sizes[name])
@@ -165,7 +174,7 @@ class SpacetimeProblem(Layout):
             return ca.reshape(p[o : o + s], *shape) if shape else p[o : o + s]
 
         GM, GQ = par("gm", (nm3, Tn)), par("gq", (n, Tn))
-        grav, mu, wts, dpsi = par("g"), par("mu"), par("wts"), par("dpsi")
+        grav, mu, wts, dpsi = par("g"), par("mu"), weight_slots(par("wts")), par("dpsi")
         REF, ANCHOR = par("ref", (6, Tn)), par("anchor", (3, Tn))
         self._GROUND, self._RISE = par("ground", (max(ff.P, 1), Tn)), par("rise")
         self._COM = par("com", (3, Tn))
@@ -181,7 +190,7 @@ class SpacetimeProblem(Layout):
         self._ng = 0
 
         # --- objective ---------------------------------------------------------------------
-        cw = ca.repmat(ca.vertcat(wts[0], wts[1], wts[3], wts[7], wts[9]), 1, Tn)
+        cw = ca.repmat(ca.vertcat(*(wts[name] for name in FRAME_COST_WEIGHTS)), 1, Tn)
         rng = par("range")
         self._PATH, self._LEAN, self._LOADS = par("path"), par("lean"), par("loads")
         self._cost(Term("cost", ff.cost, 1, qi, [GM, GQ, cw, ca.repmat(rng[:n], 1, Tn), ca.repmat(rng[n:], 1, Tn)],
@@ -193,14 +202,14 @@ class SpacetimeProblem(Layout):
             K = list(range(1, Tn - 1))
             zacc = np.vstack([qi[:, [t - 1 for t in K]], qi[:, K], qi[:, [t + 1 for t in K]]])
             self._cost(Term("acc", ff.acc, 3, zacc,
-                            [ca.repmat(wts[6], 1, len(K))], derivatives=ff.derivatives["acc"], cost=True))
+                            [ca.repmat(wts["smoothness"], 1, len(K))], derivatives=ff.derivatives["acc"], cost=True))
         objective = sum(ca.sum2(t_.outputs(x)) for t_ in self._terms if t_.cost)
         extra = []
         if self.nx > self.nq_vars + self.nv_vars:  # wrench regularization
             xw = x[self.nq_vars + self.nv_vars:]
-            objective = objective + wts[2] * ca.sumsqr(xw)
+            objective = objective + wts["wrench"] * ca.sumsqr(xw)
             nw = xw.shape[0]
-            extra.append((lambda lam_f, nw=nw: ca.repmat(2 * lam_f * wts[2], 1, nw),
+            extra.append((lambda lam_f, nw=nw: ca.repmat(2 * lam_f * wts["wrench"], 1, nw),
                           np.arange(self.nq_vars + self.nv_vars, self.nx)))
         g = ca.vertcat(*self._g_parts) if self._g_parts else ca.MX(0, 1)
         self.ng = int(g.shape[0])
@@ -267,7 +276,7 @@ class SpacetimeProblem(Layout):
         cols = [self._w_index[:, (1 if t == self.T - 1 else t) - 1] for t in frames]
         return np.stack(cols, axis=1)
 
-    def _dynamic_terms(self, x, grav, mu, wts, dpsi, REF, ANCHOR) -> None:
+    def _dynamic_terms(self, x, grav, mu, wts: dict[str, ca.MX], dpsi, REF, ANCHOR) -> None:
         ff, Tn, qi, vi = self.ff, self.T, self._q_index, self._v_index
         A = self.contacts
         B = self.foot_contact()
@@ -363,15 +372,16 @@ class SpacetimeProblem(Layout):
             [(rl.force_curvature * (15.0 * hv) ** 2) ** 2, (rl.moment_curvature * (15.0 * hv) ** 2) ** 2], len(K)))))
         self._rows(Term("smooth", ff.smooth, 3, np.vstack([Wm, W, Wb]), sm_params, derivatives=D["smooth"]),
                    [(c, r) for c in range(len(K)) for r in range(2)], -math.inf, math.inf, "smooth_ground_wrench")
-        self._cost(Term("wrate", ff.wrate, 2, np.vstack([W, Wb]), [turn, ca.repmat(wts[4], 1, len(K))],
+        self._cost(Term("wrate", ff.wrate, 2, np.vstack([W, Wb]), [turn, ca.repmat(wts["wrench_rate"], 1, len(K))],
                         derivatives=D["wrate"], cost=True))
-        self._cost(Term("lean", ff.lean, 1, qi[:, frames], [ca.repmat(grav, 1, len(frames)), self._PATH[frames].T,
-                                                           self._LEAN[frames].T, ca.repmat(wts[10], 1, len(frames))],
+        self._cost(Term("lean", ff.lean, 1, qi[:, frames],
+                        [ca.repmat(grav, 1, len(frames)), self._PATH[frames].T, self._LEAN[frames].T,
+                         ca.repmat(wts["trunk_lean"], 1, len(frames))],
                         derivatives=D["lean"], cost=True))
-        self._cost(Term("wcom", ff.wcom, 1, W, [REF[:, E], self._COM[:, E], ca.repmat(wts[8], 1, len(E))],
+        self._cost(Term("wcom", ff.wcom, 1, W, [REF[:, E], self._COM[:, E], ca.repmat(wts["com_moment"], 1, len(E))],
                         derivatives=D["wcom"], cost=True))
         self._cost(Term("jerk", ff.jerk, 4, np.vstack([qi[:, K], vi[:, K], qi[:, kp], vi[:, kp]]),
-                        [ca.repmat(h, 1, len(K)), ca.repmat(wts[5], 1, len(K))], derivatives=D["jerk"], cost=True))
+                        [ca.repmat(h, 1, len(K)), ca.repmat(wts["jerk"], 1, len(K))], derivatives=D["jerk"], cost=True))
 
     @property
     def stale(self) -> bool:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
@@ -76,6 +76,19 @@ class Weights:
     #: weighs like ~1 cm of marker distance. On a slope the guide is the tutor turned with gravity,
     #: so the walker keeps its posture against gravity instead of leaning with the ground
     trunk_lean: float = 1000.0
+
+
+#: the NLP's weight slots: the fields of :class:`Weights`, in the order of the parameter vector's
+#: ``wts`` block (``Layout.parameters`` packs them, ``SpacetimeProblem`` reads them by name)
+WEIGHT_SLOTS: tuple[str, ...] = tuple(f.name for f in fields(Weights))
+
+
+def weight_slots(vector: Any) -> dict[str, Any]:
+    """A packed weight vector (``WEIGHT_SLOTS`` order: numbers or CasADi symbols) by slot name."""
+    size = int(vector.shape[0]) if hasattr(vector, "shape") else len(vector)
+    if size != len(WEIGHT_SLOTS):
+        raise ValueError(f"a weight vector has {len(WEIGHT_SLOTS)} slots ({', '.join(WEIGHT_SLOTS)}), got {size}")
+    return {name: vector[i] for i, name in enumerate(WEIGHT_SLOTS)}
 
 
 @dataclass(frozen=True)
