@@ -17,6 +17,7 @@ from fastapi.openapi.utils import get_openapi
 from service import problems
 from service.config import Settings, get_settings
 from service.db import get_database, upgrade
+from service.deps import OwnerCache
 from service.middleware import BodyLimitMiddleware, SecurityHeadersMiddleware, page_csp
 from service.runners import make_runner
 from service.work import Compute
@@ -81,7 +82,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         },
     )
     app.state.settings = app_settings
-    app.state.owner_cache = {}
+    app.state.owner_cache = OwnerCache()
     problems.install(app)
     app.add_middleware(BodyLimitMiddleware, max_bytes=app_settings.max_body_bytes)
 

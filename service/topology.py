@@ -17,12 +17,13 @@ import signal
 import socket
 import subprocess
 import sys
-import time
 import urllib.error
 import urllib.request
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
+
+from tenacity import RetryError, Retrying, retry_if_exception, retry_if_result, stop_after_delay, wait_fixed
 
 log = logging.getLogger(__name__)
 
@@ -38,17 +39,18 @@ def free_port(host: str = "127.0.0.1") -> int:
 
 
 def wait_until(pred, timeout: float, what: str, interval: float = 0.1):
-    deadline = time.monotonic() + timeout
-    last_exc: Exception | None = None
-    while time.monotonic() < deadline:
-        try:
-            v = pred()
-            if v:
-                return v
-        except Exception as e:  # retried until the deadline
-            last_exc = e
-        time.sleep(interval)
-    raise TopologyError(f"timed out after {timeout:g} s waiting for {what}" + (f" ({last_exc})" if last_exc else ""))
+    """``pred()``'s first true answer, asked every ``interval`` seconds for at most ``timeout``
+    seconds. An exception is retried too (the server is not listening yet), except a
+    ``TopologyError``: the process waited for has exited, which is raised at once."""
+    retrying = Retrying(stop=stop_after_delay(timeout), wait=wait_fixed(interval),
+                        retry=retry_if_result(lambda v: not v)
+                        | retry_if_exception(lambda e: not isinstance(e, TopologyError)))
+    try:
+        return retrying(pred)
+    except RetryError as e:
+        last = e.last_attempt
+        why = f" ({last.exception()})" if last.failed else ""
+        raise TopologyError(f"timed out after {timeout:g} s waiting for {what}{why}") from None
 
 
 # --- Redis ------------------------------------------------------------------------------

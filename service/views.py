@@ -1,10 +1,31 @@
-"""Rendering store rows as API responses (plain dicts matching service.schemas)."""
+"""Rendering store rows as API responses (plain dicts matching service.schemas), and as
+Server-Sent Events (``sse_event``)."""
 
 from __future__ import annotations
 
+import json
 from datetime import UTC, datetime
 
+from sse_starlette import ServerSentEvent
+
 from service.models import JobRow, MotionRow, ProgressRow
+
+
+#: how finely an answer reports a value: λ and the environment's values to 1e-9 (the solver's
+#: arithmetic leaves e.g. 0.05 + 0.1 = 0.15000000000000002), times in seconds to the millisecond
+VALUE_DECIMALS, SECONDS_DECIMALS = 9, 3
+
+
+def reported(x, decimals: int = VALUE_DECIMALS):
+    """``x`` as an answer shows it: a float rounded to ``decimals`` (mappings and lists element
+    by element); None, integers, booleans and text as they are."""
+    if isinstance(x, float):
+        return round(x, decimals)
+    if isinstance(x, dict):
+        return {k: reported(v, decimals) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [reported(v, decimals) for v in x]
+    return x
 
 
 def iso(t: float | None) -> str | None:
@@ -27,15 +48,16 @@ def motion_out(row: MotionRow) -> dict:
         links["parent"] = f"/motions/{row.parent_id}"
     return dict(
         id=row.id, kind=row.kind, name=row.name, character=row.character, coordinates=row.n, frames=row.frames,
-        fps=row.fps, duration_s=(row.frames - 1) / row.fps, has_wrenches=row.has_wrenches, job_id=row.job_id,
-        step=row.step, lam=row.lam, parent_id=row.parent_id, plausible=row.plausible, created_at=iso(row.created_at),
-        links=links,
+        fps=row.fps, duration_s=reported((row.frames - 1) / row.fps, SECONDS_DECIMALS), has_wrenches=row.has_wrenches,
+        job_id=row.job_id, step=row.step, lam=reported(row.lam), parent_id=row.parent_id, plausible=row.plausible,
+        created_at=iso(row.created_at), links=links,
     )
 
 
 def progress_out(p: ProgressRow) -> dict:
-    return dict(seq=p.seq, phase=p.phase, wall_time=p.wall_time, lam=p.lam, lam_reached=p.lam_reached,
-                environment=p.environment, iterations=p.iterations, accepted=p.accepted, status=p.status)
+    return dict(seq=p.seq, phase=p.phase, wall_time=reported(p.wall_time, SECONDS_DECIMALS), lam=reported(p.lam),
+                lam_reached=reported(p.lam_reached), environment=reported(p.environment), iterations=p.iterations,
+                accepted=p.accepted, status=p.status)
 
 
 def job_out(job: JobRow, points: list[ProgressRow]) -> dict:
@@ -51,9 +73,14 @@ def job_out(job: JobRow, points: list[ProgressRow]) -> dict:
     spec = job.spec or {}
     return dict(
         id=job.id, status=job.status, motion_id=job.motion_id, tutor_motion_id=job.tutor_motion_id,
-        target=spec.get("target", {}), control=spec.get("control", {}), lam_reached=job.lam_reached, steps=job.steps,
-        solves=job.solves, attempts=job.attempts, max_attempts=job.max_attempts,
+        target=spec.get("target", {}), control=spec.get("control", {}), lam_reached=reported(job.lam_reached),
+        steps=job.steps, solves=job.solves, attempts=job.attempts, max_attempts=job.max_attempts,
         cancel_requested=job.cancel_requested, message=job.message, runner=job.runner, created_at=iso(job.created_at),
         started_at=iso(job.started_at), finished_at=iso(job.finished_at),
         progress=[progress_out(p) for p in points], links=links,
     )
+
+
+def sse_event(event: str, data: dict, ident: str | None = None) -> ServerSentEvent:
+    """One Server-Sent Event: its name, its data as compact JSON, and its id if given."""
+    return ServerSentEvent(json.dumps(data, separators=(",", ":")), event=event, id=ident)

@@ -21,10 +21,10 @@ import hashlib
 import json
 import logging
 import zlib
-from collections import OrderedDict
 from collections.abc import Callable, Hashable
 from typing import Any
 
+from cachetools import LRUCache
 from fastapi.concurrency import run_in_threadpool
 
 from service.cache import BytesLRU
@@ -49,23 +49,19 @@ class WorkError(Exception):
 
 # --- in the compute process ---------------------------------------------------------------
 
-_MOTIONS: OrderedDict[bytes, Any] = OrderedDict()
+#: the last few stored motions a compute process loaded (it runs one task at a time: no lock)
+_MOTIONS: LRUCache[bytes, Any] = LRUCache(maxsize=4)
 
 
 def _load(data: bytes):
-    """A stored motion (zlib-compressed motion file v1); the last few are kept per process."""
+    """A stored motion (zlib-compressed motion file v2); the last few are kept per process."""
     # lazy: runs in a compute process; the API process does not load the solver
     from solver.motion import motion_from_dict
 
     key = hashlib.sha256(data).digest()
     m = _MOTIONS.get(key)
     if m is None:
-        m = motion_from_dict(json.loads(zlib.decompress(data)))
-        _MOTIONS[key] = m
-        while len(_MOTIONS) > 4:
-            _MOTIONS.popitem(last=False)
-    else:
-        _MOTIONS.move_to_end(key)
+        m = _MOTIONS[key] = motion_from_dict(json.loads(zlib.decompress(data)))
     return m
 
 

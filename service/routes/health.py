@@ -1,18 +1,16 @@
 from __future__ import annotations
 
-from fastapi import APIRouter, Depends, Request
+from fastapi import APIRouter, Request
 from sqlalchemy import text
 
-from service.db import Database
-from service.deps import get_db, get_runner
-from service.runners import Runner
+from service.deps import DatabaseDep, RunnerDep
 from service.schemas import Health
 
 router = APIRouter(tags=["service"])
 
 
 @router.get("/health", response_model=Health, summary="liveness and dependencies (no API key needed)")
-def health(request: Request, db: Database = Depends(get_db), runner: Runner = Depends(get_runner)) -> Health:
+def health(request: Request, db: DatabaseDep, runner: RunnerDep) -> Health:
     """Cheap by design: heavy requests run in compute processes, so this answers at once even
     while exports or uploads are being computed."""
     try:

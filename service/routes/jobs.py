@@ -7,21 +7,20 @@ import hashlib
 import json
 import time
 
-from fastapi import APIRouter, Depends, Header, Query, Request
+from fastapi import APIRouter, Header
 from fastapi.concurrency import run_in_threadpool
-from fastapi.responses import JSONResponse, StreamingResponse
+from fastapi.responses import JSONResponse
 from sqlalchemy.exc import IntegrityError
+from sse_starlette import EventSourceResponse
 
 from service import limits, store
-from service.config import Settings
 from service.db import Database
-from service.deps import app_settings, get_db, get_owner, get_runner
+from service.deps import CursorPageDep, DatabaseDep, OffsetPageDep, OwnerDep, RunnerDep, SettingsDep
 from service.limits import LimitError
 from service.models import TERMINAL
 from service.problems import Problem, known_id, not_found
-from service.runners import Runner
 from service.schemas import ExtrapolateIn, JobOut, JobPage, MotionPage
-from service.views import job_out, motion_out, progress_out
+from service.views import job_out, motion_out, progress_out, sse_event
 
 router = APIRouter(tags=["jobs"])
 
@@ -66,11 +65,11 @@ def _accepted(out: dict, replayed: bool = False) -> JSONResponse:
 def extrapolate(
     motion_id: str,
     body: ExtrapolateIn,
+    owner: OwnerDep,
+    db: DatabaseDep,
+    runner: RunnerDep,
+    settings: SettingsDep,
     idempotency_key: str | None = IDEMPOTENCY_KEY,
-    owner: str = Depends(get_owner),
-    db: Database = Depends(get_db),
-    runner: Runner = Depends(get_runner),
-    settings: Settings = Depends(app_settings),
 ) -> JSONResponse:
     # lazy: the API process loads the solver (CasADi) on first use only
     from solver.continuation import StepControl, Target
@@ -118,55 +117,37 @@ def extrapolate(
 
 
 @router.get("/jobs", response_model=JobPage, summary="your jobs, oldest first (without progress curves)")
-def list_jobs(
-    offset: int = Query(0, ge=0, le=10**9),
-    limit: int | None = Query(None, ge=1, le=1000),
-    owner: str = Depends(get_owner),
-    db: Database = Depends(get_db),
-    settings: Settings = Depends(app_settings),
-) -> dict:
-    limit = limit or settings.page_size
+def list_jobs(page: OffsetPageDep, owner: OwnerDep, db: DatabaseDep) -> dict:
     with db.read() as s:
-        rows, total = store.list_jobs(s, owner=owner, offset=offset, limit=limit)
+        rows, total = store.list_jobs(s, owner=owner, offset=page.offset, limit=page.limit)
         items = [job_out(j, []) for j in rows]
-    nxt = f"/jobs?offset={offset + limit}&limit={limit}" if offset + limit < total else None
-    return dict(items=items, total=total, limit=limit, next=nxt)
+    return page.answer("/jobs", items, total)
 
 
 @router.get("/jobs/{job_id}", response_model=JobOut, summary="status, λ reached, progress curve, links",
             responses={404: {"description": "no such job for this key"}})
-def get_job(job_id: str, owner: str = Depends(get_owner), db: Database = Depends(get_db)) -> dict:
+def get_job(job_id: str, owner: OwnerDep, db: DatabaseDep) -> dict:
     return _job(db, job_id, owner)
 
 
 @router.get("/jobs/{job_id}/motions", response_model=MotionPage, summary="every λ optimum of the job, by step",
             responses={404: {"description": "no such job for this key"}})
-def job_motions(
-    job_id: str,
-    after: int = Query(-1, ge=-1, le=10**9, description="cursor: return steps after this one"),
-    limit: int | None = Query(None, ge=1, le=1000),
-    owner: str = Depends(get_owner),
-    db: Database = Depends(get_db),
-    settings: Settings = Depends(app_settings),
-) -> JSONResponse:
-    limit = limit or settings.page_size
+def job_motions(job_id: str, page: CursorPageDep, owner: OwnerDep, db: DatabaseDep) -> JSONResponse:
     known_id("job", job_id)
     with db.read() as s:
         if store.get_job(s, job_id=job_id, owner=owner) is None:
             raise not_found("job", job_id)
-        rows = store.job_motions(s, job_id=job_id, after_step=after, limit=limit + 1)
+        rows = store.job_motions(s, job_id=job_id, after_step=page.after, limit=page.fetch)
         total = store.count_job_motions(s, job_id=job_id)
-        items = [motion_out(r) for r in rows[:limit]]
-    nxt = f"/jobs/{job_id}/motions?after={items[-1]['step']}&limit={limit}" if len(rows) > limit else None
-    headers = {"Link": f'<{nxt}>; rel="next"'} if nxt else {}
-    return JSONResponse(dict(items=items, total=total, limit=limit, next=nxt), headers=headers)
+        items = [motion_out(r) for r in rows]
+    return page.answer(f"/jobs/{job_id}/motions", items, total, key="step")
 
 
 @router.post("/jobs/{job_id}/cancel", status_code=202, response_model=JobOut,
              summary="cooperative cancel (a running job stops between λ steps)",
              responses={404: {"description": "no such job for this key"},
                         409: {"description": "the job has already finished"}})
-def cancel_job(job_id: str, owner: str = Depends(get_owner), db: Database = Depends(get_db)) -> JSONResponse:
+def cancel_job(job_id: str, owner: OwnerDep, db: DatabaseDep) -> JSONResponse:
     known_id("job", job_id)
     with db.write() as s:
         job = store.get_job(s, job_id=job_id, owner=owner)
@@ -178,23 +159,12 @@ def cancel_job(job_id: str, owner: str = Depends(get_owner), db: Database = Depe
     return JSONResponse(_job(db, job_id, owner), status_code=202, headers={"Location": f"/jobs/{job_id}"})
 
 
-def _sse(event: str, data: dict, ident: str | None = None) -> str:
-    head = f"id: {ident}\n" if ident else ""
-    return f"{head}event: {event}\ndata: {json.dumps(data, separators=(',', ':'))}\n\n"
-
-
 @router.get(
     "/jobs/{job_id}/events",
     summary="Server-Sent Events: progress points, new λ optima, status changes; ends when the job does",
     responses={200: {"content": {"text/event-stream": {}}}, 404: {"description": "no such job for this key"}},
 )
-async def job_events(
-    job_id: str,
-    request: Request,
-    owner: str = Depends(get_owner),
-    db: Database = Depends(get_db),
-    settings: Settings = Depends(app_settings),
-) -> StreamingResponse:
+async def job_events(job_id: str, owner: OwnerDep, db: DatabaseDep, settings: SettingsDep) -> EventSourceResponse:
     known_id("job", job_id)
 
     def snapshot(after_seq: int, after_step: int, attempt: int):
@@ -212,7 +182,7 @@ async def job_events(
     if first is None:
         raise not_found("job", job_id)
 
-    async def stream():
+    async def stream():  # ended by sse_starlette when the client disconnects
         after_seq, after_step, attempt, last_status = -1, -1, -1, None
         deadline = time.monotonic() + settings.sse_max_s
         while time.monotonic() < deadline:
@@ -223,20 +193,17 @@ async def job_events(
                 attempt, after_seq = job["attempts"], -1
             for p in pts:
                 after_seq = p["seq"]
-                yield _sse("progress", p, f"{attempt}:{p['seq']}")
+                yield sse_event("progress", p, f"{attempt}:{p['seq']}")
             for m in steps:
                 after_step = m["step"]
-                yield _sse("motion", m)
+                yield sse_event("motion", m)
             key = (job["status"], job["attempts"], job["lam_reached"])
             if key != last_status:
                 last_status = key
-                yield _sse("status", job)
+                yield sse_event("status", job)
             if job["status"] in TERMINAL:
-                yield _sse("end", {"status": job["status"]})
-                return
-            if await request.is_disconnected():
+                yield sse_event("end", {"status": job["status"]})
                 return
             await asyncio.sleep(settings.sse_poll_s)
 
-    return StreamingResponse(stream(), media_type="text/event-stream",
-                             headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"})
+    return EventSourceResponse(stream())

@@ -4,22 +4,21 @@ cancel, manifest, library GLB (service.library)."""
 from __future__ import annotations
 
 import asyncio
-import json
 import time
 
-from fastapi import APIRouter, Depends, Query, Request
+from fastapi import APIRouter, Request
 from fastapi.concurrency import run_in_threadpool
-from fastapi.responses import JSONResponse, Response, StreamingResponse
+from fastapi.responses import JSONResponse, Response
+from sse_starlette import EventSourceResponse
 
 from service import library, limits, store, work
-from service.config import Settings
 from service.db import Database
-from service.deps import app_settings, get_db, get_owner, get_runner
+from service.deps import DatabaseDep, OffsetPageDep, OwnerDep, RunnerDep, SettingsDep
 from service.limits import LimitError
 from service.models import TERMINAL
 from service.problems import Problem, known_id, not_found
-from service.runners import Runner
 from service.schemas import LibraryIn, LibraryOut, LibraryPage
+from service.views import sse_event
 from service.work import Compute
 
 router = APIRouter(tags=["libraries"])
@@ -51,10 +50,10 @@ def _library(db: Database, library_id: str, owner: str) -> dict:
 def create_library(
     motion_id: str,
     body: LibraryIn,
-    owner: str = Depends(get_owner),
-    db: Database = Depends(get_db),
-    runner: Runner = Depends(get_runner),
-    settings: Settings = Depends(app_settings),
+    owner: OwnerDep,
+    db: DatabaseDep,
+    runner: RunnerDep,
+    settings: SettingsDep,
 ) -> JSONResponse:
     from solver.continuation import StepControl  # lazy: the API process loads the solver (CasADi) on first use only
     from solver.library import LibraryError
@@ -88,25 +87,17 @@ def create_library(
 
 
 @router.get("/libraries", response_model=LibraryPage, summary="your motion libraries, oldest first")
-def list_libraries(
-    offset: int = Query(0, ge=0, le=10**9),
-    limit: int | None = Query(None, ge=1, le=1000),
-    owner: str = Depends(get_owner),
-    db: Database = Depends(get_db),
-    settings: Settings = Depends(app_settings),
-) -> dict:
-    limit = limit or settings.page_size
+def list_libraries(page: OffsetPageDep, owner: OwnerDep, db: DatabaseDep) -> dict:
     with db.read() as s:
-        rows, total = store.list_libraries(s, owner=owner, offset=offset, limit=limit)
+        rows, total = store.list_libraries(s, owner=owner, offset=page.offset, limit=page.limit)
         items = [library.library_out(s, r) for r in rows]
-    nxt = f"/libraries?offset={offset + limit}&limit={limit}" if offset + limit < total else None
-    return dict(items=items, total=total, limit=limit, next=nxt)
+    return page.answer("/libraries", items, total)
 
 
 @router.get("/libraries/{library_id}", response_model=LibraryOut,
             summary="status, progress per cell and overall, links",
             responses={404: {"description": "no such library for this key"}})
-def get_library(library_id: str, owner: str = Depends(get_owner), db: Database = Depends(get_db)) -> dict:
+def get_library(library_id: str, owner: OwnerDep, db: DatabaseDep) -> dict:
     return _library(db, library_id, owner)
 
 
@@ -114,7 +105,7 @@ def get_library(library_id: str, owner: str = Depends(get_owner), db: Database =
              summary="cancel every unfinished cell (running ones stop between λ steps)",
              responses={404: {"description": "no such library for this key"},
                         409: {"description": "the library has already finished"}})
-def cancel_library(library_id: str, owner: str = Depends(get_owner), db: Database = Depends(get_db)) -> JSONResponse:
+def cancel_library(library_id: str, owner: OwnerDep, db: DatabaseDep) -> JSONResponse:
     known_id("library", library_id)
     with db.write() as s:
         row = store.get_library(s, library_id=library_id, owner=owner)
@@ -130,7 +121,7 @@ def cancel_library(library_id: str, owner: str = Depends(get_owner), db: Databas
 @router.get("/libraries/{library_id}/manifest",
             summary="the manifest: cell -> parameters, status, files, realism figures, cycle metadata",
             responses={404: {"description": "no such library for this key"}})
-def get_manifest(library_id: str, owner: str = Depends(get_owner), db: Database = Depends(get_db)) -> dict:
+def get_manifest(library_id: str, owner: OwnerDep, db: DatabaseDep) -> dict:
     known_id("library", library_id)
     with db.read() as s:
         row = store.get_library(s, library_id=library_id, owner=owner)
@@ -147,8 +138,7 @@ def get_manifest(library_id: str, owner: str = Depends(get_owner), db: Database 
                409: {"description": "no cell has a motion yet"},
                429: {"description": "the server is busy with heavy requests: retry after Retry-After seconds"}},
 )
-async def get_library_glb(library_id: str, request: Request, owner: str = Depends(get_owner),
-                          db: Database = Depends(get_db)) -> Response:
+async def get_library_glb(library_id: str, request: Request, owner: OwnerDep, db: DatabaseDep) -> Response:
     known_id("library", library_id)
 
     def load():
@@ -179,13 +169,8 @@ async def get_library_glb(library_id: str, request: Request, owner: str = Depend
             "ends when the library does",
     responses={200: {"content": {"text/event-stream": {}}}, 404: {"description": "no such library for this key"}},
 )
-async def library_events(
-    library_id: str,
-    request: Request,
-    owner: str = Depends(get_owner),
-    db: Database = Depends(get_db),
-    settings: Settings = Depends(app_settings),
-) -> StreamingResponse:
+async def library_events(library_id: str, owner: OwnerDep, db: DatabaseDep,
+                         settings: SettingsDep) -> EventSourceResponse:
     known_id("library", library_id)
 
     def snapshot() -> dict | None:
@@ -196,10 +181,7 @@ async def library_events(
     if await run_in_threadpool(snapshot) is None:
         raise not_found("library", library_id)
 
-    def sse(event: str, data: dict) -> str:
-        return f"event: {event}\ndata: {json.dumps(data, separators=(',', ':'))}\n\n"
-
-    async def stream():
+    async def stream():  # ended by sse_starlette when the client disconnects
         seen: dict[str, tuple] = {}
         last = None
         deadline = time.monotonic() + settings.sse_max_s
@@ -211,17 +193,14 @@ async def library_events(
                 key = (c["status"], c["lam_reached"], c["steps"], c["attempts"])
                 if seen.get(c["key"]) != key:
                     seen[c["key"]] = key
-                    yield sse("cell", c)
+                    yield sse_event("cell", c)
             state = (lib["status"], lib["progress"]["done"], round(lib["progress"]["fraction"], 6))
             if state != last:
                 last = state
-                yield sse("status", {k: lib[k] for k in ("id", "status", "progress", "cancel_requested")})
+                yield sse_event("status", {k: lib[k] for k in ("id", "status", "progress", "cancel_requested")})
             if lib["status"] in TERMINAL:
-                yield sse("end", {"status": lib["status"]})
-                return
-            if await request.is_disconnected():
+                yield sse_event("end", {"status": lib["status"]})
                 return
             await asyncio.sleep(settings.sse_poll_s)
 
-    return StreamingResponse(stream(), media_type="text/event-stream",
-                             headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"})
+    return EventSourceResponse(stream())

@@ -11,15 +11,14 @@ import re
 import zlib
 from typing import Any, Literal
 
-from fastapi import APIRouter, Depends, Query, Request
+from fastapi import APIRouter, Query, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse, Response
 from starlette.datastructures import UploadFile
 
 from service import limits, store, uploads, work
-from service.config import Settings
 from service.db import Database
-from service.deps import app_settings, get_db, get_owner
+from service.deps import DatabaseDep, OffsetPageDep, OwnerDep
 from service.limits import clip
 from service.problems import Problem, known_id, not_found
 from service.schemas import MotionOut, MotionPage
@@ -112,10 +111,10 @@ def _store_motion(db: Database, owner: str, encoded: Encoded, name: str) -> dict
 )
 async def upload_motion(
     request: Request,
+    owner: OwnerDep,
+    db: DatabaseDep,
     name: str = Query("", max_length=limits.MAX_NAME_CHARS, pattern=NAME_PATTERN,
                       description="a label for the motion"),
-    owner: str = Depends(get_owner),
-    db: Database = Depends(get_db),
 ) -> Response:
     ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
     compute: Compute = request.app.state.compute
@@ -152,19 +151,11 @@ async def upload_motion(
 
 
 @router.get("/motions", response_model=MotionPage, summary="your motions, oldest first")
-def list_motions(
-    offset: int = Query(0, ge=0, le=10**9),
-    limit: int | None = Query(None, ge=1, le=1000),
-    owner: str = Depends(get_owner),
-    db: Database = Depends(get_db),
-    settings: Settings = Depends(app_settings),
-) -> dict:
-    limit = limit or settings.page_size
+def list_motions(page: OffsetPageDep, owner: OwnerDep, db: DatabaseDep) -> dict:
     with db.read() as s:
-        rows, total = store.list_motions(s, owner=owner, offset=offset, limit=limit)
+        rows, total = store.list_motions(s, owner=owner, offset=page.offset, limit=page.limit)
         items = [motion_out(r) for r in rows]
-    nxt = f"/motions?offset={offset + limit}&limit={limit}" if offset + limit < total else None
-    return dict(items=items, total=total, limit=limit, next=nxt)
+    return page.answer("/motions", items, total)
 
 
 def _option(k: str, v: str) -> Any:
@@ -207,11 +198,11 @@ def _option(k: str, v: str) -> Any:
 async def get_motion(
     motion_id: str,
     request: Request,
+    owner: OwnerDep,
+    db: DatabaseDep,
     format: ExportFormat = Query(
         "json", description="output format (gltf and glb: binary glTF 2.0); other query parameters are the "
                             "exporter's options"),
-    owner: str = Depends(get_owner),
-    db: Database = Depends(get_db),
 ) -> Response:
     known_id("motion", motion_id)
     options = {k: _option(k, v) for k, v in request.query_params.items() if k != "format"}
@@ -246,8 +237,7 @@ async def get_motion(
                429: {"description": "the server is busy with heavy requests: retry after Retry-After seconds"},
                501: {"description": "validator not available"}},
 )
-async def get_validation(motion_id: str, request: Request, owner: str = Depends(get_owner),
-                         db: Database = Depends(get_db)) -> dict:
+async def get_validation(motion_id: str, request: Request, owner: OwnerDep, db: DatabaseDep) -> dict:
     known_id("motion", motion_id)
 
     def load() -> tuple[dict | None, bytes | None]:

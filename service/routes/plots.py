@@ -8,13 +8,13 @@ progress points are only ever appended.
 
 from __future__ import annotations
 
-from fastapi import APIRouter, Depends, Request
+from fastapi import APIRouter, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import Response
 
 from service import store, work
 from service.db import Database
-from service.deps import get_db, get_owner
+from service.deps import DatabaseDep, OwnerDep
 from service.problems import Problem, known_id, not_found
 from service.views import progress_out
 from service.work import Compute
@@ -42,8 +42,8 @@ def _png_responses(what: str, *, wrenches: bool = False) -> dict:
             "reached, against wall time",
     responses=_png_responses("job"),
 )
-async def progress_plot(job_id: str, request: Request, owner: str = Depends(get_owner),
-                        db: Database = Depends(get_db)) -> Response:
+async def progress_plot(job_id: str, request: Request, owner: OwnerDep,
+                        db: DatabaseDep) -> Response:
     known_id("job", job_id)
 
     def load():
@@ -96,8 +96,8 @@ async def _motion_plot(request: Request, db: Database, owner: str, motion_id: st
     summary="ground reaction forces per foot (fx, fy, fz against time, contact phases shaded)",
     responses=_png_responses("motion", wrenches=True),
 )
-async def grf_plot(motion_id: str, request: Request, owner: str = Depends(get_owner),
-                   db: Database = Depends(get_db)) -> Response:
+async def grf_plot(motion_id: str, request: Request, owner: OwnerDep,
+                   db: DatabaseDep) -> Response:
     return await _motion_plot(request, db, owner, motion_id, "grf")
 
 
@@ -107,8 +107,8 @@ async def grf_plot(motion_id: str, request: Request, owner: str = Depends(get_ow
     summary="root residual of the equations of motion per frame, ours and MuJoCo's replay",
     responses=_png_responses("motion", wrenches=True),
 )
-async def residuals_plot(motion_id: str, request: Request, owner: str = Depends(get_owner),
-                         db: Database = Depends(get_db)) -> Response:
+async def residuals_plot(motion_id: str, request: Request, owner: OwnerDep,
+                         db: DatabaseDep) -> Response:
     return await _motion_plot(request, db, owner, motion_id, "residuals")
 
 
@@ -119,6 +119,6 @@ async def residuals_plot(motion_id: str, request: Request, owner: str = Depends(
             "the ground and the ground-force arrows",
     responses=_png_responses("motion"),
 )
-async def filmstrip_plot(motion_id: str, request: Request, owner: str = Depends(get_owner),
-                         db: Database = Depends(get_db)) -> Response:
+async def filmstrip_plot(motion_id: str, request: Request, owner: OwnerDep,
+                         db: DatabaseDep) -> Response:
     return await _motion_plot(request, db, owner, motion_id, "filmstrip", wrenches=False)
