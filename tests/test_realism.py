@@ -367,3 +367,29 @@ def test_validate_shows_every_realism_check(tmp_path, capsys):
     rep = json.loads(capsys.readouterr().out)
     assert not rep["plausible"] and "refined_force" in rep["realism"]["failed"]
     assert rep["mujoco_replay"]["agreement_force_rel_weight"] < 1e-9
+
+
+def test_optimizer_bounds_lie_strictly_inside_the_checks_limits():
+    """Every bound the optimizer keeps lies strictly inside the limit its check judges (an
+    optimum is never on the edge of a check), and follows that limit when it changes."""
+    from dataclasses import replace
+
+    from solver.naturalness import NaturalnessLimits
+    from solver.spacetime.types import Naturalness, Realism
+
+    rl, nl = RealismLimits(), NaturalnessLimits()
+    r, n = Realism(), Naturalness()
+    assert r == Realism.from_limits(rl) and n == Naturalness.from_limits(nl)
+    assert r.free_moment_cap < rl.torsion_abs and r.support_max < rl.total_force and r.force_rate < rl.force_rate
+    assert r.spin_rate_deg_s < rl.spin_rate and r.torsion_margin < 1.0
+    assert r.torsion_radius_fraction == rl.torsion_radius
+    # whole-body Newton–Euler from positions sees a sixth of the ground wrench's second differences
+    assert r.force_curvature / 6 < rl.newton_force and r.moment_curvature / 6 < rl.newton_moment
+    assert n.clearance_m > nl.clearance_m and n.shared_load > nl.shared_load and n.pitch_load < nl.pitch_load
+    assert n.pitch_deg == nl.pitch_deg and n.friction_use < nl.friction_use and n.fore_aft < nl.fore_aft
+    assert n.crossover_m < nl.crossover_m and n.limit_margin_deg > nl.limit_band_deg and n.level_deg == nl.level_deg
+    assert -n.push_margin > nl.push
+    moved = Realism.from_limits(replace(rl, total_force=3.0, spin_rate=100.0))
+    assert 2.9 < moved.support_max < 3.0 and 50.0 < moved.spin_rate_deg_s < 100.0
+    closer = Naturalness.from_limits(replace(nl, crossover_m=0.05, friction_use=0.8))
+    assert 0.03 < closer.crossover_m < 0.05 and 0.7 < closer.friction_use < 0.8

@@ -10,6 +10,8 @@ from typing import Any
 import numpy as np
 
 from solver.environment import STANDARD_GRAVITY, Environment  # noqa: F401  (re-exported)
+from solver.naturalness import NaturalnessLimits
+from solver.realism import RealismLimits
 
 DEFAULT_IPOPT = {
     "ipopt.print_level": 0,
@@ -91,54 +93,101 @@ def weight_slots(vector: Any) -> dict[str, Any]:
     return {name: vector[i] for i, name in enumerate(WEIGHT_SLOTS)}
 
 
+def inside(limit: float, margin: float) -> float:
+    """A bound ``margin`` inside a check's ``limit`` (a maximum less a positive margin, a minimum
+    less a negative one), to 1e-9 of the limit's unit: an optimum is never on the edge of the check."""
+    return round(limit - margin, 9)
+
+
+def _realism_bounds(lim: RealismLimits) -> dict[str, float]:
+    """The realistic transcription's bounds inside the realism checks' limits (``solver.realism``)."""
+    return {
+        "torsion_radius_fraction": lim.torsion_radius,  # ρ = foot length / 10 (torsional friction radius)
+        "free_moment_cap": inside(lim.torsion_abs, 0.005),  # |τ| ≤ 0.025 BW·m (validator: 0.03)
+        "support_max": inside(lim.total_force, 0.05),  # total normal force ≤ 1.95 BW (validator: 2)
+        "force_rate": inside(lim.force_rate, 1.5),  # |ΔF_total| ≤ 10.5 BW/s (validator: 12 BW/s, 0.8 BW at 15 fps)
+        "spin_rate_deg_s": inside(lim.spin_rate, 15.0),  # a foot in contact turns ≤ 60°/s (validator: 75)
+    }
+
+
+def _naturalness_bounds(lim: NaturalnessLimits) -> dict[str, float]:
+    """The bounds that keep an optimum's gait human, inside the naturalness checks' limits
+    (``solver.naturalness``)."""
+    return {
+        "clearance_m": inside(lim.clearance_m, -0.001),  # 6 mm (check: 5 mm)
+        "pitch_deg": lim.pitch_deg,
+        "pitch_load": inside(lim.pitch_load, 0.05),  # 0.45 BW at 40° (check: 0.5 BW)
+        "shared_load": inside(lim.shared_load, -0.02),  # 0.12 BW (check: 0.1 BW)
+        "friction_use": inside(lim.friction_use, 0.05),  # 0.85 μ (check: 0.9 μ)
+        "fore_aft": inside(lim.fore_aft, 0.03),  # 0.32 BW (check: 0.35 BW)
+        "level_deg": lim.level_deg,
+        "crossover_m": inside(lim.crossover_m, 0.01),  # 2 cm (check: 3 cm)
+        "limit_margin_deg": inside(lim.limit_band_deg, -1.0),  # 2° inside the limits (check: a 1° band)
+    }
+
+
+_REALISM = _realism_bounds(RealismLimits())
+_NATURALNESS = _naturalness_bounds(NaturalnessLimits())
+
+
 @dataclass(frozen=True)
 class Realism:
     """Bounds of the realistic transcription, each inside the validator's limit
-    (``solver.realism``) by a margin so that an optimum is never on the edge of a check."""
+    (``solver.realism.RealismLimits``) by a margin so that an optimum is never on the edge of a
+    check: the defaults are :meth:`from_limits` of the validator's default limits."""
 
-    torsion_radius_fraction: float = 0.1  # ρ = foot length / 10 (torsional friction radius)
+    torsion_radius_fraction: float = _REALISM["torsion_radius_fraction"]
     torsion_margin: float = 0.95  # |τ| ≤ 0.95 μ ρ f_z
-    free_moment_cap: float = 0.025  # |τ| ≤ 0.025 BW·m (validator: 0.03)
-    support_max: float = 1.95  # total normal force ≤ 1.95 BW (validator: 2)
-    force_rate: float = 10.5  # |ΔF_total| ≤ 10.5 BW/s between frames (validator: 12 BW/s, 0.8 BW at 15 fps)
+    free_moment_cap: float = _REALISM["free_moment_cap"]
+    support_max: float = _REALISM["support_max"]
+    force_rate: float = _REALISM["force_rate"]
     #: second differences of the total ground wrench over three frames at 15 fps (scaled by
     #: (15 h)² at other rates): force (BW), moment about the centre of mass (BW × leg length);
     #: whole-body Newton–Euler from positions sees a sixth of them (validator: 0.08 / 0.04)
     force_curvature: float = 0.42
     moment_curvature: float = 0.16
-    spin_rate_deg_s: float = 60.0  # a foot in contact turns ≤ 60°/s about the vertical (validator: 75)
+    spin_rate_deg_s: float = _REALISM["spin_rate_deg_s"]
+
+    @classmethod
+    def from_limits(cls, lim: RealismLimits, **changes: float) -> Realism:
+        """The bounds inside the realism checks' limits ``lim`` (the others: their defaults, or ``changes``)."""
+        return cls(**{**_realism_bounds(lim), **changes})
 
 
 @dataclass(frozen=True)
 class Naturalness:
     """Bounds that keep an optimum's gait human (``solver.naturalness`` checks the result), each
-    inside the check's limit by a margin."""
+    inside the check's limit (``NaturalnessLimits``) by a margin: the defaults are
+    :meth:`from_limits` of the checks' default limits."""
 
     #: a swinging foot's sole (its four corners, the plane through its heel and toe contact
     #: points) stays this far above the ground (check: 5 mm; walking clears ~1-2 cm)
-    clearance_m: float = 0.006
+    clearance_m: float = _NATURALNESS["clearance_m"]
     #: heel-up pitch of a loaded foot: below ``pitch_free_deg`` any load; above it the load is at
-    #: most ``pitch_load`` × (sin 40° − sin p_free) / (sin p − sin p_free) BW — ``pitch_load`` at
-    #: 40° (check: a foot over 0.5 BW pitched at most 40°), ~0.85 BW at 30°, ~0.26 BW at 60°
+    #: most ``pitch_load`` × (sin p_max − sin p_free) / (sin p − sin p_free) BW, p_max = ``pitch_deg``
+    #: — ``pitch_load`` at 40° (check: a foot over 0.5 BW pitched at most 40°), ~0.85 BW at 30°,
+    #: ~0.26 BW at 60°
     pitch_free_deg: float = 20.0
-    pitch_load: float = 0.45
+    pitch_load: float = _NATURALNESS["pitch_load"]
+    pitch_deg: float = _NATURALNESS["pitch_deg"]
     #: both feet carry at least this (BW) at the middle frame(s) of every double support
     #: (check: ≥ 0.1 BW at some frame of every change of support)
-    shared_load: float = 0.12
+    shared_load: float = _NATURALNESS["shared_load"]
     #: the ground pushes the body: a foot's horizontal force along the line from the foot to the
     #: centre of mass is at least −push_margin × f_z × leg length (the force plates of the shared
-    #: trials: ≥ −0.008; a double support whose feet squeeze the ground between them: −0.36)
+    #: trials: ≥ −0.008; a double support whose feet squeeze the ground between them: −0.36; the
+    #: check warns below −0.05)
     push_margin: float = 0.02
     #: a loaded foot uses at most this fraction of the friction μ (check: 0.9): a walk that needs all
     #: of it slips at the slightest disturbance
-    friction_use: float = 0.85
+    friction_use: float = _NATURALNESS["friction_use"]
     #: on level ground a foot's fore-aft force stays within this (BW; check: 0.35; walking peaks
     #: ~0.2): the flat ground is walked on without braking and pushing twice as hard as people do
-    fore_aft: float = 0.32
-    level_deg: float = 1.0
+    fore_aft: float = _NATURALNESS["fore_aft"]
+    level_deg: float = _NATURALNESS["level_deg"]
     #: a foot in contact stands at most this far on the far side of the pelvis, across the
     #: direction of travel (check: 3 cm for a loaded foot)
-    crossover_m: float = 0.02
+    crossover_m: float = _NATURALNESS["crossover_m"]
     #: the joint-range prior (``Weights.joint_range``) acts beyond the guide's own range of each
     #: non-sagittal joint coordinate (ab/adduction, axial rotation, bending) widened by this, and on
     #: every joint coordinate within ``limit_band_deg`` of its model limit (check: a joint within
@@ -147,12 +196,17 @@ class Naturalness:
     limit_band_deg: float = 5.0
     #: the NLP's joint bounds lie this far inside the model's limits (check: a joint within 1° of
     #: its limit for more than one frame)
-    limit_margin_deg: float = 2.0
+    limit_margin_deg: float = _NATURALNESS["limit_margin_deg"]
+
+    @classmethod
+    def from_limits(cls, lim: NaturalnessLimits, **changes: float) -> Naturalness:
+        """The bounds inside the naturalness checks' limits ``lim`` (the others: their defaults, or ``changes``)."""
+        return cls(**{**_naturalness_bounds(lim), **changes})
 
     @property
     def pitch_coefficient(self) -> float:
         """C of the pitch rows: f_z (sin p − sin p_free) ≤ C (f_z in BW)."""
-        return self.pitch_load * (math.sin(math.radians(40.0)) - math.sin(math.radians(self.pitch_free_deg)))
+        return self.pitch_load * (math.sin(math.radians(self.pitch_deg)) - math.sin(math.radians(self.pitch_free_deg)))
 
 
 @dataclass(frozen=True, eq=False)
