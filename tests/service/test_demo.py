@@ -239,7 +239,7 @@ def test_the_demo_clock_runs_during_the_tutor_phase():
     time.sleep(0.25)
     second = _bar(job)
     assert " tutor " in first and first != second
-    assert 0.2 <= job.elapsed < 5.0
+    assert job.elapsed >= 0.25  # the sleep's lower bound; its upper one is the machine's
     job.seen({"status": "succeeded", "progress": [], "steps": 4, "lam_reached": 1.0})
     frozen = job.elapsed
     time.sleep(0.1)

@@ -36,9 +36,8 @@ def test_results_and_exceptions_come_back(pool):
 def test_time_limit_kills_only_that_task_and_the_slot_is_replaced(pool):
     slow = pool.submit(time.sleep, 30, timeout=0.5)
     other = pool.submit(time.sleep, 1.0)  # on the other slot, unaffected
-    t0 = time.monotonic()
-    assert isinstance(slow.exception(30), TaskTimeout)
-    assert time.monotonic() - t0 < 5
+    err = slow.exception(30)  # a 30 s task: only its 0.5 s limit ends it before this wait does
+    assert isinstance(err, TaskTimeout) and "time limit of 0.5 s" in str(err), err
     assert other.result(30) is None
     assert pool.submit(os.getpid).result(30) in pool.pids()  # the pool works on
     assert pool.restarts >= 1
