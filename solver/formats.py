@@ -1,8 +1,10 @@
 """The registries of the file formats the solver reads and writes (standard library only, so
 that front ends enumerate them without importing numpy or a reader).
 
-- :data:`READERS`: the trial readers (``solver.io.load_trial`` dispatches on a trial's files),
-  each with its file suffixes and the options it takes beside the files;
+- :data:`READERS`: the trial readers (``solver.io.load_trial`` looks a trial's files up here),
+  each with its file suffixes, the options it takes beside the files, and where its two
+  functions live: one that sorts a trial's files into the load function's arguments by their
+  suffixes and content, and the load function itself (both imported when a trial calls for them);
 - :data:`EXPORTERS`: the motion exporters (``solver.export.export_motion``), each with its
   function and media type.
 
@@ -26,7 +28,17 @@ class Reader:
     #: the files of one trial, in words (error messages, help)
     files: str
     #: reader options beside the files -> their meaning (``load_trial(..., **options)``)
-    options: MappingProxyType[str, str] = field(default_factory=lambda: MappingProxyType({}))
+    options: MappingProxyType[str, str]
+    #: the module holding the two functions below (imported when a trial calls for this reader)
+    module: str
+    #: files (list of Path) -> the load function's file arguments (name -> Path or None), from
+    #: their suffixes and content; an ``solver.io.TrialError`` says what is wrong otherwise
+    trial_files: str
+    #: ``load(**files, **options) -> Capture``
+    load: str
+    #: a suffix that makes a set of files this reader's whatever the others (OpenSim's model);
+    #: otherwise a reader takes the files whose suffixes are all its own
+    claims: str | None = None
 
 
 def _ro(d: dict[str, str]) -> MappingProxyType[str, str]:
@@ -41,15 +53,29 @@ READERS: tuple[Reader, ...] = (
                            ".trc": "marker trajectories", ".xml": "OpenSim ExternalLoads"}),
            ".osim + .mot/.sto coordinates or .trc markers (+ GRF .mot, ExternalLoads .xml)",
            _ro({**_COMMON, "belt_speed": "treadmill belt speed (m/s) or 'auto'",
-                "in_degrees": "the coordinates file is in degrees (default: its header says)"})),
+                "in_degrees": "the coordinates file is in degrees (default: its header says)"}),
+           "solver.io.opensim", "trial_files", "load_opensim", claims=".osim"),
     Reader("c3d", _ro({".c3d": "C3D"}), ".c3d",
-           _ro({**_COMMON, "markers": "marker label mapping (role -> label)"})),
+           _ro({**_COMMON, "markers": "marker label mapping (role -> label)"}),
+           "solver.io.c3d", "trial_files", "load_c3d"),
     Reader("bvh", _ro({".bvh": "BVH"}), ".bvh",
            _ro({**_COMMON, "units": "length unit of the file ('auto', 'cm', 'm', 'mm', 'in', 'cmu')",
-                "up": "the file's up axis ('y' or 'z')"})),
+                "up": "the file's up axis ('y' or 'z')"}),
+           "solver.io.bvh", "trial_files", "load_bvh"),
     Reader("deepmimic", _ro({".txt": "DeepMimic motion or character", ".json": "DeepMimic motion or character"}),
-           "DeepMimic motion .txt/.json + character .txt/.json", _ro(dict(_COMMON))),
+           "DeepMimic motion .txt/.json + character .txt/.json", _ro(dict(_COMMON)),
+           "solver.io.deepmimic", "trial_files", "load_deepmimic"),
 )
+
+
+def reader_options() -> dict[str, str]:
+    """Every option some reader takes -> its meaning (first reader wins): what a front end
+    offers beside a trial's files."""
+    out: dict[str, str] = {}
+    for r in READERS:
+        for name, meaning in r.options.items():
+            out.setdefault(name, meaning)
+    return out
 
 
 def reader_suffixes() -> dict[str, str]:

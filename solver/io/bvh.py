@@ -58,6 +58,7 @@ from solver import spatial as sp
 from solver.capture import Capture, GroundFrame
 from solver.errors import InputError
 from solver.io.fit import fit_track
+from solver.io.readers import one_file
 from solver.io.track import SkeletonTrack
 
 log = logging.getLogger(__name__)
@@ -450,6 +451,11 @@ def bvh_track(
                 "up": up, "joint_roles": {r: clip.names[j] for r, j in roles.items()},
                 "spine_joints": [clip.names[j] for j in spines], "floor_height_file_units": floor_height},
     )
+
+
+def trial_files(paths: list[Path]) -> dict[str, Path]:
+    """A BVH trial is one ``.bvh`` file (the reader registry's ``trial_files``)."""
+    return {"path": one_file(paths, ".bvh")}
 
 
 def load_bvh(

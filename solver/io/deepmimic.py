@@ -54,6 +54,7 @@ from solver import spatial as sp
 from solver.capture import Capture, GroundFrame
 from solver.errors import InputError
 from solver.io.fit import fit_track
+from solver.io.readers import TrialError
 from solver.io.track import SkeletonTrack
 
 log = logging.getLogger(__name__)
@@ -275,6 +276,34 @@ def deepmimic_track(motion: str | Path, character: str | Path, *, mass: float | 
         source={"format": "deepmimic", "motion": str(Path(motion).resolve()),
                 "character": str(Path(character).resolve()), "loop": loop,
                 "mass_from": "given" if mass is not None else "character file"},
+    )
+
+
+def json_kind(path: Path) -> str | None:
+    """What a DeepMimic JSON file is, from its content: ``"motion"`` (``Frames``),
+    ``"character"`` (``Skeleton``), or None (not JSON, or neither)."""
+    try:
+        d = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return None
+    if isinstance(d, dict) and "Frames" in d:
+        return "motion"
+    if isinstance(d, dict) and "Skeleton" in d:
+        return "character"
+    return None
+
+
+def trial_files(paths: list[Path]) -> dict[str, Path]:
+    """A DeepMimic trial is one motion file and one character file, told apart by their
+    content (the reader registry's ``trial_files``)."""
+    kinds = {p: json_kind(p) for p in paths}
+    motions = [p for p, k in kinds.items() if k == "motion"]
+    chars = [p for p, k in kinds.items() if k == "character"]
+    if len(motions) == 1 and len(chars) == 1 and len(paths) == 2:
+        return {"motion": motions[0], "character": chars[0]}
+    raise TrialError(
+        "a DeepMimic trial is one motion file (JSON with 'Frames') and one character file (JSON with "
+        f"'Skeleton'); got {[p.name + ': ' + (k or 'not DeepMimic JSON') for p, k in kinds.items()]}"
     )
 
 

@@ -29,7 +29,8 @@ Package layout: ``reader`` (file access, units, gaps, subject parameters), ``pla
 from solver.io.c3d.markers import MARKER_SETS, ROLES, detect_marker_set, parse_mapping
 from solver.io.c3d.plates import PlateSignal, PlateSpec
 from solver.io.c3d.reader import C3DError, SubjectParams, fill_gaps, length_unit
-from solver.io.c3d.trial import C3DTrial, load_c3d, read_c3d, read_c3d_trial
+from solver.io.c3d.trial import C3DTrial, load_c3d, read_c3d, read_c3d_trial, trial_files
 
 __all__ = ["MARKER_SETS", "ROLES", "C3DError", "C3DTrial", "PlateSignal", "PlateSpec", "SubjectParams",
-           "detect_marker_set", "fill_gaps", "length_unit", "load_c3d", "parse_mapping", "read_c3d", "read_c3d_trial"]
+           "detect_marker_set", "fill_gaps", "length_unit", "load_c3d", "parse_mapping", "read_c3d", "read_c3d_trial",
+           "trial_files"]

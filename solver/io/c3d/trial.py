@@ -19,6 +19,7 @@ from solver.io.c3d.plates import PlateSignal, _plate_signals, _plate_specs
 from solver.io.c3d.reader import FEET, C3DError, G, _mid, _param, _read_raw, _strings, _subject_params, fill_gaps
 from solver.io.fit import fit_track
 from solver.io.mass import implied_mass, mass_warning
+from solver.io.readers import one_file
 from solver.io.track import SkeletonTrack
 
 log = logging.getLogger("solver.io.c3d")
@@ -154,6 +155,11 @@ def read_c3d_trial(path: str | Path, *, mass: float | None = None, require_plate
     )
     return C3DTrial(track=track, plates=plates)
 
+
+
+def trial_files(paths: list[Path]) -> dict[str, Path]:
+    """A C3D trial is one ``.c3d`` file (the reader registry's ``trial_files``)."""
+    return {"path": one_file(paths, ".c3d")}
 
 
 def read_c3d(path: str | Path, *, mass: float | None = None, require_plates: bool = True,

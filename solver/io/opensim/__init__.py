@@ -98,6 +98,7 @@ from solver.io.opensim.external_loads import grf_arrays, read_opensim_grf
 from solver.io.opensim.model import PLACEHOLDER_MASS_FRACTION, opensim_track
 from solver.io.opensim.storage import Storage, read_mot
 from solver.io.opensim.treadmill import estimate_belt_speed
+from solver.io.readers import TrialError, by_suffix
 
 log = logging.getLogger(__name__)
 
@@ -112,6 +113,7 @@ __all__ = [
     "plates_implied_mass",
     "read_mot",
     "read_opensim_grf",
+    "trial_files",
 ]
 
 
@@ -121,6 +123,34 @@ def plates_implied_mass(mot: str | Path, xml: str | Path | None = None, *,
     record at the plates' rate, every force of a foot summed); None when it cannot tell."""
     sto, F, _, _ = grf_arrays(mot, xml)
     return implied_mass(sto.time, F[:, :, 1], stride_s=stride_s)
+
+
+def is_grf_mot(path: Path) -> bool:
+    """Whether an OpenSim table holds forces (a GRF file) rather than coordinates."""
+    sto = read_mot(path)
+    return any(lab.endswith(("force_vx", "_vx")) and "force" in lab for lab in sto.labels)
+
+
+def trial_files(paths: list[Path]) -> dict[str, Path | None]:
+    """An OpenSim trial's files by role (the reader registry's ``trial_files``): the model, one
+    coordinates ``.mot``/``.sto`` or markers ``.trc``, at most one GRF ``.mot`` (told by its
+    force columns) and an ExternalLoads ``.xml`` with it."""
+    by_ext = by_suffix(paths)
+    if len(by_ext[".osim"]) != 1:
+        raise TrialError(f"one OpenSim model expected, got {by_ext['.osim']}")
+    mots = by_ext.get(".mot", []) + by_ext.get(".sto", [])
+    grfs = [m for m in mots if is_grf_mot(m)]
+    kin = [m for m in mots if m not in grfs] + by_ext.get(".trc", [])
+    if len(kin) != 1:
+        raise TrialError(f"an OpenSim trial needs exactly one coordinates .mot/.sto or one markers .trc next to "
+                         f"the model; got {[str(k) for k in kin]} (GRF files: {[str(g) for g in grfs]})")
+    if len(grfs) > 1:
+        raise TrialError(f"at most one GRF .mot, got {[str(g) for g in grfs]}")
+    xmls = by_ext.get(".xml", [])
+    if len(xmls) > 1 or (xmls and not grfs):
+        raise TrialError(f"an ExternalLoads .xml goes with one GRF .mot; got xml {xmls}, GRF {grfs}")
+    return {"model": by_ext[".osim"][0], "motion": kin[0], "grf": grfs[0] if grfs else None,
+            "grf_xml": xmls[0] if xmls else None}
 
 
 def load_opensim(
