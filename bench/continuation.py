@@ -26,14 +26,14 @@ REACH = {  # further than the thesis
     "stairs_up_0.15": Target(step_height_m=0.15),
     "stairs_down_0.15": Target(step_height_m=-0.15),
 }
-#: the full body (30 frames/s): curve π/2 and stairs (issue 14: how high a step the full body
+#: the full body (30 frames/s): curve π/2 and stairs (how high a step the full body
 #: reaches; ε = 0.02 bounds an impasse's search)
 FULL_BODY = {
     "curve_90": (Target(curve_deg=90.0), {}),
     "stairs_up_0.15": (Target(step_height_m=0.15), {"eps": 0.02}),
     "stairs_down_0.15": (Target(step_height_m=-0.15), {"eps": 0.02}),
 }
-IMPOSSIBLE = {  # must end in an impasse (issue 11); ε = 0.02 keeps the bench short
+IMPOSSIBLE = {  # must end in an impasse; ε = 0.02 keeps the bench short
     "uphill_80": Target(slope_deg=80.0),
     "downhill_80": Target(slope_deg=-80.0),
     "curve_720": Target(curve_deg=720.0),

@@ -7,7 +7,7 @@ per-call overhead amortised), with the trial estimator's defaults (temporal prio
 split at the 6 Hz cut-off, single-support CoPs kept in the feet: ``frames_per_s``) and as
 one QP per frame, the thesis's form (``per_frame_frames_per_s``). Importing and filtering
 are timed separately. The nested (thesis) form is timed on the double-support frames for
-comparison (SPEC §8: 20 frames/s).
+comparison (docs/method.md, Thesis figures: 20 frames/s).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Motion libraries (issue 15): time per cell and cells per minute, in one process and on the
+"""Motion libraries: time per cell and cells per minute, in one process and on the
 distributed stack with 1, 2 and 4 Celery workers.
 
 - ``in_process``: ``solver.library.solve_library`` (the engine of ``motionx library``) on the

@@ -11,7 +11,7 @@ made on different machines or at different times.
 
 The seconds per iteration are not the whole story: IPOPT's *iteration counts* on our problems
 depend on the CPU too, through the floating-point rounding of the BLAS kernel OpenBLAS picks for
-it (measured at stop 22: the DeepMimic HalfBoy correction takes 109 iterations with the SkylakeX
+it (measured: the DeepMimic HalfBoy correction takes 109 iterations with the SkylakeX
 kernel of NumPy's OpenBLAS, 104 on the same machine with ``OPENBLAS_CORETYPE=Haswell``, 103 on an
 AMD machine; CasADi's own OpenBLAS is a CORE2 build, the same kernel everywhere), and
 a continuation magnifies that (the PiG full-body curve 90°: 230 iterations there, 665 here). So

@@ -60,7 +60,7 @@ TargetIn = create_model("TargetIn", __base__=_TargetBase, __doc__=_TargetBase.__
 
 
 class StepControlIn(Strict):
-    """Step control of the continuation (SPEC §7)."""
+    """Step control of the continuation (docs/method.md (M6))."""
 
     method: Literal["adaptive", "thesis"] = _SC.method  # type: ignore[assignment]
     delta0: float = Field(_SC.delta0, gt=0.0, le=1.0, description="first λ step Δ0")

@@ -1,4 +1,4 @@
-"""Extrapolation by continuation in λ ∈ [0, 1] (SPEC §7, Algorithm 3 and beyond).
+"""Extrapolation by continuation in λ ∈ [0, 1] (docs/method.md (M6), Algorithm 3 and beyond).
 
 Types are frozen values; progress is reported through callbacks so the CLI, a worker or
 a test can consume it (crocoddyl's CallbackLogger / mujoco's IterLog habit).
@@ -40,9 +40,8 @@ class StepControl:
     method "adaptive": step from the recent history of accepted steps, secant predictor
         from the last two optima, warm-started multipliers.
 
-    The default is the thesis's controller since stop 20: with the realistic transcription it was
-    faster on the timed targets in three sessions running and reached as far or further on every
-    reach target but the 45° uphill and the 180° curve, a few degrees short there
+    The default is the thesis's controller: with the realistic transcription it was faster on
+    the timed targets and reached as far or further on most reach targets
     (docs/continuation.md, "Step control").
     """
 

@@ -1,11 +1,11 @@
-"""Inverse dynamics: recursive Newton-Euler (SPEC Algorithm 1), one implementation.
+"""Inverse dynamics: recursive Newton-Euler (docs/method.md (M3.4), the thesis's Algorithm 1), one implementation.
 
 ``rnea`` runs on numpy (one frame, or a whole motion ``(n, T)`` at once: every line is a
 vectorised operation over frames) and on CasADi symbols (it then builds the expression
 graph). Gravity enters as a fictitious root acceleration ``a_0 = -g``. External wrenches
 are world-frame spatial forces (moment about the world origin; force), keyed by body
 index. The root wrench ``h0`` is the total external wrench the motion needs, in the world
-frame about the world origin, ordered (moment; force) — SPEC 4.7: c = h0.
+frame about the world origin, ordered (moment; force) — docs/method.md (M3.5): c = h0.
 """
 
 from __future__ import annotations
@@ -132,7 +132,7 @@ def rnea(
 
 
 def root_wrench(character: Character, q: Any, qd: Any, qdd: Any, gravity: Any = DEFAULT_GRAVITY) -> Any:
-    """h0 with no external wrench: the total ground wrench the motion needs (SPEC 4.7)."""
+    """h0 with no external wrench: the total ground wrench the motion needs (docs/method.md (M3.5))."""
     return rnea(character, q, qd, qdd, gravity).h0
 
 

@@ -7,8 +7,8 @@ own ground frame and units with its :class:`~solver.capture.GroundFrame` (forces
 CoPs mapped as points at their times — a treadmill's belt motion included); the CSV of
 ``motionx grf`` is that, one row per frame and foot.
 
-:func:`compare` computes the thesis's Table 4.1 metrics (SPEC §5): per component the RMS
-and max of the error and the relative RMS (SPEC 4.33)
+:func:`compare` computes the thesis's Table 4.1 metrics (docs/method.md (M4)): per component the RMS
+and max of the error and the relative RMS (docs/method.md (M4.8))
 
     RMS / (½ [(max x − min x) + (max e − min e)])
 

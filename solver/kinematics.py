@@ -1,4 +1,4 @@
-"""Forward kinematics (SPEC 3.11), markers, contact points and finite differences (3.7-3.8).
+"""Forward kinematics (docs/method.md (M2.3)), markers, contact points and finite differences (M2.2).
 
 Functions take ``q`` as an n-vector (numpy ``(n,)``), a motion (numpy ``(n, T)``: every
 frame at once) or a CasADi column; they return the same kind.
@@ -83,7 +83,7 @@ def _shape_points(flat: list, npts: int, like: Any) -> Any:
 
 
 def marker_points(character: Character) -> list[tuple[str, np.ndarray]]:
-    """One marker per segment, at its tip (SPEC F_dir)."""
+    """One marker per segment, at its tip (docs/method.md (M5.1), F_dir)."""
     return [(s.name, s.marker) for s in character.segments if s.length > 0]
 
 
@@ -130,7 +130,7 @@ def standing_leg_length(character: Character) -> float:
 
 
 def finite_differences(Q: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """Central differences (SPEC 3.7-3.8) at interior frames 2..T-1: (q̇, q̈), shape (n, T-2)."""
+    """Central differences (docs/method.md (M2.2)) at interior frames 2..T-1: (q̇, q̈), shape (n, T-2)."""
     Q = np.asarray(Q, dtype=float)
     if Q.ndim != 2 or Q.shape[1] < 3:
         raise ValueError(f"a motion needs shape (n, T) with T >= 3, got {Q.shape}")

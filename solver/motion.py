@@ -6,7 +6,7 @@ description (characters scaled to a subject are not reference characters).
 
 Contact wrenches are per foot and frame, spatial forces in the **world frame** (Z up),
 ordered (mx, my, mz, fx, fy, fz), the moment taken **about the world origin** — the
-convention of the dynamics (SPEC 4.7): the sum of the two feet's wrenches equals the
+convention of the dynamics (docs/method.md (M3.5)): the sum of the two feet's wrenches equals the
 root wrench h0 of a plausible motion.
 
 Version 2 adds ``trajectory``: how the motion continues between its frames (see
@@ -52,7 +52,7 @@ class MotionError(ValueError):
 
 
 def foot_schedule_of(character: Character, contacts: np.ndarray) -> np.ndarray:
-    """SPEC matrix B from A: (P, T) contact points -> (2, T) feet (right, left), a foot
+    """The contact matrix B from A (docs/method.md (M5.3)): (P, T) contact points -> (2, T) feet (right, left), a foot
     being in contact when any of its points is."""
     c = np.asarray(contacts, dtype=bool)
     out = np.zeros((2, c.shape[1]), dtype=bool)
@@ -155,7 +155,7 @@ class Motion:
         return self.q[self.character.index(name)]
 
     def foot_contact(self) -> np.ndarray:
-        """B (SPEC 5.4): (2, T) bool, a foot is in contact when any of its points is."""
+        """B (docs/method.md (M5.3)): (2, T) bool, a foot is in contact when any of its points is."""
         if self.contacts is None:
             raise MotionError("motion has no contact schedule")
         return foot_schedule_of(self.character, self.contacts)

@@ -3,7 +3,7 @@
     capture_motion(capture) -> Motion                 a raw capture as a motion (step "capture")
     motion_capture(motion) -> Capture                 and back
     synthesis_character(capture_character, "halfboy" | "fullbody") -> (synthesis, capture-side)
-    simplify(...), correct(...)                       the two spacetime problems of SPEC Table 5.2/5.3
+    simplify(...), correct(...)                       the two spacetime problems of docs/method.md (M5.6), (M5.7)
     make_tutor(capture | capture motion, character=..., fps=...) -> TutorResult
 
 A solver failure is a status (``TutorResult.status == "failed"``) with the last iterate kept
@@ -125,7 +125,7 @@ def _select(src: Character, q: np.ndarray, dst: Character) -> np.ndarray:
 
 def simplify(capture_character: Character, q_capture: np.ndarray, synthesis: Character, fps: float,
              *, weights: Weights = Weights(), max_iter: int = 500) -> SolveResult:
-    """SPEC 5.30 / Table 5.2: the synthesis character's motion closest to the capture's markers
+    """docs/method.md (M5.15), thesis Table 5.2: the synthesis character's motion closest to the capture's markers
     (superfluous coordinates locked at 0 = removed), cyclic, no forces."""
     T = q_capture.shape[1]
     problem = problem_for(synthesis, T, fps, None, dynamics=False)
@@ -177,7 +177,7 @@ def problem_for(character: Character, T: int, fps: float, contacts: np.ndarray |
 
 def estimate_wrenches(character: Character, q: np.ndarray, fps: float, contacts: np.ndarray,
                       gravity=STANDARD_GRAVITY_VECTOR) -> tuple[np.ndarray, dict]:
-    """EFC (SPEC §5) on the simplified motion: initial contact wrenches for the correction."""
+    """EFC (docs/method.md (M4)) on the simplified motion: initial contact wrenches for the correction."""
 
     B = foot_schedule_of(character, contacts)
     est = estimate_contact_wrenches(character, q, fps, B, gravity=gravity)
@@ -191,7 +191,7 @@ def estimate_wrenches(character: Character, q: np.ndarray, fps: float, contacts:
 def contact_plane_calibration(character: Character, q: np.ndarray, contacts: np.ndarray) -> tuple[np.ndarray, float]:
     """Lower the motion so the active contact points rest on z = 0 (median over stance).
 
-    The model's contact points sit inside the foot box (SPEC §2), above the sole, so a
+    The model's contact points sit inside the foot box (docs/method.md (M1)), above the sole, so a
     capture whose soles touch the floor has them hovering; without this the correction
     would pull the whole body down. Returns the shifted motion and the shift (m).
     """

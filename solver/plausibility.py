@@ -1,4 +1,4 @@
-"""Plausibility report of a motion (SPEC §9): how well it satisfies the constraints of §6.
+"""Plausibility report of a motion (docs/method.md (M8)): how well it satisfies the constraints of (M5).
 
 Residuals are measured where the motion's own trajectory defines q̇ and q̈
 (``solver.trajectory.dynamics_samples``: frames and midpoints of the C² cubic spline for the

@@ -1,4 +1,4 @@
-"""Realism checks: physics that must hold *between* the frames (issue 11, item 1).
+"""Realism checks: physics that must hold *between* the frames.
 
 The plausibility report's root residual is the optimizer's own discretization (RNEA on
 central differences at the frames): a coordinate that zig-zags from one frame to the next,

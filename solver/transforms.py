@@ -1,4 +1,4 @@
-"""Guide transforms (SPEC §6): slope Ψ and curve Φ act on the root coordinates only.
+"""Guide transforms (docs/method.md (M7)): slope Ψ and curve Φ act on the root coordinates only.
 
 Both take a motion Q (n, T) whose first six coordinates are the root (slides x, y, z then
 hinges yaw z, pitch y, roll x) and return a new Q; joint coordinates are unchanged.

@@ -1,4 +1,4 @@
-"""Contact-force estimation (SPEC §5): equations, known answers, references, bad inputs."""
+"""Contact-force estimation (docs/method.md (M4)): equations, known answers, references, bad inputs."""
 
 import numpy as np
 import pytest
@@ -179,7 +179,7 @@ def test_mirror_symmetric_stance_splits_the_load_in_half(ch):
 
 def test_qp_matches_the_thesis_nonlinear_formulation_solved_by_slsqp(ch):
     """Independent reference: effort from RNEA with the foot wrenches, CoP box constraints in their
-    original nonlinear form (SPEC 4.20-4.25), solved by SLSQP (the thesis's "naive" formulation)."""
+    original nonlinear form (docs/method.md (M4.4)-(M4.5)), solved by SLSQP (the thesis's "naive" formulation)."""
     q, fps = _swaying_motion(ch)
     fc = np.ones((2, q.shape[1]), bool)
     est = estimate_contact_wrenches(ch, q, fps, fc, friction=None, regularization=1e-12)
@@ -652,7 +652,7 @@ def test_qp_and_nested_agree_on_every_double_support_frame_of_the_shared_trials(
         assert np.max(np.abs(a.wrenches[:, :, ds] - b.wrenches[:, :, ds])) < 1e-3, name
 
 
-# Measured on the shared trials (docs/grf.md, "Accuracy"), with ~15 % margin: relative RMS (SPEC 4.33,
+# Measured on the shared trials (docs/grf.md, "Accuracy"), with ~15 % margin: relative RMS (docs/method.md (M4.8),
 # amplitudes over double support) of the force components over every frame with complete plates, per foot
 # and pooled, and the CoP RMS in cm; estimate_capture's defaults (lateral force from the centre of mass at
 # 4 Hz). Measured (pooled, right, left): treadmill fx 6.3 8.5 8.5 %, fy 7.1 12.2 11.7 %, fz 4.3 5.5 5.8 %, CoP

@@ -84,7 +84,7 @@ def test_extract_cycle_treadmill(treadmill):
     assert info["t_start"] == pytest.approx(0.618, abs=2 / 30)
     assert info["period_s"] == pytest.approx(1.235, abs=2 / 30)
     N = round(info["period_s"] * 30)
-    assert cyc.T == N + 2 and cc.shape == (4, N + 2)  # two overlap frames (SPEC §6)
+    assert cyc.T == N + 2 and cc.shape == (4, N + 2)  # two overlap frames (docs/method.md (M5.5))
     assert cc[0, 0] or cc[1, 0]  # the right foot is down at the start
     feet = np.stack([cc[0] | cc[1], cc[2] | cc[3]])
     assert np.any(feet[0, :-2] & feet[1, :-2])

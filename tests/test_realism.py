@@ -1,4 +1,4 @@
-"""Realism checks (solver/realism.py, issue 11 item 1): physics that holds between the frames.
+"""Realism checks (solver/realism.py): physics that holds between the frames.
 
 The smooth motions are built with exact derivatives (sums of sines; a root on a circular
 arc) and the ground wrenches they need from inverse dynamics on those derivatives, so they

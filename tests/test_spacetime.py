@@ -171,8 +171,8 @@ def test_structured_derivatives_equal_automatic_ones():
 
 
 def test_contact_equations_are_independent(halfboy_tutor):
-    """SPEC §10: no redundant contact, cyclic or spline equations — the equality Jacobian
-    (rows scaled to unit norm: they mix metres, radians and body weights) has full row rank."""
+    """No redundant contact, cyclic or spline equations (docs/spacetime.md, What makes it converge): the equality
+    Jacobian (rows scaled to unit norm: they mix metres, radians and body weights) has full row rank."""
     from solver.spacetime import Weights
     from solver.trajectory import spline_velocities
 

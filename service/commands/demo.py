@@ -194,7 +194,7 @@ def _run(args, files: list[Path], jobs: list[_Job], out: Path, server: Proc, bas
         return 0 if ok else 1
 
 
-#: the demo's small motion library (issue 15): 3 slopes × 3 curves, HalfBoy
+#: the demo's small motion library: 3 slopes × 3 curves, HalfBoy
 LIBRARY_GRID = {"slope_deg": [-5.0, 0.0, 5.0], "curve_deg": [-30.0, 0.0, 30.0]}
 
 

@@ -105,9 +105,6 @@ def cmd_grf(args: argparse.Namespace) -> int:
         raise CliError(f"--cutoff must be >= 0 Hz (0 = no filter), got {args.cutoff}")
     if args.smoothing is not None and not (math.isfinite(args.smoothing) and args.smoothing >= 0):
         raise CliError(f"--smoothing must be >= 0 Hz (0 = one QP per frame), got {args.smoothing}")
-    if args.smoothing and args.method != "qp":  # told before the trial is read (it can take tens of seconds)
-        raise CliError(f"--smoothing goes with --method qp (--method {args.method} is the thesis's per-frame "
-                       "reference form); drop --smoothing or pass --smoothing 0")
     smoothing = "cutoff" if args.smoothing is None else (args.smoothing or None)
     if args.lateral is not None and not (math.isfinite(args.lateral) and args.lateral >= 0):
         raise CliError(f"--lateral must be >= 0 Hz (0 = the inverse dynamics' own lateral force), "
@@ -283,7 +280,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     s = add_command(sub, "grf", "estimate each foot's ground reaction from a trial's kinematics (CSV)", """\
 Estimate each foot's ground reaction force, centre of pressure and free moment from the
-kinematics alone (SPEC §5: the total external wrench of inverse dynamics, split between the
+kinematics alone (docs/method.md (M4): the total external wrench of inverse dynamics, split between the
 feet by one convex QP per double-support frame) and write them as CSV in the input's own
 ground frame and units: time, side, fx, fy, fz, cop_x, cop_y, cop_z, tz.
 The trial is given as for `motionx tutor` (its files); --osim/--coordinates, --c3d and

@@ -1,5 +1,5 @@
 """Ground slope along the walking direction (°, + uphill), simulated by gravity: gravity
-rotated by R_y(v) and the guide tilted by Ψ(Q, v) (SPEC §7: θ = −slope)."""
+rotated by R_y(v) and the guide tilted by Ψ(Q, v) (docs/method.md (M7): θ = −slope)."""
 
 from __future__ import annotations
 

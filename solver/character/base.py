@@ -8,7 +8,7 @@ segment frame, applied in order as *intrinsic* rotations (exactly MuJoCo's seque
 joints within one body). A segment with no DOF is welded to its parent.
 
 For the algorithms the character is flattened (:class:`Model`) into one body per
-coordinate, as in SPEC §2: every joint revolute about, or prismatic along, its local z;
+coordinate, as in docs/method.md (M1): every joint revolute about, or prismatic along, its local z;
 multi-DOF joints become chains through massless, zero-length bodies; welded segments
 are merged into their parent's body. Body frames are therefore ``z`` = joint axis, and
 the segment inertia is expressed in the last body of its chain.
@@ -147,7 +147,7 @@ class Segment:
 
     @property
     def marker(self) -> np.ndarray:
-        """The segment-tip marker (SPEC ã_i = (l, 0, 0, 1) in the thesis's frame)."""
+        """The segment-tip marker (ã_i = (l, 0, 0, 1) in the thesis's frame, docs/method.md (M2))."""
         return self.direction * self.length
 
 
@@ -167,7 +167,7 @@ class ContactPoint:
 
 @dataclass(frozen=True, eq=False)
 class FootBox:
-    """The foot's bounding box (segment axes): centre and half extents (SPEC δ)."""
+    """The foot's bounding box (segment axes): centre and half extents (δ, docs/method.md (M1))."""
 
     side: str
     segment: str
@@ -284,7 +284,7 @@ class Character:
 
     @cached_property
     def singular_dofs(self) -> tuple[int, ...]:
-        """Middle coordinate of every 3-hinge chain (SPEC F_sing, Ω_sing)."""
+        """Middle coordinate of every 3-hinge chain (F_sing, Ω_sing: docs/method.md (M5.2))."""
         out = []
         k = 0
         for s in self.segments:
@@ -295,7 +295,7 @@ class Character:
         return tuple(out)
 
     def reduce(self, locked: Iterable[str], name: str | None = None) -> Character:
-        """The character with the ``locked`` coordinates removed (locked at 0, SPEC 5.30).
+        """The character with the ``locked`` coordinates removed (locked at 0, docs/method.md (M5.15)).
 
         Segments left without DOF are welded to their parent (exact rigid merge).
         """

@@ -13,7 +13,7 @@ from solver.character.base import Character, CharacterError, ContactPoint, Dof, 
 
 
 def ellipsoid(length: float, mass: float, density: float) -> tuple[float, float, np.ndarray]:
-    """Prolate ellipsoid of a segment (SPEC 3.1-3.4).
+    """Prolate ellipsoid of a segment (docs/method.md (M1.1)-(M1.3)).
 
     Returns (a, b, inertia) with a = l/2, b = c = sqrt(3 m / (4 rho pi a)) and the inertia
     about the centre, in axes (along, across, across): diag(m(b²+c²)/5, m(a²+c²)/5, m(a²+b²)/5).
@@ -40,7 +40,7 @@ def ellipsoid_inertia_in_segment(direction: np.ndarray, inertia_axes: np.ndarray
 class SegmentSpec:
     """A segment as a user describes it: bone length and direction, mass, joint axes.
 
-    Inertia comes from the prolate ellipsoid (SPEC 3.1-3.4) unless ``inertia``/``com``
+    Inertia comes from the prolate ellipsoid (docs/method.md (M1.1)-(M1.3)) unless ``inertia``/``com``
     are given (e.g. taken from an OpenSim model).
     """
 

@@ -83,7 +83,7 @@ def _leg_specs(side: str, h: float, m: float, pelvis: str) -> list[SegmentSpec]:
 
 
 def _foot_contacts(side: str, h: float) -> tuple[list[ContactPoint], FootBox]:
-    """Heel and toe points 1 cm inside the foot box so the box may penetrate ~1 cm (SPEC §2)."""
+    """Heel and toe points 1 cm inside the foot box so the box may penetrate ~1 cm (docs/method.md (M1))."""
     L = WINTER_LENGTH
     foot_len, ankle_h, width = L["foot_length"] * h, L["ankle_height"] * h, L["foot_width"] * h
     heel_x, toe_x = -0.2 * foot_len, 0.8 * foot_len
@@ -201,7 +201,7 @@ def capture_full(height: float = 1.20, mass: float = 23.0) -> Character:
                            description=f"whole-body capture skeleton, {h} m, {m} kg")
 
 
-#: Coordinates the synthesis characters lock at 0 (SPEC: Ω_sup, "simplify").
+#: Coordinates the synthesis characters lock at 0 (docs/method.md (M5.6): Ω_sup, "simplify").
 LOWER_SUPERFLUOUS = tuple(
     f"{j}_{s}"
     for s in ("r", "l")

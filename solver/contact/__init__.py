@@ -1,9 +1,9 @@
-"""Contact-force estimation from kinematics (SPEC §5, thesis ch. 4 and appendix A).
+"""Contact-force estimation from kinematics (docs/method.md (M4), thesis ch. 4 and appendix A).
 
 Inverse dynamics of the motion with no external force gives, at every frame, the total
-ground wrench the motion needs, ``c = h0`` (SPEC 4.7). Single support: the foot on the
+ground wrench the motion needs, ``c = h0`` (docs/method.md (M3.5)). Single support: the foot on the
 ground takes ``c``. Double support: the right-foot wrench ``x`` (the left one is ``c − x``)
-minimises the internal effort, the sum of squared joint forces (SPEC 4.8-4.18)
+minimises the internal effort, the sum of squared joint forces (docs/method.md (M4.1)-(M4.3))
 
     τ_i(x) = τ0_i − S_i·x          i ∈ A (ancestors of the right foot only)
     τ_i(x) = τ0_i − S_i·(c − x)    i ∈ B (ancestors of the left foot only)
@@ -14,17 +14,17 @@ where τ0 are the joint forces of the motion without external force and S_i the 
 screw of joint i (:func:`solver.kinematics.joint_screws`), subject to
 
 * each centre of pressure inside its foot's contact polygon (foot box ∩ ground),
-  written linearly by multiplying by the vertical force (SPEC 4.26-4.29),
+  written linearly by multiplying by the vertical force (docs/method.md (M4.6)),
 * ``0 ≤ x_fz ≤ c_fz`` (implied by the polygon rows) and a friction pyramid
-  ``|f_x|, |f_y| ≤ μ f_z`` on each foot (μ = 1 as in the correction problem, SPEC
-  Table 5.1; pass ``friction=None`` to drop it).
+  ``|f_x|, |f_y| ≤ μ f_z`` on each foot (μ = 1 as in the correction problem,
+  docs/method.md (M5.7); pass ``friction=None`` to drop it).
 
 ``method="qp"`` solves this as one strictly convex 6-variable QP per double-support
 frame (**[beyond]** the thesis): the QP data of every double-support frame are assembled
 at once with numpy; frames whose unconstrained optimum is feasible are done with one
 batched linear solve, the others go to quadprog (Goldfarb-Idnani). ``method="nested"`` is
 the thesis's form kept as a reference: inner QP with ``x_fz`` fixed, outer bounded scalar
-search (SPEC 4.30-4.31). Both minimise the same function under the same constraints.
+search (docs/method.md (M4.7)). Both minimise the same function under the same constraints.
 
 Strict convexity. ``H = Σ_{A∪B} S_i S_iᵀ`` is singular whenever the legs' joints do not
 span every wrench direction (e.g. a character with locked coordinates has no joint that
@@ -39,10 +39,10 @@ foot centre). Alone, it shares the load evenly with each CoP under the foot's ce
 matrices of the same units) and small (1e-6), so it only decides directions in which the
 effort is flat and moves the solution by ~1e-6 relative elsewhere.
 
-Contact polygon. The ground is the plane z = 0 (SPEC §6). A foot the schedule declares
+Contact polygon. The ground is the plane z = 0 (docs/method.md (M2)). A foot the schedule declares
 on the ground but whose box does not reach z = 0 (a rigid box and a fitted skeleton
 approximate a real foot: it may float a few mm) would get no polygon at all; for such a
-foot the contact plane is moved up to ``penetration`` (1 cm, SPEC §2) above the box's
+foot the contact plane is moved up to ``penetration`` (1 cm, docs/method.md (M1)) above the box's
 lowest corner, i.e. its lowest 1 cm is the contact surface. Where the box reaches the
 ground, the polygon is exactly box ∩ {z = 0} as in the thesis.
 
@@ -89,7 +89,7 @@ coordinate low-passed at ``lateral_hz``, the difference a force through the cent
 moment about the centre of mass unchanged); a walk turning by more than 30° keeps the inverse
 dynamics' (``solver.contact.lateral``, docs/grf.md).
 
-Accelerations are central differences (SPEC 3.7-3.8), undefined at the first and last
+Accelerations are central differences (docs/method.md (M2.2)), undefined at the first and last
 frames of a non-cyclic motion (status ``UNDEFINED``, NaN). With ``cyclic=True`` the last
 frame must close the cycle (the first pose one period later, root advanced): differences
 wrap around with that offset and every frame is defined.

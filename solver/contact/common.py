@@ -17,8 +17,8 @@ log = logging.getLogger("solver.contact")
 
 
 METHODS = ("qp", "nested")
-DEFAULT_PENETRATION = 0.01  # m, SPEC §2
-DEFAULT_FRICTION = 1.0  # SPEC Table 5.1
+DEFAULT_PENETRATION = 0.01  # m, docs/method.md (M1)
+DEFAULT_FRICTION = 1.0  # docs/method.md (M5.7)
 DEFAULT_REGULARIZATION = 1e-6
 FEASIBILITY_TOL = 1e-9  # relative, on the constraint rows (N·m per N of load)
 #: below this vertical load (N) a foot's centre of pressure is undefined (NaN), as force-plate software
@@ -197,7 +197,7 @@ def _check_schedule(fc: np.ndarray, defined: np.ndarray) -> None:
 
 
 def _derivatives(q: np.ndarray, dt: float, cyclic: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Central differences (SPEC 3.7-3.8): (frames where defined, q̇, q̈) at those frames."""
+    """Central differences (docs/method.md (M2.2)): (frames where defined, q̇, q̈) at those frames."""
     T = q.shape[1]
     if not cyclic:
         qd = (q[:, 2:] - q[:, :-2]) / (2.0 * dt)

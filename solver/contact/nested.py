@@ -1,4 +1,5 @@
-"""The thesis's nested form (SPEC 4.30-4.31), kept as the reference: inner QP at fixed x_fz, outer scalar search."""
+"""The thesis's nested form (docs/method.md (M4.7)), kept as the reference: inner QP at fixed x_fz,
+outer scalar search."""
 
 from __future__ import annotations
 
@@ -22,7 +23,7 @@ def _solve_qp(P: np.ndarray, qv: np.ndarray, G: np.ndarray, h: np.ndarray) -> np
 
 
 def _nested(P: np.ndarray, qv: np.ndarray, G: np.ndarray, h: np.ndarray, scale: float) -> np.ndarray | None:
-    """Thesis form: inner QP with y_fz = z fixed, outer bounded search over z (SPEC 4.30-4.31)."""
+    """Thesis form: inner QP with y_fz = z fixed, outer bounded search over z (docs/method.md (M4.7))."""
     from scipy.optimize import linprog, minimize_scalar  # lazy: scipy.optimize costs ~0.4 s to import
 
     # feasible interval of z = y_fz (an LP each way)

@@ -1,4 +1,5 @@
-"""The double-support QP (SPEC 4.9-4.29): batched assembly, unconstrained optimum, quadprog, relaxation."""
+"""The double-support QP (docs/method.md (M4.2)-(M4.6)): batched assembly, unconstrained optimum, quadprog,
+relaxation."""
 
 from __future__ import annotations
 

@@ -59,7 +59,7 @@ def extract_cycle(
     contacts: np.ndarray | None = None,
     cycle: int = 0,
 ) -> tuple[Capture, np.ndarray]:
-    """One gait cycle with the two overlap frames the cyclic constraint needs (SPEC §6).
+    """One gait cycle with the two overlap frames the cyclic constraint needs (docs/method.md (M5.5)).
 
     The capture is first resampled to ``fps`` (if given). The contact schedule is ``contacts``
     if given, else the capture's own (e.g. from force plates), else :func:`detect_contacts`.

@@ -28,12 +28,12 @@ What it does:
    ``capture_full()`` / ``capture_lower()``; only the numbers are the subject's.
 3. **Masses** from ``track.segment_masses`` (a source model), otherwise Winter's table ×
    ``track.mass``; a track with neither is refused. Inertias are the prolate ellipsoids of
-   SPEC 3.1-3.4 unless ``track.source["segment_inertias"]`` gives ``{segment: {"com": (3,),
+   docs/method.md (M1.1)-(M1.3) unless ``track.source["segment_inertias"]`` gives ``{segment: {"com": (3,),
    "inertia": (3, 3)}}`` (segment frame, about the COM) for segments whose frame comes
    from a track orientation.
 4. **Feet**: the box spans heel -> toe (foot frame), is ``track.source["foot_width"]`` or
    Winter's 0.055 H wide, from the sole (lowest of the heel/toe landmarks) to a quarter of
-   the ankle height above the ankle; heel and toe contact points sit 1 cm inside (SPEC §2).
+   the ankle height above the ankle; heel and toe contact points sit 1 cm inside (docs/method.md (M1)).
 5. **Inverse kinematics**: residuals (landmarks, weighted orientations) are built once as
    CasADi SX expressions from :mod:`solver.kinematics`; each frame is solved by
    Levenberg-Marquardt, started from the analytic joint angles of the segment frames

@@ -1,4 +1,4 @@
-"""Compatibility: gait processing moved to :mod:`solver.gait` (issue 14); this module re-exports it."""
+"""Compatibility: gait processing lives in :mod:`solver.gait`; this module re-exports it."""
 
 from solver.gait import (
     LOOP_PERIOD_S,

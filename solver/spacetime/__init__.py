@@ -1,4 +1,4 @@
-"""Spacetime optimization of a motion (SPEC §6) with CasADi + IPOPT: a realistic transcription
+"""Spacetime optimization of a motion (docs/method.md (M5)) with CasADi + IPOPT: a realistic transcription
 (C² cubic spline, dynamics at frames and midpoints) of named terms with exact sparse derivatives.
 
 * ``types``: Environment, Weights, Realism bounds, SolveResult, IPOPT defaults;

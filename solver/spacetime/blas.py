@@ -5,7 +5,7 @@ CasADi's wheels ship IPOPT and MUMPS linked to their own OpenBLAS
 MUMPS spends most of its factorization time in dense BLAS (``dgemm_``, ``dtrsm_``) on the KKT
 fronts (up to ~620 rows for the full body), so the kernel matters: with OpenBLAS's kernel for
 the CPU it runs on (``scipy-openblas32``, the SciPy project's build, kernel chosen at run
-time) an IPOPT iteration costs 22–43 % less on a spacetime problem (measured at stop 22:
+time) an IPOPT iteration costs 22–43 % less on a spacetime problem (measured in
 docs/spacetime.md, "Optimized BLAS").
 
 How: a tiny library whose soname is CasADi's OpenBLAS' and whose every BLAS/LAPACK entry point
@@ -42,7 +42,7 @@ log = logging.getLogger(__name__)
 SONAME = "libcasadi-tp-openblas.so.0"
 PREFIX = "scipy_"
 #: BLAS threads of the optimized library (workers run one job per core; two threads gained
-#: ~5 % on the full body at stop 20)
+#: ~5 % on the full body)
 THREADS = 1
 
 _state: dict[str, Any] = {"loaded": None, "tried": False}

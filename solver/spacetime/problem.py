@@ -1,4 +1,4 @@
-"""The spacetime NLP of one structure (SPEC §6, eq. 5.29), transcribed so that the physics
+"""The spacetime NLP of one structure (docs/method.md (M5.14)), transcribed so that the physics
 holds along the motion, not only at the frames; re-solved with new parameter values.
 
 Structure: character, number of frames T, frame rate, contact schedule, dynamics on/off.
@@ -102,7 +102,7 @@ def _cyclic_root_function(dynamics: bool, rising: bool = False) -> ca.Function:
 
 
 class SpacetimeProblem(Layout):
-    """The NLP of SPEC 5.29 for one structure; solve it many times with new parameters."""
+    """The NLP of docs/method.md (M5.14) for one structure; solve it many times with new parameters."""
 
     def __init__(self, character: Character, T: int, fps: float, contacts: np.ndarray | None, *,
                  cyclic: bool = True, dynamics: bool = True, ipopt_options: Mapping[str, Any] | None = None,

@@ -1,7 +1,7 @@
 """Whatever a client sends gets a 4xx, never a 5xx, on SQLite and on PostgreSQL alike; the
 work a request can cause is bounded by the method's limits (service.limits); responses carry
-the security headers. Each case below is something a reliability probe of the service sent
-(issue 13, item 6): the API runs as `motionx serve` over HTTP, once per database."""
+the security headers. Each case below is something a reliability probe of the service sent;
+the API runs as `motionx serve` over HTTP, once per database."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""motion libraries (issue 15)
+"""motion libraries
 
 Revision ID: 0002
 Revises: 0001
