@@ -30,7 +30,9 @@ def _script() -> str:
 def _timed(cmds: list[list[str]], cwd: Path) -> float:
     t = time.perf_counter()
     for c in cmds:
-        subprocess.run(c, cwd=cwd, check=True, capture_output=True, text=True, timeout=1800)
+        r = subprocess.run(c, cwd=cwd, capture_output=True, text=True, timeout=1800)
+        if r.returncode != 0:
+            raise RuntimeError(f"{' '.join(c)} exited {r.returncode}: {r.stderr[-2000:]}")
     return time.perf_counter() - t
 
 

@@ -13,7 +13,6 @@ from solver.status import Status
 
 _SC = StepControl()
 
-JobStatus = Status  # one status type: solver.status
 MotionKind = Literal["capture", "motion", "tutor", "step"]
 
 
@@ -125,9 +124,20 @@ class ProgressPoint(BaseModel):
     status: str
 
 
-class JobOut(BaseModel):
+class _Finished(BaseModel):
+    """A job's or a library's answer: its status, and whether it is final."""
+
+    status: Status
+
+    @computed_field(description="the status will not change any more (succeeded, impasse, canceled or failed)")
+    @property
+    def terminal(self) -> bool:
+        return self.status.terminal
+
+
+class JobOut(_Finished):
     id: str
-    status: JobStatus
+    status: Status
     motion_id: str
     tutor_motion_id: str | None
     target: dict[str, Any]
@@ -145,11 +155,6 @@ class JobOut(BaseModel):
     finished_at: str | None
     progress: list[ProgressPoint]
     links: dict[str, str]
-
-    @computed_field(description="the status will not change any more (succeeded, impasse, canceled or failed)")
-    @property
-    def terminal(self) -> bool:
-        return Status(self.status).terminal
 
 
 class Page(BaseModel):
@@ -239,7 +244,7 @@ class LibraryCellOut(BaseModel):
     plausible: bool | None = Field(description="the clip's plausibility verdict (null: not checked)")
     parameters: dict[str, float]
     job_id: str
-    status: JobStatus
+    status: Status
     at_impasse: bool
     lam_reached: float
     steps: int
@@ -264,7 +269,7 @@ class LibraryProgress(BaseModel):
     impasse: int
 
 
-class LibraryOut(BaseModel):
+class LibraryOut(_Finished):
     id: str
     status: Status
     motion_id: str
@@ -278,11 +283,6 @@ class LibraryOut(BaseModel):
     progress: LibraryProgress
     cells: list[LibraryCellOut]
     links: dict[str, str]
-
-    @computed_field(description="the status will not change any more (succeeded, impasse, canceled or failed)")
-    @property
-    def terminal(self) -> bool:
-        return Status(self.status).terminal
 
 
 class LibraryPage(Page):
