@@ -49,17 +49,8 @@ def motionx(*args) -> subprocess.CompletedProcess:
     return subprocess.run([exe, *map(str, args)], capture_output=True, text=True, timeout=600)
 
 
-TURN_NOT_CYCLIC = pytest.mark.xfail(
-    reason="known: a cycle cut from the CMU 90° left turn is not periodic (the body keeps turning); its realistic "
-           "tutor sits 8-18 cm from the capture and the refined moment check fails on some machines")
-
-
 def params(names):
     return list(names)
-
-
-def tutor_params(names):
-    return [pytest.param(n, marks=TURN_NOT_CYCLIC) if n == "bvh_cmu_left_turn" else n for n in names]
 
 
 def check_input(info: dict, plates: bool) -> None:
@@ -143,7 +134,7 @@ def tutors(shared_data, tmp_path_factory):
     return run
 
 
-@pytest.mark.parametrize("name", tutor_params(TRIALS))
+@pytest.mark.parametrize("name", params(TRIALS))
 def test_tutor_of_every_trial(tutors, name):
     r, out = tutors(name)
     assert r.returncode == 0, r.stderr + r.stdout
@@ -165,8 +156,7 @@ def _velocity_turn_deg(q: np.ndarray) -> float:
     return float(np.degrees(np.angle(np.exp(1j * (np.arctan2(b[1], b[0]) - np.arctan2(a[1], a[0]))))))
 
 
-@pytest.mark.parametrize("name, sign", [pytest.param("bvh_cmu_left_turn", 1, marks=TURN_NOT_CYCLIC),
-                                        ("bvh_cmu_right_turn", -1)])
+@pytest.mark.parametrize("name, sign", [("bvh_cmu_left_turn", 1), ("bvh_cmu_right_turn", -1)])
 def test_turning_clips_make_curved_tutors(tutors, shared_data, name, sign):
     """The spacetime problem's cyclic constraint lives in the walker's heading frame, so a cycle
     taken in a turn is a curved base motion: the tutor's heading changes over its cycle the way

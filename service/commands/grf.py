@@ -105,6 +105,9 @@ def cmd_grf(args: argparse.Namespace) -> int:
         raise CliError(f"--cutoff must be >= 0 Hz (0 = no filter), got {args.cutoff}")
     if args.smoothing is not None and not (math.isfinite(args.smoothing) and args.smoothing >= 0):
         raise CliError(f"--smoothing must be >= 0 Hz (0 = one QP per frame), got {args.smoothing}")
+    if args.smoothing and args.method != "qp":  # told before the trial is read (it can take tens of seconds)
+        raise CliError(f"--smoothing goes with --method qp (--method {args.method} is the thesis's per-frame "
+                       "reference form); drop --smoothing or pass --smoothing 0")
     smoothing = "cutoff" if args.smoothing is None else (args.smoothing or None)
     if args.lateral is not None and not (math.isfinite(args.lateral) and args.lateral >= 0):
         raise CliError(f"--lateral must be >= 0 Hz (0 = the inverse dynamics' own lateral force), "
