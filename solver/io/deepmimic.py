@@ -55,7 +55,7 @@ from solver.capture import Capture, GroundFrame
 from solver.errors import InputError
 from solver.io.fit import fit_track
 from solver.io.readers import TrialError
-from solver.io.track import SkeletonTrack
+from solver.io.track import SkeletonTrack, add_pelvis, rescaled_masses, split_mass
 
 log = logging.getLogger(__name__)
 
@@ -237,7 +237,7 @@ def deepmimic_track(motion: str | Path, character: str | Path, *, mass: float | 
         ori[f"upper_arm_{s}"] = rot(f"{side}_shoulder")
         ori[f"forearm_{s}"] = ori[f"hand_{s}"] = rot(f"{side}_elbow")
         ori[f"clavicle_{s}"] = rot("chest")
-    lm["pelvis"] = 0.5 * (lm["hip_r"] + lm["hip_l"])
+    add_pelvis(lm)
     lm["lumbar"] = pos("chest")
     lm["neck"] = pos("neck")
     lm["head_top"] = pos("neck", sphere_top("neck", 1))
@@ -252,9 +252,7 @@ def deepmimic_track(motion: str | Path, character: str | Path, *, mass: float | 
         raise DeepMimicError(f"{character}: BodyDefs give no mass")
     chest_split = {"abdomen": 0.139, "thorax": 0.196, "clavicle_r": 0.01, "clavicle_l": 0.01}
     seg_mass: dict[str, float] = {"pelvis": bm.get("root", 0.0), "head": bm.get("neck", 0.0)}
-    w = sum(chest_split.values())
-    for k, v in chest_split.items():
-        seg_mass[k] = bm.get("chest", 0.0) * v / w
+    split_mass(bm.get("chest", 0.0), chest_split, into=seg_mass)
     for s, side in (("r", "right"), ("l", "left")):
         seg_mass[f"thigh_{s}"] = bm.get(f"{side}_hip", 0.0)
         seg_mass[f"shank_{s}"] = bm.get(f"{side}_knee", 0.0)
@@ -266,8 +264,7 @@ def deepmimic_track(motion: str | Path, character: str | Path, *, mass: float | 
     if mass is not None:
         if not (np.isfinite(mass) and mass > 0):
             raise DeepMimicError(f"mass must be a positive number of kg, got {mass}")
-        seg_mass = {k: v * mass / total for k, v in seg_mass.items()}
-        total = float(mass)
+        seg_mass, total = rescaled_masses(seg_mass, total, mass)
     loop = str(d.get("Loop", "none")).lower()
     return SkeletonTrack(
         times=times, landmarks=lm, orientations=ori,

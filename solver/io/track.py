@@ -22,7 +22,7 @@ foot_r, toes_r, abdomen, thorax, head, clavicle_r, upper_arm_r, forearm_r, hand_
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -66,3 +66,33 @@ class SkeletonTrack:
     @property
     def has_upper_body(self) -> bool:
         return all(n in self.landmarks for n in UPPER_LANDMARKS)
+
+    def evolve(self, *, source_update: Mapping[str, Any] | None = None, **changes: Any) -> SkeletonTrack:
+        """A copy with ``changes`` (fields) and ``source_update`` merged into the source."""
+        if source_update:
+            changes["source"] = {**dict(changes.get("source", self.source)), **source_update}
+        return replace(self, **changes)
+
+
+# --- stages every reader shares ------------------------------------------------------------
+
+
+def add_pelvis(lm: dict[str, np.ndarray]) -> None:
+    """The ``pelvis`` landmark: the mid-point of the hip joint centres."""
+    lm["pelvis"] = 0.5 * (lm["hip_r"] + lm["hip_l"])
+
+
+def split_mass(mass: float, ratios: Mapping[str, float], into: dict[str, float] | None = None) -> dict[str, float]:
+    """A source body's ``mass`` shared between our segments in the given ratios (added to
+    ``into`` when given): one trunk body -> abdomen, thorax, head, clavicles (Winter)."""
+    out = {} if into is None else into
+    w = sum(ratios.values())
+    for k, v in ratios.items():
+        out[k] = out.get(k, 0.0) + mass * v / w
+    return out
+
+
+def rescaled_masses(segment_masses: Mapping[str, float], total: float,
+                    mass: float) -> tuple[dict[str, float], float]:
+    """A source model's segment masses scaled to the subject's ``mass`` (kg) and the new total."""
+    return {k: v * mass / total for k, v in segment_masses.items()}, float(mass)

@@ -24,7 +24,7 @@ from solver.io.opensim.external_loads import floor_from_grf
 from solver.io.opensim.ik import solve_ik
 from solver.io.opensim.storage import Storage, read_mot
 from solver.io.opensim.treadmill import belt_shift
-from solver.io.track import SkeletonTrack
+from solver.io.track import SkeletonTrack, add_pelvis, rescaled_masses, split_mass
 from solver.kinematics import points_world
 
 log = logging.getLogger(__name__)
@@ -119,6 +119,172 @@ def _angles_in_degrees(sto: Storage, in_degrees: bool | None) -> bool | None:
     return None
 
 
+def _evaluate(model: str, motion: str | Path, in_degrees: bool | None, ik_weights: Mapping[str, float] | None,
+              ik_reweight: int | None) -> tuple[dict[str, Any], np.ndarray, dict[str, Any]]:
+    """OpenSim's evaluation of the model along the motion (coordinates, or a ``.trc``'s inverse
+    kinematics): the worker's result, the times and what the source records of it."""
+    from solver.io.opensim.worker import run_worker  # lazy: the child-process launcher, only when OpenSim runs
+
+    src_extra: dict[str, Any] = {}
+    if Path(motion).suffix.lower() == ".trc":
+        res, src_extra = solve_ik(model, motion, weights=ik_weights, reweight=ik_reweight)
+        return res, np.asarray(res["ik_times"], dtype=float), src_extra
+    if ik_weights is not None or ik_reweight is not None:
+        raise OpenSimError("ik_weights / ik_reweight only apply to a .trc marker file, not to coordinates")
+    sto = read_mot(motion)
+    if len(sto.time) < 2:
+        raise OpenSimError(f"{motion}: a motion needs at least 2 frames, got {len(sto.time)}")
+    deg = _angles_in_degrees(sto, in_degrees)
+    res = run_worker(model, sto.labels, sto.data, deg)
+    ignored = check_motion(sto, res, model)
+    if ignored:
+        src_extra["ignored_columns"] = ignored
+        res["notes"] = list(res.get("notes", [])) + [
+            f"constant columns that are not model coordinates ignored (welded/locked joints): {sorted(ignored)}"]
+    return res, sto.time.astype(float), src_extra
+
+
+def _body_segments(res: Mapping[str, Any], model: str) -> tuple[dict[str, str | None], bool, bool]:
+    """Each OpenSim body's segment of ours (unknown bodies ride with their parent's segment; the
+    trunk and arms as the model has them), whether it has a torso body and arms."""
+    names = list(res["body_names"])
+    seg_of = {b: _segment_of(b) for b in names}
+    parent_of = dict(zip(res["joint_child"], res["joint_parent"]))
+    for b in names:  # unknown bodies ride with their parent's segment
+        seen = set()
+        cur = b
+        while seg_of.get(cur) is None and cur in parent_of and cur not in seen:
+            seen.add(cur)
+            cur = parent_of[cur]
+        if seg_of[b] is None:
+            seg_of[b] = seg_of.get(cur)
+            log.info("OpenSim body %r has no segment rule: lumped into %r", b, seg_of[b])
+    for need in ("pelvis", "femur_r", "femur_l", "tibia_r", "tibia_l", "calcn_r", "calcn_l", "toes_r", "toes_l"):
+        if need not in seg_of:
+            raise OpenSimError(f"{model}: body {need!r} not found; the importer needs a gait-model leg "
+                               f"(pelvis, femur, tibia, talus, calcn, toes per side); bodies: {names}")
+    has_torso = "torso" in seg_of
+    has_arms = has_torso and all(f"{b}_{s}" in seg_of for b in ("humerus", "ulna", "radius", "hand") for s in "rl")
+    arm = ("upper_arm", "forearm", "hand")
+    if not has_torso:  # no trunk body: anything above the hips rides with the pelvis (capture-lower)
+        seg_of = {b: ("pelvis" if (s or "").startswith(arm) else s) for b, s in seg_of.items()}
+    elif not has_arms:  # the torso body is head, arms and trunk (gait2354): the abdomen carries it whole
+        seg_of = {b: ("abdomen" if s == "torso" or (s or "").startswith(arm) else s) for b, s in seg_of.items()}
+    return seg_of, has_torso, has_arms
+
+
+class _Bodies:
+    """The evaluated model's body frames and joint centres, as our landmarks (floor at z = 0)."""
+
+    def __init__(self, res: Mapping[str, Any], model: str, off: np.ndarray) -> None:
+        self.res, self.model, self.off = res, model, off
+        self.bi = {b: i for i, b in enumerate(res["body_names"])}
+        self.Rb, self.Pb, self.JC = res["R"], res["P"], res["JC"]  # (T, B, 3, 3), (T, B, 3), (T, J, 3): OpenSim ground
+        self.jchild = list(res["joint_child"])
+
+    def joint_centre(self, child: str) -> np.ndarray:
+        if child not in self.jchild:
+            raise OpenSimError(f"{self.model}: no joint has body {child!r} as its child")
+        return self.JC[:, self.jchild.index(child)]
+
+    def ours(self, p_osim: np.ndarray) -> np.ndarray:
+        return to_ours_p(p_osim - self.off)
+
+    def legs(self) -> dict[str, np.ndarray]:
+        """Hip, knee, ankle, mtp joint centres, heel and toe on the sole (see the package doc), pelvis."""
+        bi, Rb, Pb, off = self.bi, self.Rb, self.Pb, self.off
+        lm: dict[str, np.ndarray] = {}
+        for s in "rl":
+            lm[f"hip_{s}"] = self.ours(self.joint_centre(f"femur_{s}"))
+            lm[f"knee_{s}"] = self.ours(self.joint_centre(f"tibia_{s}"))
+            ankle_child = f"talus_{s}" if f"talus_{s}" in bi else f"calcn_{s}"
+            lm[f"ankle_{s}"] = self.ours(self.joint_centre(ankle_child))
+            lm[f"mtp_{s}"] = self.ours(self.joint_centre(f"toes_{s}"))
+            # sole: the calcn origin's height above the floor at mid-stance
+            c = bi[f"calcn_{s}"]
+            calcn_o = Pb[:, c] - off
+            up_c = Rb[:, c, :, 1]  # calcn y axis in ground
+            sole = float(np.percentile(calcn_o[:, 1], 2))
+            heel = calcn_o - sole * up_c
+            t_i = bi[f"toes_{s}"]
+            toes_com_x = float(self.res["body_com"][t_i][0])
+            if toes_com_x <= 0.005:
+                raise OpenSimError(f"{self.model}: toes_{s} centre of mass x={toes_com_x} m does not point forward; "
+                                   "cannot place the toe tip")
+            toe = (Pb[:, t_i] - off) + 2 * toes_com_x * Rb[:, t_i, :, 0]
+            toe = toe - (np.einsum("ti,ti->t", toe - heel, up_c))[:, None] * up_c  # onto the sole plane
+            lm[f"heel_{s}"] = to_ours_p(heel)
+            lm[f"toe_{s}"] = to_ours_p(toe)
+        add_pelvis(lm)
+        return lm
+
+    def orientations(self, seg_of: Mapping[str, str | None]) -> dict[str, np.ndarray]:
+        """Each segment's orientation from its orienting body (_ORIENTING)."""
+        ori: dict[str, np.ndarray] = {}
+        for b, i in self.bi.items():
+            seg = seg_of[b]
+            if seg is None:
+                continue
+            kind = seg.rsplit("_", 1)[0] if seg[-2:] in ("_r", "_l") else seg
+            if _ORIENTING.get(kind) and b.startswith(_ORIENTING[kind]):
+                ori[seg] = to_ours_R(self.Rb[:, i])
+        return ori
+
+    def arms(self, lm: dict[str, np.ndarray], ori: dict[str, np.ndarray], height: float | None) -> None:
+        """A model with arms: shoulder, elbow, wrist, hand tip; neck, head top and sternum fixed
+        to the torso (fractions of the body height, see the package doc)."""
+        bi, Rb, Pb = self.bi, self.Rb, self.Pb
+        R_t = Rb[:, bi["torso"]]
+        for s in "rl":
+            lm[f"shoulder_{s}"] = self.ours(self.joint_centre(f"humerus_{s}"))
+            lm[f"elbow_{s}"] = self.ours(self.joint_centre(f"ulna_{s}"))
+            lm[f"wrist_{s}"] = self.ours(self.joint_centre(f"hand_{s}"))
+            h = bi[f"hand_{s}"]
+            com_h = np.asarray(self.res["body_com"][h])
+            lm[f"hand_{s}"] = self.ours(Pb[:, h] + 2 * np.einsum("tij,j->ti", Rb[:, h], com_h))
+        h_est = height or _height_from_legs(lm)
+        sh_mid = 0.5 * (self.joint_centre("humerus_r") + self.joint_centre("humerus_l"))
+        up_t, fwd_t = R_t[:, :, 1], R_t[:, :, 0]
+        neck = sh_mid + 0.06 * h_est * up_t
+        lm["neck"] = self.ours(neck)
+        lm["head_top"] = self.ours(neck + 0.13 * h_est * up_t)
+        lm["sternum"] = self.ours(sh_mid + 0.04 * h_est * fwd_t - 0.08 * h_est * up_t)
+        for seg in ("abdomen", "thorax", "head", "clavicle_r", "clavicle_l"):
+            ori[seg] = to_ours_R(R_t)
+
+    def armless_torso(self, lm: dict[str, np.ndarray], ori: dict[str, np.ndarray], height: float) -> None:
+        """No arms in the model: the canonical upper body (capture_full's neutral pose for the
+        subject's height) rides rigidly on the torso from the lumbar joint; its segments other
+        than the abdomen are placeholders (see _ARMLESS_PLACEHOLDERS)."""
+        R_t = self.Rb[:, self.bi["torso"]]
+        lumbar = self.joint_centre("torso")
+        for name, v in _neutral_upper_body(height).items():
+            lm[name] = self.ours(lumbar + np.einsum("tij,j->ti", R_t, C_OSIM.T @ v))
+        for seg in ("abdomen",) + _ARMLESS_PLACEHOLDERS:
+            ori[seg] = to_ours_R(R_t)
+
+
+def _segment_masses(body_mass: Mapping[str, float], seg_of: Mapping[str, str | None], model: str,
+                    armless_torso: bool) -> dict[str, float]:
+    """Our segments' masses: the sum of their bodies' (the torso split by Winter's ratios; an
+    arm-less torso's placeholders given a negligible share of it)."""
+    seg_mass: dict[str, float] = {}
+    for b, m in body_mass.items():
+        seg = seg_of[b]
+        if seg is None:
+            raise OpenSimError(f"{model}: cannot map body {b!r} to a segment")
+        if seg == "torso":
+            split_mass(m, _TORSO_SPLIT, into=seg_mass)
+            continue
+        seg_mass[seg] = seg_mass.get(seg, 0.0) + m
+    if armless_torso:
+        eps = PLACEHOLDER_MASS_FRACTION * float(sum(body_mass.values()))
+        for seg in _ARMLESS_PLACEHOLDERS:
+            seg_mass[seg] = eps
+        seg_mass["abdomen"] -= eps * len(_ARMLESS_PLACEHOLDERS)  # the total stays the model's
+    return seg_mass
+
+
 def opensim_track(
     model: str | Path,
     motion: str | Path,
@@ -139,164 +305,35 @@ def opensim_track(
     inverse kinematics OpenSim solves first (:func:`solver.io.opensim.ik.solve_ik`;
     ``ik_weights``, ``ik_reweight``).
     """
-    from solver.io.opensim.worker import run_worker  # lazy: the child-process launcher, only when OpenSim runs
-
     model = str(model)
     if not Path(model).is_file():
         raise OpenSimError(f"model file not found: {model}")
-    src_extra: dict[str, Any] = {}
-    if Path(motion).suffix.lower() == ".trc":
-
-        res, src_extra = solve_ik(model, motion, weights=ik_weights, reweight=ik_reweight)
-        times = np.asarray(res["ik_times"], dtype=float)
-    else:
-        if ik_weights is not None or ik_reweight is not None:
-            raise OpenSimError("ik_weights / ik_reweight only apply to a .trc marker file, not to coordinates")
-        sto = read_mot(motion)
-        if len(sto.time) < 2:
-            raise OpenSimError(f"{motion}: a motion needs at least 2 frames, got {len(sto.time)}")
-        deg = _angles_in_degrees(sto, in_degrees)
-        res = run_worker(model, sto.labels, sto.data, deg)
-        ignored = check_motion(sto, res, model)
-        if ignored:
-            src_extra["ignored_columns"] = ignored
-            res["notes"] = list(res.get("notes", [])) + [
-                f"constant columns that are not model coordinates ignored (welded/locked joints): {sorted(ignored)}"]
-        times = sto.time.astype(float)
-
-    names = list(res["body_names"])
-    seg_of = {b: _segment_of(b) for b in names}
-    parent_of = dict(zip(res["joint_child"], res["joint_parent"]))
-    for b in names:  # unknown bodies ride with their parent's segment
-        seen = set()
-        cur = b
-        while seg_of.get(cur) is None and cur in parent_of and cur not in seen:
-            seen.add(cur)
-            cur = parent_of[cur]
-        if seg_of[b] is None:
-            seg_of[b] = seg_of.get(cur)
-            log.info("OpenSim body %r has no segment rule: lumped into %r", b, seg_of[b])
-    bi = {b: i for i, b in enumerate(names)}
-    for need in ("pelvis", "femur_r", "femur_l", "tibia_r", "tibia_l", "calcn_r", "calcn_l", "toes_r", "toes_l"):
-        if need not in bi:
-            raise OpenSimError(f"{model}: body {need!r} not found; the importer needs a gait-model leg "
-                               f"(pelvis, femur, tibia, talus, calcn, toes per side); bodies: {names}")
-    has_torso = "torso" in bi
-    has_arms = has_torso and all(f"{b}_{s}" in bi for b in ("humerus", "ulna", "radius", "hand") for s in "rl")
-    arm = ("upper_arm", "forearm", "hand")
-    if not has_torso:  # no trunk body: anything above the hips rides with the pelvis (capture-lower)
-        seg_of = {b: ("pelvis" if (s or "").startswith(arm) else s) for b, s in seg_of.items()}
-    elif not has_arms:  # the torso body is head, arms and trunk (gait2354): the abdomen carries it whole
-        seg_of = {b: ("abdomen" if s == "torso" or (s or "").startswith(arm) else s) for b, s in seg_of.items()}
-    Rb = res["R"]  # (T, B, 3, 3) OpenSim ground
-    Pb = res["P"]  # (T, B, 3)
-    JC = res["JC"]  # (T, J, 3)
-    jchild = list(res["joint_child"])
-
-    def joint_centre(child: str) -> np.ndarray:
-        if child not in jchild:
-            raise OpenSimError(f"{model}: no joint has body {child!r} as its child")
-        return JC[:, jchild.index(child)]
-
+    res, times, src_extra = _evaluate(model, motion, in_degrees, ik_weights, ik_reweight)
+    seg_of, has_torso, has_arms = _body_segments(res, model)
     # floor height (OpenSim y): given, else from the GRF's centre of pressure, else 0
     floor = floor_height
     if floor is None and grf is not None:
-
         floor = floor_from_grf(grf, grf_xml)
     floor = 0.0 if floor is None else float(floor)
     off = np.array([0.0, floor, 0.0])
-
-    def P_ours(p_osim: np.ndarray) -> np.ndarray:
-        return to_ours_p(p_osim - off)
-
-    lm: dict[str, np.ndarray] = {}
-    ori: dict[str, np.ndarray] = {}
-    for s in "rl":
-        lm[f"hip_{s}"] = P_ours(joint_centre(f"femur_{s}"))
-        lm[f"knee_{s}"] = P_ours(joint_centre(f"tibia_{s}"))
-        ankle_child = f"talus_{s}" if f"talus_{s}" in bi else f"calcn_{s}"
-        lm[f"ankle_{s}"] = P_ours(joint_centre(ankle_child))
-        lm[f"mtp_{s}"] = P_ours(joint_centre(f"toes_{s}"))
-        # sole: the calcn origin's height above the floor at mid-stance
-        c = bi[f"calcn_{s}"]
-        calcn_o = Pb[:, c] - off
-        up_c = Rb[:, c, :, 1]  # calcn y axis in ground
-        sole = float(np.percentile(calcn_o[:, 1], 2))
-        heel = calcn_o - sole * up_c
-        t_i = bi[f"toes_{s}"]
-        toes_com_x = float(res["body_com"][t_i][0])
-        if toes_com_x <= 0.005:
-            raise OpenSimError(f"{model}: toes_{s} centre of mass x={toes_com_x} m does not point forward; "
-                               "cannot place the toe tip")
-        toe = (Pb[:, t_i] - off) + 2 * toes_com_x * Rb[:, t_i, :, 0]
-        toe = toe - (np.einsum("ti,ti->t", toe - heel, up_c))[:, None] * up_c  # onto the sole plane
-        lm[f"heel_{s}"] = to_ours_p(heel)
-        lm[f"toe_{s}"] = to_ours_p(toe)
-    lm["pelvis"] = 0.5 * (lm["hip_r"] + lm["hip_l"])
-    for b, i in bi.items():
-        seg = seg_of[b]
-        if seg is None:
-            continue
-        kind = seg.rsplit("_", 1)[0] if seg[-2:] in ("_r", "_l") else seg
-        if _ORIENTING.get(kind) and b.startswith(_ORIENTING[kind]):
-            ori[seg] = to_ours_R(Rb[:, i])
-    if "torso" in bi:
-        lm["lumbar"] = P_ours(joint_centre("torso"))
-    body_mass = dict(zip(names, (float(m) for m in res["body_mass"])))
-    total = float(sum(body_mass.values()))
+    bodies = _Bodies(res, model, off)
+    lm = bodies.legs()
+    ori = bodies.orientations(seg_of)
+    if has_torso:
+        lm["lumbar"] = bodies.ours(bodies.joint_centre("torso"))
     if has_arms:
-        tor = bi["torso"]
-        R_t = Rb[:, tor]
-        for s in "rl":
-            lm[f"shoulder_{s}"] = P_ours(joint_centre(f"humerus_{s}"))
-            lm[f"elbow_{s}"] = P_ours(joint_centre(f"ulna_{s}"))
-            lm[f"wrist_{s}"] = P_ours(joint_centre(f"hand_{s}"))
-            h = bi[f"hand_{s}"]
-            com_h = np.asarray(res["body_com"][h])
-            lm[f"hand_{s}"] = P_ours(Pb[:, h] + 2 * np.einsum("tij,j->ti", Rb[:, h], com_h))
-        # torso-fixed head/neck/sternum points (see module doc); body height estimate
-        h_est = height or _height_from_legs(lm)
-        sh_mid = 0.5 * (joint_centre("humerus_r") + joint_centre("humerus_l"))
-        up_t, fwd_t = R_t[:, :, 1], R_t[:, :, 0]
-        neck = sh_mid + 0.06 * h_est * up_t
-        lm["neck"] = P_ours(neck)
-        lm["head_top"] = P_ours(neck + 0.13 * h_est * up_t)
-        lm["sternum"] = P_ours(sh_mid + 0.04 * h_est * fwd_t - 0.08 * h_est * up_t)
-        for seg in ("abdomen", "thorax", "head", "clavicle_r", "clavicle_l"):
-            ori[seg] = to_ours_R(R_t)
+        bodies.arms(lm, ori, height)
     elif has_torso:
-        # no arms in the model: the canonical upper body (capture_full's neutral pose for the
-        # subject's height) rides rigidly on the torso from the lumbar joint; its segments other
-        # than the abdomen are placeholders (see _ARMLESS_PLACEHOLDERS)
         height = height or _height_from_legs(lm)
-        R_t = Rb[:, bi["torso"]]
-        lumbar = joint_centre("torso")
-        for name, v in _neutral_upper_body(height).items():
-            lm[name] = P_ours(lumbar + np.einsum("tij,j->ti", R_t, C_OSIM.T @ v))
-        for seg in ("abdomen",) + _ARMLESS_PLACEHOLDERS:
-            ori[seg] = to_ours_R(R_t)
-    seg_mass: dict[str, float] = {}
-    for b, m in body_mass.items():
-        seg = seg_of[b]
-        if seg is None:
-            raise OpenSimError(f"{model}: cannot map body {b!r} to a segment")
-        if seg == "torso":
-            for k, w in _TORSO_SPLIT.items():
-                seg_mass[k] = seg_mass.get(k, 0.0) + m * w / sum(_TORSO_SPLIT.values())
-            continue
-        seg_mass[seg] = seg_mass.get(seg, 0.0) + m
-    if has_torso and not has_arms:
-        eps = PLACEHOLDER_MASS_FRACTION * total
-        for seg in _ARMLESS_PLACEHOLDERS:
-            seg_mass[seg] = eps
-        seg_mass["abdomen"] -= eps * len(_ARMLESS_PLACEHOLDERS)  # the total stays the model's
-    frame = GroundFrame(R=C_OSIM.T, offset=off, unit_m=1.0, axes="OpenSim ground: x forward, y up, z right")
-    model_total = total
+        bodies.armless_torso(lm, ori, height)
+    body_mass = dict(zip(res["body_names"], (float(m) for m in res["body_mass"])))
+    total = model_total = float(sum(body_mass.values()))
+    seg_mass = _segment_masses(body_mass, seg_of, model, has_torso and not has_arms)
     if mass is not None and abs(mass - total) > 0.01 * total:
         log.warning("subject mass %.2f kg given, the OpenSim model weighs %.2f kg: using the model's segment masses "
                     "scaled to %.2f kg", mass, total, mass)
-        seg_mass = {k: v * mass / total for k, v in seg_mass.items()}
-        total = float(mass)
+        seg_mass, total = rescaled_masses(seg_mass, total, mass)
+    frame = GroundFrame(R=C_OSIM.T, offset=off, unit_m=1.0, axes="OpenSim ground: x forward, y up, z right")
     track = SkeletonTrack(
         times=times, landmarks=lm, orientations=ori, frame=frame, mass=total, height=height,
         segment_masses=seg_mass,
@@ -316,7 +353,6 @@ def opensim_track(
     )
     track = _with_segment_inertias(track, res, seg_of, off)
     if belt_speed is not None:
-
         track = belt_shift(track, belt_speed, grf, grf_xml)
     return track
 
@@ -402,11 +438,5 @@ def _with_segment_inertias(track: SkeletonTrack, res, seg_of, off) -> SkeletonTr
         # the segment's mass over its bodies' (a subject mass given, placeholders): inertia scaled alike
         k = float((track.segment_masses or {}).get(seg, M)) / M
         out[seg] = {"com": C_OSIM @ (com - o_body), "inertia": k * (C_OSIM @ inertia @ C_OSIM.T)}
-    src = dict(track.source)
-    src["segment_inertias"] = out
-    return SkeletonTrack(
-        times=track.times, landmarks=track.landmarks, orientations=track.orientations, frame=track.frame,
-        mass=track.mass, height=track.height, segment_masses=track.segment_masses, measured=track.measured,
-        contacts=track.contacts, source=src,
-    )
+    return track.evolve(source_update={"segment_inertias": out})
 

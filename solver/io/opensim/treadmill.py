@@ -58,10 +58,5 @@ def belt_shift(track: SkeletonTrack, belt_speed: float | str, grf, grf_xml) -> S
     f = track.frame
     frame = GroundFrame(R=f.R, offset=f.offset, unit_m=f.unit_m, velocity=np.array([v, 0.0, 0.0]),
                         axes=f.axes + "; treadmill frame moving at -velocity")
-    src = dict(track.source)
-    src["belt_speed_m_s"] = v
-    src["belt_speed_from"] = how
     log.info("treadmill: belt speed %.3f m/s (%s): root shifted by v*t (overground-equivalent)", v, how)
-    return SkeletonTrack(times=track.times, landmarks=lm, orientations=track.orientations, frame=frame,
-                         mass=track.mass, height=track.height, segment_masses=track.segment_masses,
-                         measured=track.measured, contacts=track.contacts, source=src)
+    return track.evolve(landmarks=lm, frame=frame, source_update={"belt_speed_m_s": v, "belt_speed_from": how})
