@@ -82,16 +82,26 @@ def blas_table(res: dict) -> str:
     return "\n".join(rows)
 
 
+def front_door_table(res: dict) -> str:
+    rows = ["| docs/api.md's script (median, s) | `motionx tutor` + `motionx extrapolate --slope 10` (median, s) "
+            "| ratio |", "|---|---|---|",
+            f"| {res['script_s']:.2f} ({', '.join(f'{x:.2f}' for x in res['script_runs_s'])}) "
+            f"| {res['cli_s']:.2f} ({', '.join(f'{x:.2f}' for x in res['cli_runs_s'])}) | {res['ratio']:.2f} |"]
+    return "\n".join(rows)
+
+
 FILL = {"tutor": ("docs/spacetime.md", tutor_table), "continuation": ("docs/continuation.md", continuation_table),
-        "compiled": ("docs/spacetime.md", compiled_table), "blas": ("docs/spacetime.md", blas_table)}
+        "compiled": ("docs/spacetime.md", compiled_table), "blas": ("docs/spacetime.md", blas_table),
+        "front_door": ("docs/api.md", front_door_table)}
 
 
-def fill(sec: dict) -> None:
-    """Rewrite the ``<!-- bench:NAME -->`` … ``<!-- /bench:NAME -->`` blocks of the docs."""
+def fill(sec: dict, only: list[str] | None = None) -> None:
+    """Rewrite the ``<!-- bench:NAME -->`` … ``<!-- /bench:NAME -->`` blocks of the docs (``only``:
+    these sections)."""
     import re
 
     for name, (doc, fn) in FILL.items():
-        if name not in sec:
+        if name not in sec or (only and name not in only):
             continue
         p = Path(doc)
         text = p.read_text()
@@ -101,11 +111,12 @@ def fill(sec: dict) -> None:
 
 
 def main() -> int:
-    args = [a for a in sys.argv[1:] if not a.startswith("--")]
+    args = [a for a in sys.argv[1:] if a.endswith(".json")]
     path = Path(args[0] if args else "bench/results.json")
     sec = json.loads(path.read_text())["sections"]
-    if "--fill" in sys.argv:
-        fill(sec)
+    if "--fill" in sys.argv:  # --fill [--only NAME ...]
+        only = sys.argv[sys.argv.index("--only") + 1:] if "--only" in sys.argv else None
+        fill(sec, only)
         return 0
     if "tutor" in sec:
         print("### Tutor\n\n" + tutor_table(sec["tutor"]["results"]) + "\n")
