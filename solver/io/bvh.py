@@ -59,7 +59,7 @@ from solver.capture import Capture, GroundFrame
 from solver.errors import InputError
 from solver.io.fit import fit_track
 from solver.io.readers import one_file
-from solver.io.track import SkeletonTrack
+from solver.io.track import SkeletonTrack, add_pelvis
 
 log = logging.getLogger(__name__)
 
@@ -304,15 +304,8 @@ def _minimal_unit(v: np.ndarray) -> np.ndarray:
     return v / n
 
 
-def bvh_track(
-    path: str | Path,
-    *,
-    mass: float | None = None,
-    units: str | float = "auto",
-    up: str = "y",
-    floor_height: float | None = None,
-) -> SkeletonTrack:
-    clip = read_bvh(path)
+def _roles(clip: BvhClip, path: str | Path) -> tuple[dict[str, int], list[int]]:
+    """Joint index per role (CMU/Mixamo names; the root is the hips when no name says so) and the spine joints."""
     roles: dict[str, int] = {}
     spines: list[int] = []
     for j, n in enumerate(clip.names):
@@ -328,83 +321,87 @@ def bvh_track(
     if missing:
         raise BvhError(f"{path}: cannot find the leg joints {missing} among {list(clip.names)} "
                        "(expected CMU/Mixamo names such as RightUpLeg, RightLeg, RightFoot)")
-    # axes: file -> our axes (before the facing rotation)
-    if up not in ("y", "z"):
-        raise BvhError(f"up must be 'y' or 'z', got {up!r}")
-    R_rest, P_rest = clip.forward(np.zeros((1, clip.motion.shape[1])))
-    R, P = clip.forward()
-    up_v = np.array([0.0, 1.0, 0.0]) if up == "y" else np.array([0.0, 0.0, 1.0])
-    # units from the rest leg length
-    leg = np.mean([np.linalg.norm(P_rest[roles[f"hip_{s}"], 0] - P_rest[roles[f"knee_{s}"], 0])
-                   + np.linalg.norm(P_rest[roles[f"knee_{s}"], 0] - P_rest[roles[f"ankle_{s}"], 0]) for s in "rl"])
-    if isinstance(units, str):
-        if units == "auto":
-            cands = [u for u, k in UNIT_M.items() if LEG_RANGE[0] <= leg * k <= LEG_RANGE[1]]
-            if not cands:
-                raise BvhError(f"{path}: cannot tell the length unit from the leg length {leg:.4g} (no unit of "
-                               f"{sorted(UNIT_M)} makes it {LEG_RANGE[0]}-{LEG_RANGE[1]} m); pass units=")
-            units, scale = cands[0], UNIT_M[cands[0]]  # first in the order cm, m, mm, in, cmu
-            if len(cands) > 1:
-                log.info("%s: leg length %.4g fits units %s: using %s", path, leg, cands, units)
-        elif units in UNIT_M:
-            scale = UNIT_M[units]
-        else:
-            raise BvhError(f"units must be 'auto', one of {sorted(UNIT_M)} or metres per unit, got {units!r}")
-    else:
+    return roles, spines
+
+
+def _unit_scale(units: str | float, leg: float, path: str | Path) -> tuple[str | float, float]:
+    """The file's length unit and metres per unit: given, or (``"auto"``) the first unit that
+    makes the rest leg length ``leg`` (file units) a human's."""
+    if not isinstance(units, str):
         scale = float(units)
         if not (np.isfinite(scale) and scale > 0):
             raise BvhError(f"units must be a positive number of metres per unit, got {units!r}")
-    # facing: perpendicular to the hip line, horizontal, averaged over the clip
-    hl = P[roles["hip_l"]] - P[roles["hip_r"]]  # (T, 3)
-    hl = hl - np.outer(hl @ up_v, up_v)
-    y_dir = _minimal_unit(np.mean(hl / np.linalg.norm(hl, axis=1, keepdims=True), axis=0))
-    x_dir = np.cross(y_dir, up_v)
-    A = np.stack([x_dir, y_dir, up_v])  # rows: our axes in file coordinates -> ours = A @ file
-    # sole points in the rest pose (file axes)
-    lm_local: dict[str, tuple[int, np.ndarray]] = {}
-    children = {j: [c for c, p in enumerate(clip.parents) if p == j] for j in range(len(clip.names))}
+        return units, scale
+    if units in UNIT_M:
+        return units, UNIT_M[units]
+    if units != "auto":
+        raise BvhError(f"units must be 'auto', one of {sorted(UNIT_M)} or metres per unit, got {units!r}")
+    cands = [u for u, k in UNIT_M.items() if LEG_RANGE[0] <= leg * k <= LEG_RANGE[1]]
+    if not cands:
+        raise BvhError(f"{path}: cannot tell the length unit from the leg length {leg:.4g} (no unit of "
+                       f"{sorted(UNIT_M)} makes it {LEG_RANGE[0]}-{LEG_RANGE[1]} m); pass units=")
+    if len(cands) > 1:
+        log.info("%s: leg length %.4g fits units %s: using %s", path, leg, cands, cands[0])
+    return cands[0], UNIT_M[cands[0]]  # first in the order cm, m, mm, in, cmu
 
-    def tip(j: int) -> np.ndarray | None:
+
+class _Pose:
+    """The clip's joints along the motion and in the rest pose (file axes and units)."""
+
+    def __init__(self, clip: BvhClip, up_v: np.ndarray) -> None:
+        self.clip, self.up_v = clip, up_v
+        self.R_rest, self.P_rest = clip.forward(np.zeros((1, clip.motion.shape[1])))
+        self.R, self.P = clip.forward()
+        self.children = {j: [c for c, p in enumerate(clip.parents) if p == j] for j in range(len(clip.names))}
+
+    def tip(self, j: int) -> np.ndarray | None:
         """Rest-pose position of a joint's tip: its End Site or its first child."""
-        if j in clip.end_sites:
-            return P_rest[j, 0] + R_rest[j, 0] @ clip.end_sites[j]
-        if children[j]:
-            return P_rest[children[j][0], 0]
+        if j in self.clip.end_sites:
+            return self.P_rest[j, 0] + self.R_rest[j, 0] @ self.clip.end_sites[j]
+        if self.children[j]:
+            return self.P_rest[self.children[j][0], 0]
         return None
 
-    for s in "rl":
-        a = roles[f"ankle_{s}"]
-        mtp_j = roles.get(f"mtp_{s}")
-        toe_rest = tip(mtp_j) if mtp_j is not None else tip(a)
-        if toe_rest is None:
-            raise BvhError(f"{path}: the {'right' if s == 'r' else 'left'} foot has no toe joint nor End Site: "
-                           "cannot place the toes")
-        ank = P_rest[a, 0]
-        sole_h = min(float(toe_rest @ up_v), float(P_rest[mtp_j, 0] @ up_v) if mtp_j is not None else np.inf)
-        fwd = (toe_rest - ank) - ((toe_rest - ank) @ up_v) * up_v
-        heel = ank - 0.25 * fwd + (sole_h - ank @ up_v) * up_v
-        toe_sole = toe_rest + (sole_h - toe_rest @ up_v) * up_v
-        lm_local[f"heel_{s}"] = (a, R_rest[a, 0].T @ (heel - ank))
-        body = mtp_j if mtp_j is not None else a
-        lm_local[f"toe_{s}"] = (body, R_rest[body, 0].T @ (toe_sole - P_rest[body, 0]))
-        if mtp_j is None:  # no toes joint: metatarsal heads at 72 % heel -> toe, 2 cm (scaled) above the sole
-            m = heel + 0.72 * (toe_sole - heel) + (0.02 / scale) * up_v
-            lm_local[f"mtp_{s}"] = (a, R_rest[a, 0].T @ (m - ank))
+    def world(self, j: int, local: np.ndarray) -> np.ndarray:
+        return self.P[j] + np.einsum("tij,j->ti", self.R[j], local)
 
-    def world(j: int, local: np.ndarray) -> np.ndarray:
-        return P[j] + np.einsum("tij,j->ti", R[j], local)
+    def attached(self, j: int, rest_point: np.ndarray) -> np.ndarray:
+        """A rest-pose point carried by joint j along the motion."""
+        return self.world(j, self.R_rest[j, 0].T @ (rest_point - self.P_rest[j, 0]))
 
-    raw: dict[str, np.ndarray] = {}
-    for s in "rl":
-        for r in ("hip", "knee", "ankle"):
-            raw[f"{r}_{s}"] = P[roles[f"{r}_{s}"]]
-        raw[f"mtp_{s}"] = P[roles[f"mtp_{s}"]] if f"mtp_{s}" in roles else world(*lm_local[f"mtp_{s}"])
-        raw[f"heel_{s}"] = world(*lm_local[f"heel_{s}"])
-        raw[f"toe_{s}"] = world(*lm_local[f"toe_{s}"])
-    raw["pelvis"] = 0.5 * (raw["hip_r"] + raw["hip_l"])
-    # upper body (all or nothing)
-    upper: dict[str, np.ndarray] = {}
-    try:
+    def feet(self, roles: Mapping[str, int], scale: float, path: str | Path) -> dict[str, np.ndarray]:
+        """Leg joints, heel and toe on the sole (and the metatarsal heads of a foot without a toes joint)."""
+        P_rest, R_rest, up_v = self.P_rest, self.R_rest, self.up_v
+        raw: dict[str, np.ndarray] = {}
+        for s in "rl":
+            for r in ("hip", "knee", "ankle"):
+                raw[f"{r}_{s}"] = self.P[roles[f"{r}_{s}"]]
+            a = roles[f"ankle_{s}"]
+            mtp_j = roles.get(f"mtp_{s}")
+            toe_rest = self.tip(mtp_j) if mtp_j is not None else self.tip(a)
+            if toe_rest is None:
+                raise BvhError(f"{path}: the {'right' if s == 'r' else 'left'} foot has no toe joint nor End Site: "
+                               "cannot place the toes")
+            ank = P_rest[a, 0]
+            sole_h = min(float(toe_rest @ up_v), float(P_rest[mtp_j, 0] @ up_v) if mtp_j is not None else np.inf)
+            fwd = (toe_rest - ank) - ((toe_rest - ank) @ up_v) * up_v
+            heel = ank - 0.25 * fwd + (sole_h - ank @ up_v) * up_v
+            toe_sole = toe_rest + (sole_h - toe_rest @ up_v) * up_v
+            body = mtp_j if mtp_j is not None else a
+            if mtp_j is None:  # no toes joint: metatarsal heads at 72 % heel -> toe, 2 cm (scaled) above the sole
+                m = heel + 0.72 * (toe_sole - heel) + (0.02 / scale) * up_v
+                raw[f"mtp_{s}"] = self.world(a, R_rest[a, 0].T @ (m - ank))
+            else:
+                raw[f"mtp_{s}"] = self.P[mtp_j]
+            raw[f"heel_{s}"] = self.world(a, R_rest[a, 0].T @ (heel - ank))
+            raw[f"toe_{s}"] = self.world(body, R_rest[body, 0].T @ (toe_sole - P_rest[body, 0]))
+        add_pelvis(raw)
+        return raw
+
+    def upper_body(self, roles: Mapping[str, int], spines: list[int], scale: float) -> dict[str, np.ndarray]:
+        """Lumbar, neck, head top, sternum, arms; a KeyError naming what the clip lacks."""
+        P = self.P
+        upper: dict[str, np.ndarray] = {}
         # lumbar: the first spine joint clearly above the hips (CMU's LowerBack sits on the root)
         mid_hips = 0.5 * (P[roles["hip_r"]] + P[roles["hip_l"]])
         above = [j for j in spines if np.median(np.linalg.norm(P[j] - mid_hips, axis=1)) * scale > 0.03]
@@ -413,10 +410,10 @@ def bvh_track(
         upper["lumbar"] = P[above[0]]
         head = roles["head"]
         upper["neck"] = P[head]
-        ht = tip(head)
+        ht = self.tip(head)
         if ht is None:
             raise KeyError("head top")
-        upper["head_top"] = world(head, R_rest[head, 0].T @ (ht - P_rest[head, 0]))
+        upper["head_top"] = self.attached(head, ht)
         if "clavicle_r" in roles and "clavicle_l" in roles:
             upper["sternum"] = 0.5 * (P[roles["clavicle_r"]] + P[roles["clavicle_l"]])
         elif "neck" in roles:
@@ -428,11 +425,42 @@ def bvh_track(
             upper[f"elbow_{s}"] = P[roles[f"elbow_{s}"]]
             w = roles[f"wrist_{s}"]
             upper[f"wrist_{s}"] = P[w]
-            ht = tip(w)
+            ht = self.tip(w)
             if ht is None:
                 raise KeyError(f"hand tip {s}")
-            upper[f"hand_{s}"] = world(w, R_rest[w, 0].T @ (ht - P_rest[w, 0]))
-        raw.update(upper)
+            upper[f"hand_{s}"] = self.attached(w, ht)
+        return upper
+
+
+def bvh_track(
+    path: str | Path,
+    *,
+    mass: float | None = None,
+    units: str | float = "auto",
+    up: str = "y",
+    floor_height: float | None = None,
+) -> SkeletonTrack:
+    clip = read_bvh(path)
+    roles, spines = _roles(clip, path)
+    # axes: file -> our axes (before the facing rotation)
+    if up not in ("y", "z"):
+        raise BvhError(f"up must be 'y' or 'z', got {up!r}")
+    up_v = np.array([0.0, 1.0, 0.0]) if up == "y" else np.array([0.0, 0.0, 1.0])
+    pose = _Pose(clip, up_v)
+    P_rest = pose.P_rest
+    # units from the rest leg length
+    leg = np.mean([np.linalg.norm(P_rest[roles[f"hip_{s}"], 0] - P_rest[roles[f"knee_{s}"], 0])
+                   + np.linalg.norm(P_rest[roles[f"knee_{s}"], 0] - P_rest[roles[f"ankle_{s}"], 0]) for s in "rl"])
+    units, scale = _unit_scale(units, float(leg), path)
+    # facing: perpendicular to the hip line, horizontal, averaged over the clip
+    hl = pose.P[roles["hip_l"]] - pose.P[roles["hip_r"]]  # (T, 3)
+    hl = hl - np.outer(hl @ up_v, up_v)
+    y_dir = _minimal_unit(np.mean(hl / np.linalg.norm(hl, axis=1, keepdims=True), axis=0))
+    x_dir = np.cross(y_dir, up_v)
+    A = np.stack([x_dir, y_dir, up_v])  # rows: our axes in file coordinates -> ours = A @ file
+    raw = pose.feet(roles, scale, path)
+    try:  # upper body (all or nothing)
+        raw.update(pose.upper_body(roles, spines, scale))
     except KeyError as e:
         log.info("%s: no usable upper body (%s missing): lower-body track", path, e)
     # floor along up (file units), then our frame in metres
