@@ -339,79 +339,15 @@ def fit_track(
     origin = {s: lm[SEGMENT_LANDMARKS[s][0]] for s in segs}
     height = _height(track, lm, F, origin, segs, full_geometry)
 
-    # --- geometry: offsets, tips, attached landmarks (segment frames) -----------------
-    by_name = {s.name: s for s in ref.segments}
-    offset: dict[str, np.ndarray] = {}
-    tip: dict[str, np.ndarray] = {}
-    for s in segs:
-        par = by_name[s].parent
-        if par is not None:
-            offset[s] = _median_local(F[par], origin[par], origin[s], f"the {s} joint on {par}")
-        tname = SEGMENT_LANDMARKS[s][1]
-        if tname is not None and tname in lm:
-            tip[s] = _median_local(F[s], origin[s], lm[tname], f"{tname} on {s}")
-    if not full_geometry:  # lower-body data: Winter's HAT ellipsoid above the hips
-        tip["pelvis"] = np.array([0.0, 0.0, 2 * 0.18 * height])
-    elif np.linalg.norm(tip["pelvis"]) < 0.02:  # lumbar landmark on the hips: capture_full's pelvis
-        log.info("fit_track: lumbar landmark within 2 cm of the mid-hips; pelvis length 0.10 H")
-        tip["pelvis"] = np.array([0.0, 0.0, 0.10 * height])
-    # landmark -> (segment, point in segment coordinates): what IK matches
-    attach: dict[str, tuple[str, np.ndarray]] = {}
-    for s in segs:
-        o_name, t_name, _ = SEGMENT_LANDMARKS[s]
-        if not o_name.startswith("@"):
-            attach.setdefault(o_name, (s, np.zeros(3)))
-    for s in segs:
-        t_name = SEGMENT_LANDMARKS[s][1]
-        if t_name is not None and not t_name.startswith("@") and t_name in lm and s != "pelvis":
-            attach.setdefault(t_name, (s, tip[s]))
-    for n, seg in EXTRA_LANDMARKS.items():
-        if n in lm and seg in F:
-            attach[n] = (seg, _median_local(F[seg], origin[seg], lm[n], f"{n} on {seg}"))
+    offset, tip, attach = _geometry(ref, segs, lm, F, origin, height, full_geometry)
 
     # --- masses, inertias -------------------------------------------------------------------
     masses, total, mass_how = _masses(track, segs, lower_topology=not full_geometry)
-    inertias = dict((track.source or {}).get("segment_inertias", {}) or {})
-    specs = []
-    for rs in ref.segments:
-        d = tip[rs.name]
-        length = float(np.linalg.norm(d))
-        if length < 1e-3:
-            raise FitError(f"segment {rs.name!r} has zero length in the data ({SEGMENT_LANDMARKS[rs.name][:2]})")
-        kind = SEGMENT_LANDMARKS[rs.name][2]
-        com = inertia = None
-        if rs.name in inertias and frame_src.get(rs.name) == "track":
-            com = np.array(inertias[rs.name]["com"], dtype=float).reshape(3)
-            inertia = np.array(inertias[rs.name]["inertia"], dtype=float).reshape(3, 3)
-        specs.append(
-            SegmentSpec(
-                rs.name, rs.parent, tuple(offset.get(rs.name, np.zeros(3))), rs.dofs, length, masses[rs.name],
-                tuple(d / length), winter_density(kind), com=com, inertia=inertia,
-            )
-        )
+    specs = _segment_specs(ref, offset, tip, masses, dict((track.source or {}).get("segment_inertias", {}) or {}),
+                           frame_src)
 
-    # --- feet ---------------------------------------------------------------------------------
-    contacts, feet, foot_report = [], [], {}
     width = float((track.source or {}).get("foot_width") or WINTER_LENGTH["foot_width"] * height)
-    for side in SIDES:
-        full = "right" if side == "r" else "left"
-        heel = attach[f"heel_{side}"][1]
-        toe = offset[f"toes_{side}"] + tip[f"toes_{side}"]
-        sole = min(heel[2], toe[2])
-        top = 0.25 * max(-sole, 0.02)
-        if toe[0] - heel[0] < 0.05:
-            raise FitError(f"{full} foot: heel->toe length {toe[0] - heel[0]:.3f} m is not a foot "
-                           "(check the landmarks)")
-        yc = 0.5 * (heel[1] + toe[1])
-        feet.append(FootBox(full, f"foot_{side}", np.array([(heel[0] + toe[0]) / 2, yc, (sole + top) / 2]),
-                            np.array([(toe[0] - heel[0]) / 2, width / 2, (top - sole) / 2])))
-        contacts += [
-            ContactPoint(f"heel_{side}", full, f"foot_{side}",
-                         np.array([heel[0] + CONTACT_INSET, yc, sole + CONTACT_INSET])),
-            ContactPoint(f"toe_{side}", full, f"foot_{side}",
-                         np.array([toe[0] - CONTACT_INSET, yc, sole + CONTACT_INSET])),
-        ]
-        foot_report[full] = {"length_m": float(toe[0] - heel[0]), "width_m": width, "ankle_height_m": float(-sole)}
+    contacts, feet, foot_report = _feet(attach, offset, tip, width)
 
     name = "capture-full" if full_geometry else "capture-lower"
     ch = build_character(name, specs, contacts, feet, height=height,
@@ -458,6 +394,89 @@ def fit_track(
         raise FitError(f"track.contacts must be (4, T={T}) (heel_r, toe_r, heel_l, toe_l), got {contacts_sched.shape}")
     return Capture(character=ch, q=q, times=times, frame=track.frame, source=source,
                    contacts=contacts_sched, measured=track.measured)
+
+
+def _geometry(ref, segs, lm, F, origin, height, full_geometry):
+    """The capture skeleton's geometry in segment frames (medians over the trial): each joint's
+    offset on its parent, each segment's tip, and the landmarks IK matches (segment, point)."""
+    by_name = {s.name: s for s in ref.segments}
+    offset: dict[str, np.ndarray] = {}
+    tip: dict[str, np.ndarray] = {}
+    for s in segs:
+        par = by_name[s].parent
+        if par is not None:
+            offset[s] = _median_local(F[par], origin[par], origin[s], f"the {s} joint on {par}")
+        tname = SEGMENT_LANDMARKS[s][1]
+        if tname is not None and tname in lm:
+            tip[s] = _median_local(F[s], origin[s], lm[tname], f"{tname} on {s}")
+    if not full_geometry:  # lower-body data: Winter's HAT ellipsoid above the hips
+        tip["pelvis"] = np.array([0.0, 0.0, 2 * 0.18 * height])
+    elif np.linalg.norm(tip["pelvis"]) < 0.02:  # lumbar landmark on the hips: capture_full's pelvis
+        log.info("fit_track: lumbar landmark within 2 cm of the mid-hips; pelvis length 0.10 H")
+        tip["pelvis"] = np.array([0.0, 0.0, 0.10 * height])
+    # landmark -> (segment, point in segment coordinates): what IK matches
+    attach: dict[str, tuple[str, np.ndarray]] = {}
+    for s in segs:
+        o_name, t_name, _ = SEGMENT_LANDMARKS[s]
+        if not o_name.startswith("@"):
+            attach.setdefault(o_name, (s, np.zeros(3)))
+    for s in segs:
+        t_name = SEGMENT_LANDMARKS[s][1]
+        if t_name is not None and not t_name.startswith("@") and t_name in lm and s != "pelvis":
+            attach.setdefault(t_name, (s, tip[s]))
+    for n, seg in EXTRA_LANDMARKS.items():
+        if n in lm and seg in F:
+            attach[n] = (seg, _median_local(F[seg], origin[seg], lm[n], f"{n} on {seg}"))
+    return offset, tip, attach
+
+
+def _segment_specs(ref, offset, tip, masses, inertias, frame_src) -> list[SegmentSpec]:
+    """One :class:`SegmentSpec` per segment of the reference skeleton: the measured geometry,
+    the masses, and the source model's inertias where the segment's frame is the track's."""
+    specs = []
+    for rs in ref.segments:
+        d = tip[rs.name]
+        length = float(np.linalg.norm(d))
+        if length < 1e-3:
+            raise FitError(f"segment {rs.name!r} has zero length in the data ({SEGMENT_LANDMARKS[rs.name][:2]})")
+        kind = SEGMENT_LANDMARKS[rs.name][2]
+        com = inertia = None
+        if rs.name in inertias and frame_src.get(rs.name) == "track":
+            com = np.array(inertias[rs.name]["com"], dtype=float).reshape(3)
+            inertia = np.array(inertias[rs.name]["inertia"], dtype=float).reshape(3, 3)
+        specs.append(
+            SegmentSpec(
+                rs.name, rs.parent, tuple(offset.get(rs.name, np.zeros(3))), rs.dofs, length, masses[rs.name],
+                tuple(d / length), winter_density(kind), com=com, inertia=inertia,
+            )
+        )
+    return specs
+
+
+def _feet(attach, offset, tip, width: float):
+    """Each foot's box (heel -> toe, sole to a quarter of the ankle height) and its heel and
+    toe contact points, with the feet's figures for the report."""
+    contacts, feet, foot_report = [], [], {}
+    for side in SIDES:
+        full = "right" if side == "r" else "left"
+        heel = attach[f"heel_{side}"][1]
+        toe = offset[f"toes_{side}"] + tip[f"toes_{side}"]
+        sole = min(heel[2], toe[2])
+        top = 0.25 * max(-sole, 0.02)
+        if toe[0] - heel[0] < 0.05:
+            raise FitError(f"{full} foot: heel->toe length {toe[0] - heel[0]:.3f} m is not a foot "
+                           "(check the landmarks)")
+        yc = 0.5 * (heel[1] + toe[1])
+        feet.append(FootBox(full, f"foot_{side}", np.array([(heel[0] + toe[0]) / 2, yc, (sole + top) / 2]),
+                            np.array([(toe[0] - heel[0]) / 2, width / 2, (top - sole) / 2])))
+        contacts += [
+            ContactPoint(f"heel_{side}", full, f"foot_{side}",
+                         np.array([heel[0] + CONTACT_INSET, yc, sole + CONTACT_INSET])),
+            ContactPoint(f"toe_{side}", full, f"foot_{side}",
+                         np.array([toe[0] - CONTACT_INSET, yc, sole + CONTACT_INSET])),
+        ]
+        foot_report[full] = {"length_m": float(toe[0] - heel[0]), "width_m": width, "ankle_height_m": float(-sole)}
+    return contacts, feet, foot_report
 
 
 def _height(track, lm, F, origin, segs, full_geometry) -> float:
