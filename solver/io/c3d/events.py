@@ -265,17 +265,25 @@ def _nearest_runs(dist: np.ndarray, min_len: int) -> list[tuple[int, int, int]]:
     return [(a, b, f) for a, b, f in runs]
 
 
-def _feet_and_plates(signals: Sequence[PlateSignal], lm: Mapping[str, np.ndarray], times: np.ndarray,
-                     fps: float, analog_rate: float, name: str) -> tuple[_FeetResult, list[PlateSignal]]:
+@dataclass
+class _Periods:
+    """Plate loading periods assigned to the feet: the plates with their periods, every period
+    (for the source), (plate, foot, frames) of each assigned one, each foot's sub-periods
+    (first, last + 1 frame, start split, end split) and the frames a plate is loaded by no foot."""
+
+    assigned: list[PlateSignal]
+    info: list[dict[str, Any]]
+    plate_foot_frames: list[tuple[PlateSignal, str, np.ndarray]]
+    sub_periods: dict[str, list[tuple[int, int, bool, bool]]]
+    unassigned: np.ndarray
+
+
+def _assign_periods(signals: Sequence[PlateSignal], lm: Mapping[str, np.ndarray], times: np.ndarray,
+                    fps: float, analog_rate: float, name: str) -> _Periods:
+    """Plate loading periods, assigned to a foot by the CoP's distance to the foot."""
     T = times.size
     dt = 1.0 / fps
-    # --- plate loading periods, assigned to a foot by the CoP's distance to the foot -------
-    assigned: list[PlateSignal] = []
-    per_foot_frames = {f: np.zeros(T, dtype=bool) for f in FEET}
-    unassigned = np.zeros(T, dtype=bool)
-    periods_info: list[dict[str, Any]] = []
-    plate_foot_frames: list[tuple[PlateSignal, str, np.ndarray]] = []
-    sub_periods: dict[str, list[tuple[int, int, bool, bool]]] = {f: [] for f in FEET}
+    out = _Periods([], [], [], {f: [] for f in FEET}, np.zeros(T, dtype=bool))
     for sig in signals:
         periods = []
         for a, b in _loading_periods(sig, analog_rate):
@@ -301,30 +309,35 @@ def _feet_and_plates(signals: Sequence[PlateSignal], lm: Mapping[str, np.ndarray
                     log.warning("%s: plate %d loaded %.3f-%.3f s by no foot (CoP %.2f m from the nearest)",
                                 name, sig.index, ts, te, dmed)
                     foot = "unassigned"
-                    unassigned |= fr
+                    out.unassigned |= fr
                 else:
                     foot = FEET[i_foot]
-                    per_foot_frames[foot] |= fr
-                    plate_foot_frames.append((sig, foot, fr))
-                    sub_periods[foot].append((int(idx[la]), int(idx[lb - 1]) + 1, la > 0, lb < idx.size))
+                    out.plate_foot_frames.append((sig, foot, fr))
+                    out.sub_periods[foot].append((int(idx[la]), int(idx[lb - 1]) + 1, la > 0, lb < idx.size))
                 periods.append((ts, te, foot))
                 # a "split" edge is where the CoP passes from one foot to the other on this plate:
                 # not a foot strike / foot off
-                periods_info.append({"plate": sig.index, "start": ts, "end": te, "foot": foot,
-                                     "cop_to_foot_m": dmed, "start_split": la > 0, "end_split": lb < idx.size})
-        assigned.append(PlateSignal(**{**sig.__dict__, "periods": tuple(periods)}))
-    # --- per-frame wrenches: force and moment about our origin, box-averaged -------------
+                out.info.append({"plate": sig.index, "start": ts, "end": te, "foot": foot,
+                                 "cop_to_foot_m": dmed, "start_split": la > 0, "end_split": lb < idx.size})
+        out.assigned.append(PlateSignal(**{**sig.__dict__, "periods": tuple(periods)}))
+    return out
+
+
+def _foot_wrenches(signals: Sequence[PlateSignal], per: _Periods, times: np.ndarray, dt: float):
+    """Each foot's force, centre of pressure and free moment per frame (box-averaged plate
+    wrenches about our origin, summed over the plates it stands on) and whether it loads a plate."""
+    T = times.size
     force = np.zeros((2, 3, T))
     moment = np.zeros((2, 3, T))
     height_w = np.zeros((2, T))
-    for sig in assigned:
+    for sig in per.assigned:
         cop = np.nan_to_num(sig.cop)
         m = np.cross(cop, sig.force, axis=0)
         m[2] += sig.free_moment
         Fa = _frame_average(sig.force, sig.times, times, dt)
         Ma = _frame_average(m, sig.times, times, dt)
         Ha = _frame_average((cop[2] * sig.force[2])[None], sig.times, times, dt)[0]
-        for sig2, foot, fr in plate_foot_frames:
+        for sig2, foot, fr in per.plate_foot_frames:
             if sig2 is not None and sig2.index == sig.index:
                 i = FEET.index(foot)
                 # frames of this period only (a plate may carry both feet in turn)
@@ -346,12 +359,21 @@ def _feet_and_plates(signals: Sequence[PlateSignal], lm: Mapping[str, np.ndarray
         cop_out[i] = np.vstack([x, y, np.where(ok, h, np.nan)])
         free[i] = np.where(ok, M[2] - (x * F[1] - y * F[0]), 0.0)
         force[i][:, ~ok] = 0.0
-    # --- kinematic stance (Zeni et al. 2008), event offsets calibrated on the plates -------
+    return force, cop_out, free, loaded_plate
+
+
+def _foot_contact(lm: Mapping[str, np.ndarray], times: np.ndarray, fps: float, per: _Periods,
+                  loaded_plate: np.ndarray, name: str):
+    """Each foot's stance (2, T): kinematic gait events (Zeni et al. 2008) with offsets
+    calibrated on the plates, a foot down without events counted, the plates' own loading
+    edges where they tell; the events and offsets too."""
+    T = times.size
+    dt = 1.0 / fps
     fwd = _unit(np.cross(lm["hip_l"] - lm["hip_r"], np.array([0.0, 0.0, 1.0])[:, None], axis=0))
     events = {foot: _zeni_events(lm, s, fwd, times, fps) for foot, s in zip(FEET, SIDES)}
     # (onsets, offsets) in s, foot by foot
     plate_events: dict[str, tuple[list[float], list[float]]] = {foot: ([], []) for foot in FEET}
-    for p in periods_info:
+    for p in per.info:
         if p["foot"] in FEET:
             if p["start"] > times[0] + dt and not p["start_split"]:
                 plate_events[p["foot"]][0].append(p["start"])
@@ -375,7 +397,7 @@ def _feet_and_plates(signals: Sequence[PlateSignal], lm: Mapping[str, np.ndarray
         plate = loaded_plate[i]
         c = np.zeros(T, dtype=bool)
         for a, b in _runs(kin | plate):
-            subs = [x for x in sub_periods[foot] if x[0] < b and x[1] > a]
+            subs = [x for x in per.sub_periods[foot] if x[0] < b and x[1] > a]
             pf = np.nonzero(plate[a:b])[0] + a
             if not subs or pf.size == 0:
                 c[a:b] = kin[a:b]
@@ -387,12 +409,21 @@ def _feet_and_plates(signals: Sequence[PlateSignal], lm: Mapping[str, np.ndarray
             e0 = b if last[3] else int(pf[-1]) + 1
             c[s0:e0] = True
         contact_foot[i] = c
+    return contact_foot, events, offsets
+
+
+def _feet_and_plates(signals: Sequence[PlateSignal], lm: Mapping[str, np.ndarray], times: np.ndarray,
+                     fps: float, analog_rate: float, name: str) -> tuple[_FeetResult, list[PlateSignal]]:
+    T = times.size
+    per = _assign_periods(signals, lm, times, fps, analog_rate, name)
+    force, cop_out, free, loaded_plate = _foot_wrenches(signals, per, times, 1.0 / fps)
+    contact_foot, events, offsets = _foot_contact(lm, times, fps, per, loaded_plate, name)
     hh = {foot: lm[f"heel_{s}"][2] for foot, s in zip(FEET, SIDES)}
     ht = {foot: np.minimum(lm[f"mtp_{s}"][2], lm[f"toe_{s}"][2]) for foot, s in zip(FEET, SIDES)}
     # --- valid: every foot on the ground is measured by a plate, no plate shared -----------
     valid = np.ones(T, dtype=bool)
     shared = np.zeros(T, dtype=bool)
-    for sig, foot, fr in plate_foot_frames:
+    for sig, foot, fr in per.plate_foot_frames:
         other = 1 - FEET.index(foot)
         s_o = SIDES[other]
         on_plate = np.zeros(T, dtype=bool)
@@ -402,7 +433,7 @@ def _feet_and_plates(signals: Sequence[PlateSignal], lm: Mapping[str, np.ndarray
     on_plates = feet_on_plates(lm, [s.corners for s in signals])
     for i in range(2):
         valid &= ~contact_foot[i] | (loaded_plate[i] & on_plates[i])
-    valid &= ~shared & ~unassigned
+    valid &= ~shared & ~per.unassigned
     if shared.any():
         log.warning("%s: %d frames with both feet on one plate marked invalid", name, int(shared.sum()))
     # --- heel / toe contact flags ------------------------------------------------------------
@@ -419,4 +450,4 @@ def _feet_and_plates(signals: Sequence[PlateSignal], lm: Mapping[str, np.ndarray
     ev = {foot: {"foot_strike": [round(float(x), 3) for x in events[foot][0] + offsets[foot][0]],
                  "foot_off": [round(float(x), 3) for x in events[foot][1] + offsets[foot][1]],
                  "offsets_s": [round(float(x), 3) for x in offsets[foot]]} for foot in FEET}
-    return _FeetResult(measured, contacts, periods_info, ev), assigned
+    return _FeetResult(measured, contacts, per.info, ev), per.assigned
