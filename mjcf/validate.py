@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from mjcf.replay import MujocoReplay
+from solver.checks import Check, Context, SectionResult, register_check
 from solver.environment import environment_of
 from solver.motion import FEET, Motion
 from solver.plausibility import Tolerances, about_root, report, root_residual
@@ -32,11 +33,12 @@ def mujoco_residual(motion: Motion) -> np.ndarray:
     return about_root(h0, s.q)
 
 
-def validate(motion: Motion, tol: Tolerances = Tolerances()) -> dict[str, Any]:
-    """Our plausibility report plus the MuJoCo replay; ``plausible`` requires both."""
-    rep = report(motion, tol)
-    weight, leg = rep["body_weight_N"], rep["leg_length_m"]
-    ours = root_residual(motion, environment_of(motion).gravity)
+@register_check(section="mujoco_replay", verdict="plausible", flags="all", nested=False, optional=True, order=30)
+def replay_checks(ctx: Context) -> SectionResult:
+    """The MuJoCo replay's figures and its two checks: its root residual vanishes
+    (``mujoco_root``) and agrees with ours (``mujoco_agrees``), within the residual tolerance."""
+    motion, tol, weight, leg = ctx.motion, ctx.tolerances, ctx.weight, ctx.leg
+    ours = root_residual(motion, ctx.gravity)
     mj = mujoco_residual(motion)
     diff = mj - ours
     mjr: dict[str, Any] = {
@@ -48,15 +50,16 @@ def validate(motion: Motion, tol: Tolerances = Tolerances()) -> dict[str, Any]:
         "agreement_moment_rel_weight_leg": float(np.abs(diff[:3]).max() / (weight * leg)),
         "model": "MJCF generated from the motion's character (mujoco.MjSpec), mj_inverse + mj_applyFT",
     }
-    rep["mujoco_replay"] = mjr
-    rep["checks"]["mujoco_root"] = (
-        mjr["max_force_rel_weight"] <= tol.residual and mjr["max_moment_rel_weight_leg"] <= tol.residual
+    checks = (
+        Check.measure("mujoco_root", max(mjr["max_force_rel_weight"], mjr["max_moment_rel_weight_leg"]),
+                      tol.residual, "BW, BW·leg", "MuJoCo's root residual force / weight and moment / (weight × leg)"),
+        Check.measure("mujoco_agrees",
+                      max(mjr["agreement_force_rel_weight"], mjr["agreement_moment_rel_weight_leg"]), tol.residual,
+                      "BW, BW·leg", "MuJoCo's root residual less ours, force / weight and moment / (weight × leg)"),
     )
-    rep["checks"]["mujoco_agrees"] = (
-        mjr["agreement_force_rel_weight"] <= tol.residual and mjr["agreement_moment_rel_weight_leg"] <= tol.residual
-    )
-    for k in ("mujoco_root", "mujoco_agrees"):
-        if not rep["checks"][k]:
-            rep["problems"].append(f"{k} out of tolerance")
-    rep["plausible"] = all(rep["checks"].values())
-    return rep
+    return SectionResult(checks, mjr)
+
+
+def validate(motion: Motion, tol: Tolerances = Tolerances()) -> dict[str, Any]:
+    """Our plausibility report with the MuJoCo replay section; ``plausible`` requires both."""
+    return report(motion, tol, include=("mujoco_replay",))

@@ -32,11 +32,11 @@ from typing import Any
 
 import numpy as np
 
+from solver.checks import Check, Context, SectionResult, register_check
 from solver.environment import STANDARD_GRAVITY_VECTOR, body_weight, environment_of, ground_of
 from solver.jsonable import jsonable
 from solver.kinematics import centre_of_mass, contact_points, points_world, segment_frames, standing_leg_length
 from solver.motion import FEET, Motion, foot_schedule_of
-from solver.realism import check_item, verdict
 
 
 @dataclass(frozen=True)
@@ -441,21 +441,6 @@ def gait_figures(character, q: np.ndarray, fps: float, contacts: np.ndarray, *, 
 # --- the checks -------------------------------------------------------------------------------------
 
 
-def _item(value: float | None, limit: float, unit: str, what: str, source: str, *, warning: bool = False,
-          at_least: bool = False, capture: float | None = None, applies: bool = True) -> dict[str, Any]:
-    """``realism.check_item`` with its published source, the captured walk's figure, and whether
-    it applies here (a check that does not apply passes)."""
-    item = check_item(value, limit, unit, what, warning=warning, at_least=at_least)
-    item["passed"] = item["passed"] or not applies
-    item["source"] = source
-    if capture is not None:
-        item["capture"] = float(capture)
-        item["capture_passed"] = bool(capture >= limit if at_least else capture <= limit)
-    if not applies:
-        item["applies"] = False
-    return item
-
-
 def _get(d: Mapping | None, *keys: str) -> Any:
     for k in keys:
         if not isinstance(d, Mapping):
@@ -465,91 +450,92 @@ def _get(d: Mapping | None, *keys: str) -> Any:
 
 
 def checks_of(fig: Mapping[str, Any], *, reference: Mapping[str, Any] | None = None,
-              lim: NaturalnessLimits = NaturalnessLimits()) -> dict[str, dict]:
-    """The checks (figure, limit, source, the capture's figure) from ``gait_figures``;
+              lim: NaturalnessLimits = NaturalnessLimits()) -> dict[str, Check]:
+    """The checks (figure, limit, source, the capture's figure) from ``gait_figures``, by name;
     ``reference``: {"capture": figures of the captured walk, "tutor": figures of the tutor}."""
     cap = (reference or {}).get("capture")
     tut = (reference or {}).get("tutor")
     level = fig["tilt_deg"] <= lim.level_deg and not fig.get("stairs")
-    checks: dict[str, dict] = {}
-    checks["swing_clearance"] = _item(
-        _get(fig, "swing_clearance", "min_m"), lim.clearance_m, "m",
+    checks: list[Check] = []
+    checks.append(Check.measure(
+        "swing_clearance", _get(fig, "swing_clearance", "min_m"), lim.clearance_m, "m",
         f"lowest heel, toe or sole point of a swing foot moving faster than {lim.moving_speed:g} m/s",
-        SOURCES["swing_clearance"], at_least=True, capture=_get(cap, "swing_clearance", "min_m"))
+        source=SOURCES["swing_clearance"], at_least=True, capture=_get(cap, "swing_clearance", "min_m")))
     if "foot_pitch_under_load" in fig:
-        checks["foot_pitch_under_load"] = _item(
-            _get(fig, "foot_pitch_under_load", "max_deg"), lim.pitch_deg, "deg",
+        checks.append(Check.measure(
+            "foot_pitch_under_load", _get(fig, "foot_pitch_under_load", "max_deg"), lim.pitch_deg, "deg",
             f"largest heel-up pitch of a foot carrying more than {lim.pitch_load:g} BW",
-            SOURCES["foot_pitch_under_load"], capture=_get(cap, "foot_pitch_under_load", "max_deg"))
-    checks["joint_limits"] = _item(
-        fig["joints_at_limits"]["max_frames"], lim.limit_frames, "frames",
+            source=SOURCES["foot_pitch_under_load"], capture=_get(cap, "foot_pitch_under_load", "max_deg")))
+    checks.append(Check.measure(
+        "joint_limits", fig["joints_at_limits"]["max_frames"], lim.limit_frames, "frames",
         f"frames a coordinate spends within {lim.limit_band_deg:g}° of its model limit"
         + (f" (worst: {fig['joints_at_limits']['worst']})" if fig["joints_at_limits"]["worst"] else ""),
-        SOURCES["joint_limits"], capture=_get(cap, "joints_at_limits", "max_frames"))
-    checks["crossover"] = _item(
-        _get(fig, "crossover", "max_far_side_m"), lim.crossover_m, "m",
+        source=SOURCES["joint_limits"], capture=_get(cap, "joints_at_limits", "max_frames")))
+    checks.append(Check.measure(
+        "crossover", _get(fig, "crossover", "max_far_side_m"), lim.crossover_m, "m",
         "furthest a loaded foot stands on the far side of the pelvis, across the direction of travel",
-        SOURCES["crossover"], capture=_get(cap, "crossover", "max_far_side_m"))
+        source=SOURCES["crossover"], capture=_get(cap, "crossover", "max_far_side_m")))
     if "shared_load" in fig:
-        checks["shared_load"] = _item(
-            _get(fig, "shared_load", "min_bw"), lim.shared_load, "BW",
-            "least, over the changes of support, of the load both feet carry at once", SOURCES["shared_load"],
-            at_least=True, capture=_get(cap, "shared_load", "min_bw"))
+        checks.append(Check.measure(
+            "shared_load", _get(fig, "shared_load", "min_bw"), lim.shared_load, "BW",
+            "least, over the changes of support, of the load both feet carry at once", source=SOURCES["shared_load"],
+            at_least=True, capture=_get(cap, "shared_load", "min_bw")))
     if "forces_bw" in fig:
-        checks["fore_aft_force"] = _item(
-            fig["forces_bw"]["fore_aft_max_abs"], lim.fore_aft, "BW",
-            "largest fore-aft force of a foot, level ground", SOURCES["fore_aft_force"],
-            capture=_get(cap, "forces_bw", "fore_aft_max_abs"), applies=level)
-        checks["lateral_force"] = _item(
-            fig["forces_bw"]["lateral_max_abs"], lim.lateral, "BW",
-            "largest mediolateral force of a foot, level ground", SOURCES["lateral_force"], warning=True,
-            capture=_get(cap, "forces_bw", "lateral_max_abs"), applies=level)
-        checks["vertical_force_peak"] = _item(
-            fig["forces_bw"]["vertical_max"], lim.peak_vertical, "BW", "largest vertical force of a foot, level ground",
-            SOURCES["vertical_force_shape"], warning=True, capture=_get(cap, "forces_bw", "vertical_max"),
-            applies=level)
+        checks.append(Check.measure(
+            "fore_aft_force", fig["forces_bw"]["fore_aft_max_abs"], lim.fore_aft, "BW",
+            "largest fore-aft force of a foot, level ground", source=SOURCES["fore_aft_force"],
+            capture=_get(cap, "forces_bw", "fore_aft_max_abs"), applies=level))
+        checks.append(Check.measure(
+            "lateral_force", fig["forces_bw"]["lateral_max_abs"], lim.lateral, "BW",
+            "largest mediolateral force of a foot, level ground", source=SOURCES["lateral_force"], warning=True,
+            capture=_get(cap, "forces_bw", "lateral_max_abs"), applies=level))
+        checks.append(Check.measure(
+            "vertical_force_peak", fig["forces_bw"]["vertical_max"], lim.peak_vertical, "BW",
+            "largest vertical force of a foot, level ground",
+            source=SOURCES["vertical_force_shape"], warning=True, capture=_get(cap, "forces_bw", "vertical_max"),
+            applies=level))
         humps = [min(s["loading_peak_bw"], s["push_off_peak_bw"]) - s["valley_bw"]
                  for s in fig.get("vertical_force_shape") or []]
         cap_humps = [min(s["loading_peak_bw"], s["push_off_peak_bw"]) - s["valley_bw"]
                      for s in (_get(cap, "vertical_force_shape") or [])]
-        checks["vertical_force_shape"] = _item(
-            min(humps) if humps else None, lim.hump, "BW",
+        checks.append(Check.measure(
+            "vertical_force_shape", min(humps) if humps else None, lim.hump, "BW",
             "smallest height of a stance's loading or push-off peak above its mid-stance valley, level ground",
-            SOURCES["vertical_force_shape"], warning=True, at_least=True,
-            capture=min(cap_humps) if cap_humps else None, applies=level)
+            source=SOURCES["vertical_force_shape"], warning=True, at_least=True,
+            capture=min(cap_humps) if cap_humps else None, applies=level))
         rf = fig["required_friction"]
         cap_rf = _get(cap, "required_friction", "max")
-        checks["friction_margin"] = _item(
-            rf["max"] / rf["mu"], lim.friction_use, "μ",
+        checks.append(Check.measure(
+            "friction_margin", rf["max"] / rf["mu"], lim.friction_use, "μ",
             f"largest friction a foot loaded over {lim.friction_load:g} BW needs, as a fraction of μ",
-            SOURCES["friction_margin"], capture=None if cap_rf is None else cap_rf / rf["mu"])
-        checks["push"] = _item(
-            _get(fig, "push", "min"), lim.push, "f_z·leg",
+            source=SOURCES["friction_margin"], capture=None if cap_rf is None else cap_rf / rf["mu"]))
+        checks.append(Check.measure(
+            "push", _get(fig, "push", "min"), lim.push, "f_z·leg",
             "least horizontal force of a loaded foot along the line from the foot to the centre of mass",
-            SOURCES["push"], warning=True, at_least=True, capture=_get(cap, "push", "min"))
+            source=SOURCES["push"], warning=True, at_least=True, capture=_get(cap, "push", "min")))
     slope = fig["slope_along_deg"]
     lean, tut_lean = fig["trunk_lean_deg"]["mean"], _get(tut, "trunk_lean_deg", "mean")
     if tut_lean is not None and abs(slope) > lim.level_deg:
         back = (tut_lean - lean) if slope > 0 else (lean - tut_lean)  # leaning back uphill, forward downhill
-        checks["trunk_lean"] = _item(
-            back, lim.lean_tol_deg, "deg",
+        checks.append(Check.measure(
+            "trunk_lean", back, lim.lean_tol_deg, "deg",
             (f"trunk ({fig['trunk_lean_deg']['segment']}) lean against gravity {lean:+.1f}° vs the tutor's "
              f"{tut_lean:+.1f}° on a {slope:+.1f}° slope: degrees further "
-             + ("back" if slope > 0 else "forward")), SOURCES["trunk_lean"])
+             + ("back" if slope > 0 else "forward")), source=SOURCES["trunk_lean"]))
     pr = fig["pelvis_range_deg"]
     cpr = _get(cap, "pelvis_range_deg") or {}
     for ax, limv in (("pitch", lim.pelvis_pitch_range_deg), ("roll", lim.pelvis_roll_range_deg),
                      ("yaw", lim.pelvis_yaw_range_deg)):
-        checks[f"pelvis_{ax}_range"] = _item(pr[ax], max(limv, cpr.get(ax, 0.0) + 5.0), "deg",
-                                             f"pelvis {ax} range over the cycle"
-                                             + (" (about the heading's trend)" if ax == "yaw" else "")
-                                             + " (limit: the published range, or the capture's + 5°)",
-                                             SOURCES["pelvis_ranges"], warning=True, capture=cpr.get(ax))
-    checks["foot_heading"] = _item(
-        _get(fig, "foot_heading_deg", "max_abs_loaded"), lim.foot_heading_deg, "deg",
-        "largest heading difference between a loaded foot and the pelvis", SOURCES["foot_heading"], warning=True,
-        capture=_get(cap, "foot_heading_deg", "max_abs_loaded"))
-    return checks
+        checks.append(Check.measure(f"pelvis_{ax}_range", pr[ax], max(limv, cpr.get(ax, 0.0) + 5.0), "deg",
+                                    f"pelvis {ax} range over the cycle"
+                                    + (" (about the heading's trend)" if ax == "yaw" else "")
+                                    + " (limit: the published range, or the capture's + 5°)",
+                                    source=SOURCES["pelvis_ranges"], warning=True, capture=cpr.get(ax)))
+    checks.append(Check.measure(
+        "foot_heading", _get(fig, "foot_heading_deg", "max_abs_loaded"), lim.foot_heading_deg, "deg",
+        "largest heading difference between a loaded foot and the pelvis", source=SOURCES["foot_heading"], warning=True,
+        capture=_get(cap, "foot_heading_deg", "max_abs_loaded")))
+    return {c.name: c for c in checks}
 
 
 def motion_figures(motion: Motion, lim: NaturalnessLimits = NaturalnessLimits()) -> dict[str, Any]:
@@ -569,13 +555,24 @@ def naturalness_report(motion: Motion, reference: Mapping[str, Any] | None = Non
     its source and the capture's own figure; ``reference`` defaults to the motion's provenance
     ``gait_reference`` ({"capture": …, "tutor": …} figures). ``passed`` is None when the motion
     cannot be checked (no contact schedule, or feet without a heel and a toe point)."""
+    return naturalness_checks(motion, reference, lim).to_dict()
+
+
+@register_check(section="naturalness", verdict="natural", order=20)
+def _naturalness_section(ctx: Context) -> SectionResult:
+    return naturalness_checks(ctx.motion)
+
+
+def naturalness_checks(motion: Motion, reference: Mapping[str, Any] | None = None,
+                       lim: NaturalnessLimits = NaturalnessLimits()) -> SectionResult:
+    """The naturalness checks of a motion (and the section's limits, notes and figures)."""
     t0 = time.perf_counter()
     out: dict[str, Any] = {"limits": asdict(lim), "notes": []}
     if motion.contacts is None or not has_two_point_feet(motion.character):
-        out.update(checks={}, passed=None, failed=[], warnings=[], time_s=time.perf_counter() - t0)
         out["notes"].append("no contact schedule, or feet without a heel and a toe contact point: "
                             "naturalness not checked")
-        return out
+        out["time_s"] = time.perf_counter() - t0
+        return SectionResult((), out, checked=False, unchecked=None)
     if reference is None:
         ref = motion.provenance.get("gait_reference")
         reference = ref if isinstance(ref, Mapping) else None
@@ -583,11 +580,9 @@ def naturalness_report(motion: Motion, reference: Mapping[str, Any] | None = Non
     checks = checks_of(fig, reference=reference, lim=lim)
     if reference is None or reference.get("capture") is None:
         out["notes"].append("no figures of the captured walk recorded: checked against the published limits only")
-    out["checks"] = checks
     out["figures"] = jsonable(fig)
-    out.update(verdict(checks))
     out["time_s"] = time.perf_counter() - t0
-    return out
+    return SectionResult(tuple(checks.values()), out)
 
 
 # --- the captured walk ------------------------------------------------------------------------------

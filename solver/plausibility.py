@@ -15,12 +15,13 @@ from typing import Any
 
 import numpy as np
 
+import solver.naturalness  # noqa: F401  (registers the naturalness section)
+from solver.checks import Check, Context, sections
 from solver.dynamics import rnea
 from solver.environment import body_weight, environment_of, ground_of
 from solver.kinematics import contact_points, segment_frames, standing_leg_length
 from solver.motion import FEET, Motion
-from solver.naturalness import naturalness_report
-from solver.realism import RealismLimits, problem_lines, realism_report
+from solver.realism import RealismLimits
 from solver.trajectory import dynamics_samples
 
 
@@ -50,7 +51,12 @@ def about_root(wrench: np.ndarray, q: np.ndarray) -> np.ndarray:
     return out
 
 
-def report(motion: Motion, tol: Tolerances = Tolerances(), realism: RealismLimits = RealismLimits()) -> dict:
+def report(motion: Motion, tol: Tolerances = Tolerances(), realism: RealismLimits = RealismLimits(),
+           include: tuple[str, ...] = ()) -> dict:
+    """The validation report: the root residual and contact checks, then every registered check
+    section (``solver.checks``: realism, naturalness; the optional ones named in ``include``, as
+    ``mjcf.validate`` names its MuJoCo replay). ``plausible``: no failed check of the residual,
+    the contacts, and the sections deciding it; ``natural``: the naturalness section's verdict."""
     ch = motion.character
     env = environment_of(motion)
     g = np.asarray(env.gravity, dtype=float)
@@ -79,48 +85,55 @@ def report(motion: Motion, tol: Tolerances = Tolerances(), realism: RealismLimit
         },
         "tolerances": asdict(tol),
     }
-    checks = {
-        "root_force": out["root_residual"]["max_force_rel_weight"] <= tol.residual,
-        "root_moment": out["root_residual"]["max_moment_rel_weight_leg"] <= tol.residual,
-    }
+    rr = out["root_residual"]
+    checks = [Check.measure("root_force", rr["max_force_rel_weight"], tol.residual, "BW", "root residual force"),
+              Check.measure("root_moment", rr["max_moment_rel_weight_leg"], tol.residual, "BW·leg",
+                            "root residual moment")]
     problems = []
     if motion.wrenches is None:
         problems.append("no contact wrenches: the ground reaction is unknown")
-        checks["wrenches"] = False
+        checks.append(Check("wrenches", None, 0.0, "", "the motion stores its contact wrenches", False))
     if motion.contacts is not None and ch.contacts:
         kin = _contact_checks(motion, mu, weight)
         out.update(kin)
-        checks["slip"] = kin["slip_mm"] <= tol.slip_mm
-        checks["penetration"] = kin["penetration_mm"] <= tol.penetration_mm
-        checks["contact_height"] = kin["contact_height_error_mm"] <= tol.contact_height_mm
+        checks += [Check.measure("slip", kin["slip_mm"], tol.slip_mm, "mm", "slip of a contact point"),
+                   Check.measure("penetration", kin["penetration_mm"], tol.penetration_mm, "mm", "ground penetration"),
+                   Check.measure("contact_height", kin["contact_height_error_mm"], tol.contact_height_mm, "mm",
+                                 "height of an active contact point above the ground")]
         if motion.wrenches is not None:
-            checks["friction"] = kin["friction_cone_excess_N"] <= tol.friction * weight
-            checks["normal_force"] = kin["min_normal_force_N"] >= -tol.friction * weight
-            checks["air_wrench"] = kin["max_wrench_in_air"] <= tol.friction * weight
-            checks["cop"] = kin["cop_outside_mm"] <= tol.cop_mm
+            f_tol = tol.friction * weight
+            checks += [Check.measure("friction", kin["friction_cone_excess_N"], f_tol, "N", "friction cone excess"),
+                       Check.measure("normal_force", kin["min_normal_force_N"], -f_tol, "N", "least normal force",
+                                     at_least=True),
+                       Check.measure("air_wrench", kin["max_wrench_in_air"], f_tol, "N", "wrench of a foot in the air"),
+                       Check.measure("cop", kin["cop_outside_mm"], tol.cop_mm, "mm",
+                                     "centre of pressure outside the foot")]
     else:
         problems.append("no contact schedule")
-        checks["contacts"] = False
-    failed = [k for k, v in checks.items() if not v]
-    problems += [f"{k} out of tolerance" for k in failed if k not in ("wrenches", "contacts")]
-    # the realism section (solver.realism): checks that do not share the optimizer's discretization
-    # (Newton–Euler from positions, inverse dynamics between the frames, torsional friction, foot
-    # spin, ranges); its failures are part of ``plausible``
-    real = realism_report(motion, g, mu, weight, leg, realism)
-    out["realism"] = real
-    for name, c in real.get("checks", {}).items():
-        if c["severity"] == "failure":
-            checks[f"realism_{name}"] = c["passed"]
-    failed = [k for k, v in checks.items() if not v]
-    out["checks"] = checks
-    out["problems"] = problems + problem_lines(real)
-    out["plausible"] = not failed
-    # the naturalness section (solver.naturalness): the gait's human features, against published
-    # limits and the captured walk's own figures; its failures make the motion not ``natural``
-    nat = naturalness_report(motion)
-    out["naturalness"] = nat
-    out["natural"] = nat["passed"]  # None: not checked (no contact schedule or two-point feet)
-    out["problems"] += problem_lines(nat, "naturalness")
+        checks.append(Check("contacts", None, 0.0, "", "the motion stores its contact schedule", False))
+    problems += [f"{c.name} out of tolerance" for c in checks if c.failed and c.name not in ("wrenches", "contacts")]
+    flags = {c.name: c.passed for c in checks}
+    verdicts: dict[str, list[bool | None]] = {"plausible": [not c.failed for c in checks], "natural": []}
+    # the registered sections (solver.checks): realism (physics between the frames: Newton–Euler
+    # from positions, inverse dynamics between the frames, torsional friction, foot spin, ranges;
+    # its failures are part of ``plausible``), naturalness (the gait's human features against
+    # published limits and the captured walk's own figures; its failures make the motion not
+    # ``natural``), and the optional ones the caller includes (the MuJoCo replay)
+    ctx = Context(motion, g, mu, weight, leg, tol, realism)
+    for section in sections(include):
+        result = section.produce(ctx)
+        out[section.name] = result.to_dict() if section.nested else dict(result.extra)
+        flags.update(section.flag_checks(result))
+        problems += section.problems(result)
+        if section.flags != "none":
+            verdicts[section.verdict] += [not c.failed for c in result.checks]
+        else:
+            verdicts[section.verdict].append(result.passed)
+    out["checks"] = flags
+    out["problems"] = problems
+    out["plausible"] = all(verdicts["plausible"])
+    # None: naturalness not checked (no contact schedule or two-point feet)
+    out["natural"] = None if None in verdicts["natural"] else all(verdicts["natural"])
     return out
 
 

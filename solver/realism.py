@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -36,6 +35,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.spatial.transform import Rotation
 
+from solver.checks import Check, Context, SectionResult, register_check
 from solver.dynamics import rnea
 from solver.environment import environment_of, ground_of
 from solver.kinematics import segment_frames
@@ -393,79 +393,73 @@ def requested_heading(motion: Motion) -> tuple[float | None, str]:
 # --- the report ---------------------------------------------------------------------------------------
 
 
-def check_item(value: float | None, limit: float, unit: str, what: str, *, warning: bool = False,
-               at_least: bool = False) -> dict[str, Any]:
-    """One check of a report section (realism, naturalness): its figure against its limit (a
-    figure of None, nothing to measure, passes)."""
-    ok = value is None or (value >= limit if at_least else value <= limit)
-    return {"value": None if value is None else float(value), "limit": float(limit),
-            "bound": "min" if at_least else "max", "unit": unit, "passed": bool(ok),
-            "severity": "warning" if warning else "failure", "what": what}
-
-
-def verdict(checks: dict[str, dict[str, Any]]) -> dict[str, Any]:
-    """A section's verdict: its failed checks, its warnings, and passed (no failure)."""
-    failed = [k for k, v in checks.items() if v["severity"] == "failure" and not v["passed"]]
-    warnings = [k for k, v in checks.items() if v["severity"] == "warning" and not v["passed"]]
-    return {"failed": failed, "warnings": warnings, "passed": not failed}
-
-
 def realism_report(motion: Motion, gravity: Any, mu: float, weight: float, leg: float,
                    lim: RealismLimits = RealismLimits()) -> dict[str, Any]:
     """The realism section of the plausibility report: every check as a figure with its limit."""
+    return realism_checks(motion, gravity, mu, weight, leg, lim).to_dict()
+
+
+@register_check(section="realism", verdict="plausible", flags="failures", prefix="realism_", order=10)
+def _realism_section(ctx: Context) -> SectionResult:
+    return realism_checks(ctx.motion, ctx.gravity, ctx.friction, ctx.weight, ctx.leg, ctx.realism_limits)
+
+
+def realism_checks(motion: Motion, gravity: Any, mu: float, weight: float, leg: float,
+                   lim: RealismLimits = RealismLimits()) -> SectionResult:
+    """The realism checks of a motion (and the section's limits, notes and figures)."""
     t0 = time.perf_counter()
     g = np.asarray(gravity, dtype=float)
     out: dict[str, Any] = {"limits": asdict(lim), "notes": []}
     if motion.wrenches is None:
-        out.update(checks={}, passed=False, time_s=time.perf_counter() - t0)
         out["notes"].append("no contact wrenches: nothing to check the motion's physics against")
-        return out
+        out["time_s"] = time.perf_counter() - t0
+        return SectionResult((), out, checked=False, unchecked=False)
     cyc, note = cycle_of(motion)
     out["notes"].append(note)
     out["cycle"] = None if cyc is None else {"frames": cyc.N, "heading_change_deg": math.degrees(cyc.dpsi),
                                              "translation_m": cyc.d[:2].tolist()}
-    checks: dict[str, dict] = {}
+    checks: list[Check] = []
     ne = newton_euler(motion, g, weight, leg, cyc)
-    checks["newton_force"] = check_item(ne["force_rel_weight"].max(), lim.newton_force, "BW",
-                                   "whole-body Newton from COM positions vs gravity + ground, worst frame")
-    checks["newton_moment"] = check_item(ne["moment_rel_weight_leg"].max(), lim.newton_moment, "BW·leg",
-                                    "angular momentum change about the COM vs ground moment, worst frame")
-    checks["cycle_impulse"] = check_item(ne["cycle_force_rel_weight"], lim.cycle_force, "BW",
-                                    "|impulse of ground + gravity − momentum change| / (BW × duration)")
-    checks["cycle_angular_impulse"] = check_item(ne["cycle_moment_rel_weight_leg"], lim.cycle_moment, "BW·leg",
-                                            "|angular impulse about the COM − its change| / (BW·leg × duration)")
+    checks.append(Check.measure("newton_force", ne["force_rel_weight"].max(), lim.newton_force, "BW",
+                                "whole-body Newton from COM positions vs gravity + ground, worst frame"))
+    checks.append(Check.measure("newton_moment", ne["moment_rel_weight_leg"].max(), lim.newton_moment, "BW·leg",
+                                "angular momentum change about the COM vs ground moment, worst frame"))
+    checks.append(Check.measure("cycle_impulse", ne["cycle_force_rel_weight"], lim.cycle_force, "BW",
+                                "|impulse of ground + gravity − momentum change| / (BW × duration)"))
+    checks.append(Check.measure("cycle_angular_impulse", ne["cycle_moment_rel_weight_leg"], lim.cycle_moment, "BW·leg",
+                                "|angular impulse about the COM − its change| / (BW·leg × duration)"))
     rf = refinement(motion, g, weight, leg, cyc, lim.refine)
-    checks["refined_force"] = check_item(rf["force_rel_weight"].max(), lim.refine_force, "BW",
-                                    f"root residual force on a spline at {lim.refine}× the frame rate")
-    checks["refined_moment"] = check_item(rf["moment_rel_weight_leg"].max(), lim.refine_moment, "BW·leg",
-                                     f"root residual moment on a spline at {lim.refine}× the frame rate")
+    checks.append(Check.measure("refined_force", rf["force_rel_weight"].max(), lim.refine_force, "BW",
+                                f"root residual force on a spline at {lim.refine}× the frame rate"))
+    checks.append(Check.measure("refined_moment", rf["moment_rel_weight_leg"].max(), lim.refine_moment, "BW·leg",
+                                f"root residual moment on a spline at {lim.refine}× the frame rate"))
     feet = len(motion.character.feet) == 2
     to = torsion(motion, mu, weight, lim) if feet else None
     if to is None:
         out["notes"].append("the character has no foot boxes: torsional friction and foot spin not checked")
     else:
-        checks["torsional_friction"] = check_item(to["max_excess_rel_weight_m"], lim.torsion_tol, "BW·m",
-                                             f"free moment beyond μ·ρ·f_z (ρ = foot length × {lim.torsion_radius:g})")
-        checks["free_moment"] = check_item(to["max_free_moment_rel_weight_m"], lim.torsion_abs, "BW·m",
-                                      "largest free moment at a centre of pressure")
-        checks["unloaded_foot_moment"] = check_item(to["max_unloaded_moment_Nm"] / weight,
-                                               to["moment_room_m"] * lim.unloaded, "BW·m",
-                                               f"moment about its centre of a foot carrying < {lim.unloaded:g} BW")
+        checks.append(Check.measure("torsional_friction", to["max_excess_rel_weight_m"], lim.torsion_tol, "BW·m",
+                                    f"free moment beyond μ·ρ·f_z (ρ = foot length × {lim.torsion_radius:g})"))
+        checks.append(Check.measure("free_moment", to["max_free_moment_rel_weight_m"], lim.torsion_abs, "BW·m",
+                                    "largest free moment at a centre of pressure"))
+        checks.append(Check.measure("unloaded_foot_moment", to["max_unloaded_moment_Nm"] / weight,
+                                    to["moment_room_m"] * lim.unloaded, "BW·m",
+                                    f"moment about its centre of a foot carrying < {lim.unloaded:g} BW"))
         sp = foot_spin(motion, weight, lim)
-        checks["foot_spin"] = check_item(sp["max_turn_deg_per_s"], lim.spin_rate, "deg/s",
-                                    f"turn about the normal of a foot loaded > {lim.spin_load:g} BW at both frames")
+        checks.append(Check.measure("foot_spin", sp["max_turn_deg_per_s"], lim.spin_rate, "deg/s",
+                                    f"turn about the normal of a foot loaded > {lim.spin_load:g} BW at both frames"))
     W, idx = frame_wrenches(motion, cyc)
     F = W[:, 3:].sum(axis=0)
-    checks["total_ground_force"] = check_item(np.linalg.norm(F, axis=0).max() / weight, lim.total_force, "BW",
-                                         "largest total ground force")
+    checks.append(Check.measure("total_ground_force", np.linalg.norm(F, axis=0).max() / weight, lim.total_force, "BW",
+                                "largest total ground force"))
     rate = np.linalg.norm(np.diff(F, axis=1), axis=0).max() / weight * motion.fps if F.shape[1] > 1 else 0.0
-    checks["ground_force_rate"] = check_item(rate, lim.force_rate, "BW/s",
-                                        "largest change of the total ground force between adjacent frames")
+    checks.append(Check.measure("ground_force_rate", rate, lim.force_rate, "BW/s",
+                                "largest change of the total ground force between adjacent frames"))
     want, source = requested_heading(motion)
     if cyc is not None and want is not None:
         got = math.degrees(cyc.dpsi)
-        checks["heading"] = check_item(abs(got - want), lim.heading_deg, "deg",
-                                  f"heading change over the cycle {got:.2f}° vs {want:.2f}° requested ({source})")
+        checks.append(Check.measure("heading", abs(got - want), lim.heading_deg, "deg",
+                                    f"heading change over the cycle {got:.2f}° vs {want:.2f}° requested ({source})"))
     elif want is not None:
         out["notes"].append("heading change not checked: the motion is not cyclic")
     else:
@@ -473,12 +467,11 @@ def realism_report(motion: Motion, gravity: Any, mu: float, weight: float, leg: 
     hinge = [i for i, kd in enumerate(motion.character.dof_kinds) if kd == "hinge"]
     speeds = np.degrees(np.abs(rf["refined"]["qd"][hinge])).max(axis=1)
     fast = int(np.argmax(speeds))
-    checks["joint_speed"] = check_item(speeds[fast], lim.joint_speed, "deg/s",
-                                  f"fastest coordinate ({motion.coordinate_names[hinge[fast]]}) on the spline",
-                                  warning=True)
-    checks["root_height"] = check_item(motion.q[2].min() / leg, lim.root_height, "leg", "lowest root height",
-                                  warning=True, at_least=True)
-    out["checks"] = checks
+    checks.append(Check.measure("joint_speed", speeds[fast], lim.joint_speed, "deg/s",
+                                f"fastest coordinate ({motion.coordinate_names[hinge[fast]]}) on the spline",
+                                warning=True))
+    checks.append(Check.measure("root_height", motion.q[2].min() / leg, lim.root_height, "leg", "lowest root height",
+                                warning=True, at_least=True))
     out["figures"] = {
         "newton": {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in ne.items()},
         "refinement": {"factor": lim.refine, "worst_force_time_frames": rf["worst_force_time_frames"],
@@ -488,17 +481,5 @@ def realism_report(motion: Motion, gravity: Any, mu: float, weight: float, leg: 
         "ground_force_rel_weight": (np.linalg.norm(F, axis=0) / weight).tolist(),
         "joint_speed_deg_s": dict(zip([motion.coordinate_names[i] for i in hinge], speeds.tolist())),
     }
-    out.update(verdict(checks))
     out["time_s"] = time.perf_counter() - t0
-    return out
-
-
-def problem_lines(rep: Mapping[str, Any], section: str = "realism") -> list[str]:
-    """One line per failed check or warning of a report section: name, figure, limit."""
-    out = []
-    for name, c in (rep.get("checks") or {}).items():
-        if not c["passed"]:
-            rel = "<" if c.get("bound") == "min" else ">"
-            out.append(f"{section} {c['severity']}: {name} {c['value']:.3g} {c['unit']} {rel} limit "
-                       f"{c['limit']:.3g} ({c['what']})")
-    return out
+    return SectionResult(tuple(checks), out)

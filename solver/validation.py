@@ -3,8 +3,8 @@
 ``solver.plausibility.report`` computes our checks (root residual, contacts, friction, realism,
 naturalness). Replays with independent physics plug in through the entry-point group
 ``motionx.replay`` (``pyproject.toml``): ``mjcf`` registers the MuJoCo inverse-dynamics replay
-(``mjcf.validate.validate``), which extends our report with its ``mujoco_replay`` section, so
-this package reaches MuJoCo without importing ``mjcf`` (which imports it).
+(``mjcf.validate.validate``), whose ``mujoco_replay`` check section (``solver.checks``) our
+report then runs too, so this package reaches MuJoCo without importing ``mjcf`` (which imports it).
 """
 
 from __future__ import annotations

@@ -51,7 +51,8 @@ def loads(weight: float, right: list[float], left: list[float], fx: tuple[float,
 
 
 def checks(ch, q, A, F=None, gravity=(0.0, 0.0, -9.81)) -> dict:
-    return checks_of(gait_figures(ch, q, FPS, A, forces=F, gravity=gravity))
+    """The checks as the report's JSON holds them (name → figure, limit, passed, ...)."""
+    return {k: c.to_dict() for k, c in checks_of(gait_figures(ch, q, FPS, A, forces=F, gravity=gravity)).items()}
 
 
 # --- each check on a known answer ------------------------------------------------------------------
@@ -156,11 +157,11 @@ def test_trunk_leaning_back_uphill_against_the_tutor_fails_by_the_slope_angle():
     fig = gait_figures(ch, q, FPS, A, gravity=g)
     assert fig["slope_along_deg"] == pytest.approx(10.0) and fig["trunk_lean_deg"]["mean"] == pytest.approx(-10.0)
     c = checks_of(fig, reference={"tutor": tutor})["trunk_lean"]
-    assert c["value"] == pytest.approx(10.0) and not c["passed"]
+    assert c.value == pytest.approx(10.0) and not c.passed
     q2 = q.copy()
     q2[4] = math.radians(12.0)  # the pelvis pitched forward 12°: leaning 2° forward against gravity
     c = checks_of(gait_figures(ch, q2, FPS, A, gravity=g), reference={"tutor": tutor})["trunk_lean"]
-    assert c["value"] == pytest.approx(-2.0) and c["passed"]
+    assert c.value == pytest.approx(-2.0) and c.passed
 
 
 def test_the_capture_figures_stand_beside_each_check():
@@ -169,8 +170,8 @@ def test_the_capture_figures_stand_beside_each_check():
     capture = gait_figures(ch, q, FPS, A)  # its swing foot drags too
     ch, q2, _ = stand(speed=1.0, lift=0.01)
     c = checks_of(gait_figures(ch, q2, FPS, A), reference={"capture": capture})["swing_clearance"]
-    assert c["capture"] == pytest.approx(0.0, abs=1e-9) and c["capture_passed"] is False and c["passed"]
-    assert "Begg" in c["source"]
+    assert c.capture == pytest.approx(0.0, abs=1e-9) and c.capture_passed is False and c.passed
+    assert c.source is not None and "Begg" in c.source
 
 
 # --- a real tutor ---------------------------------------------------------------------------------------

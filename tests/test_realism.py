@@ -393,3 +393,18 @@ def test_optimizer_bounds_lie_strictly_inside_the_checks_limits():
     assert 2.9 < moved.support_max < 3.0 and 50.0 < moved.spin_rate_deg_s < 100.0
     closer = Naturalness.from_limits(replace(nl, crossover_m=0.05, friction_use=0.8))
     assert 0.03 < closer.crossover_m < 0.05 and 0.7 < closer.friction_use < 0.8
+
+
+def test_the_report_runs_the_registered_check_sections():
+    """The report's sections are the registered ones (solver.checks): realism and naturalness
+    always, the MuJoCo replay when its caller includes it; an unknown section is refused."""
+    import mjcf.validate  # noqa: F401  (registers the MuJoCo replay's section)
+    from solver.checks import Check, sections
+
+    assert [s.name for s in sections()] == ["realism", "naturalness"]
+    assert [s.name for s in sections(("mujoco_replay",))] == ["realism", "naturalness", "mujoco_replay"]
+    with pytest.raises(ValueError, match="unknown check section"):
+        sections(("forward_simulation",))
+    low = Check.measure("root_height", 0.4, 0.5, "leg", "lowest root height", warning=True, at_least=True)
+    assert not low.passed and not low.failed and low.to_dict()["bound"] == "min"
+    assert Check.measure("x", 2.0, 1.0, "BW", "x", applies=False).passed
