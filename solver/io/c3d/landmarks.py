@@ -12,6 +12,7 @@ import numpy as np
 from solver.filtering import zero_phase_lowpass
 from solver.io.c3d.markers import _Markers
 from solver.io.c3d.reader import SIDES, C3DError, SubjectParams, _mid, _perp, _rigid_fill, _unit, fill_gaps
+from solver.io.track import add_pelvis
 
 log = logging.getLogger("solver.io.c3d")
 
@@ -91,19 +92,9 @@ def _landmarks(mk: _Markers, R: np.ndarray, floor: float, sp: SubjectParams, hei
     H = sp.height or height_est
     # --- pelvis -------------------------------------------------------------------------
     rasi, lasi = need("ASI", "R"), need("ASI", "L")
-    rpsi, lpsi = marker("PSI", "R", required=False), marker("PSI", "L", required=False)
-    if rpsi is not None and lpsi is not None:
-        mpsi = _mid(rpsi, lpsi)
-    else:
-        sacr = marker("SACR", None, required=False)
-        if sacr is None:
-            raise C3DError(mk.missing_message([k for k, x in (("RPSI", rpsi), ("LPSI", lpsi)) if x is None]
-                                              + ["SACR"]))
-        mpsi = sacr
+    mpsi = _back_of_pelvis(marker, mk)
     masi = _mid(lasi, rasi)
-    py = _unit(lasi - rasi)
-    px = _unit(_perp(masi - mpsi, py))
-    pz = np.cross(px, py, axis=0)
+    px, py, pz = _pelvis_axes(rasi, lasi, mpsi)
     inter_asis = sp.inter_asis or float(np.median(np.linalg.norm(lasi - rasi, axis=0)))
     lm: dict[str, np.ndarray] = {}
     ori: dict[str, np.ndarray] = {}
@@ -117,23 +108,11 @@ def _landmarks(mk: _Markers, R: np.ndarray, floor: float, sp: SubjectParams, hei
         kne = need("KNE", S)
         ank = need("ANK", S)
         asi = lasi if s == "l" else rasi
-        leg_param = sp.leg_length[s]
-        if leg_param is not None:
-            leg = leg_param
-        else:
+        leg = sp.leg_length[s]
+        if leg is None:
             leg = float(np.median(np.linalg.norm(asi - kne, axis=0) + np.linalg.norm(kne - ank, axis=0)))
             notes.append(f"{S} leg length estimated from markers: {leg:.3f} m")
-        # Davis (1991) / Newington hip joint centre in the pelvis frame (mm in the regression)
-        Lmm = leg * 1000.0
-        asis_troch = sp.asis_trochanter[s]
-        xdis = (asis_troch * 1000.0) if asis_troch else 0.1288 * Lmm - 48.56
-        C = 0.115 * Lmm - 15.3
-        theta, beta = 0.5, 0.314
-        mm = mr * 1000.0
-        hx = C * math.cos(theta) * math.sin(beta) - (xdis + mm) * math.cos(beta)
-        hy = sgn * (inter_asis * 500.0 - C * math.sin(theta))
-        hz = -C * math.cos(theta) * math.cos(beta) - (xdis + mm) * math.sin(beta)
-        hip = masi + (px * hx + py * hy + pz * hz) / 1000.0
+        hip = _hip_centre(leg, sp.asis_trochanter[s], mr, sgn, inter_asis, masi, (px, py, pz))
         lm[f"hip_{s}"] = hip
         medial_dir = -sgn * py  # towards the body's midline
         def centre(lateral: np.ndarray, medial_role: str, wand_role: str, width: float | None, frac: float,
@@ -167,29 +146,12 @@ def _landmarks(mk: _Markers, R: np.ndarray, floor: float, sp: SubjectParams, hei
             if mt1 is None or mt5 is None:
                 raise C3DError(f"{name}: required marker {S}TOE (or {S}MT1 and {S}MT5) not found")
             toe_m = _mid(mt1, mt5)
-        f_raw = toe_m - hee
-        u = _unit(_perp(ankle - hee, _unit(f_raw)))  # foot up, ⟂ heel-toe line
-        f = _unit(_perp(f_raw, u))
-        h_heel = float(np.percentile(hee[2], 5))
-        h_toe = float(np.percentile(toe_m[2], 5))
-        mtp_h = 0.01 * H  # metatarsal heads above the sole (as the capture character)
-        heel = hee - u * h_heel
-        mtp = toe_m - u * max(h_toe - mtp_h, 0.0)
-        toes_len = float(np.median(np.sum((mtp - heel) * f, axis=0))) / 3.0  # heel-mtp : mtp-tip = 3 : 1
-        lm[f"heel_{s}"] = heel
-        lm[f"mtp_{s}"] = mtp
-        lm[f"toe_{s}"] = _toe_tip(mtp, f, u, toes_len, mtp_h)
+        lm[f"heel_{s}"], lm[f"mtp_{s}"], lm[f"toe_{s}"], f, u = _sole(hee, toe_m, ankle, 0.01 * H)
         # segment orientations (x forward, y left, z up in the neutral pose)
-        ky = (knee - kne) if s == "r" else (kne - knee)
-        tz = _unit(hip - knee)
-        ty = _unit(_perp(ky, tz))
-        ori[f"thigh_{s}"] = np.stack([np.cross(ty, tz, axis=0), ty, tz], axis=1)
-        ay = (ankle - ank) if s == "r" else (ank - ankle)
-        sz = _unit(knee - ankle)
-        sy = _unit(_perp(ay, sz))
-        ori[f"shank_{s}"] = np.stack([np.cross(sy, sz, axis=0), sy, sz], axis=1)
+        ori[f"thigh_{s}"] = _long_bone_frame(hip, knee, kne, s)
+        ori[f"shank_{s}"] = _long_bone_frame(knee, ankle, ank, s)
         ori[f"foot_{s}"] = np.stack([f, np.cross(u, f, axis=0), u], axis=1)
-    lm["pelvis"] = _mid(lm["hip_r"], lm["hip_l"])
+    add_pelvis(lm)
     # --- upper body: markers where there are some, modelled elsewhere ---------------------------
     how: dict[str, str] = {}
     if upper != "none":
@@ -201,6 +163,68 @@ def _landmarks(mk: _Markers, R: np.ndarray, floor: float, sp: SubjectParams, hei
             notes.append("upper body " + "; ".join(modelled))
             log.info("%s: upper body %s", name, "; ".join(modelled))
     return _Built(lm, ori, notes, used, how)
+
+
+def _back_of_pelvis(marker: Callable[..., np.ndarray | None], mk: _Markers) -> np.ndarray:
+    """The mid-point of the posterior superior iliac spines, else the sacral marker (a
+    C3DError naming both when neither is there)."""
+    rpsi, lpsi = marker("PSI", "R", required=False), marker("PSI", "L", required=False)
+    if rpsi is not None and lpsi is not None:
+        return _mid(rpsi, lpsi)
+    sacr = marker("SACR", None, required=False)
+    if sacr is None:
+        raise C3DError(mk.missing_message([k for k, x in (("RPSI", rpsi), ("LPSI", lpsi)) if x is None] + ["SACR"]))
+    return sacr
+
+
+def _pelvis_axes(rasi: np.ndarray, lasi: np.ndarray, mpsi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The pelvis' forward, left and up axes: left along the ASIS line, forward from the
+    mid-PSIS (or sacrum) towards the mid-ASIS."""
+    py = _unit(lasi - rasi)
+    px = _unit(_perp(_mid(lasi, rasi) - mpsi, py))
+    return px, py, np.cross(px, py, axis=0)
+
+
+def _long_bone_frame(proximal: np.ndarray, distal: np.ndarray, lateral: np.ndarray, side: str) -> np.ndarray:
+    """A thigh's or shank's orientation (3, 3, T), x forward, y left, z up in the neutral pose:
+    z from the distal joint centre to the proximal one, y along the lateral marker's offset
+    from the distal centre (pointing left)."""
+    y = (distal - lateral) if side == "r" else (lateral - distal)
+    z = _unit(proximal - distal)
+    y = _unit(_perp(y, z))
+    return np.stack([np.cross(y, z, axis=0), y, z], axis=1)
+
+
+def _hip_centre(leg: float, asis_troch: float | None, mr: float, sgn: float, inter_asis: float, masi: np.ndarray,
+                axes: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:
+    """Davis (1991) / Newington hip joint centre (the regression in mm), from the pelvis frame
+    (origin mid-ASIS, axes px, py, pz); ``sgn`` +1 left, -1 right."""
+    px, py, pz = axes
+    Lmm = leg * 1000.0
+    xdis = (asis_troch * 1000.0) if asis_troch else 0.1288 * Lmm - 48.56
+    C = 0.115 * Lmm - 15.3
+    theta, beta = 0.5, 0.314
+    mm = mr * 1000.0
+    hx = C * math.cos(theta) * math.sin(beta) - (xdis + mm) * math.cos(beta)
+    hy = sgn * (inter_asis * 500.0 - C * math.sin(theta))
+    hz = -C * math.cos(theta) * math.cos(beta) - (xdis + mm) * math.sin(beta)
+    return masi + (px * hx + py * hy + pz * hz) / 1000.0
+
+
+def _sole(hee: np.ndarray, toe_m: np.ndarray, ankle: np.ndarray, mtp_h: float):
+    """Heel, metatarsal heads and toe tip on the sole, and the foot's forward and up axes: heel
+    and toe markers sit at the same height above the sole (PiG), the toe marker on the 2nd
+    metatarsal head; the sole is their height during stance, the metatarsal heads ``mtp_h``
+    above it (as the capture character)."""
+    f_raw = toe_m - hee
+    u = _unit(_perp(ankle - hee, _unit(f_raw)))  # foot up, ⟂ heel-toe line
+    f = _unit(_perp(f_raw, u))
+    h_heel = float(np.percentile(hee[2], 5))
+    h_toe = float(np.percentile(toe_m[2], 5))
+    heel = hee - u * h_heel
+    mtp = toe_m - u * max(h_toe - mtp_h, 0.0)
+    toes_len = float(np.median(np.sum((mtp - heel) * f, axis=0))) / 3.0  # heel-mtp : mtp-tip = 3 : 1
+    return heel, mtp, _toe_tip(mtp, f, u, toes_len, mtp_h), f, u
 
 
 def _toe_tip(mtp: np.ndarray, f: np.ndarray, u: np.ndarray, length: float, mtp_h: float) -> np.ndarray:
