@@ -272,7 +272,7 @@ class _Walk:
         return ""
 
     def finish(self, status: str, lam: float, message: str = "") -> ExtrapolationResult:
-        return ExtrapolationResult(status, float(lam), tuple(self.steps), tuple(self.records), self.solves,
+        return ExtrapolationResult(Status(status), float(lam), tuple(self.steps), tuple(self.records), self.solves,
                                    time.perf_counter() - self.t0, message, self.target)
 
     def solve(self, lam: float, init: tuple[np.ndarray, np.ndarray | None], warm_from: SolveResult | None,

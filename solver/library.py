@@ -352,7 +352,7 @@ def solve_library(tutor, cells: Sequence[Cell], control=None, *,
             res = extrapolate(tutor, Target(**cell.target_kwargs()), ctl, start=start, on_step=on_step,
                               should_cancel=should_cancel,
                               on_progress=functools.partial(on_progress, cell) if on_progress else None)
-        status = "canceled" if cancelled or res is None else res.status
+        status = Status.CANCELED if cancelled or res is None else res.status
         lam = (ws.lam if ws else 0.0) if res is None else max(res.lam_reached, ws.lam if ws else 0.0)
         kept = last_realistic(steps)
         motion = kept[1] if kept else None
