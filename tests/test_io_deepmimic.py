@@ -5,9 +5,9 @@ import json
 import numpy as np
 import pytest
 
+from solver.gait import detect_contacts, extract_cycle, gait_events
 from solver.io import load_trial
 from solver.io.deepmimic import DeepMimicError, deepmimic_track, load_deepmimic
-from solver.io.preprocess import detect_contacts, extract_cycle, gait_events
 from solver.kinematics import contact_points, points_world
 
 DM = "deepmimic_humanoid3d_walk"

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
+from solver.gait import detect_contacts, gait_events
 from solver.io import load_trial
 from solver.io.opensim import C_OSIM, OpenSimError, load_opensim, read_mot, read_opensim_grf
-from solver.io.preprocess import detect_contacts, gait_events
 from solver.kinematics import contact_points, points_world
 
 LW = "opensim_loadedwalking_subject05"

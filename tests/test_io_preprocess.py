@@ -3,10 +3,8 @@
 import numpy as np
 import pytest
 
-from solver.io.deepmimic import load_deepmimic
-from solver.io.opensim import load_opensim
-from solver.io.preprocess import (
-    PreprocessError,
+from solver.gait import (
+    GaitError,
     contacts_from_plates,
     detect_contacts,
     extract_cycle,
@@ -14,6 +12,8 @@ from solver.io.preprocess import (
     resample,
     unroll_loop,
 )
+from solver.io.deepmimic import load_deepmimic
+from solver.io.opensim import load_opensim
 
 TM = "opensim_gait2354_subject01_treadmill"
 
@@ -63,9 +63,9 @@ def test_lowpass_is_zero_phase():
     assert np.abs(lowpass(fast, fps, 6.0)[mid]).max() < 0.01  # stopband removed
     two = lowpass(np.stack([slow, 2 * slow]), fps, 6.0)
     assert two.shape == (2, 400) and np.allclose(two[1], 2 * two[0])
-    with pytest.raises(PreprocessError, match="fps/2"):
+    with pytest.raises(GaitError, match="fps/2"):
         lowpass(slow, fps, 60.0)
-    with pytest.raises(PreprocessError, match="NaN"):
+    with pytest.raises(GaitError, match="NaN"):
         lowpass(np.r_[slow[:-1], np.nan], fps, 6.0)
 
 
@@ -110,11 +110,11 @@ def test_unroll_loop(deepmimic):
 
 def test_cycle_errors(treadmill, deepmimic):
     short = treadmill.evolve(q=treadmill.q[:, :50], times=treadmill.times[:50], measured=None, contacts=None)
-    with pytest.raises(PreprocessError, match="too short for a gait cycle"):
+    with pytest.raises(GaitError, match="too short for a gait cycle"):
         extract_cycle(short)
     lifted = np.array(treadmill.q)
     lifted[treadmill.character.index("root_tz")] += 0.4
-    with pytest.raises(PreprocessError, match="never touches the ground"):
+    with pytest.raises(GaitError, match="never touches the ground"):
         detect_contacts(treadmill.character, lifted, treadmill.fps)
     T = treadmill.T
     run = np.zeros((4, T), dtype=bool)  # a run: never both feet down
@@ -123,16 +123,16 @@ def test_cycle_errors(treadmill, deepmimic):
         ph = k % period
         run[0:2, k] = ph < 14
         run[2:4, k] = 20 <= ph < 34
-    with pytest.raises(PreprocessError, match="no double support"):
+    with pytest.raises(GaitError, match="no double support"):
         extract_cycle(treadmill, contacts=run)
     stand = np.ones((4, T), dtype=bool)
-    with pytest.raises(PreprocessError, match="no right heel strike"):
+    with pytest.raises(GaitError, match="no right heel strike"):
         extract_cycle(treadmill, contacts=stand)
     swing = stand.copy()
     swing[2:] = False
-    with pytest.raises(PreprocessError, match="left foot is never on the ground"):
+    with pytest.raises(GaitError, match="left foot is never on the ground"):
         extract_cycle(treadmill, contacts=swing)
-    with pytest.raises(PreprocessError, match="start must be"):
+    with pytest.raises(GaitError, match="start must be"):
         extract_cycle(treadmill, start="toe_off")
-    with pytest.raises(PreprocessError, match="fps must be"):
+    with pytest.raises(GaitError, match="fps must be"):
         resample(treadmill, 0)

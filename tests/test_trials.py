@@ -161,8 +161,8 @@ def test_turning_clips_make_curved_tutors(tutors, shared_data, name, sign):
     """The spacetime problem's cyclic constraint lives in the walker's heading frame, so a cycle
     taken in a turn is a curved base motion: the tutor's heading changes over its cycle the way
     the capture's does, and its velocity comes back rotated by exactly that heading change."""
+    from solver.gait import extract_cycle
     from solver.io import load_trial
-    from solver.io.preprocess import extract_cycle
 
     r, out = tutors(name)
     assert r.returncode == 0, r.stderr + r.stdout

@@ -85,7 +85,7 @@ def estimate_capture(
     ``method="qp"``, none with the nested reference form or without a filter; ``None`` = one
     QP per frame (the thesis). ``project_cop``: single-support CoPs outside the foot's
     contact polygon moved into it (default; ``False``: the foot takes c exactly, the thesis).
-    ``contacts``: ``"kinematics"`` (:func:`solver.io.preprocess.detect_contacts` on the
+    ``contacts``: ``"kinematics"`` (:func:`solver.gait.detect_contacts` on the
     filtered motion), ``"plates"`` (force-plate loading, kinematics where the plates are
     incomplete; needs ``capture.measured``), ``"auto"`` (the importer's schedule when it has
     one — from plates —, else the plates, else kinematics) or a (P, T) array.
@@ -108,7 +108,7 @@ def estimate_capture(
         cyclic = capture.source.get("loop") == "wrap"
     dt = np.diff(capture.times)
     if capture.T > 2 and np.max(np.abs(dt - np.median(dt))) > 0.01 * np.median(dt):
-        raise ContactError("the capture is not uniformly sampled; resample it first (solver.io.preprocess.resample)")
+        raise ContactError("the capture is not uniformly sampled; resample it first (solver.gait.resample)")
     qf = q if cutoff_hz is None else lowpass_kinematics(ch, q, fps, cutoff_hz, cyclic=cyclic)
     if isinstance(contacts, str):
         if contacts not in CONTACT_SOURCES:

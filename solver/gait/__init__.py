@@ -13,12 +13,11 @@
     belt_speed(times, feet, *, stance=None) -> m/s                        (solver.gait.belt)
     unwrap_hinges(character, q) -> q with continuous hinge angles         (solver.gait.base)
 
-Every failure is a :class:`GaitError` (``PreprocessError``, its name in solver.io.preprocess,
-which re-exports this package), an :class:`solver.errors.InputError`. The treadmill reader
+Every failure is a :class:`GaitError`, an :class:`solver.errors.InputError`. The treadmill reader
 (solver/io/opensim/treadmill.py) takes the belt speed from here and shifts its marker track.
 """
 
-from solver.gait.base import GaitError, PreprocessError, lowpass, resample, unwrap_hinges
+from solver.gait.base import GaitError, lowpass, resample, unwrap_hinges
 from solver.gait.belt import belt_speed
 from solver.gait.contacts import contacts_from_plates, detect_contacts, ensure_double_support, gait_events
 from solver.gait.cycles import LOOP_PERIOD_S, extract_cycle, unroll_loop
@@ -26,7 +25,6 @@ from solver.gait.cycles import LOOP_PERIOD_S, extract_cycle, unroll_loop
 __all__ = [
     "LOOP_PERIOD_S",
     "GaitError",
-    "PreprocessError",
     "belt_speed",
     "contacts_from_plates",
     "detect_contacts",

@@ -20,9 +20,6 @@ class GaitError(InputError):
     message says why."""
 
 
-#: the name it had in solver.io.preprocess
-PreprocessError = GaitError
-
 
 def lowpass(x: np.ndarray, fps: float, cutoff_hz: float, *, order: int = 4, axis: int = -1) -> np.ndarray:
     """Zero-phase Butterworth low-pass (:func:`solver.filtering.zero_phase_lowpass`, scipy's
@@ -95,5 +92,3 @@ def resample(capture: Capture, fps: float) -> Capture:
     src["resampled_fps"] = float(fps)
     return capture.evolve(q=qn, times=tn, contacts=contacts, measured=measured, source=src)
 
-
-_unwrapped = unwrap_hinges  # the name solver.io.preprocess exported

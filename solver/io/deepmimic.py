@@ -36,7 +36,7 @@ thorax + clavicles (Winter ratios 0.139 : 0.196 : 0.01 : 0.01), neck -> head, hi
 knee -> shank, ankle -> foot + toes (0.8 : 0.2), shoulder -> upper arm, elbow -> forearm,
 wrist -> hand. Inertias: the capture skeleton's ellipsoids (DeepMimic gives shapes, not
 inertias). ``"Loop": "wrap"`` is recorded as ``capture.source["loop"]``, which
-:func:`solver.io.preprocess.extract_cycle` uses to unroll the clip.
+:func:`solver.gait.extract_cycle` uses to unroll the clip.
 """
 
 from __future__ import annotations

@@ -164,7 +164,7 @@ def mass_warning(mass: float | None, implied: ImpliedMass | float | None, *,
 
 
 def stride_from_events(events: dict[str, list[float]]) -> float | None:
-    """Median same-foot heel-strike interval (s) of ``solver.io.preprocess.gait_events``, or None."""
+    """Median same-foot heel-strike interval (s) of ``solver.gait.gait_events``, or None."""
     d = [b - a for side in ("right", "left") for a, b in zip(events.get(f"{side}_heel_strike", [])[:-1],
                                                             events.get(f"{side}_heel_strike", [])[1:])]
     return float(np.median(d)) if d else None
