@@ -247,10 +247,13 @@ def _run(db: Database, job_id: str, attempt: int, token: str, settings: Settings
         if tutor is None:
             from solver.pipeline import make_tutor  # lazy: the solver loads in the job's process, not the API's
 
-            res = make_tutor(motion, character=character, fps=fps)
+            # a cancel (or a lost lease) stops the tutor's solve at its next IPOPT iteration
+            res = make_tutor(motion, character=character, fps=fps, should_cancel=lambda: hb.cancel_requested or hb.lost)
             record("tutor", wall_time=time.monotonic() - t0, lam=0.0, lam_reached=0.0, environment={},
                    iterations=_tutor_iterations(res.stats), accepted=res.status == "succeeded",
                    status=f"tutor {res.status}")
+            if res.status == "canceled" and hb.cancel_requested:
+                return "canceled", f"tutor: {res.message}", {}
             if res.status != "succeeded" or res.motion is None:
                 return "failed", f"tutor: {res.message or res.status}", {}
             with hb.write_lock, db.write() as s:

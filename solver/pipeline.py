@@ -15,7 +15,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -33,6 +33,7 @@ from solver.motion import Motion, foot_schedule_of
 from solver.naturalness import against_plates, capture_figures, joint_rms_deg
 from solver.plausibility import report
 from solver.spacetime import Environment, SolveResult, SpacetimeProblem, Weights
+from solver.status import Status
 
 log = logging.getLogger(__name__)
 
@@ -124,25 +125,30 @@ def _select(src: Character, q: np.ndarray, dst: Character) -> np.ndarray:
 
 
 def simplify(capture_character: Character, q_capture: np.ndarray, synthesis: Character, fps: float,
-             *, weights: Weights = Weights(), max_iter: int = 500) -> SolveResult:
+             *, weights: Weights = Weights(), max_iter: int = 500,
+             should_cancel: Callable[[], bool] | None = None) -> SolveResult:
     """docs/method.md (M5.15), thesis Table 5.2: the synthesis character's motion closest to the capture's markers
-    (superfluous coordinates locked at 0 = removed), cyclic, no forces."""
+    (superfluous coordinates locked at 0 = removed), cyclic, no forces. ``should_cancel()`` is
+    polled at every IPOPT iteration (true: the solve ends with ``User_Requested_Stop``)."""
     T = q_capture.shape[1]
     problem = problem_for(synthesis, T, fps, None, dynamics=False)
     gm = markers(capture_character, q_capture).reshape(-1, T)
     init = _select(capture_character, q_capture, synthesis)
-    return problem.solve(None, guide_markers=gm, init_q=init, weights=weights, max_iter=max_iter)
+    return problem.solve(None, guide_markers=gm, init_q=init, weights=weights, max_iter=max_iter,
+                         should_stop=should_cancel)
 
 
 def correct(synthesis: Character, q_sim: np.ndarray, contacts: np.ndarray, fps: float, *,
             init_wrenches: np.ndarray | None, env: Environment = Environment(),
             weights: Weights = Weights(), max_iter: int = 1000, heading_change: float | None = None,
-            prior_q: np.ndarray | None = None) -> SolveResult:
+            prior_q: np.ndarray | None = None, should_cancel: Callable[[], bool] | None = None) -> SolveResult:
     """Table 5.3: physically plausible motion closest to the simplified one (the tutor);
-    ``prior_q``: the joint angles the coordinates prior keeps it near (default: the simplified's)."""
+    ``prior_q``: the joint angles the coordinates prior keeps it near (default: the simplified's);
+    ``should_cancel()``: polled at every IPOPT iteration, as in :func:`simplify`."""
     problem = problem_for(synthesis, q_sim.shape[1], fps, contacts)
     return problem.solve(q_sim, init_q=q_sim, init_wrenches=init_wrenches, env=env, weights=weights,
-                         max_iter=max_iter, heading_change=heading_change, prior_q=prior_q)
+                         max_iter=max_iter, heading_change=heading_change, prior_q=prior_q,
+                         should_stop=should_cancel)
 
 
 def heading_change_to_impose(q_capture: np.ndarray, q_simplified: np.ndarray) -> float:
@@ -270,14 +276,27 @@ def make_tutor(
     start: str = "auto",
     max_iter: int = 1000,
     weights: Weights = Weights(),
+    should_cancel: Callable[[], bool] | None = None,
 ) -> TutorResult:
     """import → cycle → simplify → estimate → correct. ``source`` is a Capture, or a motion of
-    step "capture" (e.g. stored by the service); ``weights``: the correction's cost weights."""
+    step "capture" (e.g. stored by the service); ``weights``: the correction's cost weights.
+    ``should_cancel()`` is polled between the phases and at every IPOPT iteration: once true, the
+    running solve stops at its next iteration and the result is "canceled" (no retry)."""
     t_start = time.perf_counter()
+
+    def canceled(stats: Mapping[str, Any], phase: str, solved: SolveResult | None = None) -> TutorResult | None:
+        """A canceled result when ``should_cancel()`` is true: "canceled before|during|after <phase>"."""
+        if should_cancel is None or not should_cancel():
+            return None
+        when = "before" if solved is None else "during" if solved.status == "User_Requested_Stop" else "after"
+        return TutorResult(Status.CANCELED, None, f"canceled {when} the {phase}", jsonable(stats))
+
     capture = motion_capture(source) if isinstance(source, Motion) else source
     if not (math.isfinite(fps) and fps > 0):
         raise PipelineError(f"fps must be positive, got {fps}")
     stats: dict[str, Any] = {}
+    if stop := canceled(stats, "simplification"):
+        return stop
     t = time.perf_counter()
     cyc, contacts = extract_cycle(capture, fps, start=start, cycle=cycle)
     contacts = np.array(contacts, dtype=bool)
@@ -296,9 +315,11 @@ def make_tutor(
         stats["double_support_added"] = shared
 
     t = time.perf_counter()
-    simp = simplify(cap_char, q_cap, syn, fps, weights=weights)
+    simp = simplify(cap_char, q_cap, syn, fps, weights=weights, should_cancel=should_cancel)
     stats["simplify"] = {"status": simp.status, "iterations": simp.iterations, "time_s": time.perf_counter() - t,
                          "marker_rms_mm": 1e3 * simp.marker_rms}
+    if stop := canceled(stats, "simplification", simp):
+        return stop
     if not simp.success:
         return TutorResult("failed", None, f"simplification did not converge ({simp.status})", jsonable(stats),
                            last_iterate={"q": simp.q})
@@ -311,6 +332,8 @@ def make_tutor(
         log.warning("contact estimation failed (%s); correcting from zero wrenches", e)
         w0, est_summary = None, {"error": str(e)}
     stats["estimate"] = {"time_s": time.perf_counter() - t, **est_summary}
+    if stop := canceled(stats, "correction"):
+        return stop
 
     t = time.perf_counter()
     env = Environment()
@@ -321,15 +344,20 @@ def make_tutor(
                                    "tutor": math.degrees(dpsi)}
     q_joints = _select(cap_char, q_cap, syn)  # the capture's own angles: what the tutor keeps of its details
     res = correct(syn, q_sim, contacts, fps, init_wrenches=w0, env=env, max_iter=max_iter, heading_change=dpsi,
-                  weights=weights, prior_q=q_joints)
+                  weights=weights, prior_q=q_joints, should_cancel=should_cancel)
     attempts.append({"init": "estimated wrenches", "status": res.status, "iterations": res.iterations,
                      "time_s": res.wall_time})
     if not res.success:
+        stats["correct"] = {"time_s": time.perf_counter() - t, "attempts": attempts}
+        if stop := canceled(stats, "correction", res):  # no second attempt
+            return stop
         res2 = correct(syn, q_sim, contacts, fps, init_wrenches=None, env=env, max_iter=max_iter,
-                       heading_change=dpsi, weights=weights, prior_q=q_joints)
+                       heading_change=dpsi, weights=weights, prior_q=q_joints, should_cancel=should_cancel)
         attempts.append({"init": "zero wrenches", "status": res2.status, "iterations": res2.iterations,
                          "time_s": res2.wall_time})
         res = res2 if res2.success else res
+        if not res.success and (stop := canceled(stats, "correction", res2)):
+            return stop
     stats["correct"] = {"time_s": time.perf_counter() - t, "attempts": attempts,
                         "problem": {"variables": res.stats.get("n_variables"),
                                     "constraints": res.stats.get("n_constraints"),

@@ -12,8 +12,10 @@ downloads into ``--out``, per job: every
 ``library/manifest.json`` and ``library/library.glb`` (one looping animation per cell;
 ``--no-library`` skips it); then prints a short summary.
 
-The service is stopped (its whole process group, waited for) when the demo ends, fails, or
-receives Ctrl-C or SIGTERM; the temporary data directory is removed unless ``--keep-temp``.
+Ctrl-C or SIGTERM while the jobs run cancels them (each stops at its next IPOPT iteration),
+downloads what they reached into ``--out`` with ``summary.json`` saying "canceled", and exits
+130 (143). The service is stopped (its whole process group, waited for) when the demo ends,
+fails, or receives Ctrl-C or SIGTERM; the temporary data directory is removed unless ``--keep-temp``.
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from service import examples
-from service.cli import CliError, Terminated, add_command, stop_on_signals
+from service.cli import CliError, Terminated, add_command, cancel_on_signals, stop_on_signals
 from service.commands.outputs import progress_csv, step_stem, written_here
 from service.topology import Proc, TopologyError, free_port, motionx_cmd, wait_api
 
@@ -43,6 +45,11 @@ DEMO_TRIAL = ("deepmimic_humanoid3d_walk", ("humanoid3d_walk.txt", "humanoid3d_c
 JOB_NAMES = ("downhill", "uphill", "curve", "stairs")
 #: without a terminal, a running job's progress line is repeated this often (its clock moves)
 LOG_EVERY_S = 5.0
+#: after Ctrl-C or SIGTERM, how long the canceled jobs are given to stop (each stops at its next
+#: IPOPT iteration) before what they reached is downloaded
+CANCEL_GRACE_S = 60.0
+#: a summary's status from its jobs' and library's: the first of these found, else succeeded
+WORST_FIRST = ("canceled", "failed", "impasse")
 
 
 def _default_trial() -> list[Path]:
@@ -154,34 +161,14 @@ def _run(args, files: list[Path], jobs: list[_Job], out: Path, server: Proc, bas
         raise CliError(f"the service did not start (see {out / 'server.log'}): {str(e)[:500]}") from None
     with httpx.Client(base_url=base, headers={"X-API-Key": key}, timeout=120.0) as http:
         print(f"[demo] service up at {base} (SQLite in {data_dir}, local runner)", flush=True)
-        up = http.post("/motions", files=[("files", (f.name, f.read_bytes())) for f in files],
-                       data={"name": "demo capture", **({"mass": str(args.mass)} if args.mass else {})})
-        _check(up, 201, "upload")
-        motion = up.json()
-        print(f"[demo] uploaded {', '.join(f.name for f in files)} -> motion {motion['id']} "
-              f"({motion['kind']}, {motion['frames']} frames)")
-        tutor = {"character": args.character, "fps": args.fps}
-        for j in jobs:
-            r = http.post(f"/motions/{motion['id']}/extrapolate", json={"target": j.target, "tutor": tutor},
-                          headers={"Idempotency-Key": f"{key}-{j.name}"})
-            _check(r, 202, f"extrapolate ({j.name})")
-            j.url = r.headers["Location"]
-            j.seen(r.json())
-            print(f"[demo] job {j.name}: {j.target} queued at {j.url}")
-        # the library's cells queue behind the jobs: a worker freed by a short job takes a cell
-        library = _queue_library(http, motion["id"], tutor) if args.library else None
-        _follow(http, jobs, deadline=time.monotonic() + args.timeout)
-        summary = {"input": [f.name for f in files], "character": args.character, "fps": args.fps,
-                   "jobs": [_download(http, j, out / j.name) for j in jobs]}
-        if library is not None:
-            summary["library"] = _library(http, library, out / "library", t0,
-                                          deadline=time.monotonic() + args.timeout)
-        summary["wall_time_s"] = round(time.perf_counter() - t0, 2)
-        (out / "summary.json").write_text(json.dumps(summary, indent=2))
-        _print_summary(summary, out)
-        ok = all(j["status"] in ("succeeded", "impasse") for j in summary["jobs"])
-        if "library" in summary:
-            ok = ok and summary["library"]["status"] in ("succeeded", "impasse")
+        # from here Ctrl-C or SIGTERM cancels the jobs (each stops at its next IPOPT iteration) and
+        # what they reached is downloaded into --out, summary.json saying "canceled"
+        with cancel_on_signals() as cancel:
+            summary = _work(args, http, files, jobs, out, key, t0, cancel)
+        if cancel.exit_status is not None:
+            print(f"[demo] {cancel.reason}: stopped; what the jobs reached is in {out}/ (summary.json)", flush=True)
+            return cancel.exit_status
+        ok = summary["status"] in ("succeeded", "impasse")
         if args.serve:
             print(f"[demo] the web page: {base}/ui/#key={key}  (Ctrl-C or SIGTERM stops the service)", flush=True)
             try:
@@ -192,6 +179,47 @@ def _run(args, files: list[Path], jobs: list[_Job], out: Path, server: Proc, bas
             except (KeyboardInterrupt, Terminated):
                 print("[demo] stopping the service", flush=True)
         return 0 if ok else 1
+
+
+def _work(args, http, files: list[Path], jobs: list[_Job], out: Path, key: str, t0: float, cancel) -> dict:
+    """Upload, queue the jobs and the library, follow them and download what they reached into
+    ``out``; ``cancel()`` true (Ctrl-C, SIGTERM): nothing more is queued, the unfinished jobs are
+    canceled, and what they reached is downloaded. Returns the summary it writes."""
+    up = http.post("/motions", files=[("files", (f.name, f.read_bytes())) for f in files],
+                   data={"name": "demo capture", **({"mass": str(args.mass)} if args.mass else {})})
+    _check(up, 201, "upload")
+    motion = up.json()
+    print(f"[demo] uploaded {', '.join(f.name for f in files)} -> motion {motion['id']} "
+          f"({motion['kind']}, {motion['frames']} frames)")
+    tutor = {"character": args.character, "fps": args.fps}
+    for j in jobs:
+        if cancel():
+            break
+        r = http.post(f"/motions/{motion['id']}/extrapolate", json={"target": j.target, "tutor": tutor},
+                      headers={"Idempotency-Key": f"{key}-{j.name}"})
+        _check(r, 202, f"extrapolate ({j.name})")
+        j.url = r.headers["Location"]
+        j.seen(r.json())
+        print(f"[demo] job {j.name}: {j.target} queued at {j.url}")
+    # the library's cells queue behind the jobs: a worker freed by a short job takes a cell
+    library = _queue_library(http, motion["id"], tutor) if args.library and not cancel() else None
+    queued = [j for j in jobs if j.url]
+    _follow(http, queued, deadline=time.monotonic() + args.timeout, cancel=cancel)
+    if cancel() and library is not None:  # its cells stop too while the jobs' results are downloaded
+        http.post(f"/libraries/{library['id']}/cancel")
+    summary = {"input": [f.name for f in files], "character": args.character, "fps": args.fps,
+               "jobs": [_download(http, j, out / j.name) for j in queued]}
+    if library is not None:
+        summary["library"] = _library(http, library, out / "library", t0,
+                                      deadline=time.monotonic() + args.timeout, cancel=cancel)
+    summary["wall_time_s"] = round(time.perf_counter() - t0, 2)
+    found = {j["status"] for j in summary["jobs"]} | ({summary["library"]["status"]} if library else set())
+    summary["status"] = "canceled" if cancel() else next((s for s in WORST_FIRST if s in found), "succeeded")
+    if cancel():
+        summary["message"] = cancel.reason
+    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    _print_summary(summary, out)
+    return summary
 
 
 #: the demo's small motion library: 3 slopes × 3 curves, HalfBoy
@@ -208,11 +236,17 @@ def _queue_library(http, motion_id: str, tutor: dict) -> dict:
     return lib
 
 
-def _library(http, lib: dict, out: Path, t0: float, deadline: float) -> dict:
+def _library(http, lib: dict, out: Path, t0: float, deadline: float, cancel=lambda: False) -> dict:
     """Follow the library's overall progress, download its manifest and GLB; its time runs
-    from the demo's start (``t0``), since its cells share the workers with the jobs."""
-    last = None
+    from the demo's start (``t0``), since its cells share the workers with the jobs. ``cancel()``
+    true: the library is canceled and followed until its cells have stopped."""
+    last, canceling = None, False
     while True:
+        if cancel() and not canceling:
+            canceling, deadline = True, min(deadline, time.monotonic() + CANCEL_GRACE_S)
+            r = http.post(f"/libraries/{lib['id']}/cancel")
+            if r.status_code not in (202, 409):  # 409: finished already
+                _check(r, 202, "library cancel")
         lib = http.get(f"/libraries/{lib['id']}").json()
         pr = lib["progress"]
         line = (f"[demo] library: {pr['done']}/{pr['cells']} cells done ({pr['succeeded']} succeeded, "
@@ -223,6 +257,8 @@ def _library(http, lib: dict, out: Path, t0: float, deadline: float) -> dict:
         if lib["status"] not in ("queued", "running"):
             break
         if time.monotonic() > deadline:
+            if canceling:
+                break
             raise CliError("the library did not finish before the demo's deadline (--timeout)")
         time.sleep(1.0)
     out.mkdir(parents=True, exist_ok=True)
@@ -230,8 +266,9 @@ def _library(http, lib: dict, out: Path, t0: float, deadline: float) -> dict:
     _check(manifest, 200, "library manifest")
     (out / "manifest.json").write_text(json.dumps(manifest.json(), indent=2))
     glb = http.get(f"/libraries/{lib['id']}/library.glb")
-    _check(glb, 200, "library GLB")
-    (out / "library.glb").write_bytes(glb.content)
+    if not (canceling and glb.status_code == 409):  # 409: no cell has a motion (yet)
+        _check(glb, 200, "library GLB")
+        (out / "library.glb").write_bytes(glb.content)
     realistic = sum(1 for c in lib["cells"] if c["plausible"])
     print(f"[demo] library {lib['status']}: {realistic}/{len(lib['cells'])} cells realistic, done "
           f"{time.perf_counter() - t0:.1f} s after the demo's start; wrote {out}/manifest.json and library.glb",
@@ -273,13 +310,24 @@ def _job_time(progress: list[dict]) -> float:
     return (tutor[-1] if tutor else 0.0) + (ext[-1] if ext else 0.0)
 
 
-def _follow(http, jobs: list[_Job], deadline: float) -> None:
+def _follow(http, jobs: list[_Job], deadline: float, cancel=lambda: False) -> None:
     """Polls every job until all are finished, drawing a progress bar per job: redrawn in
-    place on a terminal, one line per change otherwise (logs)."""
+    place on a terminal, one line per change otherwise (logs). Once ``cancel()`` is true the
+    unfinished jobs are canceled (each stops at its next IPOPT iteration) and followed until
+    they have stopped, for at most ``CANCEL_GRACE_S``."""
     tty = sys.stdout.isatty()
     last: list[str] = []
     logged: dict[int, float] = {}
+    canceling = False
     while True:
+        if cancel() and not canceling:
+            canceling, deadline = True, min(deadline, time.monotonic() + CANCEL_GRACE_S)
+            print(f"[demo] {getattr(cancel, 'reason', '') or 'canceled'}: canceling the jobs", flush=True)
+            for j in jobs:
+                if not j.done:
+                    r = http.post(f"{j.url}/cancel")
+                    if r.status_code not in (202, 409):  # 409: finished already
+                        _check(r, 202, f"cancel ({j.name})")
         for j in jobs:
             if not j.done:
                 r = http.get(j.url)
@@ -303,6 +351,8 @@ def _follow(http, jobs: list[_Job], deadline: float) -> None:
         if all(j.done for j in jobs):
             return
         if time.monotonic() > deadline:
+            if canceling:
+                return
             raise CliError("the jobs did not finish before the demo's deadline (--timeout)")
         time.sleep(0.5)
 
@@ -324,8 +374,9 @@ def _download(http, job: _Job, out: Path) -> dict:
     (out / "job.json").write_text(json.dumps(s, indent=2))
     (out / "progress.csv").write_text(progress_csv(s.get("progress") or []))
     r = http.get(f"{job.url}/plots/progress.png")
-    _check(r, 200, "progress plot")
-    (out / "progress.png").write_bytes(r.content)
+    if r.status_code == 200 or s.get("status") != "canceled":  # a job canceled early may have no curve
+        _check(r, 200, "progress plot")
+        (out / "progress.png").write_bytes(r.content)
     if s.get("tutor_motion_id"):
         r = http.get(f"/motions/{s['tutor_motion_id']}?format=motion")
         _check(r, 200, "tutor")
@@ -376,7 +427,7 @@ def _print_summary(summary: dict, out: Path) -> None:
         print(f"[demo] {j['name']:9s} {j['status']:9s} {j['lambda_reached']:6.3f} {reached:>18s} "
               f"{j['motions']:7d} {j['plausible']:>4d}/{j['motions']:<4d} {j['natural']:>4d}/{j['motions']:<4d} "
               f"{j['job_time_s']:5.1f}s "
-              f"{res if res is None else format(res, '.1e'):>19s}")
+              f"{'-' if res is None else format(res, '.1e'):>19s}")
     print(f"[demo] total {summary['wall_time_s']:.1f} s; in {out}/<job>/: every λ optimum as "
           f"step_NNN_lambda_L.motion.json, .clip.json, .glb, .bvh, .validation.json; progress.csv, progress.png, "
           f"final.grf.png, final.residuals.png, final.filmstrip.png (summary.json)")
@@ -389,8 +440,10 @@ folder, on a free port), upload a captured walk over HTTP (default: the DeepMimi
 data/), ask for a downhill slope, a curve and stairs, and a 3 × 3 motion library (slopes ×
 curves), follow the jobs with a progress bar and
 download every λ optimum (motion file, JSON clip, GLB, BVH, plausibility report), the
-progress curve (CSV, PNG) and the final motion's plots into --out/<job>/. The service is
-stopped and its temporary folder removed at the end, on Ctrl-C and on SIGTERM.""")
+progress curve (CSV, PNG) and the final motion's plots into --out/<job>/. Ctrl-C or SIGTERM
+cancels the jobs, downloads what they reached (summary.json: status canceled) and exits 130
+(143). The service is stopped and its temporary folder removed at the end, on Ctrl-C and on
+SIGTERM.""")
     s.add_argument("inputs", nargs="*", metavar="INPUT",
                    help="trial files, as for `motionx tutor` (default: the DeepMimic walk in data/)")
     s.add_argument("--out", default="out/demo", metavar="DIR",

@@ -123,8 +123,8 @@ def _library(args: argparse.Namespace, cancel: cancel_on_signals) -> int:
               f"{s['impasse']} at impasse, {s['failed']} failed\n  wrote {out}/: manifest.json, library.glb, "
               "CELL.motion.json and CELL.clip.json per cell")
     if cancel.exit_status is not None:
-        print(f"motionx library: {cancel.reason}: {s['canceled']} cells canceled; the {s['done'] - s['canceled']} "
-              f"finished before are in {out}/", file=sys.stderr)
+        print(f"motionx library: {cancel.reason}: canceled {s['canceled']} of {s['cells']} cells; what the cells "
+              f"reached is in {out}/ (manifest.json: status canceled)", file=sys.stderr)
         return cancel.exit_status
     return 0 if all(r.status.ok for r in result.cells) else 1
 

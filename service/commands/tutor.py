@@ -90,6 +90,13 @@ def _realism_words(out: dict) -> str:
 
 
 def cmd_tutor(args: argparse.Namespace) -> int:
+    # Ctrl-C or SIGTERM, from the import on, cancels: the running solve stops at its next IPOPT
+    # iteration, nothing is written, the summary says "canceled" and the exit status is 130 / 143
+    with cancel_on_signals() as cancel:
+        return _tutor(args, cancel)
+
+
+def _tutor(args: argparse.Namespace, cancel: cancel_on_signals) -> int:
     from solver.io import load_trial
     from solver.pipeline import PipelineError, make_tutor
 
@@ -105,16 +112,20 @@ def cmd_tutor(args: argparse.Namespace) -> int:
 
     described = jsonable(describe(capture))
     warn_input(described)
+    if not cancel():
+        print("motionx tutor: solving (simplification, then correction with IPOPT)", file=sys.stderr, flush=True)
     try:
         res = make_tutor(capture, character=args.character, fps=args.fps, cycle=args.cycle, start=args.start,
-                         max_iter=args.max_iter)
+                         max_iter=args.max_iter, should_cancel=cancel)
     except (PipelineError, ValueError) as e:
         raise CliError(str(e)) from None
     out = {"status": res.status, "message": res.message, "import_s": round(t_import, 3), "input": described,
            "stats": res.stats}
+    if res.status == "canceled" and cancel():
+        out["message"] = f"{cancel.reason}, {res.message}"
     if res.motion is None:
         print(json.dumps(out) if args.json else _tutor_summary(out))
-        return 1
+        return cancel.exit_status or 1
     rep = _write_motion(res.motion, Path(args.out))
     out.update({"out": args.out, "character": res.motion.character.name, "fps": res.motion.fps,
                 "frames": res.motion.T, "coordinates": res.motion.n, "plausible": rep["plausible"],
@@ -122,6 +133,8 @@ def cmd_tutor(args: argparse.Namespace) -> int:
                 "mujoco_agreement_rel_weight": rep["mujoco_replay"]["agreement_force_rel_weight"],
                 "realism_failed": (rep.get("realism") or {}).get("failed", [])})
     print(json.dumps(out) if args.json else _tutor_summary(out))
+    if cancel.exit_status is not None:  # the signal came after the tutor was made: it is written
+        return cancel.exit_status
     return 0 if rep["plausible"] else 1
 
 
@@ -338,7 +351,8 @@ Import a captured walk, take one gait cycle, reduce the capture skeleton to the 
 character, estimate the contact forces from the kinematics and correct the motion with the
 spacetime NLP (IPOPT) until it obeys the equations of motion: the tutor, written as a motion
 file v1 with its plausibility report (MuJoCo replay included). It is the input of
-`motionx extrapolate`. Exit status 1 when the correction fails (nothing is written).""")
+`motionx extrapolate`. Exit status 1 when the correction fails (nothing is written); Ctrl-C
+or SIGTERM stops the solve at its next IPOPT iteration, writes nothing and exits 130 (143).""")
     s.add_argument("inputs", nargs="+", metavar="INPUT",
                    help="trial files: MODEL.osim COORDS.mot [GRF.mot X.xml] | FILE.c3d | FILE.bvh | "
                         "DeepMimic CLIP.txt CHARACTER.txt")
