@@ -815,3 +815,24 @@ def test_a_foot_down_without_events_is_a_stance(trial, tmp_path, path):
     c = tr.contacts[0] | tr.contacts[1]
     late = tr.times > 2.3  # ... but the foot-down check keeps the right stance of 2.10-2.70 s
     assert c[late & down].all() and (np.stack([c, tr.contacts[2] | tr.contacts[3]]).any(axis=0)).all()
+
+
+@pytest.mark.parametrize("sacral", ["VSAC", "SACR", "V_SAC"])
+def test_a_sacral_marker_stands_for_the_psis_pair(path, trial, tmp_path, sacral):
+    """Helen Hayes labs name the sacral marker VSAC (Vicon's V-prefixed virtual markers), Plug-in
+    Gait SACR: a file whose PSIS pair is replaced by one sacral marker at their mid-point loads,
+    with the same pelvis (hip centres, pelvis frame) as the PSIS pair gives."""
+    def edit(c):
+        labels = [s.strip() for s in c["parameters"]["POINT"]["LABELS"]["value"]]
+        r, l_ = labels.index("RPSI"), labels.index("LPSI")
+        pts = c["data"]["points"]
+        pts[:3, r] = 0.5 * (pts[:3, r] + pts[:3, l_])
+        c["data"]["points"] = pts
+        labels[r], labels[l_] = sacral, "XPSI"  # the left spine's label is one no role knows
+        c["parameters"]["POINT"]["LABELS"]["value"] = labels
+
+    alt = read_c3d_trial(_variant(path, tmp_path / f"{sacral}.c3d", edit)).track
+    assert alt.source["markers"]["SACR"] == sacral and "RPSI" not in alt.source["markers"]
+    for name in ("pelvis", "hip_r", "hip_l"):
+        assert np.max(np.abs(alt.landmarks[name] - trial.track.landmarks[name])) < 1e-6, name
+    assert np.max(np.abs(alt.orientations["pelvis"] - trial.track.orientations["pelvis"])) < 1e-6

@@ -39,7 +39,8 @@ _ROLE_LIST = (
     # pelvis
     Role("ASI", True, "anterior superior iliac spine", ("ASI", "ASIS", "IAS", "SIAS", "EIAS", "AS")),
     Role("PSI", True, "posterior superior iliac spine", ("PSI", "PSIS", "IPS", "SIPS", "EIPS", "PS")),
-    Role("SACR", False, "sacrum (mid-PSIS)", ("SACR", "SACRUM", "SAC", "S1", "S2", "MPSI", "MIPS", "MPSIS")),
+    Role("SACR", False, "sacrum (mid-PSIS)",
+         ("SACR", "SACRUM", "SAC", "VSAC", "VSACR", "SACRAL", "S1", "S2", "MPSI", "MIPS", "MPSIS")),
     # thigh, shank
     Role("THI", True, "thigh wand (lateral thigh)", ("THI", "THL", "TH", "THIGH", "THIW")),
     Role("KNE", True, "lateral femoral epicondyle (knee)",
