@@ -103,7 +103,8 @@ def _tutor(args: argparse.Namespace, cancel: cancel_on_signals) -> int:
     enable_native_code(get_settings())
     t0 = time.perf_counter()
     try:
-        capture = load_trial(args.inputs, mass=args.mass, belt_speed=parse_belt_speed(args.belt_speed))
+        capture = load_trial(args.inputs, mass=args.mass, belt_speed=parse_belt_speed(args.belt_speed),
+                             markers=args.markers)
     except (ValueError, FileNotFoundError) as e:
         raise CliError(f"cannot import {' '.join(args.inputs)}: {import_message(e)}") from None
     t_import = time.perf_counter() - t0
@@ -329,7 +330,7 @@ def cmd_extrapolate(args: argparse.Namespace) -> int:
     print(json.dumps(summary) if args.json else _extrapolate_summary(summary, out))
     if cancel.exit_status is not None:
         return cancel.exit_status
-    return 0 if res.status in ("succeeded", "impasse") else 1
+    return 0 if res.status.ok else 1
 
 
 def _finite(kind: str):
@@ -365,6 +366,10 @@ or SIGTERM stops the solve at its next IPOPT iteration, writes nothing and exits
     s.add_argument("--belt-speed", default=None, metavar="auto|V",
                    help="treadmill belt speed in m/s, or 'auto' (adds v·t to the root: overground-equivalent; "
                         "default: none, overground)")
+    s.add_argument("--markers", metavar="MAP", default=None,
+                   help="C3D marker mapping for unrecognised marker sets: ROLE=label,... (Plug-in Gait roles, e.g. "
+                        "LASI=L_IAS,RASI=R_IAS) or a file with one ROLE=label per line (docs/c3d.md; default: "
+                        "roles detected from the labels)")
     s.add_argument("--cycle", type=int, default=0, metavar="N", help="which complete gait cycle to use (0 = first)")
     s.add_argument("--start", default="auto", choices=["auto", "right_heel_strike", "left_heel_strike", "best_loop"],
                    help="where the cycle starts (auto: heel strikes, else the best-closing loop)")
