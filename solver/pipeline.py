@@ -17,10 +17,12 @@ import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from solver import native
 from solver.capture import Capture, GroundFrame
 from solver.character import FULL_SUPERFLUOUS, LOWER_SUPERFLUOUS, Character, merge_segments
 from solver.contact import estimate_contact_wrenches
@@ -47,12 +49,25 @@ class PipelineError(ValueError):
 
 @dataclass(frozen=True, eq=False)
 class TutorResult:
-    status: str  # "succeeded" | "failed"
+    """A tutor, or why there is none: ``status`` succeeded (``motion`` is the tutor), failed or
+    canceled (``motion`` is None; a failed solve's last iterate is kept apart)."""
+
+    status: Status
     motion: Motion | None
     message: str = ""
     stats: Mapping[str, Any] = field(default_factory=dict)
     simplified: Motion | None = None
     last_iterate: Mapping[str, Any] | None = None  # failed solves only: kept apart, not a solution
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "status", Status(self.status))
+
+    def save(self, path: str | Path) -> Path:
+        """Write the tutor as a motion file (its report inside); a result without a motion is refused."""
+        if self.motion is None:
+            raise PipelineError(f"no tutor to save: {self.status} ({self.message})")
+        self.motion.save(path)
+        return Path(path)
 
 
 def _shifted_frame(frame: GroundFrame, h: float) -> GroundFrame:
@@ -282,6 +297,7 @@ def make_tutor(
     step "capture" (e.g. stored by the service); ``weights``: the correction's cost weights.
     ``should_cancel()`` is polled between the phases and at every IPOPT iteration: once true, the
     running solve stops at its next iteration and the result is "canceled" (no retry)."""
+    native.ensure()
     t_start = time.perf_counter()
 
     def canceled(stats: Mapping[str, Any], phase: str, solved: SolveResult | None = None) -> TutorResult | None:
@@ -321,7 +337,7 @@ def make_tutor(
     if stop := canceled(stats, "simplification", simp):
         return stop
     if not simp.success:
-        return TutorResult("failed", None, f"simplification did not converge ({simp.status})", jsonable(stats),
+        return TutorResult(Status.FAILED, None, f"simplification did not converge ({simp.status})", jsonable(stats),
                            last_iterate={"q": simp.q})
     q_sim = simp.q
 
@@ -369,7 +385,7 @@ def make_tutor(
     simplified = Motion(syn, fps, q_sim, contacts=contacts, provenance=jsonable({
         "step": "simplify", "source": src_prov, "lambda": None}))
     if not res.success:
-        return TutorResult("failed", None, f"correction did not converge ({res.status})", jsonable(stats),
+        return TutorResult(Status.FAILED, None, f"correction did not converge ({res.status})", jsonable(stats),
                            simplified=simplified, last_iterate={"q": res.q, "wrenches": res.wrenches})
     # marker distance between the tutor and the capture (lower segments for HalfBoy)
     mk_cap = markers(cap_char, q_cap)
@@ -401,4 +417,4 @@ def make_tutor(
         }),
     )
     tutor = tutor.evolve(report=report(tutor))
-    return TutorResult("succeeded", tutor, "", jsonable(stats), simplified=simplified)
+    return TutorResult(Status.SUCCEEDED, tutor, "", jsonable(stats), simplified=simplified)

@@ -30,12 +30,15 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from tqdm import tqdm
+
 from service import examples
 from service.cli import CliError, Terminated, add_command, cancel_on_signals, stop_on_signals
-from service.commands.outputs import progress_csv, step_stem, written_here
+from service.commands.outputs import written_here
 from service.topology import Proc, TopologyError, free_port, motionx_cmd, wait_api
+from solver.outputs import progress_csv, step_stem
+from solver.status import TERMINAL, Status
 
-TERMINAL = ("succeeded", "failed", "canceled", "impasse")
 #: what each λ optimum is downloaded as: (query format, file suffix)
 EXPORTS = (("motion", "motion.json"), ("json", "clip.json"), ("gltf", "glb"), ("bvh", "bvh"))
 #: the plots of a job's final motion: (endpoint name, file)
@@ -168,7 +171,7 @@ def _run(args, files: list[Path], jobs: list[_Job], out: Path, server: Proc, bas
         if cancel.exit_status is not None:
             print(f"[demo] {cancel.reason}: stopped; what the jobs reached is in {out}/ (summary.json)", flush=True)
             return cancel.exit_status
-        ok = summary["status"] in ("succeeded", "impasse")
+        ok = Status(summary["status"]).ok
         if args.serve:
             print(f"[demo] the web page: {base}/ui/#key={key}  (Ctrl-C or SIGTERM stops the service)", flush=True)
             try:
@@ -254,7 +257,7 @@ def _library(http, lib: dict, out: Path, t0: float, deadline: float, cancel=lamb
         if line != last:
             print(line, flush=True)
             last = line
-        if lib["status"] not in ("queued", "running"):
+        if Status(lib["status"]).terminal:
             break
         if time.monotonic() > deadline:
             if canceling:
@@ -290,16 +293,34 @@ def _bar(job: _Job, width: int = 24, clock: bool = True) -> str:
 
     s = job.state
     lam = float(s.get("lam_reached") or 0.0)
-    fill = round(lam * width)
     prog = s.get("progress") or []
     status = s.get("status", "?")
     if status == "running" and not any(p.get("phase") == "extrapolate" for p in prog):
         status = "tutor" if not prog else "starting"
     env = next((p.get("environment") or {} for p in reversed(prog) if p.get("accepted") and p.get("environment")), {})
     shown = [f"{k}={number_text(env[k])}" for k in job.target if k in env]
-    text = (f"{job.name:9s} [{'#' * fill}{'.' * (width - fill)}] λ={lam:.3f} {status:9s} "
-            f"{' '.join(shown):17s} {s.get('steps', 0):2d} steps")
+    meter = tqdm.format_meter(lam, 1.0, 0, bar_format=f"[{{bar:{width}}}]", ascii=".#")
+    text = f"{job.name:9s} {meter} λ={lam:.3f} {status:9s} {' '.join(shown):17s} {s.get('steps', 0):2d} steps"
     return f"{text} {job.elapsed:5.1f}s" if clock else text
+
+
+class _Lines:
+    """On a terminal, one tqdm line per job redrawn in place (``show``); closed on exit."""
+
+    def __init__(self, n: int) -> None:
+        self.bars = [tqdm(file=sys.stdout, position=i, bar_format="[demo] {desc}", dynamic_ncols=True)
+                     for i in range(n)]
+
+    def show(self, lines: list[str]) -> None:
+        for bar, line in zip(self.bars, lines):
+            bar.set_description_str(line)
+
+    def __enter__(self) -> _Lines:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for bar in self.bars:
+            bar.close()
 
 
 def _job_time(progress: list[dict]) -> float:
@@ -315,7 +336,13 @@ def _follow(http, jobs: list[_Job], deadline: float, cancel=lambda: False) -> No
     place on a terminal, one line per change otherwise (logs). Once ``cancel()`` is true the
     unfinished jobs are canceled (each stops at its next IPOPT iteration) and followed until
     they have stopped, for at most ``CANCEL_GRACE_S``."""
-    tty = sys.stdout.isatty()
+    if not sys.stdout.isatty():
+        return _poll(http, jobs, deadline, cancel, None)
+    with _Lines(len(jobs)) as shown:
+        return _poll(http, jobs, deadline, cancel, shown)
+
+
+def _poll(http, jobs: list[_Job], deadline: float, cancel, shown: _Lines | None) -> None:
     last: list[str] = []
     logged: dict[int, float] = {}
     canceling = False
@@ -334,12 +361,8 @@ def _follow(http, jobs: list[_Job], deadline: float, cancel=lambda: False) -> No
                 _check(r, 200, "job status")
                 j.seen(r.json())
         lines = [_bar(j) for j in jobs]
-        if tty:
-            if last:
-                sys.stdout.write(f"\x1b[{len(last)}F")
-            sys.stdout.write("".join(f"\x1b[2K[demo] {ln}\n" for ln in lines))
-            sys.stdout.flush()
-            last = lines
+        if shown is not None:
+            shown.show(lines)
         else:  # logs: a line when a job's state changes, and every LOG_EVERY_S while it runs
             states = [_bar(j, clock=False) for j in jobs]
             now = time.monotonic()

@@ -21,9 +21,10 @@ from service.cli import (
     parse_belt_speed,
     warn_input,
 )
-from service.commands.outputs import prepare_output_dir, progress_csv, step_stem
+from service.commands.outputs import prepare_output_dir
 from service.config import enable_native_code, get_settings
 from solver import axes as registry
+from solver.outputs import progress_csv, step_stem
 
 
 def _write_motion(motion, path: Path, *, with_replay: bool = True) -> dict:
@@ -360,7 +361,7 @@ or SIGTERM stops the solve at its next IPOPT iteration, writes nothing and exits
     s.add_argument("--character", choices=["halfboy", "fullbody"], default="halfboy",
                    help="synthesis character: halfboy (16 coordinates, legs + lumped trunk) or fullbody (43)")
     s.add_argument("--fps", type=float, choices=[15.0, 30.0], default=15.0, help="frames per second of the tutor")
-    s.add_argument("--out", required=True, metavar="TUTOR.json", help="motion file v1 (JSON) to write")
+    s.add_argument("--out", required=True, metavar="TUTOR.json", help="motion file v2 (JSON) to write")
     s.add_argument("--mass", type=_finite("--mass"), metavar="KG",
                    help="subject mass in kg (default: from the input; required when the input does not state it)")
     s.add_argument("--belt-speed", default=None, metavar="auto|V",
