@@ -121,16 +121,21 @@ async function api(path, { as = 'json', method = 'GET' } = {}) {
   if (!apiKey) throw new ApiError(401, 'no API key');
   const res = await fetch(path, { method, headers: { 'X-API-Key': apiKey } });
   if (!res.ok) {
-    let detail = `${res.status} ${res.statusText}`;
-    try {
-      const problem = await res.json();
-      if (problem && problem.detail) detail = problem.detail;
-    } catch { /* not JSON */ }
+    const detail = await problemDetail(res);
     if (res.status === 401) setKeyStatus('invalid', detail);
     throw new ApiError(res.status, detail);
   }
   setKeyStatus('ok');
   return res[as]();
+}
+
+/** The `detail` of a problem answer, or its status line when it is not JSON. */
+async function problemDetail(res) {
+  try {
+    const problem = await res.json();
+    if (problem && problem.detail) return problem.detail;
+  } catch { /* not JSON */ }
+  return `${res.status} ${res.statusText}`;
 }
 
 /**
@@ -147,14 +152,7 @@ async function followEvents(kind, path, onEvent) {
   try {
     const res = await fetch(path, { headers: { 'X-API-Key': apiKey, Accept: 'text/event-stream' },
       signal: controller.signal, cache: 'no-store' });
-    if (!res.ok) {
-      let detail = `${res.status} ${res.statusText}`;
-      try {
-        const problem = await res.json();
-        if (problem && problem.detail) detail = problem.detail;
-      } catch { /* not JSON */ }
-      throw new ApiError(res.status, detail);
-    }
+    if (!res.ok) throw new ApiError(res.status, await problemDetail(res));
     const reader = res.body.pipeThrough(new TextDecoderStream()).getReader();
     let buffer = '';
     for (;;) {
