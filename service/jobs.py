@@ -198,14 +198,33 @@ def execute_job(job_id: str, settings: Settings) -> str:
                 cap = f" of {settings.job_memory_mb:g} MB" if settings.job_memory_mb else ""
                 status, message, extra = "failed", f"out of memory: the job needs more than its memory limit{cap}", {}
             else:
-                log.exception("job %s failed", job_id)
-                status, message, extra = "failed", f"{type(e).__name__}: {e}", {}
+                if limits.refusal_text(e, ""):  # the input's fault, said in the message: no traceback
+                    log.info("job %s refused: %s", job_id, e)
+                else:
+                    log.exception("job %s failed", job_id)
+                status, message, extra = "failed", job_error_message(e), {}
         if hb.lost:
             log.warning("job %s: lease lost (another attempt took over); result not recorded", job_id)
             return "lost"
         with hb.write_lock, db.write() as s:
             ok = store.finish_job(s, job_id=job_id, token=token, status=status, message=message, **extra)
     return status if ok else "lost"
+
+
+def job_error_message(e: BaseException, doing: str = "running the job") -> str:
+    """What a failed job says about an exception: the message of a refusal our code raised on
+    purpose (bad input, a pipeline that cannot go on), cut to a short text; for anything else a
+    generic sentence (the traceback is in the log)."""
+    return limits.refusal_text(e, f"internal error while {doing} (logged on the server)")
+
+
+def solve_status(status: str) -> str:
+    """A progress record's status as the API shows it: a solver's numerical failure
+    (``error: <exception text>``) without the exception's internals (they are in the log)."""
+    if status.startswith("error:"):
+        log.warning("solve failed: %s", status)
+        return "error: the solver failed on this step (numerical error)"
+    return status
 
 
 def _run(db: Database, job_id: str, attempt: int, token: str, settings: Settings, hb: Heartbeat):
@@ -275,7 +294,7 @@ def _run(db: Database, job_id: str, attempt: int, token: str, settings: Settings
     def on_progress(rec) -> None:
         record("extrapolate", wall_time=rec.wall_time, lam=rec.lam, lam_reached=rec.lam_reached,
                environment=jsonable(dict(rec.environment)),
-               iterations=rec.iterations, accepted=rec.accepted, status=rec.status)
+               iterations=rec.iterations, accepted=rec.accepted, status=solve_status(rec.status))
 
     def on_step(step) -> None:
         validation = validation_report(step.motion) if settings.validate_steps else None
@@ -345,4 +364,4 @@ def validation_report(motion) -> dict | None:
         return jsonable(validate(motion))
     except Exception as e:  # a failing check must not fail the job: the report says so
         log.warning("validation failed", exc_info=True)
-        return {"plausible": False, "error": f"{type(e).__name__}: {e}"}
+        return {"plausible": False, "error": job_error_message(e, "validating the motion")}

@@ -25,7 +25,7 @@ from typing import Any
 from service import store
 from service.db import Database
 from service.models import TERMINAL, JobRow, LibraryRow, MotionRow
-from service.views import iso
+from service.views import SECONDS_DECIMALS, iso, reported
 from solver import library as L
 from solver.status import Status, combined
 
@@ -91,14 +91,15 @@ def warm_start(db: Database, job_id: str, ref: dict):
 def _cell_view(c: dict, job: JobRow | None, clip: tuple | None) -> dict:
     status = job.status if job is not None else "failed"
     return {
-        "clip_motion_id": clip[4] if clip else None, "clip_lam": clip[2] if clip else None,
+        "clip_motion_id": clip[4] if clip else None, "clip_lam": reported(clip[2]) if clip else None,
         "plausible": clip[3] if clip else None,
-        "key": c["key"], "parameters": c["parameters"], "job_id": c["job_id"], "status": status,
-        "at_impasse": status == "impasse", "lam_reached": job.lam_reached if job else 0.0,
+        "key": c["key"], "parameters": reported(c["parameters"]), "job_id": c["job_id"], "status": status,
+        "at_impasse": status == "impasse", "lam_reached": reported(job.lam_reached) if job else 0.0,
         "steps": job.steps if job else 0, "solves": job.solves if job else 0,
         "attempts": job.attempts if job else 0, "message": job.message if job else "cell job missing",
         "started_at": iso(job.started_at) if job else None, "finished_at": iso(job.finished_at) if job else None,
-        "wall_time_s": (job.finished_at - job.started_at) if job and job.finished_at and job.started_at else None,
+        "wall_time_s": reported(job.finished_at - job.started_at, SECONDS_DECIMALS)
+        if job and job.finished_at and job.started_at else None,
         "links": {"job": f"/jobs/{c['job_id']}", "motions": f"/jobs/{c['job_id']}/motions"},
     }
 
@@ -121,12 +122,13 @@ def library_out(session, row: LibraryRow) -> dict:
     status = status_of(cells, row.cancel_requested)
     spec = row.spec
     return {
-        "id": row.id, "status": status, "motion_id": row.motion_id, "axes": spec.get("axes", []),
+        "id": row.id, "status": status, "terminal": status in TERMINAL, "motion_id": row.motion_id,
+        "axes": spec.get("axes", []),
         "grid": spec.get("grid"), "targets": spec.get("targets"), "control": spec.get("control", {}),
         "cancel_requested": row.cancel_requested, "created_at": iso(row.created_at),
         "finished_at": iso(max(finished)) if status in TERMINAL and finished else None,
         "progress": {"cells": len(cells), "done": sum(1 for c in cells if c["status"] in TERMINAL),
-                     "fraction": sum(frac) / len(frac) if frac else 1.0, **counts},
+                     "fraction": reported(sum(frac) / len(frac)) if frac else 1.0, **counts},
         "cells": cells,
         "links": {"self": f"/libraries/{row.id}", "cancel": f"/libraries/{row.id}/cancel",
                   "manifest": f"/libraries/{row.id}/manifest", "glb": f"/libraries/{row.id}/library.glb",

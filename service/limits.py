@@ -106,3 +106,15 @@ def clip(text: str, n: int = 300) -> str:
     """A message fragment that never echoes a large input."""
     text = str(text)
     return text if len(text) <= n else text[: n - 1] + "…"
+
+
+def refusal_text(e: BaseException, fallback: str, n: int = 500) -> str:
+    """What a client may read about exception ``e``: the message of a refusal our own code
+    raised on purpose (a subclass of ``ValueError`` defined in ``solver``, ``mjcf`` or
+    ``service``: ``InputError``, ``MotionError``, ``PipelineError``, ...), cut to ``n``
+    characters; else ``fallback`` — a bare ``ValueError``, ``TypeError`` or a library's error
+    names internals (the caller logs it in full)."""
+    ours = type(e).__module__.split(".")[0] in ("solver", "mjcf", "service")
+    if isinstance(e, ValueError) and type(e) is not ValueError and ours and str(e):
+        return clip(str(e), n)
+    return fallback

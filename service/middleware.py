@@ -9,7 +9,8 @@ import re
 
 from starlette.exceptions import HTTPException
 
-from service.problems import MEDIA_TYPE
+from service.limits import clip
+from service.problems import MAX_ECHO, MEDIA_TYPE
 
 
 class BodyTooLarge(HTTPException):
@@ -64,7 +65,7 @@ class BodyLimitMiddleware:
     async def _reply(self, send, scope, status: int, detail: str) -> None:
         title = "Content Too Large" if status == 413 else "Bad Request"
         body = json.dumps({"type": "about:blank", "title": title, "status": status, "detail": detail,
-                           "instance": scope.get("path", "")}).encode()
+                           "instance": clip(scope.get("path", ""), MAX_ECHO)}).encode()
         await send({"type": "http.response.start", "status": status,
                     "headers": [(b"content-type", MEDIA_TYPE.encode()), (b"content-length", str(len(body)).encode()),
                                 (b"connection", b"close")]})

@@ -66,13 +66,15 @@ def problem_response(
     body: dict[str, Any] = {"type": type, "title": title or TITLES.get(status, "Error"), "status": status,
                             "detail": detail}
     if instance:
-        body["instance"] = instance
+        body["instance"] = _short(instance, MAX_ECHO)
     body.update(extra)
     return JSONResponse(body, status_code=status, media_type=MEDIA_TYPE, headers=headers)
 
 
 #: the longest ``detail`` sent: a message never repeats a large input
 MAX_DETAIL = 2000
+#: the longest excerpt of the client's own input (a request path, a value) an answer repeats
+MAX_ECHO = 200
 _IDS = {"motion": re.compile(r"m_[0-9a-f]{32}"), "job": re.compile(r"j_[0-9a-f]{32}"),
         "library": re.compile(r"l_[0-9a-f]{32}")}
 
@@ -138,7 +140,7 @@ def install(app: FastAPI) -> None:
             if request.method == "OPTIONS":
                 return Response(status_code=204, headers={"Allow": allow})
             headers["Allow"] = allow
-            detail = f"{request.method} is not allowed here; allowed: {allow}"
+            detail = f"{_short(request.method, 20)} is not allowed here; allowed: {allow}"
         return problem_response(exc.status_code, detail, instance=request.url.path, headers=headers or None)
 
     @app.exception_handler(Exception)

@@ -4,7 +4,7 @@ These functions run in the API's compute processes (:mod:`service.work`), never 
 event loop, each with a time and memory limit; they return an :class:`Encoded` motion (the
 compressed motion file and the columns of its row), so the API process only stores it.
 
-- ``application/json``: a motion file v1. Non-finite numbers (``NaN``, ``Infinity``,
+- ``application/json``: a motion file (v2; v1 read too). Non-finite numbers (``NaN``, ``Infinity``,
   ``1e999``), integer literals of more than ``MAX_INT_DIGITS`` digits, nesting deeper than
   ``MAX_JSON_DEPTH`` and ragged arrays are refused with a message naming where.
 - ``multipart/form-data``: a mocap trial, read by ``solver.io.load_trial`` (OpenSim
@@ -25,16 +25,18 @@ import logging
 import math
 import os
 import re
+import struct
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from service import limits
-from service.limits import LimitError, clip
+from service.limits import LimitError, clip, refusal_text
 from solver import axes as registry
 from solver.environment import environment_of
 from solver.formats import reader_suffixes
+from solver.motion import FORMAT as MOTION_FORMAT
 from solver.motion import Motion, MotionError, motion_from_dict
 
 log = logging.getLogger(__name__)
@@ -64,7 +66,7 @@ class Encoded:
     frames: int
     fps: float
     has_wrenches: bool
-    data: bytes  # zlib-compressed motion file v1
+    data: bytes  # zlib-compressed motion file v2
     sha256: str  # of the uncompressed JSON
     input: dict | None = None  # uploaded trials: the input summary (``input_summary``) for the response
 
@@ -157,6 +159,22 @@ def check_motion(motion: Motion) -> None:
             raise UploadError(f"{what} {clip(nm, 60)!r} must be 1 to {limits.MAX_NAME_CHARS} characters without "
                               "control characters")
     _check_environment(motion)
+    if classify(motion) == "capture":
+        _check_capture(motion)
+
+
+def _check_capture(motion: Motion) -> None:
+    """A raw capture's provenance (``source``, ``frame``, ``t0``) rebuilds the capture the job's
+    tutor pipeline starts from (``solver.pipeline.motion_capture``): a value of the wrong type
+    there (``"source": true``) is refused now rather than failing the job later."""
+    from solver.pipeline import motion_capture  # lazy: runs in a compute process; the API process does not load it
+
+    try:
+        motion_capture(motion)
+    except (TypeError, ValueError, KeyError, AttributeError, IndexError, OverflowError) as e:
+        log.info("capture provenance refused: %r", e)
+        raise UploadError("provenance of a capture: " + refusal_text(
+            e, "'source' must be an object, 'frame' a ground frame and 't0' a number")) from None
 
 
 def _check_environment(motion: Motion) -> None:
@@ -176,7 +194,7 @@ def _check_environment(motion: Motion) -> None:
 
 
 def motion_from_upload(d: Any) -> Motion:
-    """A motion file v1 (already parsed) -> Motion, with shape errors named precisely."""
+    """A motion file (already parsed) -> Motion, with shape errors named precisely."""
     if isinstance(d, dict):
         _check_sizes(d)
         coords = d.get("coordinates")
@@ -193,14 +211,16 @@ def motion_from_upload(d: Any) -> Motion:
         motion = motion_from_dict(d)
     except MotionError as e:
         raise UploadError(clip(str(e), 500)) from None
-    except (ValueError, TypeError, KeyError, OverflowError) as e:
-        raise UploadError(clip(f"invalid motion file: {e}", 500)) from None
+    except (ValueError, TypeError, KeyError, OverflowError, IndexError) as e:
+        log.info("motion file refused: %r", e, exc_info=True)
+        raise UploadError("invalid motion file: " + refusal_text(
+            e, "its values do not fit the motion file's schema (solver/schemas/motion-v2.schema.json)")) from None
     check_motion(motion)
     return motion
 
 
 def motion_upload(body: bytes) -> Encoded:
-    """``POST /motions`` with a motion file v1: the body -> a validated, encoded motion."""
+    """``POST /motions`` with a motion file: the body -> a validated, encoded motion."""
     return encode(motion_from_upload(parse_json(body)))
 
 
@@ -246,14 +266,67 @@ def _trial_extent(name: str, content: bytes) -> tuple[int | None, float | None]:
                 dts = [fr[0] for fr in frames[:-1] if isinstance(fr, list) and fr and isinstance(fr[0], (int, float))]
                 return len(frames), float(sum(abs(dt) for dt in dts))
         elif low.endswith((".mot", ".sto")):
-            text = content.decode("utf-8", "replace")
-            body = text.split("endheader", 1)[1] if "endheader" in text else text
-            rows = [ln.split() for ln in body.strip().splitlines()[1:] if ln.strip()]
-            if len(rows) >= 2:
-                return None, abs(float(rows[-1][0]) - float(rows[0][0]))  # rows of forces can be 1 kHz
-    except (ValueError, IndexError, TypeError, RecursionError):
+            return _storage_extent(content)
+        elif low.endswith(".trc"):
+            return _trc_extent(content)
+        elif low.endswith(".c3d"):
+            return _c3d_extent(content)
+    except (ValueError, IndexError, TypeError, RecursionError, struct.error):
         return None, None  # the importer names the problem
     return None, None
+
+
+def _data_lines(body: bytes) -> tuple[int, bytes, bytes]:
+    """(lines, first line, last line) of ``body`` without splitting it into lines."""
+    body = body.strip()
+    if not body:
+        return 0, b"", b""
+    first_end = body.find(b"\n")
+    return body.count(b"\n") + 1, (body if first_end < 0 else body[:first_end]), body[body.rfind(b"\n") + 1:]
+
+
+def _storage_extent(content: bytes) -> tuple[int | None, float | None]:
+    """An OpenSim .mot/.sto: its rows and time span, from its line count and its first and last
+    rows. A file of forces (``*force_vx`` columns) has no frame limit: plates sample at 1 kHz."""
+    end = content.find(b"endheader")
+    start = content.find(b"\n", end) + 1 if end >= 0 else 0
+    body = content[start:].strip()
+    labels_end = body.find(b"\n")
+    if labels_end < 0:
+        return None, None  # the reader names what is missing
+    rows, first, last = _data_lines(body[labels_end + 1:])
+    seconds = abs(float(last.split()[0]) - float(first.split()[0])) if rows >= 2 else None
+    forces = any(lab.endswith(b"_vx") and b"force" in lab for lab in body[:labels_end].split())
+    return (None if forces else rows), seconds
+
+
+def _trc_extent(content: bytes) -> tuple[int | None, float | None]:
+    """A .trc marker file: its frames (data lines after the five header lines) and their
+    duration at its DataRate (third line, first value)."""
+    n, _, _ = _data_lines(content)
+    header = content[:4096].splitlines()
+    frames = max(n - 5, 0)
+    rate = float(header[2].split()[0]) if len(header) > 2 else 0.0
+    return frames, (frames - 1) / rate if rate > 0 and frames > 1 else None
+
+
+def _c3d_extent(content: bytes) -> tuple[int | None, float | None]:
+    """A C3D file's frames and duration from its header block: first and last frame (16-bit
+    words 4 and 5, 0xFFFF when the file has more frames than that) and the frame rate (words
+    11-12), in the byte order of its processor type (parameter block header byte 4: 84 Intel,
+    85 DEC, 86 MIPS)."""
+    if len(content) < 512 or content[1] != 0x50:
+        return None, None
+    param = (content[0] - 1) * 512
+    proc = content[param + 3] if 0 <= param + 3 < len(content) else 84
+    order = ">" if proc == 86 else "<"
+    first, last = struct.unpack_from(order + "HH", content, 6)
+    rate = struct.unpack_from(order + "f", content, 20)[0] / (4.0 if proc == 85 else 1.0)
+    frames = last - first + 1 if last >= first else None
+    if last == 0xFFFF:
+        frames = 0xFFFF  # at least: the header's 16-bit counter is full
+    ok_rate = math.isfinite(rate) and rate > 0
+    return frames, ((frames - 1) / rate if frames and ok_rate else None)
 
 
 def _precheck_trial(names: list[str], files: list[tuple[str, bytes]]) -> None:
@@ -282,10 +355,10 @@ def motion_from_trial(files: list[tuple[str, bytes]], *, mass: float | None, bel
         raise UploadError(f"belt_speed must be a treadmill speed in m/s (at most 20), got {belt_speed:g}")
     names = [_safe_name(n, i) for i, (n, _) in enumerate(files)]
     if len(set(names)) != len(names):
-        raise UploadError(f"file names must be distinct, got {names}")
+        raise UploadError(f"file names must be distinct, got {clip(str(names), 200)}")
     bad = [n for n in names if not n.lower().endswith(TRIAL_SUFFIXES)]
     if bad:
-        raise UploadError(f"unsupported file type(s) {bad}; supported: {list(TRIAL_SUFFIXES)}")
+        raise UploadError(f"unsupported file type(s) {clip(str(bad), 200)}; supported: {list(TRIAL_SUFFIXES)}")
     _precheck_trial(names, files)
     try:
         from solver.io import load_trial  # lazy: runs in a compute process; the API process does not load the solver
@@ -305,16 +378,38 @@ def motion_from_trial(files: list[tuple[str, bytes]], *, mass: float | None, bel
             raise
         except Exception as e:  # the parsing boundary: whatever a reader trips on is bad input
             log.info("trial import failed: %s", e, exc_info=True)
-            raise UploadError(clip(f"could not import the trial: {client_message(e, tmp)}", 500)) from None
+            known = refusal_text(e, "")
+            why = client_message(e, tmp) if known else (f"{', '.join(names)}: not a well-formed trial of a supported "
+                                                          "format (the server's log has the reader's error)")
+            raise UploadError(clip(f"could not import the trial: {why}", 500)) from None
         summary = input_summary(capture, tmp)
         motion = motion.evolve(provenance={**_hide_paths(dict(motion.provenance), tmp), "input": summary})
     check_motion(motion)
     return motion
 
 
+def is_motion_file(files: list[tuple[str, bytes]]) -> bool:
+    """Whether a multipart upload is one motion file (``-F files=@tutor.json``) rather than a
+    trial: a single ``.json`` file holding a JSON object with the motion file's ``format`` (or,
+    without it, its ``coordinates`` and ``frames``). A DeepMimic trial is two files."""
+    if len(files) != 1 or not files[0][0].lower().endswith(".json") or files[0][1].lstrip()[:1] != b"{":
+        return False
+    try:
+        d = json.loads(files[0][1])
+    except (ValueError, RecursionError):
+        return False  # not JSON at all: the trial readers say what it is not
+    return isinstance(d, dict) and (d.get("format") == MOTION_FORMAT or {"coordinates", "frames"} <= d.keys())
+
+
 def trial_upload(files: list[tuple[str, bytes]], mass: float | None, belt_speed: float | None) -> Encoded:
     """``POST /motions`` with a multipart trial: files -> the validated, encoded raw capture,
-    with the input summary (``Encoded.input``) the upload response shows."""
+    with the input summary (``Encoded.input``) the upload response shows. A single motion file
+    sent this way is read as the JSON body would be (:func:`motion_upload`)."""
+    if is_motion_file(files):
+        if mass is not None or belt_speed is not None:
+            raise UploadError("mass and belt_speed go with a mocap trial; a motion file states its character's "
+                              "masses itself")
+        return motion_upload(files[0][1])
     motion = motion_from_trial(files, mass=mass, belt_speed=belt_speed)
     return dataclasses.replace(encode(motion), input=(motion.provenance or {}).get("input"))
 

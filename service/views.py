@@ -8,8 +8,7 @@ from datetime import UTC, datetime
 
 from sse_starlette import ServerSentEvent
 
-from service.models import JobRow, MotionRow, ProgressRow
-
+from service.models import TERMINAL, JobRow, MotionRow, ProgressRow
 
 #: how finely an answer reports a value: λ and the environment's values to 1e-9 (the solver's
 #: arithmetic leaves e.g. 0.05 + 0.1 = 0.15000000000000002), times in seconds to the millisecond
@@ -72,7 +71,8 @@ def job_out(job: JobRow, points: list[ProgressRow]) -> dict:
         links["tutor"] = f"/motions/{job.tutor_motion_id}"
     spec = job.spec or {}
     return dict(
-        id=job.id, status=job.status, motion_id=job.motion_id, tutor_motion_id=job.tutor_motion_id,
+        id=job.id, status=job.status, terminal=job.status in TERMINAL, motion_id=job.motion_id,
+        tutor_motion_id=job.tutor_motion_id,
         target=spec.get("target", {}), control=spec.get("control", {}), lam_reached=reported(job.lam_reached),
         steps=job.steps, solves=job.solves, attempts=job.attempts, max_attempts=job.max_attempts,
         cancel_requested=job.cancel_requested, message=job.message, runner=job.runner, created_at=iso(job.created_at),

@@ -36,6 +36,7 @@ from typing import Any
 from solver.capture import Capture
 from solver.errors import InputError
 from solver.formats import READERS as FORMAT_READERS
+from solver.formats import reader_suffixes
 from solver.io.readers import TrialError, load_files
 
 __all__ = ["READERS", "InputError", "TrialError", "load_trial"]
@@ -59,6 +60,12 @@ def load_trial(
     if not ps:
         raise TrialError("no files given")
     for p in ps:
+        if p.is_dir():
+            suffixes = reader_suffixes()
+            found = sorted(q.name for q in p.iterdir() if q.is_file() and q.suffix.lower() in suffixes)
+            held = (f"trial files there: {', '.join(found[:8])}{', …' if len(found) > 8 else ''}" if found else
+                    f"it holds no {'/'.join(suffixes)} file")
+            raise TrialError(f"{p} is a folder; give the trial's files, not their folder ({held})")
         if not p.is_file():
             raise TrialError(f"file not found: {p}")
     return load_files(ps, {"mass": mass, "belt_speed": belt_speed, "lower_only": lower_only, **options})

@@ -278,6 +278,24 @@ def _mat33(rot) -> np.ndarray:  # pragma: no cover - child process
 # --- the parent -------------------------------------------------------------------------------
 
 
+#: the parts of OpenSim's and Simbody's C++ exception texts that name their own code, not the file
+_INTERNALS = (r"std::exception in '[^']*':\s*", r"SimTK Exception thrown at [\w./]+:\d+:\s*",
+              r"Error detected by Simbody method [\w:~]+\(\):\s*", r"\(Required condition '[^']*' was not met\.\)",
+              r"\s*(?:Thrown at|In) [\w./]+\.(?:cpp|h):\d+(?: in '?[^'\n]*'?)?\.?")
+
+
+def readable(msg: str) -> str:
+    """The child's error as a reader's message: what the C++ exception says about the file,
+    without the source files, line numbers and method names of OpenSim's code; a message
+    that still names them is replaced by a sentence that does not."""
+    for pat in _INTERNALS:
+        msg = re.sub(pat, " ", msg)
+    msg = re.sub(r"\s+", " ", msg).strip()
+    if re.search(r"\.(?:cpp|h):\d+|\w::\w", msg) or not msg:
+        return "OpenSim refused the file (not a valid OpenSim model or motion)"
+    return msg
+
+
 def run_worker(model_path: str, columns: Sequence[str] = (), values: np.ndarray | None = None,
                in_degrees: bool | None = None, *, ik: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """Evaluate ``model_path`` along ``values`` (T, K) of ``columns`` — or, with ``ik``
@@ -304,7 +322,7 @@ def run_worker(model_path: str, columns: Sequence[str] = (), values: np.ndarray 
             msg = err.read_text() if err.exists() else (proc.stderr.strip().splitlines() or ["(no message)"])[-1]
             if "No module named 'opensim'" in proc.stderr:
                 msg = "the 'opensim' package is not installed (pip install opensim)"
-            raise OpenSimError(f"OpenSim could not {what} {model_path}: {msg}")
+            raise OpenSimError(f"OpenSim could not {what} {model_path}: {readable(msg)}")
         with np.load(out) as z:
             res: dict[str, Any] = {k: z[k] for k in z.files if k != "meta"}
             res.update(json.loads(str(z["meta"])))
