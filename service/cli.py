@@ -34,8 +34,79 @@ log = logging.getLogger("motionx")
 #: the files of a captured trial (what `motionx tutor` reads), by suffix: the readers' registry
 #: (solver.formats) but .txt/.json/.xml, which may be a motion file too
 TRIAL_SUFFIXES = {s: kind for s, kind in reader_suffixes().items() if s not in (".txt", ".json", ".xml")}
+
+
+def _positive_kg(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise CliError(f"--mass must be a mass in kg, got {text!r}") from None
+    if not (math.isfinite(v) and v > 0):
+        raise CliError(f"--mass must be a positive finite mass in kg, got {text!r}")
+    return v
+
+
+def _belt(text: str) -> float | str:
+    if text == "auto":
+        return "auto"
+    try:
+        v = float(text)
+    except ValueError:
+        raise CliError(f"--belt-speed must be 'auto' or a speed in m/s, got {text!r}") from None
+    if not math.isfinite(v):
+        raise CliError(f"--belt-speed must be finite, got {text!r}")
+    return v
+
+
+def _unit(text: str) -> str | float:
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+#: the importer options whose text is converted (a mistake is one line, exit status 2)
+_CONVERT = {"mass": _positive_kg, "belt_speed": _belt, "units": _unit}
+#: every importer option (``solver.formats.reader_options()``) as a flag: (flag, argparse
+#: keywords). Every command that imports a trial offers them all (``add_import_options``); a test
+#: checks that each reader option has its flag.
+IMPORT_FLAGS: dict[str, tuple[str, dict]] = {
+    "mass": ("--mass", {"metavar": "KG",
+                        "help": "subject mass in kg (default: from the input; required when the input does not "
+                                "state it, e.g. BVH)"}),
+    "belt_speed": ("--belt-speed", {"metavar": "auto|V",
+                                    "help": "OpenSim treadmill trials: belt speed in m/s, or 'auto' (adds v·t to the "
+                                            "root: overground-equivalent; default: none, overground)"}),
+    "markers": ("--markers", {"metavar": "MAP",
+                              "help": "C3D: marker mapping for unrecognised marker sets, ROLE=label,... (Plug-in "
+                                      "Gait roles, e.g. LASI=L_IAS,RASI=R_IAS) or a file with one ROLE=label per "
+                                      "line (docs/c3d.md; default: roles detected from the labels)"}),
+    "lower_only": ("--lower-only", {"action": argparse.BooleanOptionalAction,
+                                    "help": "fit the lower body only (--no-lower-only: the whole body; default: the "
+                                            "whole body when the data allow)"}),
+    "units": ("--units", {"metavar": "UNIT",
+                          "help": "BVH: length unit of the file, auto, cm, m, mm, in, cmu or metres per unit "
+                                  "(default: auto)"}),
+    "up": ("--up", {"choices": ["y", "z"], "help": "BVH: the file's up axis (default: y)"}),
+    "in_degrees": ("--in-degrees", {"action": argparse.BooleanOptionalAction,
+                                    "help": "OpenSim: the coordinates file is in degrees (--no-in-degrees: radians; "
+                                            "default: its header says)"}),
+}
 #: importer parameters (``solver.errors.InputError.parameter``) -> the flag that sets them
-PARAMETER_FLAGS = {"mass": "--mass KG", "belt_speed": "--belt-speed auto|V"}
+PARAMETER_FLAGS = {name: f"{flag} {spec.get('metavar', '')}".strip() for name, (flag, spec) in IMPORT_FLAGS.items()}
+
+
+def add_import_options(parser: argparse.ArgumentParser) -> None:
+    """The importer options (``IMPORT_FLAGS``) on a command that imports a trial."""
+    g = parser.add_argument_group("import options (each for the formats that take it; see docs/import.md)")
+    for name, (flag, spec) in IMPORT_FLAGS.items():
+        g.add_argument(flag, dest=name, default=None, **spec)
+
+
+def import_options(args: argparse.Namespace) -> dict:
+    """The importer options given on the command line, as ``load_trial`` keywords."""
+    given = {name: getattr(args, name) for name in IMPORT_FLAGS if getattr(args, name, None) is not None}
+    return {name: _CONVERT[name](v) if name in _CONVERT else v for name, v in given.items()}
 
 
 class CliError(Exception):
@@ -115,21 +186,6 @@ class cancel_on_signals:
         if self._active:
             for sig, handler in self._old.items():
                 signal.signal(sig, handler)
-
-
-def parse_belt_speed(text: str | None) -> float | str | None:
-    """``--belt-speed``: None, "auto", or a finite speed in m/s."""
-    if text is None:
-        return None
-    if text == "auto":
-        return "auto"
-    try:
-        v = float(text)
-    except ValueError:
-        raise CliError(f"--belt-speed must be 'auto' or a speed in m/s, got {text!r}") from None
-    if not math.isfinite(v):
-        raise CliError(f"--belt-speed must be finite, got {text!r}")
-    return v
 
 
 def import_message(e: BaseException) -> str:

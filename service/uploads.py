@@ -27,6 +27,7 @@ import os
 import re
 import struct
 import tempfile
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -340,8 +341,10 @@ def _precheck_trial(names: list[str], files: list[tuple[str, bytes]]) -> None:
                               f"{_seconds(seconds)}")
 
 
-def motion_from_trial(files: list[tuple[str, bytes]], *, mass: float | None, belt_speed: float | None) -> Motion:
-    """Mocap files (name, content) -> the raw capture as a Motion."""
+def motion_from_trial(files: list[tuple[str, bytes]], *, mass: float | None, belt_speed: float | None,
+                      **options: Any) -> Motion:
+    """Mocap files (name, content) -> the raw capture as a Motion (``options``: the other
+    importer options, :func:`trial_options`)."""
     if not files:
         raise UploadError("no files: send the trial's files as multipart field 'files'")
     if len(files) > MAX_FILES:
@@ -372,7 +375,7 @@ def motion_from_trial(files: list[tuple[str, bytes]], *, mass: float | None, bel
             p.write_bytes(content)
             paths.append(p)
         try:
-            capture = load_trial(paths, mass=mass, belt_speed=belt_speed)
+            capture = load_trial(paths, mass=mass, belt_speed=belt_speed, **options)
             motion = capture_motion(capture)
         except MemoryError:
             raise
@@ -401,16 +404,68 @@ def is_motion_file(files: list[tuple[str, bytes]]) -> bool:
     return isinstance(d, dict) and (d.get("format") == MOTION_FORMAT or {"coordinates", "frames"} <= d.keys())
 
 
-def trial_upload(files: list[tuple[str, bytes]], mass: float | None, belt_speed: float | None) -> Encoded:
+#: the importer options a trial upload takes as form fields beside ``mass`` and ``belt_speed``
+#: (``solver.formats.reader_options()``; a test checks that every one is here)
+OPTION_FIELDS = ("lower_only", "markers", "units", "up", "in_degrees")
+_BOOLEAN = {"true": True, "false": False, "1": True, "0": False, "yes": True, "no": False}
+_BVH_UNITS = ("auto", "cm", "m", "mm", "in", "cmu")
+_ROLE = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,31}$")
+
+
+def _marker_map(text: str) -> dict[str, str]:
+    """``ROLE=label,ROLE=label`` (C3D roles -> the file's labels; an empty label: do not use the
+    role). Only the inline form: the server reads no mapping file."""
+    out: dict[str, str] = {}
+    parts = [p for p in text.split(",") if p.strip()]
+    if not parts or len(parts) > 64:
+        raise UploadError("markers must be 1 to 64 entries ROLE=label, separated by commas")
+    for part in parts:
+        role, sep, label = part.partition("=")
+        role, label = role.strip(), label.strip()
+        if not sep or not _ROLE.match(role) or len(label) > 64 or _CONTROL.search(label):
+            raise UploadError(f"markers: {clip(part, 60)!r} is not ROLE=label (e.g. LASI=L_IAS)")
+        out[role.upper()] = label
+    return out
+
+
+def trial_options(fields: Mapping[str, str]) -> dict[str, Any]:
+    """The importer options of a trial upload's form (``OPTION_FIELDS``; absent or empty: the
+    reader's default) as ``load_trial`` keywords, each checked."""
+    out: dict[str, Any] = {}
+    for key in OPTION_FIELDS:
+        v = fields.get(key)
+        if v is None or not v.strip():
+            continue
+        v = v.strip()
+        if key in ("lower_only", "in_degrees"):
+            if v.lower() not in _BOOLEAN:
+                raise UploadError(f"{key} must be true or false, got {clip(v, 20)!r}")
+            out[key] = _BOOLEAN[v.lower()]
+        elif key == "units":
+            if v not in _BVH_UNITS:
+                raise UploadError(f"units must be one of {', '.join(_BVH_UNITS)}, got {clip(v, 20)!r}")
+            out[key] = v
+        elif key == "up":
+            if v not in ("y", "z"):
+                raise UploadError(f"up must be y or z, got {clip(v, 20)!r}")
+            out[key] = v
+        else:
+            out[key] = _marker_map(v)
+    return out
+
+
+def trial_upload(files: list[tuple[str, bytes]], mass: float | None, belt_speed: float | None,
+                 options: Mapping[str, Any] | None = None) -> Encoded:
     """``POST /motions`` with a multipart trial: files -> the validated, encoded raw capture,
     with the input summary (``Encoded.input``) the upload response shows. A single motion file
-    sent this way is read as the JSON body would be (:func:`motion_upload`)."""
+    sent this way is read as the JSON body would be (:func:`motion_upload`). ``options``: the
+    other importer options (:func:`trial_options`)."""
     if is_motion_file(files):
-        if mass is not None or belt_speed is not None:
-            raise UploadError("mass and belt_speed go with a mocap trial; a motion file states its character's "
-                              "masses itself")
+        if mass is not None or belt_speed is not None or options:
+            raise UploadError("mass, belt_speed and the importer options go with a mocap trial; a motion file "
+                              "states its character itself")
         return motion_upload(files[0][1])
-    motion = motion_from_trial(files, mass=mass, belt_speed=belt_speed)
+    motion = motion_from_trial(files, mass=mass, belt_speed=belt_speed, **(options or {}))
     return dataclasses.replace(encode(motion), input=(motion.provenance or {}).get("input"))
 
 

@@ -96,6 +96,35 @@ def test_every_command_is_described_and_every_option_has_help_with_its_default()
     assert "--fps {15,30}" in helps["tutor"] and "choices: 15, 30; default: 15" in helps["tutor"]
 
 
+#: the commands that import a trial (from files, or by uploading them to the service)
+IMPORTING = ("tutor", "grf", "demo")
+
+
+def test_every_command_that_imports_a_trial_offers_every_importer_option():
+    """Each reader option of the registry (solver.formats) is a flag of every importing command."""
+    from service.cli import IMPORT_FLAGS
+    from solver.formats import reader_options
+
+    assert set(IMPORT_FLAGS) == set(reader_options())
+    subs = {" ".join(p): s for p, s in commands(build_parser())}
+    for name in IMPORTING:
+        flags = {o for a in subs[name]._actions for o in a.option_strings}
+        missing = [flag for flag, _ in IMPORT_FLAGS.values() if flag not in flags]
+        assert not missing, f"motionx {name} lacks {missing}"
+
+
+@pytest.mark.parametrize("args, words", [
+    (["tutor", "x.bvh", "--out", "t.json", "--mass", "-3"], "--mass must be a positive finite mass in kg"),
+    (["tutor", "x.bvh", "--out", "t.json", "--mass", "heavy"], "--mass must be a mass in kg, got 'heavy'"),
+    (["tutor", "x.mot", "--out", "t.json", "--belt-speed", "fast"], "--belt-speed must be 'auto' or a speed"),
+])
+def test_importer_option_mistakes_are_one_line(args, words):
+    r = motionx(*args)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1 and lines[0].startswith("motionx: error:") and words in lines[0], \
+        r.stderr
+
+
 def test_usage_errors_are_one_line_and_status_2():
     for args in (["tutor"], ["extrapolate", "x.json"], ["frobnicate"], ["tutor", "x.c3d", "--out", "t.json",
                                                                         "--fps", "20"]):

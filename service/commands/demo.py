@@ -33,7 +33,15 @@ from pathlib import Path
 from tqdm import tqdm
 
 from service import examples
-from service.cli import CliError, Terminated, add_command, cancel_on_signals, stop_on_signals
+from service.cli import (
+    CliError,
+    Terminated,
+    add_command,
+    add_import_options,
+    cancel_on_signals,
+    import_options,
+    stop_on_signals,
+)
 from service.commands.outputs import written_here
 from service.topology import Proc, TopologyError, free_port, motionx_cmd, wait_api
 from solver.outputs import progress_csv, step_stem
@@ -118,12 +126,30 @@ def _clear_earlier_run(out: Path) -> None:
     (out / "summary.json").unlink(missing_ok=True)
 
 
+def _upload_fields(args: argparse.Namespace) -> dict[str, str]:
+    """The importer options given as the upload's form fields (POST /motions)."""
+    fields = {}
+    for name, v in import_options(args).items():
+        if name == "belt_speed" and v == "auto":
+            raise CliError("--belt-speed auto is not taken by the service: give the belt speed in m/s")
+        if name == "markers":
+            from solver.io.c3d.markers import parse_mapping
+
+            try:
+                v = ",".join(f"{role}={label}" for role, label in parse_mapping(v).items())
+            except ValueError as e:
+                raise CliError(f"--markers: {e}") from None
+        fields[name] = str(v).lower() if isinstance(v, bool) else str(v)
+    return fields
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
     files = [Path(p) for p in args.inputs] if args.inputs else _default_trial()
     for f in files:
         if not f.is_file():
             raise CliError(f"input not found: {f}")
     jobs = _targets(args)
+    args.form = _upload_fields(args)
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise CliError(f"--out {out} exists and is not a directory")
@@ -189,7 +215,7 @@ def _work(args, http, files: list[Path], jobs: list[_Job], out: Path, key: str, 
     ``out``; ``cancel()`` true (Ctrl-C, SIGTERM): nothing more is queued, the unfinished jobs are
     canceled, and what they reached is downloaded. Returns the summary it writes."""
     up = http.post("/motions", files=[("files", (f.name, f.read_bytes())) for f in files],
-                   data={"name": "demo capture", **({"mass": str(args.mass)} if args.mass else {})})
+                   data={"name": "demo capture", **args.form})
     _check(up, 201, "upload")
     motion = up.json()
     print(f"[demo] uploaded {', '.join(f.name for f in files)} -> motion {motion['id']} "
@@ -480,8 +506,7 @@ SIGTERM.""")
     s.add_argument("--character", choices=["halfboy", "fullbody"], default="halfboy",
                    help="synthesis character of the tutor")
     s.add_argument("--fps", type=float, choices=[15.0, 30.0], default=15.0, help="frames per second of the tutor")
-    s.add_argument("--mass", type=float, default=None, metavar="KG",
-                   help="subject mass in kg (default: from the input; required when the input does not state it)")
+    add_import_options(s)
     s.add_argument("--timeout", type=float, default=900.0, metavar="S", help="seconds to wait for the jobs")
     s.add_argument("--no-library", dest="library", action="store_false",
                    help="skip the small motion library (3 slopes × 3 curves, queued with the jobs; default: it runs)")

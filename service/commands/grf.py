@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from service.cli import CliError, add_command, import_message, parse_belt_speed, warn_input
+from service.cli import CliError, add_command, add_import_options, import_message, import_options, warn_input
 
 log = logging.getLogger("motionx")
 
@@ -54,9 +54,10 @@ def _load(args: argparse.Namespace):
         raise CliError("give the trial once: its files (MODEL.osim IK.mot|MARKERS.trc [GRF.mot X.xml] | FILE.c3d "
                        "| FILE.bvh | DeepMimic CLIP.txt CHARACTER.txt), or --osim MODEL --coordinates IK.mot, "
                        "or --c3d FILE")
-    if args.mass is not None and not (math.isfinite(args.mass) and args.mass > 0):
-        raise CliError(f"--mass must be a positive number of kg, got {args.mass}")
-    belt = parse_belt_speed(args.belt_speed)
+    options = import_options(args)
+    belt = options.get("belt_speed")
+    from solver.io import load_trial
+
     if kinds[0] == "osim":
         if not args.coordinates:
             raise CliError("--osim needs --coordinates IK.mot (the model's coordinates over time)")
@@ -64,10 +65,7 @@ def _load(args: argparse.Namespace):
         _exists(args.coordinates, "--coordinates")
         _exists(args.grf, "--grf")
         _exists(args.external_loads, "--external-loads")
-        from solver.io.opensim import load_opensim
-
-        return load_opensim(args.osim, args.coordinates, mass=args.mass, belt_speed=belt, grf=args.grf,
-                            grf_xml=args.external_loads)
+        return load_trial([p for p in (args.osim, args.coordinates, args.grf, args.external_loads) if p], **options)
     if args.coordinates:
         raise CliError("--coordinates goes with --osim (or list the model and its coordinates as files)")
     if kinds[0] == "c3d":
@@ -76,9 +74,7 @@ def _load(args: argparse.Namespace):
         if belt is not None:
             raise CliError("--belt-speed applies to OpenSim treadmill trials")
         _exists(args.c3d, "--c3d")
-        from solver.io.c3d import load_c3d
-
-        return load_c3d(args.c3d, mass=args.mass, markers=args.markers)
+        return load_trial([args.c3d], **options)
     for p in files:
         _exists(p, "input")
     extra = [p for p in (args.grf, args.external_loads) if p]
@@ -86,14 +82,7 @@ def _load(args: argparse.Namespace):
         raise CliError("--grf and --external-loads go with an OpenSim trial (MODEL.osim IK.mot)")
     _exists(args.grf, "--grf")
     _exists(args.external_loads, "--external-loads")
-    options = {}
-    if args.markers:
-        if not any(Path(p).suffix.lower() == ".c3d" for p in files):
-            raise CliError("--markers goes with a C3D trial")
-        options["markers"] = args.markers
-    from solver.io import load_trial
-
-    return load_trial([*files, *extra], mass=args.mass, belt_speed=belt, **options)
+    return load_trial([*files, *extra], **options)
 
 
 def cmd_grf(args: argparse.Namespace) -> int:
@@ -193,7 +182,8 @@ def cmd_grf_compare(args: argparse.Namespace) -> int:
             _exists(args.c3d, "--c3d")
             from solver.io.c3d import read_c3d_trial
 
-            trial = read_c3d_trial(args.c3d, mass=args.mass, markers=args.markers)
+            opts = import_options(args)
+            trial = read_c3d_trial(args.c3d, mass=opts.get("mass"), markers=opts.get("markers"))
             track = trial.track
             if track.measured is None:
                 raise CliError(f"{args.c3d}: no force plates to compare with")
@@ -297,15 +287,7 @@ The trial is given as for `motionx tutor` (its files); --osim/--coordinates, --c
                    "markers (.trc) whose inverse kinematics OpenSim solves with the model's marker set")
     g.add_argument("--c3d", metavar="FILE.c3d", help="C3D trial (markers; plates give the contact timing)")
     g.add_argument("--input", nargs="+", metavar="FILE", help="trial files, as the positional INPUT")
-    s.add_argument("--mass", type=float, default=None, metavar="KG",
-                   help="subject mass in kg (default: from the input; required when the input does not state it)")
-    s.add_argument("--markers", metavar="MAP", default=None,
-                   help="C3D marker mapping for unrecognised marker sets: ROLE=label,... (Plug-in Gait roles, e.g. "
-                        "LASI=L_IAS,RASI=R_IAS) or a file with one ROLE=label per line (docs/c3d.md; default: "
-                        "roles detected from the labels)")
-    s.add_argument("--belt-speed", default=None, metavar="auto|V",
-                   help="treadmill belt speed (m/s) or 'auto' (OpenSim): kinematics made overground-equivalent "
-                        "(default: none, overground)")
+    add_import_options(s)
     s.add_argument("--grf", metavar="GRF.mot", help="OpenSim force-plate file: contact timing from the plates "
                    "(--contacts auto|plates) and the belt-speed estimate (default: none)")
     s.add_argument("--external-loads", metavar="X.xml",

@@ -15,10 +15,11 @@ from tqdm import tqdm
 from service.cli import (
     CliError,
     add_command,
+    add_import_options,
     cancel_on_signals,
     import_message,
+    import_options,
     load_motion,
-    parse_belt_speed,
     warn_input,
 )
 from service.commands.outputs import prepare_output_dir
@@ -104,8 +105,7 @@ def _tutor(args: argparse.Namespace, cancel: cancel_on_signals) -> int:
     enable_native_code(get_settings())
     t0 = time.perf_counter()
     try:
-        capture = load_trial(args.inputs, mass=args.mass, belt_speed=parse_belt_speed(args.belt_speed),
-                             markers=args.markers)
+        capture = load_trial(args.inputs, **import_options(args))
     except (ValueError, FileNotFoundError) as e:
         raise CliError(f"cannot import {' '.join(args.inputs)}: {import_message(e)}") from None
     t_import = time.perf_counter() - t0
@@ -362,20 +362,12 @@ or SIGTERM stops the solve at its next IPOPT iteration, writes nothing and exits
                    help="synthesis character: halfboy (16 coordinates, legs + lumped trunk) or fullbody (43)")
     s.add_argument("--fps", type=float, choices=[15.0, 30.0], default=15.0, help="frames per second of the tutor")
     s.add_argument("--out", required=True, metavar="TUTOR.json", help="motion file v2 (JSON) to write")
-    s.add_argument("--mass", type=_finite("--mass"), metavar="KG",
-                   help="subject mass in kg (default: from the input; required when the input does not state it)")
-    s.add_argument("--belt-speed", default=None, metavar="auto|V",
-                   help="treadmill belt speed in m/s, or 'auto' (adds v·t to the root: overground-equivalent; "
-                        "default: none, overground)")
-    s.add_argument("--markers", metavar="MAP", default=None,
-                   help="C3D marker mapping for unrecognised marker sets: ROLE=label,... (Plug-in Gait roles, e.g. "
-                        "LASI=L_IAS,RASI=R_IAS) or a file with one ROLE=label per line (docs/c3d.md; default: "
-                        "roles detected from the labels)")
     s.add_argument("--cycle", type=int, default=0, metavar="N", help="which complete gait cycle to use (0 = first)")
     s.add_argument("--start", default="auto", choices=["auto", "right_heel_strike", "left_heel_strike", "best_loop"],
                    help="where the cycle starts (auto: heel strikes, else the best-closing loop)")
     s.add_argument("--max-iter", type=int, default=1000, metavar="K", help="IPOPT iteration limit of the correction")
     s.add_argument("--json", action="store_true", help="print the result as one JSON object instead of a summary")
+    add_import_options(s)
     s.set_defaults(func=cmd_tutor)
 
     s = add_command(sub, "extrapolate", "continuation from a tutor to a new environment (the main job)", """\

@@ -47,6 +47,18 @@ UPLOAD_BODY = {
                                  "description": "subject mass (kg): C3D without it, BVH"},
                         "belt_speed": {"type": "number", "minimum": -20, "maximum": 20,
                                        "description": "treadmill belt speed (m/s)"},
+                        "lower_only": {"type": "boolean",
+                                       "description": "fit the lower body only (default: the whole body when the "
+                                                      "data allow)"},
+                        "markers": {"type": "string", "maxLength": 4000, "pattern": "^[^\\x00-\\x1f\\x7f]*$",
+                                    "description": "C3D: marker mapping ROLE=label,... for unrecognised marker sets "
+                                                   "(Plug-in Gait roles, e.g. LASI=L_IAS,RASI=R_IAS)"},
+                        "units": {"type": "string", "enum": ["auto", "cm", "m", "mm", "in", "cmu"],
+                                  "description": "BVH: the file's length unit (default: auto)"},
+                        "up": {"type": "string", "enum": ["y", "z"], "description": "BVH: the file's up axis "
+                                                                                       "(default: y)"},
+                        "in_degrees": {"type": "boolean", "description": "OpenSim: the coordinates are in degrees "
+                                                                          "(default: the file's header says)"},
                         "name": {"type": "string", "maxLength": 200, "pattern": "^[^\\x00-\\x1f\\x7f]*$"},
                     },
                 }
@@ -58,7 +70,7 @@ UPLOAD_BODY = {
 #: the exporters' registry (solver.formats), and the motion file itself
 FORMATS = (*EXPORTERS, "motion")
 ExportFormat = Literal[FORMATS]  # type: ignore[valid-type]
-MULTIPART_FIELDS = ("files", "mass", "belt_speed", "name")
+MULTIPART_FIELDS = ("files", "mass", "belt_speed", *uploads.OPTION_FIELDS, "name")
 NAME_PATTERN = r"^[^\x00-\x1f\x7f]*$"
 _CONTROL = re.compile(r"[\x00-\x1f\x7f]")
 
@@ -123,7 +135,7 @@ async def upload_motion(
             body = await request.body()
             encoded = await compute.run(uploads.motion_upload, body, what="the upload")
         elif ctype == "multipart/form-data":
-            form = await request.form(max_files=MAX_FILES, max_fields=16)
+            form = await request.form(max_files=MAX_FILES, max_fields=24)
             try:
                 unknown = sorted({k for k in form if k not in MULTIPART_FIELDS})
                 if unknown:
@@ -131,12 +143,17 @@ async def upload_motion(
                                       f"{', '.join(MULTIPART_FIELDS)}")
                 files = [(f.filename or "", await f.read()) for f in form.getlist("files") if isinstance(f, UploadFile)]
                 mass, belt = _form_float(form, "mass"), _form_float(form, "belt_speed")
+                texts = {k: form.get(k) for k in uploads.OPTION_FIELDS if form.get(k) is not None}
+                if any(not isinstance(v, str) for v in texts.values()):
+                    raise UploadError(f"{', '.join(k for k, v in texts.items() if not isinstance(v, str))}: a value, "
+                                      "not a file")
+                options = uploads.trial_options(texts)
                 label = form.get("name")
                 if label is not None:
                     name = _label(label)
             finally:
                 await form.close()
-            encoded = await compute.run(uploads.trial_upload, files, mass, belt, what="the trial import")
+            encoded = await compute.run(uploads.trial_upload, files, mass, belt, options, what="the trial import")
         else:
             raise Problem(415, f"unsupported content type {clip(ctype, 60) or '(none)'!r}: send application/json "
                           "(motion file v1) or multipart/form-data (mocap trial)")

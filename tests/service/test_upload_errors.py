@@ -50,3 +50,38 @@ def test_over_http(api, bvh_bytes):
     assert "fake.bvh" in r.text
     r = api.a.post("/motions", files={"files": ("walk.bvh", bvh_bytes)})
     assert r.status_code == 422 and "send the form field 'mass' (kg)" in r.text, r.text
+
+
+def test_every_importer_option_is_a_form_field():
+    from service.routes.motions import MULTIPART_FIELDS
+    from solver.formats import reader_options
+
+    assert set(reader_options()) <= set(MULTIPART_FIELDS)
+
+
+@pytest.mark.parametrize("fields, words", [
+    ({"lower_only": "maybe"}, "lower_only must be true or false"),
+    ({"units": "furlong"}, "units must be one of auto, cm, m, mm, in, cmu"),
+    ({"up": "x"}, "up must be y or z"),
+    ({"markers": "/etc/passwd"}, "is not ROLE=label"),
+    ({"markers": "LASI=L_IAS,1X=y"}, "'1X=y' is not ROLE=label"),
+])
+def test_bad_importer_options_are_refused_clearly(fields, words):
+    from service.uploads import trial_options
+
+    with pytest.raises(UploadError, match=words):
+        trial_options(fields)
+
+
+def test_importer_options_reach_the_reader(bvh_bytes):
+    """The form's text becomes the reader's options, and they reach the reader: lower_only fits
+    fewer coordinates; an option of another format is refused by name."""
+    from service.uploads import trial_options
+
+    opts = trial_options({"units": "m", "up": "y", "lower_only": "true"})
+    assert opts == {"units": "m", "up": "y", "lower_only": True}
+    whole = motion_from_trial([("walk.bvh", bvh_bytes)], mass=45.0, belt_speed=None)
+    lower = motion_from_trial([("walk.bvh", bvh_bytes)], mass=45.0, belt_speed=None, lower_only=True)
+    assert lower.character.n < whole.character.n  # the lower body only
+    with pytest.raises(UploadError, match="markers"):  # an option of another reader is refused, by name
+        motion_from_trial([("walk.bvh", bvh_bytes)], mass=45.0, belt_speed=None, markers={"LASI": "L_IAS"})
