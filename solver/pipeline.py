@@ -282,6 +282,69 @@ def sole_calibration(character: Character, q: np.ndarray, contacts: np.ndarray) 
     return replace(character, contacts=tuple(pts), feet=tuple(feet)), {"heel_above_toe_mm": moved}
 
 
+@dataclass(frozen=True, eq=False)
+class PreparedCycle:
+    """One gait cycle of a capture ready for the synthesis character: the cycle (``cycle``, on
+    the levelled capture skeleton), its contact schedule, the synthesis character, the capture
+    skeleton reduced to it and its coordinates ``q`` (contact plane calibrated)."""
+
+    cycle: Capture
+    contacts: np.ndarray
+    synthesis: Character
+    capture_character: Character
+    q: np.ndarray
+    fps: float
+    stats: Mapping[str, Any]
+
+
+def prepare_cycle(capture: Capture, *, character: str = "halfboy", fps: float = 15.0, cycle: int = 0,
+                  start: str = "auto") -> PreparedCycle:
+    """cycle → soles levelled → synthesis character → contact plane → double support: what the
+    simplification starts from."""
+    if not (math.isfinite(fps) and fps > 0):
+        raise PipelineError(f"fps must be positive, got {fps}")
+    stats: dict[str, Any] = {}
+    t = time.perf_counter()
+    cyc, contacts = extract_cycle(capture, fps, start=start, cycle=cycle)
+    contacts = np.array(contacts, dtype=bool)
+    contacts[:, -2:] = contacts[:, :2]  # the overlap frames repeat frames 1-2
+    mean_pose = dict(zip(capture.character.coordinate_names, np.mean(cyc.q[:, :-2], axis=1)))
+    levelled, soles = sole_calibration(capture.character, cyc.q, contacts)
+    if soles:
+        stats["sole_calibration"] = soles
+    syn, cap_char = synthesis_character(levelled, character, pose=mean_pose)
+    stats["cycle_s"] = time.perf_counter() - t
+    q_cap = _select(levelled, cyc.q, cap_char)
+    q_cap, shift = contact_plane_calibration(cap_char, q_cap, contacts)
+    stats["contact_plane_shift_mm"] = 1e3 * shift
+    contacts, shared = ensure_double_support(cap_char, q_cap, contacts)
+    if shared:
+        stats["double_support_added"] = shared
+    return PreparedCycle(cyc, contacts, syn, cap_char, q_cap, fps, stats)
+
+
+def _source_provenance(capture: Capture, cyc: Capture) -> dict[str, Any]:
+    return {"format": capture.source.get("format"), "files": capture.source.get("files"),
+            "subject": capture.source.get("subject"), "cycle": capture.source.get("cycle") or cyc.source.get("cycle")}
+
+
+def _simplified(prep: PreparedCycle, q: np.ndarray, source: Mapping[str, Any]) -> Motion:
+    return Motion(prep.synthesis, prep.fps, q, contacts=prep.contacts, provenance=jsonable({
+        "step": "simplify", "source": source, "lambda": None}))
+
+
+def simplified_motion(source: Capture | Motion, *, character: str = "halfboy", fps: float = 15.0, cycle: int = 0,
+                      start: str = "auto", weights: Weights = Weights()) -> Motion:
+    """The simplified cycle alone (step "simplify": the capture's cycle fitted by the synthesis
+    character, kinematics only, no forces), as ``make_tutor`` makes it before the correction."""
+    capture = motion_capture(source) if isinstance(source, Motion) else source
+    prep = prepare_cycle(capture, character=character, fps=fps, cycle=cycle, start=start)
+    simp = simplify(prep.capture_character, prep.q, prep.synthesis, fps, weights=weights)
+    if not simp.success:
+        raise PipelineError(f"simplification did not converge ({simp.status})")
+    return _simplified(prep, simp.q, _source_provenance(capture, prep.cycle))
+
+
 def make_tutor(
     source: Capture | Motion,
     *,
@@ -308,27 +371,12 @@ def make_tutor(
         return TutorResult(Status.CANCELED, None, f"canceled {when} the {phase}", jsonable(stats))
 
     capture = motion_capture(source) if isinstance(source, Motion) else source
-    if not (math.isfinite(fps) and fps > 0):
-        raise PipelineError(f"fps must be positive, got {fps}")
     stats: dict[str, Any] = {}
     if stop := canceled(stats, "simplification"):
         return stop
-    t = time.perf_counter()
-    cyc, contacts = extract_cycle(capture, fps, start=start, cycle=cycle)
-    contacts = np.array(contacts, dtype=bool)
-    contacts[:, -2:] = contacts[:, :2]  # the overlap frames repeat frames 1-2
-    mean_pose = dict(zip(capture.character.coordinate_names, np.mean(cyc.q[:, :-2], axis=1)))
-    levelled, soles = sole_calibration(capture.character, cyc.q, contacts)
-    if soles:
-        stats["sole_calibration"] = soles
-    syn, cap_char = synthesis_character(levelled, character, pose=mean_pose)
-    stats["cycle_s"] = time.perf_counter() - t
-    q_cap = _select(levelled, cyc.q, cap_char)
-    q_cap, shift = contact_plane_calibration(cap_char, q_cap, contacts)
-    stats["contact_plane_shift_mm"] = 1e3 * shift
-    contacts, shared = ensure_double_support(cap_char, q_cap, contacts)
-    if shared:
-        stats["double_support_added"] = shared
+    prep = prepare_cycle(capture, character=character, fps=fps, cycle=cycle, start=start)
+    stats.update(prep.stats)
+    cyc, contacts, syn, cap_char, q_cap = prep.cycle, prep.contacts, prep.synthesis, prep.capture_character, prep.q
 
     t = time.perf_counter()
     simp = simplify(cap_char, q_cap, syn, fps, weights=weights, should_cancel=should_cancel)
@@ -379,11 +427,8 @@ def make_tutor(
                                     "constraints": res.stats.get("n_constraints"),
                                     "build_s": res.stats.get("build_time")}}
     stats["total_s"] = time.perf_counter() - t_start
-    src_prov = {"format": capture.source.get("format"), "files": capture.source.get("files"),
-                "subject": capture.source.get("subject"),
-                "cycle": capture.source.get("cycle") or cyc.source.get("cycle")}
-    simplified = Motion(syn, fps, q_sim, contacts=contacts, provenance=jsonable({
-        "step": "simplify", "source": src_prov, "lambda": None}))
+    src_prov = _source_provenance(capture, cyc)
+    simplified = _simplified(prep, q_sim, src_prov)
     if not res.success:
         return TutorResult(Status.FAILED, None, f"correction did not converge ({res.status})", jsonable(stats),
                            simplified=simplified, last_iterate={"q": res.q, "wrenches": res.wrenches})

@@ -148,11 +148,11 @@ def test_real_walk_smoothed_passes_the_dynamics_checks_and_its_zigzag_fails(shar
     (Its free moment, 0.033 BW·m about the centre of pressure, exceeds the torsional limits: HalfBoy
     has no arms to cancel the legs' vertical angular momentum — the optimizer must shape that.)"""
     from solver.io import load_trial
-    from solver.pipeline import make_tutor
+    from solver.pipeline import simplified_motion
     from solver.realism import refined
 
     d = shared_data / "deepmimic_humanoid3d_walk"
-    sim = make_tutor(load_trial([d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt"]), fps=15.0).simplified
+    sim = simplified_motion(load_trial([d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt"]), fps=15.0)
     m = lowpass_cycle(sim.evolve(wrenches=np.zeros((2, 6, sim.T))), 4)
     cyc, _ = cycle_of(m)
     r = refined(m, cyc, 1)
