@@ -166,4 +166,5 @@ def test_a_capture_whose_provenance_cannot_rebuild_it_is_refused_at_upload(api):
         assert "provenance of a capture" in r.json()["detail"]
     ok = halfboy_motion(20).to_dict()
     ok["provenance"]["source"] = {"format": "test"}
-    assert api.a.post("/motions", content=json.dumps(ok), headers={"content-type": "application/json"}).status_code == 201
+    r = api.a.post("/motions", content=json.dumps(ok), headers={"content-type": "application/json"})
+    assert r.status_code == 201
