@@ -65,6 +65,26 @@ def _unit(text: str) -> str | float:
         return text
 
 
+def finite(flag: str, what: str = "a number"):
+    """An argparse type: a finite number (``what`` says what the flag takes, in its errors)."""
+    def conv(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{flag} takes {what}, got {text!r}") from None
+        if not math.isfinite(v):
+            raise argparse.ArgumentTypeError(f"{flag} must be finite, got {text!r}")
+        return v
+
+    return conv
+
+
+def finite_list(flag: str):
+    """An argparse type: comma-separated finite numbers."""
+    one = finite(flag, "comma-separated numbers")
+    return lambda text: [one(part.strip()) for part in text.split(",")]
+
+
 #: the importer options whose text is converted (a mistake is one line, exit status 2)
 _CONVERT = {"mass": _positive_kg, "belt_speed": _belt, "units": _unit}
 #: every importer option (``solver.formats.reader_options()``) as a flag: (flag, argparse

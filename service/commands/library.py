@@ -7,32 +7,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from pathlib import Path
 
 from tqdm import tqdm
 
-from service.cli import CliError, add_command, cancel_on_signals, load_motion
+from service.cli import CliError, add_command, cancel_on_signals, finite_list, load_motion
 from service.config import enable_native_code, get_settings
 from solver import axes as registry
-
-
-def _values(flag: str):
-    def conv(text: str) -> list[float]:
-        out = []
-        for part in text.split(","):
-            part = part.strip()
-            try:
-                v = float(part)
-            except ValueError:
-                raise argparse.ArgumentTypeError(f"{flag} takes comma-separated numbers, got {part!r}") from None
-            if not math.isfinite(v):
-                raise argparse.ArgumentTypeError(f"{flag} values must be finite, got {part!r}")
-            out.append(v)
-        return out
-
-    return conv
 
 
 class _Bar:
@@ -143,7 +125,7 @@ IPOPT iteration, writes the cells reached so far and the manifest (status cancel
     s.add_argument("tutor", metavar="TUTOR.json", help="tutor motion file (from motionx tutor)")
     for ax in registry.axes():  # one flag per grid axis of the registry: --slopes, --curves, --speed-scales
         if ax.grid:
-            s.add_argument(ax.cli + "s", dest=ax.name, type=_values(ax.cli + "s"), metavar="V1,V2,...",
+            s.add_argument(ax.cli + "s", dest=ax.name, type=finite_list(ax.cli + "s"), metavar="V1,V2,...",
                            help=f"{ax.doc}: comma-separated values within {ax.bounds_text()} (default: none)")
     s.add_argument("--out", required=True, metavar="DIR", help="output folder (new or empty, unless --force)")
     s.add_argument("--force", action="store_true", help="write into a non-empty --out (replaces this command's files)")

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import time
 from dataclasses import asdict
@@ -17,6 +16,7 @@ from service.cli import (
     add_command,
     add_import_options,
     cancel_on_signals,
+    finite,
     import_message,
     import_options,
     load_motion,
@@ -334,19 +334,6 @@ def cmd_extrapolate(args: argparse.Namespace) -> int:
     return 0 if res.status.ok else 1
 
 
-def _finite(kind: str):
-    def conv(s: str) -> float:
-        try:
-            v = float(s)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{kind} must be a number, got {s!r}") from None
-        if not math.isfinite(v):
-            raise argparse.ArgumentTypeError(f"{kind} must be finite, got {s!r}")
-        return v
-
-    return conv
-
-
 def register(sub: argparse._SubParsersAction) -> None:
     s = add_command(sub, "tutor", "import a trial and make it physically plausible (the tutor motion)", """\
 Import a captured walk, take one gait cycle, reduce the capture skeleton to the synthesis
@@ -379,7 +366,7 @@ step_NNN_lambda_L.motion.json, then progress.csv, progress.png, summary.json and
 motion's grf.png, residuals.png and filmstrip.png. Exit status 0 for `succeeded` and `impasse`.""")
     s.add_argument("tutor", metavar="TUTOR.json", help="tutor motion file (from motionx tutor)")
     for ax in registry.axes():  # one flag per registered homotopy axis
-        s.add_argument(ax.cli, dest=ax.name, type=_finite(ax.cli), metavar=ax.metavar,
+        s.add_argument(ax.cli, dest=ax.name, type=finite(ax.cli), metavar=ax.metavar,
                        help=f"{ax.doc}; within {ax.bounds_text()}"
                             + ("" if ax.default is None else f" (default: {ax.default:g})"))
     s.add_argument("--out", required=True, metavar="DIR", help="output folder (new or empty, unless --force)")
@@ -389,8 +376,8 @@ motion's grf.png, residuals.png and filmstrip.png. Exit status 0 for `succeeded`
     s.add_argument("--method", choices=["adaptive", "thesis"], default="thesis",
                    help="step control: thesis (default; Algorithm 3: double on success, halve on failure) or "
                         "adaptive (secant predictor, steps from the recent history)")
-    s.add_argument("--delta0", type=_finite("--delta0"), default=0.05, metavar="D", help="first step Δ0 in λ")
-    s.add_argument("--eps", type=_finite("--eps"), default=0.005, metavar="E",
+    s.add_argument("--delta0", type=finite("--delta0"), default=0.05, metavar="D", help="first step Δ0 in λ")
+    s.add_argument("--eps", type=finite("--eps"), default=0.005, metavar="E",
                    help="smallest step ε in λ before an impasse")
     s.add_argument("--max-iter", type=int, default=200, metavar="K", help="IPOPT iterations per step (k)")
     s.add_argument("--max-solves", type=int, default=400, metavar="N",
@@ -410,7 +397,7 @@ force shape, trunk lean on slopes, pelvis ranges), each beside the captured walk
 figure. Prints a summary (--json: the report as JSON); exit status 1 when the motion is not
 plausible or not natural.""")
     s.add_argument("motion", metavar="MOTION.json", help="motion file v1 (JSON)")
-    s.add_argument("--residual-tol", type=_finite("--residual-tol"), default=None, metavar="R",
+    s.add_argument("--residual-tol", type=finite("--residual-tol"), default=None, metavar="R",
                    help="root residual tolerance relative to body weight (default: 1e-6)")
     s.add_argument("--json", action="store_true", help="print the report as one JSON object instead of a summary")
     s.add_argument("--pretty", action="store_true", help="print the report as indented JSON")
