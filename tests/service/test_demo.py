@@ -79,7 +79,7 @@ def demo_run(tmp_path_factory, shared_data):
     tmp.mkdir()
     # leftovers of an earlier run (and a file of the user's, which must stay)
     (out / "downhill").mkdir(parents=True)
-    for stale in ("step_009_lambda_0.9000.motion.json", "step_009_lambda_0.9000.glb", "lambda_0.5000.motion.json"):
+    for stale in ("step_009_lambda_0.9000.motion.json", "step_009_lambda_0.9000.glb"):
         (out / "downhill" / stale).write_text("{}")
     (out / "downhill" / "notes.txt").write_text("mine")
     exe = Path(sys.executable).with_name("motionx")
@@ -171,7 +171,6 @@ def test_sigterm_stops_the_demo_and_its_service_and_removes_the_temporary_folder
 def test_demo_replaces_an_earlier_runs_files_only(demo_run):
     d = demo_run.out / "downhill"
     assert not (d / "step_009_lambda_0.9000.motion.json").exists() and not (d / "step_009_lambda_0.9000.glb").exists()
-    assert not (d / "lambda_0.5000.motion.json").exists()
     assert (d / "notes.txt").read_text() == "mine"
 
 
