@@ -27,7 +27,7 @@ from importlib.metadata import version as dist_version
 from pathlib import Path
 from typing import ClassVar
 
-from solver.formats import reader_suffixes
+from solver.formats import BVH_UNITS, reader_suffixes
 
 log = logging.getLogger("motionx")
 
@@ -105,7 +105,7 @@ IMPORT_FLAGS: dict[str, tuple[str, dict]] = {
                                     "help": "fit the lower body only (--no-lower-only: the whole body; default: the "
                                             "whole body when the data allow)"}),
     "units": ("--units", {"metavar": "UNIT",
-                          "help": "BVH: length unit of the file, auto, cm, m, mm, in, cmu or metres per unit "
+                          "help": f"BVH: length unit of the file, {', '.join(BVH_UNITS)} or metres per unit "
                                   "(default: auto)"}),
     "up": ("--up", {"choices": ["y", "z"], "help": "BVH: the file's up axis (default: y)"}),
     "in_degrees": ("--in-degrees", {"action": argparse.BooleanOptionalAction,

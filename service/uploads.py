@@ -36,7 +36,7 @@ from service import limits
 from service.limits import LimitError, clip, refusal_text
 from solver import axes as registry
 from solver.environment import environment_of
-from solver.formats import reader_suffixes
+from solver.formats import BVH_UNITS, reader_suffixes
 from solver.motion import FORMAT as MOTION_FORMAT
 from solver.motion import Motion, MotionError, motion_from_dict
 
@@ -408,7 +408,6 @@ def is_motion_file(files: list[tuple[str, bytes]]) -> bool:
 #: (``solver.formats.reader_options()``; a test checks that every one is here)
 OPTION_FIELDS = ("lower_only", "markers", "units", "up", "in_degrees")
 _BOOLEAN = {"true": True, "false": False, "1": True, "0": False, "yes": True, "no": False}
-_BVH_UNITS = ("auto", "cm", "m", "mm", "in", "cmu")
 _ROLE = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,31}$")
 
 
@@ -442,8 +441,8 @@ def trial_options(fields: Mapping[str, str]) -> dict[str, Any]:
                 raise UploadError(f"{key} must be true or false, got {clip(v, 20)!r}")
             out[key] = _BOOLEAN[v.lower()]
         elif key == "units":
-            if v not in _BVH_UNITS:
-                raise UploadError(f"units must be one of {', '.join(_BVH_UNITS)}, got {clip(v, 20)!r}")
+            if v not in BVH_UNITS:
+                raise UploadError(f"units must be one of {', '.join(BVH_UNITS)}, got {clip(v, 20)!r}")
             out[key] = v
         elif key == "up":
             if v not in ("y", "z"):

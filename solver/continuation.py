@@ -74,6 +74,11 @@ class StepControl:
         if self.max_iter < 1 or self.max_solves < 1:
             raise ValueError("max_iter and max_solves must be >= 1")
 
+    def summary(self) -> dict[str, Any]:
+        """The settings a summary or a manifest records."""
+        return {"method": self.method, "delta0": self.delta0, "eps": self.eps, "max_iter": self.max_iter,
+                "max_solves": self.max_solves}
+
 
 @dataclass(frozen=True)
 class ProgressRecord:

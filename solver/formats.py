@@ -45,6 +45,9 @@ def _ro(d: dict[str, str]) -> MappingProxyType[str, str]:
     return MappingProxyType(d)
 
 
+#: the length units a BVH file may be read in (``solver.io.bvh.UNIT_M`` and "auto")
+BVH_UNITS = ("auto", "cm", "m", "mm", "in", "cmu")
+
 _COMMON = {"mass": "the subject's mass (kg) when the files do not state it",
            "lower_only": "fit the lower body only (None: the whole body when the data allow)"}
 
@@ -59,7 +62,7 @@ READERS: tuple[Reader, ...] = (
            _ro({**_COMMON, "markers": "marker label mapping (role -> label)"}),
            "solver.io.c3d", "trial_files", "load_c3d"),
     Reader("bvh", _ro({".bvh": "BVH"}), ".bvh",
-           _ro({**_COMMON, "units": "length unit of the file ('auto', 'cm', 'm', 'mm', 'in', 'cmu')",
+           _ro({**_COMMON, "units": f"length unit of the file ({', '.join(BVH_UNITS)})",
                 "up": "the file's up axis ('y' or 'z')"}),
            "solver.io.bvh", "trial_files", "load_bvh"),
     Reader("deepmimic", _ro({".txt": "DeepMimic motion or character", ".json": "DeepMimic motion or character"}),

@@ -9,7 +9,8 @@ report then runs too, so this package reaches MuJoCo without importing ``mjcf`` 
 
 from __future__ import annotations
 
-from importlib.metadata import entry_points
+from functools import cache
+from importlib.metadata import EntryPoint, entry_points
 from typing import Any
 
 from solver.motion import Motion
@@ -19,10 +20,16 @@ from solver.plausibility import Tolerances, report
 REPLAY_GROUP = "motionx.replay"
 
 
+@cache
+def _replays() -> tuple[EntryPoint, ...]:
+    """The installed replays (read from the package metadata once per process)."""
+    return tuple(sorted(entry_points(group=REPLAY_GROUP), key=lambda e: e.name))
+
+
 def validate(motion: Motion, tolerances: Tolerances = Tolerances()) -> dict[str, Any]:
     """The validation report of ``motion``: our checks, extended by the installed replay (the
     MuJoCo one when the project is installed; ``plausible`` then requires it too)."""
-    replays = sorted(entry_points(group=REPLAY_GROUP), key=lambda e: e.name)
+    replays = _replays()
     if not replays:
         return report(motion, tolerances)
     if len(replays) > 1:

@@ -253,3 +253,10 @@ def test_bvh_without_mass_names_the_mass_flag(shared_data, tmp_path):
         r = subprocess.run([exe, *map(str, cmd)], capture_output=True, text=True, timeout=120)
         assert r.returncode == 2 and "does not state it; pass --mass KG" in r.stderr, r.stderr
         assert "mass=" not in r.stderr, r.stderr
+
+
+def test_the_unit_names_offered_are_the_readers():
+    from solver.formats import BVH_UNITS
+    from solver.io.bvh import UNIT_M
+
+    assert ("auto", *UNIT_M) == BVH_UNITS

@@ -314,19 +314,9 @@ def cmd_extrapolate(args: argparse.Namespace) -> int:
                  "realism_failed": (rep.get("realism") or {}).get("failed", []),
                  "environment": last.motion.provenance.get("environment_values"),
                  "plots": list(write_motion_plots(last.motion, out).values())}
-    summary = {
-        "status": res.status,
-        "lambda_reached": res.lam_reached,
-        "message": cancel.reason if cancel() and res.status == "canceled" else res.message,
-        "target": target.to_dict(),
-        "control": {"method": control.method, "delta0": control.delta0, "eps": control.eps,
-                    "max_iter": control.max_iter, "max_solves": control.max_solves},
-        "solves": res.solves,
-        "accepted": len(res.steps),
-        "wall_time_s": round(res.wall_time, 3),
-        "motions": files,
-        "final": final,
-    }
+    summary = {**res.summary(), "control": control.summary(), "final": final}  # motions: the files on_step wrote
+    if cancel() and res.status == "canceled":
+        summary["message"] = cancel.reason
     (out / "summary.json").write_text(json.dumps(summary, indent=2, allow_nan=False))
     print(json.dumps(summary) if args.json else _extrapolate_summary(summary, out))
     if cancel.exit_status is not None:

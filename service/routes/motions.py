@@ -25,7 +25,7 @@ from service.schemas import MotionOut, MotionPage
 from service.uploads import MAX_FILES, Encoded, ImporterUnavailable, UploadError
 from service.views import motion_out
 from service.work import Compute
-from solver.formats import EXPORTERS, export_media_types
+from solver.formats import BVH_UNITS, EXPORTERS, export_media_types
 
 router = APIRouter(tags=["motions"])
 
@@ -53,7 +53,7 @@ UPLOAD_BODY = {
                         "markers": {"type": "string", "maxLength": 4000, "pattern": "^[^\\x00-\\x1f\\x7f]*$",
                                     "description": "C3D: marker mapping ROLE=label,... for unrecognised marker sets "
                                                    "(Plug-in Gait roles, e.g. LASI=L_IAS,RASI=R_IAS)"},
-                        "units": {"type": "string", "enum": ["auto", "cm", "m", "mm", "in", "cmu"],
+                        "units": {"type": "string", "enum": list(BVH_UNITS),
                                   "description": "BVH: the file's length unit (default: auto)"},
                         "up": {"type": "string", "enum": ["y", "z"], "description": "BVH: the file's up axis "
                                                                                        "(default: y)"},
