@@ -118,6 +118,9 @@ class Capture:
     source: Mapping[str, Any] = field(default_factory=dict)
     contacts: np.ndarray | None = None  # (P, T) bool, character.contacts order (e.g. from plates)
     measured: MeasuredGRF | None = None
+    #: the input's own skeleton and its animation at ``times`` (:class:`solver.rig.Rig`), when it
+    #: has one (BVH, skinned glTF, DeepMimic): what results are written back onto
+    rig: Any = None
 
     def __post_init__(self) -> None:
         q = np.asarray(self.q, dtype=float)

@@ -178,6 +178,7 @@ def _motion(tutor: Motion, lam: float, target: Target, env: Environment, values:
         "step": "extrapolate",
         "source": tutor.provenance.get("source"),
         "frame": tutor.provenance.get("frame"),
+        **({"rig": tutor.provenance["rig"]} if "rig" in tutor.provenance else {}),
         "lambda": float(lam),
         "environment": env.to_dict(),
         "environment_values": dict(values),

@@ -34,6 +34,7 @@ from solver.kinematics import contact_points, markers, segment_frames
 from solver.motion import Motion, foot_schedule_of
 from solver.naturalness import against_plates, capture_figures, joint_rms_deg
 from solver.plausibility import report
+from solver.rig import RIG_FORMATS, Rig, calibrate, unroll
 from solver.spacetime import Environment, SolveResult, SpacetimeProblem, Weights
 from solver.status import Status
 
@@ -93,6 +94,7 @@ def capture_motion(capture: Capture) -> Motion:
             "frame": capture.frame.to_dict(),
             "t0": float(capture.times[0]),
             "lambda": None,
+            **({"rig": rig_to_dict(capture.rig)} if capture.rig is not None else {}),
         }),
     )
 
@@ -108,7 +110,46 @@ def motion_capture(motion: Motion) -> Capture:
         frame=GroundFrame.from_dict(prov.get("frame")),
         source=prov.get("source") or {},
         contacts=motion.contacts,
+        rig=rig_from_dict(prov.get("rig")),
     )
+
+
+def rig_to_dict(rig: Any) -> dict[str, Any]:
+    """A capture's source rig as motion provenance: a :class:`Rig`'s dict, or a format's own mapping."""
+    return rig.to_dict() if isinstance(rig, Rig) else dict(rig)
+
+
+def rig_from_dict(d: Any) -> Any:
+    """Inverse of :func:`rig_to_dict` (None when the motion has no rig)."""
+    if not isinstance(d, Mapping):
+        return None
+    return Rig.from_dict(d) if d.get("format") in RIG_FORMATS else dict(d)
+
+
+def tutor_rig(capture: Capture, cyc: Capture, syn: Character, q_sim: np.ndarray, fps: float,
+              stats: dict[str, Any]) -> dict[str, Any] | None:
+    """The capture's rig calibrated against the simplified cycle (``solver.rig.calibrate``), as
+    the tutor's provenance carries it; a rig that cannot be calibrated costs only the rig export
+    (noted in ``stats``)."""
+    rig = capture.rig
+    if rig is None:
+        return None
+    if not isinstance(rig, Rig):
+        return dict(rig)
+    info = cyc.source.get("cycle") or {}
+    try:
+        t_start, period = float(info["t_start"]), float(info["period_s"])
+        if capture.source.get("loop") == "wrap":
+            disp = capture.frame.vector_from_input(rig.root[-1] - rig.root[0]) * capture.frame.unit_m
+            disp[2] = 0.0
+            rig = unroll(rig, 3, capture.frame.vector_to_input(disp) / capture.frame.unit_m)
+        frame = _shifted_frame(capture.frame, stats.get("contact_plane_shift_mm", 0.0) / 1e3)
+        cal = calibrate(rig, syn, q_sim, fps, t_start=t_start, period=period, frame=frame)
+    except (KeyError, TypeError, ValueError) as e:
+        stats["rig"] = f"the source rig could not be calibrated: {e}"
+        log.warning("source rig not calibrated: %s", e)
+        return None
+    return cal.to_dict(animation=False)
 
 
 def synthesis_character(capture_character: Character, kind: str,
@@ -459,6 +500,7 @@ def make_tutor(
                        "time_s": res.wall_time},
             "pipeline": stats,
             "gait_reference": {"capture": capture_figures(cap_char, q_cap, fps, contacts, cyc.measured)},
+            **({"rig": rig} if (rig := tutor_rig(capture, cyc, syn, q_sim, fps, stats)) is not None else {}),
         }),
     )
     tutor = tutor.evolve(report=report(tutor))

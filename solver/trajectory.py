@@ -133,3 +133,23 @@ def dynamics_samples(motion) -> DynamicsSamples:
     qd, qdd = finite_differences(q, dt)
     ws = None if W is None else W[:, :, 1:-1]
     return DynamicsSamples(np.arange(1, T - 1) * dt, q[:, 1:-1], qd, qdd, ws, np.full(T - 2, "frame"))
+
+
+def sample(q: np.ndarray, fps: float, times: np.ndarray, *, cyclic: bool = False,
+           interpolation: str = "central-differences") -> np.ndarray:
+    """The trajectory ``q`` (n, T) at ``fps`` evaluated at ``times`` (s from frame 0, clipped to the
+    frames): the Hermite cubic through the frames with the knot velocities of the periodic C²
+    spline (``cubic-spline``, cyclic) — the spline itself — or of central differences."""
+    q = np.asarray(q, dtype=float)
+    n, T = q.shape
+    h = 1.0 / float(fps)
+    if interpolation == "cubic-spline" and cyclic:
+        v = spline_velocities(q, h)
+    else:
+        v = np.gradient(q, h, axis=1) if T >= 2 else np.zeros_like(q)
+    s = np.clip(np.asarray(times, dtype=float) / h, 0.0, T - 1.0)
+    k = np.minimum(np.floor(s).astype(int), T - 2)
+    u = s - k
+    h00, h10 = 2 * u**3 - 3 * u**2 + 1, u**3 - 2 * u**2 + u
+    h01, h11 = -2 * u**3 + 3 * u**2, u**3 - u**2
+    return q[:, k] * h00 + h * v[:, k] * h10 + q[:, k + 1] * h01 + h * v[:, k + 1] * h11

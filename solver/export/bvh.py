@@ -60,9 +60,16 @@ def _check(units: object, rotation_order: object, decimals: object) -> None:
         raise ExportError(f"decimals must be an integer in [1, 12], got {decimals!r}")
 
 
-def to_bvh(motion: Motion, *, units: str = "cm", rotation_order: str = "XZY", decimals: int = 6) -> str:
-    """BVH text of ``motion`` (Y up; ``units`` "cm" or "m"; ``decimals`` per number)."""
+def to_bvh(motion: Motion, *, units: str = "cm", rotation_order: str = "XZY", decimals: int = 6,
+           rig: str = "character") -> str:
+    """BVH text of ``motion`` (Y up; ``units`` "cm" or "m"; ``decimals`` per number).
+    ``rig="source"``: on the skeleton of the BVH the motion came from (:func:`source_bvh`;
+    ``units`` and ``rotation_order`` are then the source's)."""
     _check_motion(motion)
+    if rig == "source":
+        return source_bvh(motion, decimals=decimals)
+    if rig != "character":
+        raise ExportError(f"rig must be 'character' (the motion's own skeleton) or 'source' (the input's), got {rig!r}")
     _check(units, rotation_order, decimals)
     ch = motion.character
     segs = ch.segments
@@ -120,4 +127,85 @@ def to_bvh(motion: Motion, *, units: str = "cm", rotation_order: str = "XZY", de
     table = np.concatenate(columns, axis=1) + 0.0
     np.savetxt(out, table, fmt=f"%.{decimals}f", delimiter=" ")
     log.debug("BVH of %s: %d joints, %d channels, %d frames", ch.name, len(segs), table.shape[1], motion.T)
+    return out.getvalue()
+
+
+def _channel_values(R: np.ndarray, axes: str) -> np.ndarray:
+    """Angles (F, len(axes)) in degrees of the rotation channels ``axes`` (e.g. "ZXY", "Z"),
+    intrinsic, continuous in time. One or two channels: the rotation's part about those axes
+    (swing removed; exact when the joint turns only about them)."""
+    from scipy.spatial.transform import Rotation
+
+    if len(axes) == 3:
+        ang = euler_angles(R, axes)
+    else:
+        rest = "".join(a for a in "XYZ" if a not in axes)
+        order = axes + rest[: 3 - len(axes)]
+        ang = euler_angles(R, order)[..., : len(axes)]
+        if len(axes) == 1:  # twist about the one axis (swing-twist decomposition)
+            quat = Rotation.from_matrix(R.reshape(-1, 3, 3)).as_quat()
+            k = "XYZ".index(axes)
+            ang = (2.0 * np.arctan2(quat[:, k], quat[:, 3])).reshape(R.shape[:-2] + (1,))
+    return np.degrees(np.unwrap(ang, axis=0))
+
+
+def source_bvh(motion: Motion, *, decimals: int = 6) -> str:
+    """``motion`` on the skeleton of the BVH it came from: the input's hierarchy, joint names,
+    offsets, channels (order and count), End Sites and units, one gait cycle at the input's
+    frame rate (``solver.rig.retarget``)."""
+    from solver.rig import Rig, RigError, retarget
+
+    if isinstance(decimals, bool) or not isinstance(decimals, int) or not 1 <= decimals <= 12:
+        raise ExportError(f"decimals must be an integer in [1, 12], got {decimals!r}")
+    d = motion.provenance.get("rig")
+    if not isinstance(d, dict) or d.get("format") != "bvh":
+        src = d.get("format") if isinstance(d, dict) else None
+        why = f"this one came from {src}" if src else "this one has no source rig"
+        raise ExportError(f"rig=source needs a motion made from a BVH trial ({why})")
+    try:
+        rig = Rig.from_dict(d)
+        pose = retarget(motion, rig)
+    except RigError as e:
+        raise ExportError(str(e)) from None
+    fmt = f"{{:.{decimals}f}}"
+    children: dict[int, list[int]] = {j: [] for j in range(rig.J)}
+    for j, p in enumerate(rig.parents):
+        if p >= 0:
+            children[p].append(j)
+    out = io.StringIO()
+    columns: list[np.ndarray] = []
+
+    def vec(v: np.ndarray) -> str:
+        return " ".join(fmt.format(float(x) + 0.0) for x in v)
+
+    def write(j: int, depth: int) -> None:
+        pad = "\t" * depth
+        out.write(f"{pad}{'ROOT' if depth == 0 else 'JOINT'} {rig.names[j]}\n{pad}{{\n")
+        out.write(f"{pad}\tOFFSET {vec(rig.offsets[j])}\n")
+        chans = rig.channels[j]
+        out.write(f"{pad}\tCHANNELS {len(chans)} {' '.join(chans)}\n")
+        translation = pose.root if j == 0 else (pose.positions[:, j] if pose.positions is not None
+                                                 else np.broadcast_to(rig.offsets[j], pose.root.shape))
+        rot_axes = "".join(c[0].upper() for c in chans if c.lower().endswith("rotation"))
+        angles = _channel_values(pose.local[:, j], rot_axes) if rot_axes else np.zeros((pose.times.size, 0))
+        k = 0
+        for c in chans:
+            if c.lower().endswith("position"):
+                a = "XYZ".index(c[0].upper())
+                columns.append((translation[:, a] - rig.offsets[j][a])[:, None])
+            else:
+                columns.append(angles[:, k : k + 1])
+                k += 1
+        for child in children[j]:
+            write(child, depth + 1)
+        if j in rig.end_sites:
+            out.write(f"{pad}\tEnd Site\n{pad}\t{{\n{pad}\t\tOFFSET {vec(rig.end_sites[j])}\n{pad}\t}}\n")
+        out.write(f"{pad}}}\n")
+
+    out.write("HIERARCHY\n")
+    write(0, 0)
+    frames = pose.times.size
+    out.write(f"MOTION\nFrames: {frames}\nFrame Time: {float(pose.times[1] - pose.times[0]):.8f}\n")
+    table = (np.concatenate(columns, axis=1) if columns else np.zeros((frames, 0))) + 0.0
+    np.savetxt(out, table, fmt=f"%.{decimals}f", delimiter=" ")
     return out.getvalue()

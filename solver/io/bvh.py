@@ -51,6 +51,7 @@ import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -60,6 +61,7 @@ from solver.errors import InputError
 from solver.io.fit import fit_track
 from solver.io.readers import one_file
 from solver.io.track import SkeletonTrack, add_pelvis
+from solver.rig import Rig, segment_roles
 
 log = logging.getLogger(__name__)
 
@@ -495,7 +497,35 @@ def load_bvh(
     floor_height: float | None = None,
     lower_only: bool | None = None,
 ) -> Capture:
-    """Import a BVH clip as a :class:`Capture` (conventions in the module doc)."""
+    """Import a BVH clip as a :class:`Capture` (conventions in the module doc), with the file's
+    own skeleton as its rig (:func:`bvh_rig`)."""
+    track = bvh_track(path, mass=mass, units=units, up=up, floor_height=floor_height)
+    capture = fit_track(track, lower_only=lower_only)
+    return capture.evolve(rig=bvh_rig(read_bvh(path), track))
 
-    return fit_track(bvh_track(path, mass=mass, units=units, up=up, floor_height=floor_height),
-                     lower_only=lower_only)
+
+def bvh_rig(clip: BvhClip, track: SkeletonTrack) -> Rig:
+    """The clip's own skeleton and animation as a :class:`solver.rig.Rig` (the roles the track
+    found: hips -> pelvis, RightUpLeg -> thigh_r, …; lumbar = the first spine joint more than
+    3 cm from the hips in the rest pose)."""
+    by_name = {n: j for j, n in enumerate(clip.names)}
+    roles = {r: by_name[n] for r, n in track.source["joint_roles"].items() if n in by_name}
+    R_rest, P_rest = clip.forward(np.zeros((1, clip.motion.shape[1])))
+    scale = float(track.source["metres_per_unit"])
+    mid_hips = 0.5 * (P_rest[roles["hip_r"], 0] + P_rest[roles["hip_l"], 0])
+    for n in track.source.get("spine_joints", []):
+        if np.linalg.norm(P_rest[by_name[n], 0] - mid_hips) * scale > 0.03:
+            roles["lumbar"] = by_name[n]
+            break
+    J, T = len(clip.names), clip.T
+    local = np.empty((T, J, 3, 3))
+    pos = np.empty((T, J, 3))
+    for j in range(J):
+        local[:, j], pos[:, j] = clip.local(j)
+    moved = any(ch.lower().endswith("position") for j in range(1, J) for ch in clip.channels[j])
+    extra: dict[str, Any] = {"frame_time": clip.frame_time, "units": track.source["units"]}
+    if moved:
+        extra["positions"] = pos.tolist()
+    return Rig("bvh", clip.names, clip.parents, clip.offsets, clip.channels, segment_roles(roles),
+               np.arange(T) * clip.frame_time, local, pos[:, 0], track.frame,
+               end_sites=dict(clip.end_sites), extra=extra)

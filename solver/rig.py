@@ -1,0 +1,584 @@
+"""The input's own skeleton (its *rig*) and how a motion goes back onto it.
+
+A trial read from a BVH, a skinned glTF or a DeepMimic clip has a skeleton of its own: joint
+names, hierarchy, offsets, channels, rest pose. The importer keeps it beside the capture as a
+:class:`Rig` (the joints' local rotations and the root's translation at the capture's times)
+and names, per segment of the capture skeleton, the joint that moves it (its *role*, e.g.
+``thigh_r`` → ``RightUpLeg``). Motions carry it in ``provenance["rig"]``, so every tutor,
+λ optimum and library cell can be written on the user's own skeleton.
+
+**Calibration** (when the tutor is made, :func:`calibrate`). At every rig frame of the
+gait cycle, the rigid map between each driving joint's world frame ``W_j`` and its segment's
+frame ``R_s`` in the *simplified* motion (the synthesis character fitted to the capture) is
+kept: ``C_j = R_sᵀ W_j``; so are the root joint's position in the pelvis frame and each ankle
+joint's position in the foot frame. These maps hold what the synthesis character does not
+model — its locked degrees of freedom (hip rotation, subtalar, spine, arms…) and the
+difference between the fitted segment and the rig's bone — at that gait phase.
+
+**Retargeting** (:func:`retarget`): for a motion of the same character (tutor, λ optimum),
+at each output time ``t`` (the rig's own frame rate, one cycle), the gait phase
+``φ = t / D`` (``D`` the motion's cycle duration) picks the capture's rig time
+``t' = t_start + φ · period`` (time-warped where the speed changed). A driving joint gets the
+world rotation ``R_s(t) · C_j(t')``; every other joint (arms, spine, head, fingers of a
+HalfBoy motion) its captured local rotation at ``t'``; the root its position from the pelvis.
+Then each leg is closed by a two-bone IK (hip and knee joints turned in their plane) so the
+rig's ankle joint lands where the motion's foot frame carries it: the feet stay planted on
+the rig's own bones even where its bone lengths differ from the fitted segments.
+
+Pure numpy/scipy; rotations stored as unit quaternions (w, x, y, z) in :meth:`Rig.to_dict`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
+
+from solver.capture import GroundFrame
+from solver.errors import InputError
+from solver.kinematics import segment_frames
+
+#: the formats whose rigs are :class:`Rig` values (others, e.g. OpenSim's, are their exporter's own mapping)
+RIG_FORMATS = ("bvh", "gltf", "deepmimic")
+#: importer joint role -> the capture segment that joint moves (the joint at its proximal end)
+ROLE_SEGMENTS = {"hips": "pelvis", "lumbar": "abdomen", "head": "head",
+                 **{f"{role}_{s}": f"{seg}_{s}" for s in "rl" for role, seg in (
+                     ("hip", "thigh"), ("knee", "shank"), ("ankle", "foot"), ("mtp", "toes"),
+                     ("clavicle", "clavicle"), ("shoulder", "upper_arm"), ("elbow", "forearm"),
+                     ("wrist", "hand"))}}
+#: segments whose joints keep one calibration over the cycle (the rig's foot bones move rigidly
+#: with the motion's feet, so a planted foot stays planted on the rig)
+RIGID_PREFIXES = ("foot_", "toes_")
+#: per side, the leg segments whose driving joints the two-bone IK turns
+LEG_SEGMENTS = {"r": ("thigh_r", "shank_r", "foot_r"), "l": ("thigh_l", "shank_l", "foot_l")}
+
+
+class RigError(InputError):
+    """A motion cannot be written on its source rig; the message says why."""
+
+
+def _frozen(a: Any, dtype: Any = float) -> np.ndarray:
+    a = np.array(a, dtype=dtype, copy=True)
+    a.setflags(write=False)
+    return a
+
+
+def quats_to_matrices(q: np.ndarray) -> np.ndarray:
+    """(..., 4) unit quaternions (w, x, y, z) -> (..., 3, 3)."""
+    q = np.asarray(q, dtype=float)
+    return Rotation.from_quat(q.reshape(-1, 4), scalar_first=True).as_matrix().reshape(q.shape[:-1] + (3, 3))
+
+
+def matrices_to_quats(R: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) -> (..., 4) (w, x, y, z), continuous along the first axis (sign flips removed)."""
+    R = np.asarray(R, dtype=float)
+    q = Rotation.from_matrix(R.reshape(-1, 3, 3)).as_quat(scalar_first=True).reshape(R.shape[:-2] + (4,))
+    if q.ndim >= 2:
+        for k in range(1, q.shape[0]):
+            flip = np.sum(q[k] * q[k - 1], axis=-1) < 0
+            q[k][flip] *= -1
+    return q
+
+
+@dataclass(frozen=True, eq=False)
+class Calibration:
+    """The rig at the cycle's frames, relative to the simplified motion (see the module doc)."""
+
+    t_start: float  # s, the cycle's start in the rig's times
+    period: float  # s, the capture cycle's duration
+    times: np.ndarray  # (F,) rig times covering [t_start, t_start + period]
+    local: np.ndarray  # (F, J, 3, 3) captured local rotations
+    root: np.ndarray  # (F, 3) captured root translation (input units)
+    joint_in_segment: np.ndarray  # (F, J, 3, 3): C_j for driving joints, identity elsewhere
+    root_in_pelvis: np.ndarray  # (F, 3) m, the root joint's position in the pelvis frame
+    ankle_in_foot: np.ndarray  # (F, 2, 3) m, ankle joints (right, left) in the foot frames
+
+    def __post_init__(self) -> None:
+        for name in ("times", "local", "root", "joint_in_segment", "root_in_pelvis", "ankle_in_foot"):
+            object.__setattr__(self, name, _frozen(getattr(self, name)))
+
+    def at(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Interpolated (local, root, joint_in_segment, root_in_pelvis, ankle_in_foot) at rig
+        times ``t`` (slerp for rotations, linear otherwise)."""
+        t = np.clip(np.asarray(t, dtype=float), self.times[0], self.times[-1])
+
+        def rot(a: np.ndarray) -> np.ndarray:
+            J = a.shape[1]
+            out = np.empty((t.size, J, 3, 3))
+            for j in range(J):
+                out[:, j] = Slerp(self.times, Rotation.from_matrix(a[:, j]))(t).as_matrix()
+            return out
+
+        def lin(a: np.ndarray) -> np.ndarray:
+            flat = a.reshape(a.shape[0], -1)
+            return np.stack([np.interp(t, self.times, flat[:, c]) for c in range(flat.shape[1])], axis=-1).reshape(
+                (t.size,) + a.shape[1:])
+
+        return rot(self.local), lin(self.root), rot(self.joint_in_segment), lin(self.root_in_pelvis), \
+            lin(self.ankle_in_foot)
+
+    def to_dict(self) -> dict[str, Any]:
+        r6 = _round
+        return {"t_start": self.t_start, "period": self.period, "times": r6(self.times),
+                "local": r6(matrices_to_quats(self.local)), "root": r6(self.root),
+                "joint_in_segment": r6(matrices_to_quats(self.joint_in_segment)),
+                "root_in_pelvis": r6(self.root_in_pelvis), "ankle_in_foot": r6(self.ankle_in_foot)}
+
+    @staticmethod
+    def from_dict(d: Mapping[str, Any]) -> Calibration:
+        return Calibration(float(d["t_start"]), float(d["period"]), np.asarray(d["times"], dtype=float),
+                           quats_to_matrices(np.asarray(d["local"], dtype=float)),
+                           np.asarray(d["root"], dtype=float),
+                           quats_to_matrices(np.asarray(d["joint_in_segment"], dtype=float)),
+                           np.asarray(d["root_in_pelvis"], dtype=float), np.asarray(d["ankle_in_foot"], dtype=float))
+
+
+def _round(a: np.ndarray, nd: int = 6) -> list:
+    return np.round(np.asarray(a, dtype=float), nd).tolist()
+
+
+@dataclass(frozen=True, eq=False)
+class Rig:
+    """A source skeleton and its captured animation (input axes and length units).
+
+    ``local`` (F, J, 3, 3) is each joint's full local rotation (rest rotation included) at
+    ``times``; ``root`` (F, 3) the root joint's local translation. Child joints sit at their
+    ``offsets`` in the parent frame (plus, for BVH joints with position channels, the
+    captured ``extra["positions"]``). ``roles``: capture segment -> index of the joint that
+    moves it (the joint at the segment's proximal end). ``channels``: per joint, the BVH
+    channel names (or ``("quaternion",)`` / ``("Zrotation",)`` for DeepMimic's spherical /
+    revolute joints, ``()`` for a fixed joint). ``frame`` maps our world onto the input's axes
+    and units. ``extra``: what the writer of that format needs besides (JSON-able).
+    """
+
+    format: str
+    names: tuple[str, ...]
+    parents: tuple[int, ...]
+    offsets: np.ndarray  # (J, 3)
+    channels: tuple[tuple[str, ...], ...]
+    roles: Mapping[str, int]
+    times: np.ndarray  # (F,)
+    local: np.ndarray  # (F, J, 3, 3)
+    root: np.ndarray  # (F, 3)
+    frame: GroundFrame = field(default_factory=GroundFrame)
+    end_sites: Mapping[int, np.ndarray] = field(default_factory=dict)
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    calibration: Calibration | None = None
+
+    def __post_init__(self) -> None:
+        J = len(self.names)
+        if len(self.parents) != J or len(self.channels) != J:
+            raise RigError("rig: names, parents and channels must have one entry per joint")
+        if J == 0 or self.parents[0] != -1 or any(not -1 < p < j for j, p in enumerate(self.parents) if j):
+            raise RigError("rig: joints must be listed parents first, the root first")
+        for name in ("offsets", "times", "local", "root"):
+            object.__setattr__(self, name, _frozen(getattr(self, name)))
+        F = self.times.shape[0]
+        if self.offsets.shape != (J, 3) or self.local.shape != (F, J, 3, 3) or self.root.shape != (F, 3):
+            raise RigError(f"rig: expected offsets (J={J}, 3), local (F={F}, J, 3, 3), root (F, 3); got "
+                           f"{self.offsets.shape}, {self.local.shape}, {self.root.shape}")
+        bad = {s: j for s, j in self.roles.items() if not 0 <= int(j) < J}
+        if bad:
+            raise RigError(f"rig: roles point at no joint: {bad}")
+        object.__setattr__(self, "roles", {str(s): int(j) for s, j in self.roles.items()})
+        object.__setattr__(self, "end_sites", {int(j): _frozen(v) for j, v in self.end_sites.items()})
+        object.__setattr__(self, "extra", dict(self.extra))
+
+    @property
+    def J(self) -> int:
+        return len(self.names)
+
+    @property
+    def frame_time(self) -> float:
+        if self.times.size < 2:
+            return float(self.extra.get("frame_time", 1 / 30))
+        return float(np.median(np.diff(self.times)))
+
+    def positions(self) -> np.ndarray | None:
+        """(F, J, 3) captured local translations of joints with position channels, else None."""
+        p = self.extra.get("positions")
+        return None if p is None else np.asarray(p, dtype=float)
+
+    def forward(self, local: np.ndarray, root: np.ndarray, positions: np.ndarray | None = None
+                ) -> tuple[np.ndarray, np.ndarray]:
+        """World rotations (F, J, 3, 3) and positions (F, J, 3) in the input's axes and units."""
+        F = local.shape[0]
+        W = np.empty_like(local)
+        P = np.empty((F, self.J, 3))
+        for j, p in enumerate(self.parents):
+            if p < 0:
+                W[:, j], P[:, j] = local[:, j], root
+            else:
+                off = self.offsets[j] if positions is None else positions[:, j]
+                W[:, j] = W[:, p] @ local[:, j]
+                P[:, j] = P[:, p] + np.einsum("fij,fj->fi", W[:, p], np.broadcast_to(off, (F, 3)))
+        return W, P
+
+    def evolve(self, **changes: Any) -> Rig:
+        return replace(self, **changes)
+
+    # --- JSON (motion provenance) -------------------------------------------------------
+    def to_dict(self, *, animation: bool = True) -> dict[str, Any]:
+        d: dict[str, Any] = {
+            "format": self.format, "names": list(self.names), "parents": list(self.parents),
+            "offsets": _round(self.offsets), "channels": [list(c) for c in self.channels],
+            "roles": dict(self.roles), "frame": self.frame.to_dict(),
+            "end_sites": {str(j): _round(v) for j, v in self.end_sites.items()},
+            "extra": dict(self.extra), "frame_time": self.frame_time,
+        }
+        if animation:
+            d.update(times=_round(self.times), local=_round(matrices_to_quats(self.local)), root=_round(self.root))
+        if self.calibration is not None:
+            d["calibration"] = self.calibration.to_dict()
+        return d
+
+    @staticmethod
+    def from_dict(d: Mapping[str, Any]) -> Rig:
+        try:
+            names = tuple(str(n) for n in d["names"])
+            J = len(names)
+            cal = d.get("calibration")
+            calibration = Calibration.from_dict(cal) if cal else None
+            if "times" in d:
+                times = np.asarray(d["times"], dtype=float)
+                local = quats_to_matrices(np.asarray(d["local"], dtype=float))
+                root = np.asarray(d["root"], dtype=float)
+            elif calibration is not None:  # a calibrated rig needs no animation of its own
+                times, local, root = calibration.times, calibration.local, calibration.root
+            else:
+                raise KeyError("times")
+            extra = dict(d.get("extra") or {})
+            extra.setdefault("frame_time", float(d.get("frame_time", 1 / 30)))
+            return Rig(str(d["format"]), names, tuple(int(p) for p in d["parents"]),
+                       np.asarray(d["offsets"], dtype=float).reshape(J, 3),
+                       tuple(tuple(str(c) for c in ch) for ch in d["channels"]),
+                       {str(k): int(v) for k, v in dict(d["roles"]).items()}, times, local, root,
+                       GroundFrame.from_dict(d.get("frame")),
+                       {int(k): np.asarray(v, dtype=float) for k, v in dict(d.get("end_sites") or {}).items()},
+                       extra, calibration)
+        except (KeyError, TypeError, ValueError) as e:
+            raise RigError(f"the motion's source rig is unreadable ({e.__class__.__name__}: {e})") from None
+
+
+def segment_roles(roles: Mapping[str, int]) -> dict[str, int]:
+    """Importer joint roles (``hip_r``, ``knee_r``, ``lumbar``…) -> capture segment -> joint."""
+    return {ROLE_SEGMENTS[r]: int(j) for r, j in roles.items() if r in ROLE_SEGMENTS}
+
+
+# --- calibration ------------------------------------------------------------------------
+
+def _world_in_ours(rig: Rig, local: np.ndarray, root: np.ndarray, times: np.ndarray,
+                   frame: GroundFrame, positions: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """World rotations (F, J, 3, 3) and positions (F, J, 3) (m) of the rig in our world frame."""
+    W, P = rig.forward(local, root, positions)
+    Wo = np.einsum("ji,fkjl->fkil", frame.R, W)  # Rᵀ W
+    Po = frame.point_from_input(P, times[:, None])
+    return Wo, Po
+
+
+def _cycle_frames(rig: Rig, t_start: float, period: float) -> np.ndarray:
+    """Indices of the rig frames covering [t_start, t_start + period] (one frame either side)."""
+    t = rig.times
+    a = max(int(np.searchsorted(t, t_start, side="right")) - 2, 0)
+    b = min(int(np.searchsorted(t, t_start + period, side="left")) + 2, t.size)
+    if b - a < 2 or t[a] > t_start + 1e-6 or t[b - 1] < t_start + period - 1e-6:
+        raise RigError(f"the source rig's frames ({t[0]:.3f}-{t[-1]:.3f} s) do not cover the gait cycle "
+                       f"({t_start:.3f}-{t_start + period:.3f} s)")
+    return np.arange(a, b)
+
+
+def unroll(rig: Rig, repeats: int, displacement: np.ndarray) -> Rig:
+    """A looping rig clip (its last frame at the phase of its first) repeated ``repeats`` times,
+    the root moved by ``displacement`` (input units) per repetition (as :func:`solver.gait.unroll_loop`)."""
+    times, local, root = [rig.times], [rig.local], [rig.root]
+    pos = rig.positions()
+    poss = None if pos is None else [pos]
+    period = rig.times[-1] - rig.times[0]
+    for r in range(1, repeats):
+        times.append(rig.times[1:] + r * period)
+        local.append(rig.local[1:])
+        root.append(rig.root[1:] + r * np.asarray(displacement, dtype=float))
+        if poss is not None and pos is not None:
+            poss.append(pos[1:])
+    extra = dict(rig.extra)
+    if poss is not None:
+        extra["positions"] = np.concatenate(poss).tolist()
+    return rig.evolve(times=np.concatenate(times), local=np.concatenate(local), root=np.concatenate(root),
+                      extra=extra)
+
+
+def calibrate(rig: Rig, character: Any, q: np.ndarray, fps: float, *, t_start: float, period: float,
+              frame: GroundFrame, interpolation: str = "cubic-spline") -> Rig:
+    """The rig calibrated against the simplified motion ``q`` (n, T) of ``character`` (a gait
+    cycle at ``fps`` starting at rig time ``t_start``, lasting ``period``; ``frame`` the
+    motion's ground frame): see the module docstring."""
+    from solver.trajectory import sample
+
+    idx = _cycle_frames(rig, t_start, period)
+    t = rig.times[idx]
+    local, root = rig.local[idx], rig.root[idx]
+    pos = rig.positions()
+    pos = None if pos is None else pos[idx]
+    Wo, Po = _world_in_ours(rig, local, root, t, frame, pos)
+    T = q.shape[1]
+    duration = (T - 2) / fps
+    tm = np.clip((t - t_start) / period, 0.0, 1.0) * duration
+    qs = sample(q, fps, tm, cyclic=True, interpolation=interpolation)
+    Rs, Ps = segment_frames(character, qs)  # (S, 3, 3, F), (S, 3, F)
+    seg = {s.name: i for i, s in enumerate(character.segments)}
+    C = np.broadcast_to(np.eye(3), Wo.shape).copy()
+    for s, j in rig.roles.items():
+        if s in seg:
+            Rseg = np.moveaxis(Rs[seg[s]], -1, 0)
+            C[:, j] = np.einsum("fji,fjk->fik", Rseg, Wo[:, j])
+    for s, j in rig.roles.items():  # feet rigid on the motion's feet: they stay planted where it is
+        if s in seg and s.startswith(RIGID_PREFIXES):
+            C[:, j] = Rotation.from_matrix(C[:, j]).mean().as_matrix()
+    pel = seg.get("pelvis", 0)
+    Rp, Pp = np.moveaxis(Rs[pel], -1, 0), Ps[pel].T
+    root_in_pelvis = np.einsum("fji,fj->fi", Rp, Po[:, 0] - Pp)
+    ankles = np.zeros((t.size, 2, 3))
+    for k, side in enumerate("rl"):
+        thigh, shank, foot = LEG_SEGMENTS[side]
+        if foot in seg and foot in rig.roles:
+            Rf, Pf = np.moveaxis(Rs[seg[foot]], -1, 0), Ps[seg[foot]].T
+            ankles[:, k] = np.einsum("fji,fj->fi", Rf, Po[:, rig.roles[foot]] - Pf).mean(axis=0)
+    cal = Calibration(float(t_start), float(period), t, local, root, C, root_in_pelvis, ankles)
+    extra = dict(rig.extra)
+    if pos is not None:
+        extra["positions"] = pos.tolist()
+    extra["calibrated_on"] = sorted(s for s in rig.roles if s in seg)
+    return rig.evolve(times=t, local=local, root=root, extra=extra, calibration=cal)
+
+
+# --- retargeting ------------------------------------------------------------------------
+
+@dataclass(frozen=True, eq=False)
+class RigPose:
+    """A motion on the rig: ``local`` (F, J, 3, 3) rotations and ``root`` (F, 3) translation (input
+    units) at ``times`` (s from the cycle's start), plus what the feet check needs."""
+
+    times: np.ndarray
+    local: np.ndarray
+    root: np.ndarray
+    positions: np.ndarray | None  # (F, J, 3) local translations of joints with position channels
+    capture_time: np.ndarray  # (F,) the rig time of the same gait phase
+    ankle_target: np.ndarray  # (F, 2, 3) m, our frame: where the motion's feet carry the ankle joints
+    driven: tuple[str, ...]  # segments whose joints the motion drives
+
+
+def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Smallest rotation taking direction a (3,) to direction b (3,)."""
+    a = a / np.linalg.norm(a)
+    b = b / np.linalg.norm(b)
+    v = np.cross(a, b)
+    c = float(np.dot(a, b))
+    s = float(np.linalg.norm(v))
+    if s < 1e-12:
+        if c > 0:
+            return np.eye(3)
+        perp = np.cross(a, [1.0, 0.0, 0.0])
+        if np.linalg.norm(perp) < 1e-6:
+            perp = np.cross(a, [0.0, 1.0, 0.0])
+        return Rotation.from_rotvec(np.pi * perp / np.linalg.norm(perp)).as_matrix()
+    return Rotation.from_rotvec(v / s * math.atan2(s, c)).as_matrix()
+
+
+def _path(parents: Sequence[int], ancestor: int, joint: int) -> list[int]:
+    """Joints from ``ancestor`` (included) down to ``joint`` (excluded)."""
+    out = []
+    j = parents[joint]
+    while j >= 0 and j != ancestor:
+        out.append(j)
+        j = parents[j]
+    if j != ancestor:
+        return []
+    return [ancestor, *reversed(out)]
+
+
+def _two_bone(W: np.ndarray, P: np.ndarray, parents: Sequence[int], hip: int, knee: int, ankle: int,
+              target: np.ndarray, bend: np.ndarray) -> None:
+    """Turn the hip -> knee and knee -> ankle chains (world rotations ``W`` (J, 3, 3), positions
+    ``P`` (J, 3), one frame, edited in place for the chain's joints) so the ankle reaches ``target``;
+    ``bend`` is the knee's flexion axis used when the leg is straight."""
+    H, K, A = P[hip], P[knee], P[ankle]
+    l1, l2 = np.linalg.norm(K - H), np.linalg.norm(A - K)
+    d = float(np.clip(np.linalg.norm(target - H), abs(l1 - l2) + 1e-6, l1 + l2 - 1e-6))
+    n = np.cross(K - H, A - K)
+    n = n / np.linalg.norm(n) if np.linalg.norm(n) > 1e-4 * l1 * l2 else bend / np.linalg.norm(bend)
+    cur = float(np.clip((l1**2 + l2**2 - np.linalg.norm(A - H) ** 2) / (2 * l1 * l2), -1, 1))
+    want = float(np.clip((l1**2 + l2**2 - d**2) / (2 * l1 * l2), -1, 1))
+    delta = math.acos(want) - math.acos(cur)  # interior angle change
+    best = None
+    for sgn in (1.0, -1.0):
+        Rk = Rotation.from_rotvec(sgn * delta * n).as_matrix()
+        err = abs(np.linalg.norm(K + Rk @ (A - K) - H) - d)
+        if best is None or err < best[0]:
+            best = (err, Rk)
+    assert best is not None
+    Rk = best[1]
+    A1 = K + Rk @ (A - K)
+    Rh = _rotation_between(A1 - H, target - H)
+    for j in _path(parents, hip, knee):
+        W[j] = Rh @ W[j]
+    for j in _path(parents, knee, ankle):
+        W[j] = Rh @ Rk @ W[j]
+
+
+def output_times(motion: Any, frame_time: float) -> tuple[np.ndarray, float]:
+    """One gait cycle of ``motion`` sampled near ``frame_time``: (times from 0 to the cycle's
+    duration D included, D)."""
+    D = (motion.T - 2) / motion.fps if motion.cyclic else (motion.T - 1) / motion.fps
+    n = max(int(round(D / frame_time)), 2)
+    return np.linspace(0.0, D, n + 1), D
+
+
+def retarget(motion: Any, rig: Rig, *, frame_time: float | None = None) -> RigPose:
+    """``motion`` (of the character the rig was calibrated on) on the rig, one cycle at the rig's
+    frame rate (or ``frame_time``)."""
+    from solver.trajectory import sample
+
+    cal = rig.calibration
+    if cal is None:
+        raise RigError("the source rig was never calibrated against a tutor (it is a capture's rig): "
+                       "make a tutor first")
+    ch = motion.character
+    seg = {s.name: i for i, s in enumerate(ch.segments)}
+    if "pelvis" not in seg:
+        raise RigError("the motion's character has no pelvis segment")
+    frame = GroundFrame.from_dict(motion.provenance.get("frame"))
+    t, D = output_times(motion, frame_time or rig.frame_time)
+    tc = cal.t_start + t / D * cal.period
+    local_c, root_c, C, root_in_pelvis, ankle_in_foot = cal.at(tc)
+    positions = None
+    pos = rig.positions()
+    if pos is not None:
+        positions = np.stack([np.stack([np.interp(tc, cal.times, pos[:, j, c]) for c in range(3)], -1)
+                              for j in range(rig.J)], 1)
+    q = sample(motion.q, motion.fps, t, cyclic=motion.cyclic, interpolation=motion.interpolation)
+    Rs, Ps = segment_frames(ch, q)
+    Rs, Ps = np.moveaxis(Rs, -1, 1), np.moveaxis(Ps, -1, 1)  # (S, F, 3, 3), (S, F, 3)
+    driven = {j: s for s, j in rig.roles.items() if s in seg}
+    F = t.size
+    Wo = np.empty((F, rig.J, 3, 3))
+    for j, p in enumerate(rig.parents):
+        if j in driven:
+            Wo[:, j] = Rs[seg[driven[j]]] @ C[:, j]
+        elif p < 0:
+            raise RigError("the rig's root joint moves no segment of the motion's character")
+        else:
+            Wo[:, j] = Wo[:, p] @ local_c[:, j]
+    root_pos = Ps[seg["pelvis"]] + np.einsum("fij,fj->fi", Rs[seg["pelvis"]], root_in_pelvis)
+    unit = rig.frame.unit_m
+
+    def fk(Wo: np.ndarray) -> np.ndarray:
+        P = np.empty((F, rig.J, 3))
+        P[:, 0] = root_pos
+        for j, p in enumerate(rig.parents):
+            if p >= 0:
+                off = rig.offsets[j] if positions is None else positions[:, j]
+                P[:, j] = P[:, p] + unit * np.einsum("fij,fj->fi", Wo[:, p], np.broadcast_to(off, (F, 3)))
+        return P
+
+    Po = fk(Wo)
+    targets = np.full((F, 2, 3), np.nan)
+    for k, side in enumerate("rl"):
+        thigh, shank, foot = LEG_SEGMENTS[side]
+        if not all(s in rig.roles and s in seg for s in (thigh, shank, foot)):
+            continue
+        hip, knee, ankle = rig.roles[thigh], rig.roles[shank], rig.roles[foot]
+        if not (_path(rig.parents, hip, knee) and _path(rig.parents, knee, ankle)):
+            continue
+        targets[:, k] = Ps[seg[foot]] + np.einsum("fij,fj->fi", Rs[seg[foot]], ankle_in_foot[:, k])
+        bend = Rs[seg[shank]][:, :, 1]  # our knees flex about the shank's y axis
+        for f in range(F):
+            _two_bone(Wo[f], Po[f], rig.parents, hip, knee, ankle, targets[f, k], bend[f])
+        Po = fk(Wo)
+    # local rotations: unchanged by the choice of world axes (Wo = Rᵀ W_input)
+    local = np.empty_like(Wo)
+    for j, p in enumerate(rig.parents):
+        local[:, j] = Wo[:, j] if p < 0 else np.einsum("fji,fjk->fik", Wo[:, p], Wo[:, j])
+    local[:, 0] = np.einsum("ij,fjk->fik", frame.R, Wo[:, 0])  # the root's rotation in input axes
+    t_frame = tc  # the frame's time dependence (treadmill belt) follows the capture's clock
+    root_in = frame.point_to_input(root_pos, t_frame)
+    return RigPose(t, local, root_in, positions, tc, targets, tuple(sorted(driven.values())))
+
+
+def feet_report(motion: Any, rig: Rig, pose: RigPose) -> dict[str, Any]:
+    """How well the rig's feet follow the motion, from the rig's own forward kinematics.
+
+    Per side: ``ankle_error_m``, the largest distance over stance frames between the rig's
+    ankle joint and where the motion's foot frame carries it; ``slide_m``, the largest
+    horizontal drift, over one contact interval of one of the motion's contact points (heel,
+    toe), of the point of the rig's foot (ankle joint's frame for a heel point, toe joint's
+    for a toe point) that lies on that contact point when the interval starts: a foot bone
+    that stays pinned where the motion's foot is on the ground does not slide. A frame
+    counts as in contact when both motion frames around it are."""
+    from solver.kinematics import contact_points
+    from solver.trajectory import sample
+
+    if motion.contacts is None:
+        return {}
+    frame = GroundFrame.from_dict(motion.provenance.get("frame"))
+    W, P = rig.forward(pose.local, pose.root, pose.positions)
+    Wo = np.einsum("ji,fkjl->fkil", frame.R, W)
+    Po = frame.point_from_input(P, pose.capture_time[:, None])
+    s = pose.times * motion.fps
+    lo = np.clip(np.floor(s + 1e-9).astype(int), 0, motion.T - 1)
+    hi = np.clip(np.ceil(s - 1e-9).astype(int), 0, motion.T - 1)
+    active = motion.contacts[:, lo] & motion.contacts[:, hi]  # (points, F)
+    q = sample(motion.q, motion.fps, pose.times, cyclic=motion.cyclic, interpolation=motion.interpolation)
+    cp = np.asarray(contact_points(motion.character, q)).reshape(len(motion.character.contacts), 3, -1)
+    feet = motion.foot_contact()
+    out: dict[str, Any] = {}
+    for k, side in enumerate(("right", "left")):
+        foot = LEG_SEGMENTS[side[0]][2]
+        if foot not in rig.roles or np.isnan(pose.ankle_target[:, k]).all():
+            continue
+        a = rig.roles[foot]
+        toe = rig.roles.get(f"toes_{side[0]}", a)
+        stance = feet[k][lo] & feet[k][hi]
+        err = np.linalg.norm(Po[:, a] - pose.ankle_target[:, k], axis=1)
+        slides = []
+        for i, c in enumerate(motion.character.contacts):
+            if c.side != side[0] and c.side != side:
+                continue
+            j = toe if "toe" in c.name else a
+            edges = np.flatnonzero(np.diff(np.concatenate([[0], active[i].astype(int), [0]])))
+            for s0, s1 in zip(edges[::2], edges[1::2]):
+                if s1 - s0 < 2:
+                    continue
+                local = Wo[s0, j].T @ (cp[i, :, s0] - Po[s0, j])
+                pts = Po[s0:s1, j] + np.einsum("fij,j->fi", Wo[s0:s1, j], local)
+                slides.append(float(np.max(np.linalg.norm(pts[:, :2] - pts[0, :2], axis=1))))
+        out[side] = {"ankle_error_m": float(err[stance].max()) if stance.any() else 0.0,
+                     "slide_m": max(slides) if slides else 0.0, "contact_intervals": len(slides)}
+    return out
+
+
+def locked_joint_rms(rig: Rig, pose: RigPose) -> dict[str, float]:
+    """RMS (degrees) of the rotation between each joint the motion does not drive and the
+    capture's own local rotation at the same gait phase, and the amplitude ratio (exported
+    range of motion over captured) of those joints."""
+    cal = rig.calibration
+    if cal is None:
+        return {}
+    local_c, *_ = cal.at(pose.capture_time)
+    driven = {rig.roles[s] for s in pose.driven if s in rig.roles}
+    legs = set()
+    for side in "rl":
+        thigh, shank, foot = LEG_SEGMENTS[side]
+        if all(s in rig.roles for s in (thigh, shank, foot)):
+            legs.update(_path(rig.parents, rig.roles[thigh], rig.roles[shank]))
+            legs.update(_path(rig.parents, rig.roles[shank], rig.roles[foot]))
+    free = [j for j in range(1, rig.J) if j not in driven and j not in legs]
+    if not free:
+        return {"rms_deg": 0.0, "joints": 0}
+    rel = np.einsum("fjik,fjil->fjkl", local_c[:, free], pose.local[:, free])
+    ang = Rotation.from_matrix(rel.reshape(-1, 3, 3)).magnitude().reshape(rel.shape[:2])
+    return {"rms_deg": float(np.degrees(np.sqrt(np.mean(ang**2)))), "max_deg": float(np.degrees(ang.max())),
+            "joints": len(free)}
