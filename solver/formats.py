@@ -63,7 +63,8 @@ READERS: tuple[Reader, ...] = (
            "solver.io.c3d", "trial_files", "load_c3d"),
     Reader("bvh", _ro({".bvh": "BVH"}), ".bvh",
            _ro({**_COMMON, "units": f"length unit of the file ({', '.join(BVH_UNITS)})",
-                "up": "the file's up axis ('y' or 'z')"}),
+                "up": "the file's up axis ('y' or 'z')",
+                "joints": "joint role mapping (role -> joint name, e.g. hip_l=Thigh_L) for unrecognised names"}),
            "solver.io.bvh", "trial_files", "load_bvh"),
     Reader("deepmimic", _ro({".txt": "DeepMimic motion or character", ".json": "DeepMimic motion or character"}),
            "DeepMimic motion .txt/.json + character .txt/.json", _ro(dict(_COMMON)),
@@ -108,7 +109,10 @@ EXPORTERS: MappingProxyType[str, Exporter] = MappingProxyType({e.name: e for e i
              "glTF 2.0, binary (.glb); binary=False: the .gltf JSON with its buffer embedded",
              MappingProxyType({("binary", False): "model/gltf+json"})),
     Exporter("glb", "solver.export.gltf", "to_glb", "model/gltf-binary", "binary glTF 2.0 (.glb)"),
-    Exporter("bvh", "solver.export.bvh", "to_bvh", "text/plain", "BVH (Y up)"),
+    Exporter("bvh", "solver.export.bvh", "to_bvh", "text/plain",
+             "BVH (Y up); rig=source: on the input BVH's own skeleton"),
+    Exporter("deepmimic", "solver.export.deepmimic", "to_deepmimic", "application/json",
+             "DeepMimic motion on the input DeepMimic character (rig=source)"),
 )})
 
 

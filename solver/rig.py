@@ -401,7 +401,7 @@ def _path(parents: Sequence[int], ancestor: int, joint: int) -> list[int]:
 
 
 def _two_bone(W: np.ndarray, P: np.ndarray, parents: Sequence[int], hip: int, knee: int, ankle: int,
-              target: np.ndarray, bend: np.ndarray) -> None:
+              target: np.ndarray, bend: np.ndarray, *, hinge: bool = False) -> None:
     """Turn the hip -> knee and knee -> ankle chains (world rotations ``W`` (J, 3, 3), positions
     ``P`` (J, 3), one frame, edited in place for the chain's joints) so the ankle reaches ``target``;
     ``bend`` is the knee's flexion axis used when the leg is straight."""
@@ -409,7 +409,7 @@ def _two_bone(W: np.ndarray, P: np.ndarray, parents: Sequence[int], hip: int, kn
     l1, l2 = np.linalg.norm(K - H), np.linalg.norm(A - K)
     d = float(np.clip(np.linalg.norm(target - H), abs(l1 - l2) + 1e-6, l1 + l2 - 1e-6))
     n = np.cross(K - H, A - K)
-    n = n / np.linalg.norm(n) if np.linalg.norm(n) > 1e-4 * l1 * l2 else bend / np.linalg.norm(bend)
+    n = n / np.linalg.norm(n) if np.linalg.norm(n) > 1e-4 * l1 * l2 and not hinge else bend / np.linalg.norm(bend)
     cur = float(np.clip((l1**2 + l2**2 - np.linalg.norm(A - H) ** 2) / (2 * l1 * l2), -1, 1))
     want = float(np.clip((l1**2 + l2**2 - d**2) / (2 * l1 * l2), -1, 1))
     delta = math.acos(want) - math.acos(cur)  # interior angle change
@@ -427,6 +427,86 @@ def _two_bone(W: np.ndarray, P: np.ndarray, parents: Sequence[int], hip: int, kn
         W[j] = Rh @ W[j]
     for j in _path(parents, knee, ankle):
         W[j] = Rh @ Rk @ W[j]
+
+
+def hinge_axes(rig: Rig) -> dict[int, np.ndarray]:
+    """Joints with exactly one rotation channel (a BVH joint with one ``…rotation`` channel, a
+    DeepMimic revolute joint) -> that axis (unit, joint frame)."""
+    out = {}
+    for j, ch in enumerate(rig.channels):
+        rots = [c for c in ch if c.lower().endswith("rotation")]
+        if j > 0 and len(rots) == 1 and "quaternion" not in ch:
+            out[j] = np.eye(3)["XYZ".index(rots[0][0].upper())]
+    return out
+
+
+def _twist(R: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """The part of rotations R (F, 3, 3) about ``axis`` (swing-twist decomposition)."""
+    q = Rotation.from_matrix(R).as_quat()  # x, y, z, w
+    ang = 2.0 * np.arctan2(q[:, :3] @ axis, q[:, 3])
+    return Rotation.from_rotvec(ang[:, None] * axis[None, :]).as_matrix()
+
+
+def _locals(parents: Sequence[int], W: np.ndarray) -> np.ndarray:
+    local = np.empty_like(W)
+    for j, p in enumerate(parents):
+        local[:, j] = W[:, j] if p < 0 else np.einsum("fji,fjk->fik", W[:, p], W[:, j])
+    return local
+
+
+def _worlds(parents: Sequence[int], local: np.ndarray) -> np.ndarray:
+    W = np.empty_like(local)
+    for j, p in enumerate(parents):
+        W[:, j] = local[:, j] if p < 0 else W[:, p] @ local[:, j]
+    return W
+
+
+#: after a foot leaves the ground, how long its pinning correction takes to fade out (s)
+PIN_RELEASE_S = 0.15
+
+
+def foot_pins(motion: Any, q: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """(F, 2, 3) m: per output time and foot (right, left), the translation that keeps the
+    motion's ground contact points where they touched down (foot-skate clean-up).
+
+    The optimizer holds a contact point still at the motion's frames; between frames the
+    interpolated joints let it drift a few millimetres (up to ~1 cm in tight turns at 15 fps).
+    At dense output times each foot is moved so its active contact points stay at their
+    anchors (a point's anchor: where the corrected foot put it when it touched down, so the
+    correction never jumps), and the correction fades out over :data:`PIN_RELEASE_S` once the
+    foot is in the air. A frame counts as in contact when both motion frames around it are."""
+    from solver.kinematics import contact_points
+
+    F = t.size
+    out = np.zeros((F, 2, 3))
+    if motion.contacts is None or not motion.character.contacts:
+        return out
+    P = len(motion.character.contacts)
+    cp = np.asarray(contact_points(motion.character, q), dtype=float).reshape(P, 3, F)
+    s = t * motion.fps
+    lo = np.clip(np.floor(s + 1e-9).astype(int), 0, motion.T - 1)
+    hi = np.clip(np.ceil(s - 1e-9).astype(int), 0, motion.T - 1)
+    on = motion.contacts[:, lo] & motion.contacts[:, hi]
+    dt = float(t[1] - t[0]) if F > 1 else 1.0
+    for k, side in enumerate(("r", "l")):
+        pts = [i for i, c in enumerate(motion.character.contacts) if c.side[0] == side]
+        anchor: dict[int, np.ndarray] = {}
+        corr = np.zeros(3)
+        released, since = np.zeros(3), 0.0
+        for f in range(F):
+            for i in pts:
+                if on[i, f] and i not in anchor:
+                    anchor[i] = cp[i, :, f] + corr
+                elif not on[i, f]:
+                    anchor.pop(i, None)
+            if anchor:
+                corr = np.mean([anchor[i] - cp[i, :, f] for i in anchor], axis=0)
+                released, since = corr, 0.0
+            else:
+                since += dt
+                corr = released * max(0.0, 1.0 - since / PIN_RELEASE_S)
+            out[f, k] = corr
+    return out
 
 
 def output_times(motion: Any, frame_time: float) -> tuple[np.ndarray, float]:
@@ -463,6 +543,7 @@ def retarget(motion: Any, rig: Rig, *, frame_time: float | None = None) -> RigPo
     Rs, Ps = segment_frames(ch, q)
     Rs, Ps = np.moveaxis(Rs, -1, 1), np.moveaxis(Ps, -1, 1)  # (S, F, 3, 3), (S, F, 3)
     driven = {j: s for s, j in rig.roles.items() if s in seg}
+    hinges = hinge_axes(rig)
     F = t.size
     Wo = np.empty((F, rig.J, 3, 3))
     for j, p in enumerate(rig.parents):
@@ -485,6 +566,7 @@ def retarget(motion: Any, rig: Rig, *, frame_time: float | None = None) -> RigPo
         return P
 
     Po = fk(Wo)
+    pins = foot_pins(motion, q, t)
     targets = np.full((F, 2, 3), np.nan)
     for k, side in enumerate("rl"):
         thigh, shank, foot = LEG_SEGMENTS[side]
@@ -493,15 +575,39 @@ def retarget(motion: Any, rig: Rig, *, frame_time: float | None = None) -> RigPo
         hip, knee, ankle = rig.roles[thigh], rig.roles[shank], rig.roles[foot]
         if not (_path(rig.parents, hip, knee) and _path(rig.parents, knee, ankle)):
             continue
-        targets[:, k] = Ps[seg[foot]] + np.einsum("fij,fj->fi", Rs[seg[foot]], ankle_in_foot[:, k])
-        bend = Rs[seg[shank]][:, :, 1]  # our knees flex about the shank's y axis
+        targets[:, k] = Ps[seg[foot]] + np.einsum("fij,fj->fi", Rs[seg[foot]], ankle_in_foot[:, k]) + pins[:, k]
+        if knee in hinges:  # a hinge knee bends about its own axis
+            bend = np.einsum("fij,j->fi", Wo[:, rig.parents[knee]], hinges[knee])
+        else:
+            bend = Rs[seg[shank]][:, :, 1]  # our knees flex about the shank's y axis
         for f in range(F):
-            _two_bone(Wo[f], Po[f], rig.parents, hip, knee, ankle, targets[f, k], bend[f])
+            _two_bone(Wo[f], Po[f], rig.parents, hip, knee, ankle, targets[f, k], bend[f], hinge=knee in hinges)
         Po = fk(Wo)
+    local = _locals(rig.parents, Wo)
+    if hinges:  # joints turning about one axis only: keep that part, then aim the legs again
+        saved = Wo.copy()
+        for j, axis in hinges.items():
+            local[:, j] = _twist(local[:, j], axis)
+        Wo = _worlds(rig.parents, local)
+        for k, side in enumerate("rl"):
+            thigh, shank, foot = LEG_SEGMENTS[side]
+            if np.isnan(targets[:, k]).all():
+                continue
+            hip, ankle = rig.roles[thigh], rig.roles[foot]
+            chain = _path(rig.parents, hip, ankle)
+            Po = fk(Wo)
+            for f in range(F):
+                Rh = _rotation_between(Po[f, ankle] - Po[f, hip], targets[f, k] - Po[f, hip])
+                for j in chain:
+                    Wo[f, j] = Rh @ Wo[f, j]
+            for j in chain:
+                p = rig.parents[j]
+                local[:, j] = np.einsum("fji,fjk->fik", Wo[:, p], Wo[:, j])
+            if ankle not in hinges:  # the foot keeps the motion's orientation
+                local[:, ankle] = np.einsum("fji,fjk->fik", Wo[:, chain[-1]], saved[:, ankle])
+            Wo = _worlds(rig.parents, local)
     # local rotations: unchanged by the choice of world axes (Wo = Rᵀ W_input)
-    local = np.empty_like(Wo)
-    for j, p in enumerate(rig.parents):
-        local[:, j] = Wo[:, j] if p < 0 else np.einsum("fji,fjk->fik", Wo[:, p], Wo[:, j])
+    local = _locals(rig.parents, Wo)
     local[:, 0] = np.einsum("ij,fjk->fik", frame.R, Wo[:, 0])  # the root's rotation in input axes
     t_frame = tc  # the frame's time dependence (treadmill belt) follows the capture's clock
     root_in = frame.point_to_input(root_pos, t_frame)

@@ -23,6 +23,12 @@ def cmd_export(args: argparse.Namespace) -> int:
         if fmt != "bvh":
             raise CliError(f"--units applies to BVH only (format {fmt!r} is always in metres)")
         options["units"] = args.units
+    if args.rig is not None:
+        if fmt == "json":
+            raise CliError("--rig applies to bvh, gltf and deepmimic (the JSON clip is on the motion's own skeleton)")
+        if args.rig == "source" and args.units is not None:
+            raise CliError("--units does not apply with --rig source (the input's own units are kept)")
+        options["rig"] = args.rig
     if args.y_up and fmt == "json":
         options["y_up"] = True  # glTF and BVH are always Y-up: the flag changes nothing for them
     suffix = Path(args.out).suffix.lower() if args.out != "-" else ""
@@ -65,7 +71,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     s = add_command(sub, "export", "export a motion file as a JSON clip, glTF 2.0 (.glb) or BVH", """\
 Write a motion file for other tools: a compact JSON clip (schema solver/export/clip.schema.json),
 glTF 2.0 binary .glb (skinned ellipsoids + animation, Y-up, metres; --embedded for a .gltf
-JSON) or BVH (Y-up, cm by default). solver.export.reimport reads all three back.""")
+JSON) or BVH (Y-up, cm by default), or, with --rig source, on the input's own skeleton (BVH, skinned
+glTF, DeepMimic motion). solver.export.reimport reads the JSON clip, glTF and BVH back.""")
     s.add_argument("motion", metavar="MOTION.json", help="motion file v1 (JSON), e.g. a tutor or a λ optimum")
     s.add_argument("--format", required=True, choices=CHOICES,
                    help="json: motionx clip; gltf (alias glb): binary glTF 2.0 (.glb); bvh")
@@ -75,4 +82,9 @@ JSON) or BVH (Y-up, cm by default). solver.export.reimport reads all three back.
     s.add_argument("--y-up", action="store_true",
                    help="JSON clip in Y-up axes (x left, y up, z forward); glTF and BVH are always Y-up")
     s.add_argument("--units", choices=("cm", "m"), default=None, help="BVH length unit (default: cm)")
+    s.add_argument("--rig", choices=("character", "source"), default=None,
+                   help="source: on the input's own skeleton (the BVH, skinned glTF or DeepMimic character the "
+                        "motion was made from: its hierarchy, names, offsets, channels; the joints the motion's "
+                        "character locked carry the capture's own values at the same gait phase); character "
+                        "(default): on the motion's own skeleton")
     s.set_defaults(func=cmd_export)

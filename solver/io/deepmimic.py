@@ -56,6 +56,7 @@ from solver.errors import InputError
 from solver.io.fit import fit_track
 from solver.io.readers import TrialError
 from solver.io.track import SkeletonTrack, add_pelvis, rescaled_masses, split_mass
+from solver.rig import Rig
 
 log = logging.getLogger(__name__)
 
@@ -307,6 +308,47 @@ def trial_files(paths: list[Path]) -> dict[str, Path]:
 def load_deepmimic(
     motion: str | Path, character: str | Path, *, mass: float | None = None, lower_only: bool | None = None
 ) -> Capture:
-    """Import a DeepMimic clip as a :class:`Capture` (conventions in the module doc)."""
+    """Import a DeepMimic clip as a :class:`Capture` (conventions in the module doc), with the
+    character's own skeleton as its rig (:func:`deepmimic_rig`)."""
+    track = deepmimic_track(motion, character, mass=mass)
+    capture = fit_track(track, lower_only=lower_only)
+    return capture.evolve(rig=deepmimic_rig(read_deepmimic_character(character), motion, track))
 
-    return fit_track(deepmimic_track(motion, character, mass=mass), lower_only=lower_only)
+
+#: DeepMimic humanoid joint -> the capture segment it moves (the ankle's box carries the toes,
+#: the wrist is fixed: neither drives a segment of its own)
+RIG_ROLES = {"root": "pelvis", "chest": "abdomen", "neck": "head",
+             **{f"{side}_{j}": f"{seg}_{side[0]}" for side in ("right", "left") for j, seg in (
+                 ("hip", "thigh"), ("knee", "shank"), ("ankle", "foot"), ("shoulder", "upper_arm"),
+                 ("elbow", "forearm"))}}
+#: DeepMimic joint type -> its "channels" in a rig (what a frame holds for it)
+RIG_CHANNELS = {"spherical": ("quaternion",), "revolute": ("Zrotation",), "fixed": (), "none": ()}
+
+
+def deepmimic_rig(sk: DeepMimicSkeleton, motion: str | Path, track: SkeletonTrack) -> Rig:
+    """The character's skeleton and the clip's local rotations as a :class:`solver.rig.Rig`
+    (DeepMimic axes, metres), with its ``BodyDefs`` (shapes for a GLB of the character) and the
+    clip's loop mode in ``extra``."""
+    frames = np.array(_load_json(motion, "DeepMimic motion")["Frames"], dtype=float)
+    T, J = frames.shape[0], len(sk.names)
+    local = np.empty((T, J, 3, 3))
+    col = 8
+    for j in range(J):
+        t = sk.types[j]
+        if sk.parents[j] < 0:
+            local[:, j] = _quat_to_matrix(frames[:, 4:8])
+            continue
+        if t == "spherical":
+            local[:, j] = _quat_to_matrix(frames[:, col:col + 4])
+        elif t == "revolute":
+            local[:, j] = _rotz(frames[:, col])
+        else:
+            local[:, j] = np.eye(3)
+        col += _DOF[t]
+    channels = tuple(("Xposition", "Yposition", "Zposition", "quaternion") if sk.parents[j] < 0
+                     else RIG_CHANNELS[sk.types[j]] for j in range(J))
+    roles = {seg: sk.names.index(j) for j, seg in RIG_ROLES.items() if j in sk.names}
+    body_defs = {n: dict(b) for n, b in sk.bodies.items()}
+    return Rig("deepmimic", sk.names, sk.parents, sk.attach, channels, roles, track.times, local, frames[:, 1:4],
+               track.frame, extra={"frame_time": float(np.median(frames[:-1, 0])), "types": list(sk.types),
+                                   "body_defs": body_defs, "loop": track.source.get("loop", "none")})
