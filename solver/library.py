@@ -240,7 +240,9 @@ class CellResult:
 
 #: files a library folder holds besides its cells' CELL.motion.json and CELL.clip.json
 LIBRARY_FILES = ("manifest.json", "library.glb")
-CELL_KINDS = ("motion.json", "clip.json")
+CELL_KINDS = ("motion.json", "clip.json", "rig.bvh", "deepmimic.txt")
+#: source rig format -> (export format, cell file kind) written beside each cell's clip
+RIG_FILES = {"bvh": ("bvh", "rig.bvh"), "deepmimic": ("deepmimic", "deepmimic.txt")}
 
 
 @dataclass(frozen=True)
@@ -290,8 +292,11 @@ class LibraryResult:
 
     def save(self, folder: str | Path, tutor_file: str | None = None) -> Path:
         """Write ``manifest.json``, ``library.glb`` (one animation per cell with a clip) and each
-        cell's ``CELL.motion.json`` and ``CELL.clip.json`` into ``folder`` (created when missing;
+        cell's ``CELL.motion.json`` and ``CELL.clip.json`` (and, for a walk from a BVH or a
+        DeepMimic clip, the cell on the input's own skeleton: ``CELL.rig.bvh`` /
+        ``CELL.deepmimic.txt``) into ``folder`` (created when missing;
         earlier files of these names are replaced)."""
+        from solver.export import export_motion
         from solver.export.clip import to_clip_json
         from solver.export.gltf import to_library_glb
 
@@ -306,6 +311,10 @@ class LibraryResult:
             if r.motion is not None:
                 r.motion.save(out / f"{r.cell.key}.motion.json")
                 (out / f"{r.cell.key}.clip.json").write_text(to_clip_json(r.motion))
+                rig = r.motion.provenance.get("rig")
+                if isinstance(rig, Mapping) and rig.get("format") in RIG_FILES:
+                    fmt, kind = RIG_FILES[rig["format"]]
+                    (out / f"{r.cell.key}.{kind}").write_text(str(export_motion(r.motion, fmt, rig="source")))
                 clips.append((r.cell.key, r.motion))
         if clips:
             (out / "library.glb").write_bytes(to_library_glb(clips, extras={**manifest["grid"],

@@ -45,7 +45,11 @@ def runs(shared_data):
     for r in lib.cells:
         assert r.motion is not None, r.cell.key
         motions[f"cell_{r.cell.key}"] = r.motion
+    runs_library.append(lib)
     return path, motions
+
+
+runs_library: list = []
 
 
 def _bvhio_world(text: str, tmp_path, names):
@@ -173,6 +177,16 @@ def test_library_cells_come_out_on_the_input_rig(runs, tmp_path):
         rep = feet_report(m, rig, retarget(m, rig))
         for side in ("right", "left"):
             assert rep[side]["ankle_error_m"] <= 0.02 and rep[side]["slide_m"] <= 0.01, (key, rep)
+
+
+def test_saved_library_holds_each_cell_on_the_input_rig(runs, tmp_path):
+    path, _ = runs
+    out = runs_library[-1].save(tmp_path / "lib")
+    files = sorted(out.glob("*.rig.bvh"))
+    assert len(files) == 9
+    src = read_bvh(path)
+    for f in files:
+        _same_hierarchy(read_bvh(f), src)
 
 
 def test_deepmimic_motion_on_its_own_character(shared_data, tmp_path):
