@@ -44,6 +44,9 @@ from solver.kinematics import segment_frames
 
 #: the formats whose rigs are :class:`Rig` values (others, e.g. OpenSim's, are their exporter's own mapping)
 RIG_FORMATS = ("bvh", "gltf", "deepmimic")
+#: at most this many joints in a rig (a full-body rig with fingers and face has ~70–150): it bounds
+#: what every motion of the capture carries
+MAX_JOINTS = 256
 #: importer joint role -> the capture segment that joint moves (the joint at its proximal end)
 ROLE_SEGMENTS = {"hips": "pelvis", "lumbar": "abdomen", "head": "head",
                  **{f"{role}_{s}": f"{seg}_{s}" for s in "rl" for role, seg in (
@@ -171,6 +174,8 @@ class Rig:
 
     def __post_init__(self) -> None:
         J = len(self.names)
+        if J > MAX_JOINTS:
+            raise RigError(f"the input's skeleton has {J} joints; at most {MAX_JOINTS} are supported")
         if len(self.parents) != J or len(self.channels) != J:
             raise RigError("rig: names, parents and channels must have one entry per joint")
         if J == 0 or self.parents[0] != -1 or any(not -1 < p < j for j, p in enumerate(self.parents) if j):
