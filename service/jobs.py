@@ -1,8 +1,10 @@
 """The one job function, run by both runners (LocalRunner's process pool, Celery workers).
 
 ``execute_job(job_id, settings)`` claims the job row (attempt counter with a cap, a lease
-renewed while it runs), makes the tutor when the source is a raw capture (stored as its
-own motion), runs the continuation and writes every progress record and every accepted
+renewed while it runs), gets the tutor when the source is a raw capture — the stored one, or
+made by this job and stored as its own motion, while the other jobs needing the same tutor
+wait for it (one maker per tutor across processes and workers: ``service.store.claim_tutor``)
+—, runs the continuation and writes every progress record and every accepted
 λ optimum to SQL as it goes (optima upserted by (job, step), so a re-run after a crash
 rewrites the same rows). It never raises for a solver failure: that is a job status.
 
@@ -25,7 +27,9 @@ import socket
 import threading
 import time
 import uuid
-from typing import Any
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Literal
 
 from sqlalchemy.exc import DBAPIError
 from tenacity import Retrying, retry_if_result, stop_after_delay, wait_fixed
@@ -190,25 +194,35 @@ def execute_job(job_id: str, settings: Settings) -> str:
             status, message, extra = _run(db, job_id, claim.attempt, token, settings, hb)
         except DBAPIError:  # the store itself is unreachable: not the job's fault, let the runner retry it
             raise
-        except LimitError as e:
-            status, message, extra = "failed", str(e), {}
         except Exception as e:  # the job boundary: a failure becomes a status, never a crash
-            if isinstance(e, MemoryError) or "bad_alloc" in str(e):  # Python's, or C++'s inside CasADi
+            if _out_of_memory(e):
                 log.error("job %s: out of memory", job_id)
-                cap = f" of {settings.job_memory_mb:g} MB" if settings.job_memory_mb else ""
-                status, message, extra = "failed", f"out of memory: the job needs more than its memory limit{cap}", {}
+            elif isinstance(e, LimitError) or limits.refusal_text(e, ""):  # the input's fault: no traceback
+                log.info("job %s refused: %s", job_id, e)
             else:
-                if limits.refusal_text(e, ""):  # the input's fault, said in the message: no traceback
-                    log.info("job %s refused: %s", job_id, e)
-                else:
-                    log.exception("job %s failed", job_id)
-                status, message, extra = "failed", job_error_message(e), {}
+                log.exception("job %s failed", job_id)
+            status, message, extra = "failed", failure_message(e, settings), {}
         if hb.lost:
             log.warning("job %s: lease lost (another attempt took over); result not recorded", job_id)
             return "lost"
         with hb.write_lock, db.write() as s:
             ok = store.finish_job(s, job_id=job_id, token=token, status=status, message=message, **extra)
     return status if ok else "lost"
+
+
+def _out_of_memory(e: BaseException) -> bool:
+    return isinstance(e, MemoryError) or "bad_alloc" in str(e)  # Python's, or C++'s inside CasADi
+
+
+def failure_message(e: BaseException, settings: Settings) -> str:
+    """A failed job's message for an exception it raised: a limit's or a refusal's own text,
+    out of memory with the job's cap, else a generic sentence (the traceback is in the log)."""
+    if isinstance(e, LimitError):
+        return str(e)
+    if _out_of_memory(e):
+        cap = f" of {settings.job_memory_mb:g} MB" if settings.job_memory_mb else ""
+        return f"out of memory: the job needs more than its memory limit{cap}"
+    return job_error_message(e)
 
 
 def job_error_message(e: BaseException, doing: str = "running the job") -> str:
@@ -236,7 +250,7 @@ def _run(db: Database, job_id: str, attempt: int, token: str, settings: Settings
     with db.read() as s:
         job = store.get_job(s, job_id=job_id, owner=None)
         source = store.get_motion(s, motion_id=job.motion_id, owner=None)
-        spec, owner = dict(job.spec), job.owner
+        spec, owner, created_at = dict(job.spec), job.owner, job.created_at
         kind, source_id = source.kind, source.id
         limits.check_source(kind=kind, frames=source.frames, fps=source.fps, coordinates=source.n)
         motion = store.load_motion(source)
@@ -258,27 +272,12 @@ def _run(db: Database, job_id: str, attempt: int, token: str, settings: Settings
         tutor_opts = spec.get("tutor") or {}
         character = tutor_opts.get("character", settings.default_character)
         fps = float(tutor_opts.get("fps", settings.default_tutor_fps))
-        tutor_key = f"{character}@{fps:g}"
-        with db.read() as s:
-            row = store.get_or_add_tutor(s, owner=owner, parent_id=source_id, tutor_key=tutor_key)
-            tutor = store.load_motion(row) if row is not None else None
-            tutor_id = row.id if row is not None else None
-        if tutor is None:
-            from solver.pipeline import make_tutor  # lazy: the solver loads in the job's process, not the API's
-
-            # a cancel (or a lost lease) stops the tutor's solve at its next IPOPT iteration
-            res = make_tutor(motion, character=character, fps=fps, should_cancel=lambda: hb.cancel_requested or hb.lost)
-            record("tutor", wall_time=time.monotonic() - t0, lam=0.0, lam_reached=0.0, environment={},
-                   iterations=_tutor_iterations(res.stats), accepted=res.status == "succeeded",
-                   status=f"tutor {res.status}")
-            if res.status == "canceled" and hb.cancel_requested:
-                return "canceled", f"tutor: {res.message}", {}
-            if res.status != "succeeded" or res.motion is None:
-                return "failed", f"tutor: {res.message or res.status}", {}
-            with hb.write_lock, db.write() as s:
-                tutor_id = store.get_or_add_tutor(s, owner=owner, parent_id=source_id, tutor_key=tutor_key,
-                                                  motion=res.motion).id
-            tutor = res.motion
+        made = _tutor(db, job_id=job_id, token=token, created_at=created_at, owner=owner, parent_id=source_id,
+                      tutor_key=f"{character}@{fps:g}", capture=motion, character=character, fps=fps, hb=hb,
+                      t0=t0, record=record, settings=settings)
+        if isinstance(made, tuple):  # the job ends here: (status, message)
+            return made[0], made[1], {}
+        tutor, tutor_id = made.motion, made.motion_id
         with hb.write_lock, db.write() as s:
             store.set_tutor(s, job_id=job_id, token=token, tutor_motion_id=tutor_id)
         limits.check_tutor(frames=tutor.T, fps=float(tutor.fps), coordinates=tutor.n, made=True)
@@ -320,6 +319,87 @@ def _run(db: Database, job_id: str, attempt: int, token: str, settings: Settings
         status, message = "failed", f"unexpected extrapolation status {result.status!r}: {result.message}"
     lam_reached = max(result.lam_reached, start[0]) if start else result.lam_reached
     return status, message, dict(lam_reached=lam_reached, steps=len(result.steps) + offset, solves=result.solves)
+
+
+@dataclass(frozen=True)
+class _Tutor:
+    motion: Any  # solver.motion.Motion
+    motion_id: str
+
+
+def _tutor(db: Database, *, job_id: str, token: str, created_at: float, owner: str, parent_id: str, tutor_key: str,
+           capture: Any, character: str, fps: float, hb: Heartbeat, t0: float, record: Callable[..., None],
+           settings: Settings) -> _Tutor | tuple[str, str]:
+    """The tutor of capture ``parent_id`` for ``tutor_key``, made by one job at a time
+    (:func:`service.store.claim_tutor`): the stored one; or made here (``solver.pipeline.make_tutor``)
+    and stored; or, while another live job makes it, waited for (polled, the job's lease renewed
+    meanwhile) and then taken from the store. Its progress point (phase ``tutor``) says which: the
+    tutor pipeline's status and iterations, or ``tutor made by job …`` with 0 iterations and the
+    time waited. Returns the tutor, or the job's end (status, message): canceled or out of time
+    while waiting or making it, or the tutor failed (here, or in the job that made it for this one)."""
+    turn = _tutor_turn(db, job_id=job_id, token=token, created_at=created_at, parent_id=parent_id,
+                       tutor_key=tutor_key, hb=hb, poll_s=max(0.2, min(1.0, settings.job_lease_s / 4.0)))
+    if turn.outcome == "wait":  # stopped while another job makes the tutor
+        by = f" (the tutor is being made by job {turn.maker})"
+        if hb.cancel_requested or hb.lost:
+            return "canceled", f"canceled while waiting for the tutor{by}"
+        return "failed", f"time limit of {settings.job_time_limit_s:g} s exceeded while waiting for the tutor{by}"
+    if turn.outcome == "failed":
+        record("tutor", wall_time=time.monotonic() - t0, lam=0.0, lam_reached=0.0, environment={}, iterations=0,
+               accepted=False, status=f"tutor failed in job {turn.maker}")
+        return "failed", f"tutor: {turn.message} (in job {turn.maker}, which made it for this job too)"
+    if turn.outcome == "ready":
+        assert turn.tutor_id is not None
+        with db.read() as s:
+            row = store.get_motion(s, motion_id=turn.tutor_id, owner=None)
+            assert row is not None  # motions are never deleted
+            tutor = store.load_motion(row)
+        record("tutor", wall_time=time.monotonic() - t0, lam=0.0, lam_reached=0.0, environment={}, iterations=0,
+               accepted=True, status=f"tutor made by job {turn.maker}" if turn.maker else "tutor stored earlier")
+        return _Tutor(tutor, turn.tutor_id)
+    from solver.pipeline import make_tutor  # lazy: the solver loads in the job's process, not the API's
+
+    def end(state: Literal["failed", "released"], message: str = "") -> None:
+        with hb.write_lock, db.write() as s:
+            store.end_tutor_claim(s, parent_id=parent_id, tutor_key=tutor_key, token=token, state=state,
+                                  message=message)
+
+    try:
+        # a cancel (or a lost lease) stops the tutor's solve at its next IPOPT iteration
+        res = make_tutor(capture, character=character, fps=fps,
+                         should_cancel=lambda: hb.cancel_requested or hb.lost)
+    except DBAPIError:  # the store is unreachable: the maker's lease runs out and the claim with it
+        raise
+    except Exception as e:  # the job fails with it (execute_job), and so do the jobs waiting for this tutor
+        end("failed", failure_message(e, settings))
+        raise
+    record("tutor", wall_time=time.monotonic() - t0, lam=0.0, lam_reached=0.0, environment={},
+           iterations=_tutor_iterations(res.stats), accepted=res.status == "succeeded", status=f"tutor {res.status}")
+    if res.status == "canceled":
+        end("released")  # stopped, not failed: the next job needing this tutor makes it
+        return "canceled" if hb.cancel_requested else "failed", f"tutor: {res.message}"
+    if res.status != "succeeded" or res.motion is None:
+        end("failed", res.message or res.status)
+        return "failed", f"tutor: {res.message or res.status}"
+    with hb.write_lock, db.write() as s:
+        row = store.get_or_add_tutor(s, owner=owner, parent_id=parent_id, tutor_key=tutor_key, motion=res.motion)
+        assert row is not None  # stored just now, or by an earlier attempt
+        store.end_tutor_claim(s, parent_id=parent_id, tutor_key=tutor_key, token=token, state="made")
+    return _Tutor(res.motion, row.id)
+
+
+def _tutor_turn(db: Database, *, job_id: str, token: str, created_at: float, parent_id: str, tutor_key: str,
+                hb: Heartbeat, poll_s: float) -> store.TutorTurn:
+    """The job's turn at the tutor (:func:`service.store.claim_tutor`), asked again every
+    ``poll_s`` while another live job makes it; still ``wait`` when the job must stop meanwhile
+    (a cancel, a lost lease, its time limit)."""
+    while True:
+        with hb.write_lock, db.write() as s:
+            turn = store.claim_tutor(s, parent_id=parent_id, tutor_key=tutor_key, job_id=job_id, token=token,
+                                     job_created_at=created_at, holder_alive=holder_alive)
+        if turn.outcome != "wait" or hb.cancel_requested or hb.lost or time.monotonic() > hb.deadline:
+            return turn
+        time.sleep(poll_s)
 
 
 def _cell_start(db: Database, job_id: str, ref: dict, owner: str, target, hb: Heartbeat):

@@ -1,4 +1,5 @@
-"""SQL tables (SQLAlchemy 2 declarative). Durable state: motions, jobs, progress points.
+"""SQL tables (SQLAlchemy 2 declarative). Durable state: motions, jobs, progress points,
+libraries, and who makes each tutor.
 
 Times are epoch seconds (double precision) so SQLite and PostgreSQL behave alike.
 The schema is created and upgraded by Alembic (``service/migrations``), never by
@@ -131,3 +132,24 @@ class LibraryRow(Base):
     spec: Mapped[dict[str, Any]] = mapped_column(JSON)
     cancel_requested: Mapped[bool] = mapped_column(Boolean, default=False)
     created_at: Mapped[float] = mapped_column(Float)
+
+
+class TutorClaimRow(Base):
+    """Who makes the tutor of a capture (``parent_id``) for ``tutor_key`` (character@fps): one
+    row per tutor, the key being the tutor's own unique key in ``motions``. A job that finds no
+    tutor inserts this row (``INSERT … ON CONFLICT DO NOTHING``: one winner, on SQLite and
+    PostgreSQL alike) and makes it; other jobs needing it wait while the maker's job lease is live
+    (``token`` is that lease's holder). ``state``: ``making``, then ``made`` (the tutor is in
+    ``motions``) or ``failed`` (``message``; ``ended_at``): jobs created before the failure share
+    it, later ones make the tutor again (service.store.claim_tutor)."""
+
+    __tablename__ = "tutor_claims"
+
+    parent_id: Mapped[str] = mapped_column(String(40), primary_key=True)
+    tutor_key: Mapped[str] = mapped_column(String(100), primary_key=True)
+    job_id: Mapped[str] = mapped_column(String(40))
+    token: Mapped[str] = mapped_column(String(200))
+    state: Mapped[str] = mapped_column(String(16))  # making | made | failed
+    message: Mapped[str] = mapped_column(Text, default="")
+    claimed_at: Mapped[float] = mapped_column(Float)
+    ended_at: Mapped[float | None] = mapped_column(Float, nullable=True)

@@ -96,6 +96,7 @@ def _records(progress: Any) -> list[dict]:
             "lam_reached": _number(r["lam_reached"], f"progress[{i}].lam_reached"),
             "accepted": r["accepted"],
             "iterations": int(_number(r.get("iterations", 0), f"progress[{i}].iterations")),
+            "status": str(r.get("status") or ""),
             "environment": {k: _number(env[k], f"progress[{i}].environment.{k}")
                             for k in TARGET_KEYS if env.get(k) is not None},
         }
@@ -168,7 +169,10 @@ def progress_figure(progress: list[dict], target: dict | None):
     title = f"continuation toward {describe_target(tgt)}" if target is not None else "continuation"
     if tutor:
         t = tutor[-1]
-        title += f"\n(tutor made first: {t['wall_time']:.1f} s, {t['iterations']} iterations)"
+        if t["status"].startswith("tutor made by job"):  # another job made it (service.jobs)
+            title += f"\n(tutor made by another job, taken from the store after {t['wall_time']:.1f} s)"
+        else:
+            title += f"\n(tutor made first: {t['wall_time']:.1f} s, {t['iterations']} iterations)"
     fig.suptitle(title, fontsize=10)
     axes[-1].set_xlabel("wall time of the extrapolation (s)")
     ax.set_ylabel("λ")

@@ -271,3 +271,16 @@ def test_motionx_extrapolate_writes_the_final_motions_plots(tutor_file, tmp_path
     # the residual plot is of the last λ motion, which is plausible
     last = Motion.load(out / summary["final"]["file"])
     assert last.provenance["lambda"] == 1.0 and residual_series(last).ours_force_rel.max() < 1e-6
+
+
+def test_progress_title_says_whose_tutor_it_is(continuation):
+    """The job that made its tutor says how long it took; a job that took it from the store
+    (made by another job: service.jobs) says so, not "made first" with 0 iterations."""
+    _, res = continuation
+    ext = [{**asdict(r), "phase": "extrapolate"} for r in res.records]
+    made = {"phase": "tutor", "wall_time": 31.8, "lam": 0.0, "lam_reached": 0.0, "environment": {},
+            "iterations": 224, "accepted": True, "status": "tutor succeeded"}
+    taken = {**made, "wall_time": 12.4, "iterations": 0, "status": "tutor made by job j_0123"}
+    titles = [progress_figure([p, *ext], {"slope_deg": 4.0})._suptitle.get_text() for p in (made, taken)]
+    assert titles[0].endswith("(tutor made first: 31.8 s, 224 iterations)")
+    assert titles[1].endswith("(tutor made by another job, taken from the store after 12.4 s)")

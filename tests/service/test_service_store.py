@@ -41,7 +41,7 @@ def _job(db, *, max_attempts=3, runner="celery", key=None, own=None):
 
 def test_migrations_reach_head_and_are_idempotent(db):
     upgrade(db.url)  # second run: nothing to do
-    assert current_revision(db.url) == "0002"
+    assert current_revision(db.url) == "0003"
     if db.is_sqlite:
         with db.read() as s:
             assert s.execute(text("PRAGMA journal_mode")).scalar() == "wal"
@@ -260,3 +260,89 @@ def test_api_keys_hashed_and_revocable(db):
         assert store.revoke_api_key(s, key_id=kid)
     with db.read() as s:
         assert store.owner_for_key(s, key=key) is None
+
+
+def _running_job(db, motion_id: str, own: str, token: str) -> str:
+    """A job on ``motion_id`` that is running under the lease ``token``."""
+    with db.write() as s:
+        j = store.create_job(s, owner=own, motion_id=motion_id, spec={"target": {"slope_deg": 3.0}}, runner="local",
+                             max_attempts=3)
+        jid, created = j.id, j.created_at
+    with db.write() as s:
+        assert store.claim_job(s, job_id=jid, token=token, lease_s=60).outcome == "claimed"
+    return jid, created
+
+
+def _turn(db, capture: str, job: tuple[str, float], token: str, key: str = "halfboy@15", **kw) -> store.TutorTurn:
+    with db.write() as s:
+        return store.claim_tutor(s, parent_id=capture, tutor_key=key, job_id=job[0], token=token,
+                                 job_created_at=job[1], **kw)
+
+
+def test_a_tutor_is_made_by_one_job_and_shared(db):
+    """Of the jobs needing the same tutor, one makes it and the others wait for it while the
+    maker holds its lease; its result (the stored tutor, or its failure) is theirs."""
+    _, capture, own = _job(db)
+    a, b = _running_job(db, capture, own, "h:1:a"), _running_job(db, capture, own, "h:2:b")
+    assert _turn(db, capture, a, "h:1:a").outcome == "make"
+    assert _turn(db, capture, b, "h:2:b") == store.TutorTurn("wait", maker=a[0])
+    assert _turn(db, capture, a, "h:1:a").outcome == "make"  # asked again by its maker: still its own
+    assert _turn(db, capture, b, "h:2:b", key="halfboy@30").outcome == "make"  # another tutor: another claim
+    # the maker fails: the jobs created before share the failure, a job created after makes it again
+    with db.write() as s:
+        assert store.end_tutor_claim(s, parent_id=capture, tutor_key="halfboy@15", token="h:1:a", state="failed",
+                                     message="no gait cycle")
+        assert not store.end_tutor_claim(s, parent_id=capture, tutor_key="halfboy@15", token="h:2:b",
+                                         state="made")  # fenced: not b's claim
+    assert _turn(db, capture, b, "h:2:b") == store.TutorTurn("failed", maker=a[0], message="no gait cycle")
+    time.sleep(0.01)  # the next job is created after the failure (epoch seconds)
+    c = _running_job(db, capture, own, "h:3:c")
+    assert _turn(db, capture, c, "h:3:c").outcome == "make"
+    assert _turn(db, capture, b, "h:2:b") == store.TutorTurn("wait", maker=c[0])
+    with db.write() as s:  # c stores it and ends its claim in the same transaction
+        tutor = store.get_or_add_tutor(s, owner=own, parent_id=capture, tutor_key="halfboy@15",
+                                       motion=halfboy_motion(seed=5)).id
+        assert store.end_tutor_claim(s, parent_id=capture, tutor_key="halfboy@15", token="h:3:c", state="made")
+    for job, token in ((b, "h:2:b"), (a, "h:1:a"), (c, "h:3:c")):
+        assert _turn(db, capture, job, token) == store.TutorTurn("ready", tutor_id=tutor, maker=c[0])
+    with db.read() as s:
+        assert s.scalar(select(func.count()).select_from(MotionRow).where(MotionRow.parent_id == capture)) == 1
+
+
+def test_a_tutor_claim_is_taken_over_when_its_maker_stops(db):
+    _, capture, own = _job(db)
+    a, b = _running_job(db, capture, own, "h:1:a"), _running_job(db, capture, own, "h:2:b")
+    assert _turn(db, capture, a, "h:1:a").outcome == "make"
+    # the maker's process is gone (a dead process of this host): taken over at once
+    assert _turn(db, capture, b, "h:2:b", holder_alive=lambda t: t != "h:1:a").outcome == "make"
+    assert _turn(db, capture, a, "h:1:a") == store.TutorTurn("wait", maker=b[0])
+    # the maker's job ends without making it (e.g. its watchdog stopped it): no longer its lease
+    with db.write() as s:
+        assert store.finish_job(s, job_id=b[0], token="h:2:b", status="canceled")
+    assert _turn(db, capture, a, "h:1:a").outcome == "make"
+    # released (canceled while making it): the next job needing it makes it, failure or not
+    with db.write() as s:
+        assert store.end_tutor_claim(s, parent_id=capture, tutor_key="halfboy@15", token="h:1:a", state="released")
+    c = _running_job(db, capture, own, "h:3:c")
+    assert _turn(db, capture, c, "h:3:c").outcome == "make"
+
+
+def test_concurrent_jobs_claim_a_tutor_once(db):
+    """Jobs asking at the same moment, each in its own transaction and connection: one makes it."""
+    _, capture, own = _job(db)
+    jobs = [_running_job(db, capture, own, f"h:{i}:x") for i in range(6)]
+    barrier, turns = threading.Barrier(len(jobs)), {}
+
+    def ask(i: int) -> None:
+        barrier.wait()
+        turns[i] = _turn(db, capture, jobs[i], f"h:{i}:x")
+
+    threads = [threading.Thread(target=ask, args=(i,)) for i in range(len(jobs))]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=60)
+    outcomes = sorted(t.outcome for t in turns.values())
+    assert len(turns) == len(jobs) and outcomes.count("make") == 1 and outcomes.count("wait") == len(jobs) - 1, turns
+    maker = next(jobs[i][0] for i, t in turns.items() if t.outcome == "make")
+    assert all(t.maker in (None, maker) for t in turns.values())  # None: lost the insert race, asks again
