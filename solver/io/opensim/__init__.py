@@ -95,7 +95,8 @@ from solver.io.fit import fit_track
 from solver.io.mass import ImpliedMass, implied_mass, mass_warning, stride_from_events
 from solver.io.opensim.base import C_OSIM, OpenSimError
 from solver.io.opensim.external_loads import grf_arrays, read_opensim_grf
-from solver.io.opensim.model import PLACEHOLDER_MASS_FRACTION, opensim_track
+from solver.io.opensim.model import PLACEHOLDER_MASS_FRACTION, opensim_evaluation, opensim_track
+from solver.io.opensim.rig import opensim_rig
 from solver.io.opensim.storage import Storage, read_mot
 from solver.io.opensim.treadmill import estimate_belt_speed
 from solver.io.readers import TrialError, by_suffix
@@ -179,13 +180,15 @@ def load_opensim(
     ground reactions (``read_opensim_grf``), attached as ``capture.measured`` with ``valid``
     computed from the kinematic contact schedule; the mass they imply is in
     ``capture.source["implied_mass"]`` and a disagreement of more than 5 % with the mass used
-    is logged and kept in ``source["mass_warning"]``.
+    is logged and kept in ``source["mass_warning"]``. ``capture.rig``: what writing results
+    back on the model needs (:mod:`solver.io.opensim.rig`, :mod:`solver.export.opensim`).
     """
 
-    track = opensim_track(model, motion, mass=mass, belt_speed=belt_speed, grf=grf, grf_xml=grf_xml,
-                          in_degrees=in_degrees, floor_height=floor_height, height=height,
-                          ik_weights=ik_weights, ik_reweight=ik_reweight)
+    track, res = opensim_evaluation(model, motion, mass=mass, belt_speed=belt_speed, grf=grf, grf_xml=grf_xml,
+                                    in_degrees=in_degrees, floor_height=floor_height, height=height,
+                                    ik_weights=ik_weights, ik_reweight=ik_reweight)
     cap = fit_track(track, lower_only=lower_only)
+    cap = cap.evolve(rig=opensim_rig(model, res, cap))
     if grf is not None:
         contacts = detect_contacts(cap.character, cap.q, cap.fps)
         measured = read_opensim_grf(grf, grf_xml, times=cap.times, frame=cap.frame, contacts=contacts)

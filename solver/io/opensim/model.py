@@ -122,12 +122,15 @@ def _angles_in_degrees(sto: Storage, in_degrees: bool | None) -> bool | None:
 def _evaluate(model: str, motion: str | Path, in_degrees: bool | None, ik_weights: Mapping[str, float] | None,
               ik_reweight: int | None) -> tuple[dict[str, Any], np.ndarray, dict[str, Any]]:
     """OpenSim's evaluation of the model along the motion (coordinates, or a ``.trc``'s inverse
-    kinematics): the worker's result, the times and what the source records of it."""
+    kinematics): the worker's result (``coordinates``: the columns evaluated and their values
+    (T, K) in the model's units, radians and metres, added), the times and what the source
+    records of it."""
     from solver.io.opensim.worker import run_worker  # lazy: the child-process launcher, only when OpenSim runs
 
     src_extra: dict[str, Any] = {}
     if Path(motion).suffix.lower() == ".trc":
         res, src_extra = solve_ik(model, motion, weights=ik_weights, reweight=ik_reweight)
+        res["coordinates"] = (list(res["coord_names"]), np.asarray(res["ik_q"], dtype=float))
         return res, np.asarray(res["ik_times"], dtype=float), src_extra
     if ik_weights is not None or ik_reweight is not None:
         raise OpenSimError("ik_weights / ik_reweight only apply to a .trc marker file, not to coordinates")
@@ -137,6 +140,13 @@ def _evaluate(model: str, motion: str | Path, in_degrees: bool | None, ik_weight
     deg = _angles_in_degrees(sto, in_degrees)
     res = run_worker(model, sto.labels, sto.data, deg)
     ignored = check_motion(sto, res, model)
+    names = list(res["coord_names"])
+    cols = [k for k, c in enumerate(sto.labels) if c in names]
+    values = np.array(sto.data[:, cols], dtype=float)
+    for j, k in enumerate(cols):
+        if res["in_degrees"] and res["coord_rotational"][names.index(sto.labels[k])]:
+            values[:, j] = np.radians(values[:, j])
+    res["coordinates"] = ([sto.labels[k] for k in cols], values)
     if ignored:
         src_extra["ignored_columns"] = ignored
         res["notes"] = list(res.get("notes", [])) + [
@@ -305,6 +315,29 @@ def opensim_track(
     inverse kinematics OpenSim solves first (:func:`solver.io.opensim.ik.solve_ik`;
     ``ik_weights``, ``ik_reweight``).
     """
+    return opensim_evaluation(model, motion, mass=mass, belt_speed=belt_speed, grf=grf, grf_xml=grf_xml,
+                              in_degrees=in_degrees, floor_height=floor_height, height=height,
+                              ik_weights=ik_weights, ik_reweight=ik_reweight)[0]
+
+
+def opensim_evaluation(
+    model: str | Path,
+    motion: str | Path,
+    *,
+    mass: float | None = None,
+    belt_speed: float | str | None = None,
+    grf: str | Path | None = None,
+    grf_xml: str | Path | None = None,
+    in_degrees: bool | None = None,
+    floor_height: float | None = None,
+    height: float | None = None,
+    ik_weights: Mapping[str, float] | None = None,
+    ik_reweight: int | None = None,
+) -> tuple[SkeletonTrack, dict[str, Any]]:
+    """:func:`opensim_track` and OpenSim's own evaluation it comes from (the worker's result:
+    the model's coordinates, bodies, and ``coordinates`` = (columns, values (T, K) in radians
+    and metres) along the motion): what the importer keeps for writing results back on the
+    model (:func:`solver.io.opensim.rig.opensim_rig`)."""
     model = str(model)
     if not Path(model).is_file():
         raise OpenSimError(f"model file not found: {model}")
@@ -354,7 +387,7 @@ def opensim_track(
     track = _with_segment_inertias(track, res, seg_of, off)
     if belt_speed is not None:
         track = belt_shift(track, belt_speed, grf, grf_xml)
-    return track
+    return track, res
 
 
 def _neutral_upper_body(height: float) -> dict[str, np.ndarray]:

@@ -1,0 +1,1144 @@
+"""A motion written on the subject's own OpenSim model: coordinates, ground reactions,
+ExternalLoads, the model, an inverse-dynamics setup, checked by OpenSim's own tools.
+
+Only motions made from an OpenSim trial can be written (their ``provenance["rig"]``, see
+:mod:`solver.io.opensim.rig`, holds the model and the trial). The folder holds:
+
+* ``<model>.osim``: the trial's model (a 3.x-era file whose sockets name bodies as
+  ``../body`` gets those paths rewritten to ``/bodyset/body``, nothing else changed);
+* ``coordinates.mot``: the model's coordinates (degrees and metres, ``inDegrees=yes``),
+  written by OpenSim's InverseKinematicsTool, ``CYCLES`` repetitions of the gait cycle
+  sampled at ``RATE_HZ`` from the motion's own interpolation (the optimizer's C² spline);
+* ``grf.mot``: per foot ``ground_force_{r,l}_v{x,y,z}`` (N), ``ground_force_{r,l}_p{x,y,z}``
+  (centre of pressure on the floor, m) and ``ground_torque_{r,l}_{x,y,z}`` (the free
+  moment, vertical), in the model's ground frame (x forward, y up, z right);
+* ``external_loads.xml``: the two forces applied to the model's feet (``calcn_r``, ``calcn_l``),
+  force and point expressed in ground;
+* ``setup_id.xml``: OpenSim's InverseDynamicsTool on these files, coordinates low-passed at
+  ``LOWPASS_HZ`` (as OpenSim's examples do), over the middle cycle (the outer ones keep the
+  filter's edges away from it), muscles excluded;
+* ``summary.json`` and ``README.md``: what was written, how, and the residuals OpenSim's
+  InverseDynamicsTool reports on exactly these files.
+
+**Coordinates.** The motion drives our segments; the model has its own bodies. At each
+captured frame the importer's OpenSim evaluation gives every body's pose, and the capture
+skeleton's fit gives our segments' poses: the rigid map between a body and its *anchor*
+segment (the segment it belongs to when the motion's character has it, else its parent
+body's anchor: the torso and arms of a HalfBoy ride on its pelvis) is the *calibration*. It
+holds what our character does not model (subtalar, knee translations, arms, the lumbar
+joint of a HalfBoy…) at that gait phase. A motion time ``t`` is at phase ``φ = t / D``
+(``D`` the motion's cycle) and so at capture time ``t_start + φ · period`` (the captured
+cycle, ``provenance["source"]["cycle"]``): each body is placed at the motion's anchor pose
+composed with the calibration there. Four body-fixed virtual markers per body (its centre
+of mass and 10 cm along each axis) follow those poses; OpenSim's InverseKinematicsTool
+fits the model to them (``.trc`` and a copy of the model carrying the markers in a scratch
+folder, not in the export).
+
+**Ground reactions.** The motion's wrenches (linear between frames, the optimizer's
+convention) are carried to the model's ground frame with the motion's ``GroundFrame``
+(a treadmill trial's belt velocity included) and written as force, centre of pressure on
+the floor plane and free moment: the same wrench exactly (a foot loaded below 1 % of the
+body weight keeps its last centre of pressure and takes the remainder as torque).
+
+**Residual reduction** (``reduce_residuals=True``, the default). The model is not our
+character: its arms and trunk move relative to the pelvis where a HalfBoy's do not, its
+knees translate, the coordinate filter smooths. OpenSim's InverseDynamicsTool is run on the
+written files; its pelvis residuals ``r`` (generalised forces of the six ground-pelvis
+coordinates) are the external wrench ``W`` the model still misses, ``r = G W`` where the
+rows of ``G`` are the twists each pelvis coordinate imparts to the whole model (computed by
+OpenSim at every row). That wrench is added to the feet in contact (in proportion to their
+vertical loads) and the ground-reaction file rewritten; the summary reports by how much the
+forces, centres of pressure and free moments moved. Then the InverseDynamicsTool is run
+again on the folder as written: those are the residuals reported.
+
+OpenSim runs in a child process (CasADi and OpenSim cannot share one: see
+:mod:`solver.io.opensim.worker`); :func:`child_main` is its entry point.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+import xml.etree.ElementTree as ET
+import zipfile
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from solver.capture import GroundFrame
+from solver.character import Character
+from solver.export import ExportError
+from solver.kinematics import segment_frames
+from solver.motion import Motion
+from solver.trajectory import ROOT_XY, ROOT_YAW, cycle_turn, sample
+
+#: sampling rate of the written files (Hz)
+RATE_HZ = 100.0
+#: gait cycles written (the inverse-dynamics setup analyses the middle one)
+CYCLES = 3
+#: low-pass cut-off of the coordinates in the inverse-dynamics setup (Hz), as OpenSim's examples
+LOWPASS_HZ = 6.0
+#: virtual markers: this far (m) from a body's centre of mass along each of its axes
+MARKER_OFFSET_M = 0.1
+#: a foot loaded less than this fraction of the body weight keeps its last centre of pressure
+MIN_LOAD_FRACTION = 0.01
+#: Hicks et al. 2015, "Is my model good enough?" (J Biomech Eng 137(2)), Table 2: peak
+#: residual force ≤ 5 % of the peak net external force; peak residual moment ≤ 1 % of
+#: (centre-of-mass height × peak net external force)
+HICKS_FORCE_FRACTION = 0.05
+HICKS_MOMENT_FRACTION = 0.01
+CHILD_TIMEOUT_S = 600.0
+#: bodies left without virtual markers: their pose follows from constraints (a patella's coupler)
+UNMARKED_BODIES = re.compile(r"patella.*")
+
+COORDINATES_FILE = "coordinates.mot"
+GRF_FILE = "grf.mot"
+EXTERNAL_LOADS_FILE = "external_loads.xml"
+SETUP_FILE = "setup_id.xml"
+ID_OUTPUT_FILE = "inverse_dynamics.sto"
+SUMMARY_FILE = "summary.json"
+README_FILE = "README.md"
+
+
+class OpenSimExportError(ExportError):
+    """A motion cannot be written on an OpenSim model; the message says why."""
+
+
+# --- what the motion must carry ---------------------------------------------------------------
+
+
+def source_rig(motion: Motion) -> Mapping[str, Any]:
+    """The OpenSim rig a motion carries (``provenance["rig"]``), checked; refused otherwise."""
+    if not isinstance(motion, Motion):
+        raise OpenSimExportError(f"expected a solver.motion.Motion, got {type(motion).__name__}")
+    rig = motion.provenance.get("rig")
+    fmt = (motion.provenance.get("source") or {}).get("format")
+    if not isinstance(rig, Mapping) or rig.get("format") != "opensim":
+        have = f"its source is {fmt!r}" if fmt else "it records no source"
+        raise OpenSimExportError(
+            f"the OpenSim export writes a motion on the OpenSim model of the trial it was made from; this motion "
+            f"carries no OpenSim model ({have}; provenance['rig'] is "
+            f"{'absent' if rig is None else repr(rig.get('format')) if isinstance(rig, Mapping) else 'not a mapping'})."
+            " Make the tutor from an OpenSim trial (.osim + coordinates or markers) to export it for OpenSim")
+    missing = [k for k in ("model", "coordinates", "times", "fit", "bodies", "body_segments", "feet", "frame")
+               if k not in rig]
+    if missing:
+        raise OpenSimExportError(f"the motion's OpenSim rig lacks {missing}")
+    if motion.wrenches is None:
+        raise OpenSimExportError("the motion has no ground reactions (contact wrenches): the OpenSim export "
+                                 "writes them as the model's external loads; export a tutor or a λ optimum, "
+                                 "not a capture")
+    if not motion.cyclic:
+        raise OpenSimExportError("the OpenSim export writes gait cycles: this motion is not a cycle "
+                                 "(motion.cyclic is false)")
+    cycle = (motion.provenance.get("source") or {}).get("cycle") or {}
+    if not all(isinstance(cycle.get(k), (int, float)) for k in ("t_start", "period_s")):
+        raise OpenSimExportError("the motion does not record the captured gait cycle it stands for "
+                                 "(provenance['source']['cycle'] with t_start and period_s)")
+    return rig
+
+
+# --- sampling the motion ------------------------------------------------------------------------
+
+
+def _rotz(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def cycle_samples(motion: Motion, cycles: int, rate: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """The motion repeated ``cycles`` times and sampled at ``rate``: times (S,) from 0, q (n, S)
+    (the periodic spline; each repetition moved by the cycle's own turn and displacement),
+    wrenches (2, 6, S) (linear between frames, moved alike) and the cycle duration D (s)."""
+    N = motion.T - 2  # frames T-2, T-1 repeat 0, 1
+    D = N / motion.fps
+    S = int(math.floor(cycles * D * rate + 1e-9)) + 1
+    t = np.arange(S) / rate
+    c = np.minimum(np.floor(t / D + 1e-12).astype(int), cycles - 1)
+    tau = t - c * D
+    q1 = sample(motion.q, motion.fps, tau, cyclic=True, interpolation=motion.interpolation)
+    W = np.asarray(motion.wrenches, dtype=float)
+    s = np.clip(tau * motion.fps, 0.0, N)
+    k = np.minimum(np.floor(s).astype(int), N - 1)
+    u = s - k
+    w1 = W[:, :, k] * (1 - u) + W[:, :, k + 1] * u  # (2, 6, S)
+    dpsi = cycle_turn(motion.q)
+    R2 = _rotz(dpsi)[:2, :2]
+    x0, xN = motion.q[list(ROOT_XY), 0], motion.q[list(ROOT_XY), N]
+    b = xN - R2 @ x0  # xy_{k+N} = R xy_k + b
+    q = q1.copy()
+    w = w1.copy()
+    for j in range(S):
+        Rk = np.eye(2)
+        bk = np.zeros(2)
+        for _ in range(int(c[j])):
+            Rk, bk = R2 @ Rk, R2 @ bk + b
+        if c[j]:
+            q[list(ROOT_XY), j] = Rk @ q1[list(ROOT_XY), j] + bk
+            q[ROOT_YAW, j] = q1[ROOT_YAW, j] + c[j] * dpsi
+            R3 = np.eye(3)
+            R3[:2, :2] = Rk
+            b3 = np.array([bk[0], bk[1], 0.0])
+            for f in range(2):
+                F = R3 @ w1[f, 3:, j]
+                w[f, 3:, j] = F
+                w[f, :3, j] = R3 @ w1[f, :3, j] + np.cross(b3, F)
+    return t, q, w, D
+
+
+# --- calibration: the model's bodies against our segments at the captured frames ---------------
+
+
+def _anchors(rig: Mapping[str, Any], character: Character, parents: Mapping[str, str]) -> dict[str, str]:
+    """Each model body -> the segment of the motion's character it rides on (see the module doc)."""
+    segs = {s.name for s in character.segments}
+    own = {b: ("abdomen" if s == "torso" else s) for b, s in dict(rig["body_segments"]).items()}
+    out: dict[str, str] = {}
+
+    def anchor(b: str, seen: tuple[str, ...] = ()) -> str:
+        if b in out:
+            return out[b]
+        s = own.get(b)
+        if s in segs:
+            return str(s)
+        p = parents.get(b)
+        if p is None or p == "ground" or p in seen:
+            return character.segments[0].name
+        return anchor(p, (*seen, b))
+
+    for b in rig["bodies"]:
+        out[b] = anchor(b)
+    return out
+
+
+def _fit_q(rig: Mapping[str, Any], character: Character) -> np.ndarray:
+    names = list(rig["fit"]["names"])
+    qf = np.asarray(rig["fit"]["q"], dtype=float)
+    missing = [c for c in character.coordinate_names if c not in names]
+    if missing:
+        raise OpenSimExportError(f"the motion's character has coordinates the capture fit lacks: {missing}")
+    return np.stack([qf[names.index(c)] for c in character.coordinate_names])
+
+
+def _fourier(phase: np.ndarray, K: int) -> np.ndarray:
+    """The periodic basis (len(phase), 2K+1): 1, cos 2πkφ, sin 2πkφ (k = 1..K)."""
+    phase = np.asarray(phase, dtype=float)
+    cols = [np.ones_like(phase)]
+    for k in range(1, K + 1):
+        cols += [np.cos(2 * np.pi * k * phase), np.sin(2 * np.pi * k * phase)]
+    return np.stack(cols, axis=-1)
+
+
+@dataclass(frozen=True, eq=False)
+class Calibration:
+    """Each model body relative to its anchor segment as a smooth periodic function of the gait
+    phase: rotation ``mean[b] · exp(Σ rot[b, j] basis_j(φ))`` and origin ``Σ pos[b, j]
+    basis_j(φ)`` (anchor frame, metres). A body riding on a segment that is not its own (the
+    torso and arms of a HalfBoy, merged into its pelvis) has the constant term only: the
+    posture the motion's character holds them in."""
+
+    anchors: Mapping[str, str]
+    mean: np.ndarray  # (B, 3, 3)
+    rot: np.ndarray  # (B, 2K+1, 3) rotation-vector coefficients
+    pos: np.ndarray  # (B, 2K+1, 3)
+    harmonics: int
+    fit_rms_deg: float  # how far the smooth calibration is from the per-frame one (rotation, RMS)
+    fit_rms_mm: float
+
+    def at(self, phase: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rotations (S, B, 3, 3) and origins (S, B, 3) at gait phases (S,)."""
+        basis = _fourier(np.mod(phase, 1.0), self.harmonics)
+        rv = np.einsum("sj,bjk->sbk", basis, self.rot)
+        R = np.einsum("bij,sbjk->sbik", self.mean, Rotation.from_rotvec(rv.reshape(-1, 3)).as_matrix().reshape(
+            rv.shape[:2] + (3, 3)))
+        return R, np.einsum("sj,bjk->sbk", basis, self.pos)
+
+
+def calibration(rig: Mapping[str, Any], character: Character, evaluation: Mapping[str, Any],
+                cycle: Mapping[str, Any], cutoff_hz: float = LOWPASS_HZ) -> Calibration:
+    """The model's bodies against the motion's character at the captured cycle's frames (our
+    world; ``evaluation``: OpenSim's body frames along the trial's coordinates,
+    :func:`solver.io.opensim.worker.run_worker`; the capture skeleton's fit in the rig), as a
+    periodic function of the phase with harmonics up to ``cutoff_hz`` (the capture's frame
+    noise and the cycle's small non-closure do not reach the written motion)."""
+    bodies = list(evaluation["body_names"])
+    if bodies != list(rig["bodies"]):
+        raise OpenSimExportError("the motion's OpenSim model does not have the bodies its rig records")
+    parents = dict(zip(evaluation["joint_child"], evaluation["joint_parent"]))
+    anchors = _anchors(rig, character, parents)
+    frame = GroundFrame.from_dict(rig["frame"])
+    times = np.asarray(rig["times"], dtype=float)
+    t_start, period = float(cycle["t_start"]), float(cycle["period_s"])
+    inside = (times >= t_start - 1e-9) & (times < t_start + period - 1e-9)
+    if inside.sum() < 8:
+        raise OpenSimExportError(f"the captured cycle {t_start:.3f}+{period:.3f} s holds {int(inside.sum())} frames "
+                                 "of the trial: too few to calibrate the model against")
+    phase = (times[inside] - t_start) / period
+    K = max(0, min(int(cutoff_hz * period), (int(inside.sum()) - 1) // 2 - 1))
+    basis = _fourier(phase, K)
+    Rb = np.asarray(evaluation["R"], dtype=float)[inside]  # (F, B, 3, 3) OpenSim ground
+    Pb = np.asarray(evaluation["P"], dtype=float)[inside]
+    W = np.einsum("ji,tbjk->tbik", frame.R, Rb)  # ours = R^T osim
+    p = frame.point_from_input(Pb, times[inside][:, None])
+    Rs, Ps = segment_frames(character, _fit_q(rig, character)[:, inside])  # (S, 3, 3, F), (S, 3, F)
+    names = [s.name for s in character.segments]
+    own = {b: ("abdomen" if s == "torso" else s) for b, s in dict(rig["body_segments"]).items()}
+    B = len(bodies)
+    mean = np.empty((B, 3, 3))
+    rot = np.zeros((B, 2 * K + 1, 3))
+    pos = np.zeros((B, 2 * K + 1, 3))
+    err_r, err_p = [], []
+    for i, b in enumerate(bodies):
+        a = names.index(anchors[b])
+        Ra = np.moveaxis(Rs[a], -1, 0)  # (F, 3, 3)
+        C = np.einsum("tji,tjk->tik", Ra, W[:, i])
+        d = np.einsum("tji,tj->ti", Ra, p[:, i] - Ps[a].T)
+        m = Rotation.from_matrix(C).mean()
+        rv = (m.inv() * Rotation.from_matrix(C)).as_rotvec()  # (F, 3)
+        k = K if own.get(b) == anchors[b] and not UNMARKED_BODIES.fullmatch(b) else 0
+        sub = basis[:, :2 * k + 1]
+        rot[i, :2 * k + 1] = np.linalg.lstsq(sub, rv, rcond=None)[0]
+        pos[i, :2 * k + 1] = np.linalg.lstsq(sub, d, rcond=None)[0]
+        mean[i] = m.as_matrix()
+        if k:
+            err_r.append(rv - sub @ rot[i, :2 * k + 1])
+            err_p.append(d - sub @ pos[i, :2 * k + 1])
+    er = np.degrees(np.linalg.norm(np.concatenate(err_r), axis=1)) if err_r else np.zeros(1)
+    ep = 1e3 * np.linalg.norm(np.concatenate(err_p), axis=1) if err_p else np.zeros(1)
+    return Calibration(anchors, mean, rot, pos, K, float(np.sqrt(np.mean(er**2))), float(np.sqrt(np.mean(ep**2))))
+
+
+def body_poses(motion: Motion, q: np.ndarray, t: np.ndarray, D: float, cal: Calibration
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """The model's bodies (S, B, 3, 3), (S, B, 3) in OpenSim ground, placed on the motion's
+    anchors ``q`` (n, S) at times ``t`` (s; ``D`` the motion's cycle) with the calibration at
+    the same gait phase."""
+    t_start = float(motion.provenance["source"]["cycle"]["t_start"])
+    C, d = cal.at(t / D)
+    Rs, Ps = segment_frames(motion.character, q)
+    names = [s.name for s in motion.character.segments]
+    frame = GroundFrame.from_dict(motion.provenance.get("frame"))
+    W = np.empty_like(C)
+    P = np.empty_like(d)
+    for i, b in enumerate(cal.anchors):
+        a = names.index(cal.anchors[b])
+        Ra = np.moveaxis(Rs[a], -1, 0)
+        W[:, i] = np.einsum("ij,tjk->tik", frame.R, Ra @ C[:, i])
+        P[:, i] = frame.point_to_input(Ps[a].T + np.einsum("tij,tj->ti", Ra, d[:, i]), t_start + t)
+    return W, P
+
+
+def virtual_markers(bodies: Sequence[str], body_com: np.ndarray, W: np.ndarray, P: np.ndarray
+                    ) -> tuple[list[tuple[str, str, list[float]]], np.ndarray]:
+    """Four markers per body (its centre of mass, and ``MARKER_OFFSET_M`` along each body axis):
+    their definitions (name, body, position in the body) and trajectories (S, M, 3) in ground."""
+    defs: list[tuple[str, str, list[float]]] = []
+    traj = []
+    for i, b in enumerate(bodies):
+        if UNMARKED_BODIES.fullmatch(b):
+            continue
+        c = np.asarray(body_com[i], dtype=float)
+        for tag, off in (("c", np.zeros(3)), ("x", np.eye(3)[0]), ("y", np.eye(3)[1]), ("z", np.eye(3)[2])):
+            local = c + MARKER_OFFSET_M * off
+            defs.append((f"{b}_{tag}", b, local.tolist()))
+            traj.append(P[:, i] + np.einsum("tij,j->ti", W[:, i], local))
+    return defs, np.stack(traj, axis=1)
+
+
+# --- ground reactions in the model's frame -----------------------------------------------------
+
+
+def wrenches_to_input(w: np.ndarray, t_abs: np.ndarray, frame: GroundFrame) -> np.ndarray:
+    """Wrenches (2, 6, S) (moment about our origin; force) -> the input's ground frame, the moment
+    about its origin (the frame's translation, belt motion included, carried along)."""
+    M = np.moveaxis(w[:, :3], 1, -1)
+    F = np.moveaxis(w[:, 3:], 1, -1)  # (2, S, 3)
+    Fi = frame.vector_to_input(F)
+    o = frame.point_to_input(np.zeros((t_abs.size, 3)), t_abs)  # our origin in the input frame
+    Mi = frame.vector_to_input(M) + np.cross(o[None], Fi)
+    return np.moveaxis(np.concatenate([Mi, Fi], axis=-1), -1, 1)
+
+
+def grf_columns(w_in: np.ndarray, floor_y: float, min_load: float) -> np.ndarray:
+    """Per foot (2, S, 9): force, point on the floor plane y = ``floor_y``, torque — OpenSim's
+    ground-reaction columns — for wrenches ``w_in`` (2, 6, S) about OpenSim's ground origin (y up).
+
+    Loaded (vertical force above ``min_load``): the point is the centre of pressure, the
+    torque the vertical free moment. Otherwise the foot's nearest loaded centre of pressure
+    is kept and the torque is whatever keeps the wrench (zero for an unloaded foot)."""
+    out = np.zeros((2, w_in.shape[2], 9))
+    for f in range(2):
+        M, F = w_in[f, :3].T, w_in[f, 3:].T  # (S, 3)
+        loaded = F[:, 1] > min_load
+        p = np.full((F.shape[0], 3), np.nan)
+        fy = np.where(loaded, F[:, 1], 1.0)
+        p[:, 0] = (M[:, 2] + floor_y * F[:, 0]) / fy
+        p[:, 2] = (floor_y * F[:, 2] - M[:, 0]) / fy
+        p[:, 1] = floor_y
+        p[~loaded] = np.nan
+        if loaded.any():
+            idx = np.where(loaded)[0]
+            near = idx[np.abs(np.arange(F.shape[0])[:, None] - idx[None]).argmin(axis=1)]
+            p[~loaded] = p[near[~loaded]]
+        else:
+            p[:] = [0.0, floor_y, 0.0]
+        tq = M - np.cross(p, F)
+        tq[loaded, 0] = 0.0  # exactly zero at the centre of pressure (rounding only)
+        tq[loaded, 2] = 0.0
+        out[f] = np.concatenate([F, p, tq], axis=1)
+    return out
+
+
+GRF_LABELS = tuple(f"ground_{kind}_{s}_{c}" for s in "rl" for kind, cs in (
+    ("force", ("vx", "vy", "vz", "px", "py", "pz")), ("torque", ("x", "y", "z"))) for c in cs)
+
+
+def _grf_table(cols: np.ndarray) -> np.ndarray:
+    """(2, S, 9) -> (S, 18) in GRF_LABELS order."""
+    return np.concatenate([cols[0], cols[1]], axis=1)
+
+
+def _grf_wrench(table: np.ndarray) -> np.ndarray:
+    """(S, 18) -> (2, 6, S) wrench (moment about the origin; force) per foot."""
+    out = np.empty((2, 6, table.shape[0]))
+    for f in range(2):
+        F, p, tq = table[:, 9 * f:9 * f + 3], table[:, 9 * f + 3:9 * f + 6], table[:, 9 * f + 6:9 * f + 9]
+        out[f, :3] = (np.cross(p, F) + tq).T
+        out[f, 3:] = F.T
+    return out
+
+
+# --- writing OpenSim's text files ----------------------------------------------------------------
+
+
+def write_mot(path: str | Path, name: str, labels: Sequence[str], times: np.ndarray, data: np.ndarray, *,
+              in_degrees: bool, digits: int = 8) -> None:
+    """An OpenSim storage file (version 1 header, tab-separated, ``time`` first)."""
+    data = np.asarray(data, dtype=float)
+    lines = [name, "version=1", f"nRows={data.shape[0]}", f"nColumns={len(labels) + 1}",
+             f"inDegrees={'yes' if in_degrees else 'no'}", "endheader", "\t".join(["time", *labels])]
+    fmt = f"%.{digits}f"
+    for k in range(data.shape[0]):
+        lines.append("\t".join([fmt % times[k], *(fmt % v for v in data[k])]))
+    Path(path).write_text("\n".join(lines) + "\n")
+
+
+def write_trc(path: str | Path, names: Sequence[str], times: np.ndarray, xyz: np.ndarray, rate: float) -> None:
+    """Marker trajectories (S, M, 3), metres, as a ``.trc`` (OpenSim's MarkersReference reads it)."""
+    S, M = xyz.shape[:2]
+    head = [f"PathFileType\t4\t(X/Y/Z)\t{Path(path).name}",
+            "DataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\tOrigDataRate\tOrigDataStartFrame\tOrigNumFrames",
+            f"{rate:g}\t{rate:g}\t{S}\t{M}\tm\t{rate:g}\t1\t{S}",
+            "\t".join(["Frame#", "Time", *(f"{n}\t\t" for n in names)]).rstrip("\t"),
+            "\t".join(["", "", *(f"X{i + 1}\tY{i + 1}\tZ{i + 1}" for i in range(M))]), ""]
+    rows = ["\t".join([str(k + 1), f"{times[k]:.8f}", *(f"{v:.8f}" for v in xyz[k].ravel())]) for k in range(S)]
+    Path(path).write_text("\n".join(head + rows) + "\n")
+
+
+def external_loads_xml(feet: Mapping[str, str], datafile: str) -> str:
+    """ExternalLoads for the two feet (columns ``ground_force_{r,l}_v/p``, ``ground_torque_{r,l}_``)."""
+    forces = []
+    for side, s in (("right", "r"), ("left", "l")):
+        forces.append(f"""			<ExternalForce name="{side}_foot">
+				<applies_force>true</applies_force>
+				<applied_to_body>{feet[side]}</applied_to_body>
+				<force_expressed_in_body>ground</force_expressed_in_body>
+				<point_expressed_in_body>ground</point_expressed_in_body>
+				<force_identifier>ground_force_{s}_v</force_identifier>
+				<point_identifier>ground_force_{s}_p</point_identifier>
+				<torque_identifier>ground_torque_{s}_</torque_identifier>
+			</ExternalForce>""")
+    body = "\n".join(forces)
+    return f"""<?xml version="1.0" encoding="UTF-8" ?>
+<OpenSimDocument Version="40000">
+	<ExternalLoads name="externalloads">
+		<objects>
+{body}
+		</objects>
+		<groups />
+		<datafile>{datafile}</datafile>
+	</ExternalLoads>
+</OpenSimDocument>
+"""
+
+
+def id_setup_xml(model: str, coordinates: str, external_loads: str, t0: float, t1: float, *,
+                 lowpass: float = LOWPASS_HZ, output: str = ID_OUTPUT_FILE, results: str = ".") -> str:
+    """An InverseDynamicsTool setup (muscles excluded, coordinates low-passed at ``lowpass`` Hz)."""
+    return f"""<?xml version="1.0" encoding="UTF-8" ?>
+<OpenSimDocument Version="40000">
+	<InverseDynamicsTool name="inverse_dynamics">
+		<results_directory>{results}</results_directory>
+		<model_file>{model}</model_file>
+		<time_range> {t0:.6f} {t1:.6f}</time_range>
+		<forces_to_exclude> Muscles</forces_to_exclude>
+		<external_loads_file>{external_loads}</external_loads_file>
+		<coordinates_file>{coordinates}</coordinates_file>
+		<lowpass_cutoff_frequency_for_coordinates>{lowpass:g}</lowpass_cutoff_frequency_for_coordinates>
+		<output_gen_force_file>{output}</output_gen_force_file>
+	</InverseDynamicsTool>
+</OpenSimDocument>
+"""
+
+
+def repaired_model_text(text: bytes) -> tuple[bytes, bool]:
+    """A model whose socket paths name bodies as ``../body`` (3.x-era files that OpenSim 4
+    cannot connect) with those paths rewritten to ``/bodyset/body`` (``/ground``); every other
+    element kept (muscles, markers). Returns the text and whether anything changed."""
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as e:
+        raise OpenSimExportError(f"the motion's OpenSim model is not valid XML ({e})") from None
+    model = root.find("Model")
+    if model is None:
+        raise OpenSimExportError("the motion's OpenSim model has no <Model> element")
+    bodies = {b.get("name") for b in model.iter("Body")}
+    changed = False
+    for el in model.iter():
+        if el.tag.startswith("socket_") and el.text:
+            m = re.fullmatch(r"(?:\.\./)+(\w+)", el.text.strip())
+            if m and (m.group(1) == "ground" or m.group(1) in bodies):
+                el.text = "/ground" if m.group(1) == "ground" else "/bodyset/" + m.group(1)
+                changed = True
+    if not changed:
+        return text, False
+    return b'<?xml version="1.0" encoding="UTF-8" ?>\n' + ET.tostring(root, encoding="utf-8"), True
+
+
+# --- the child process ------------------------------------------------------------------------------
+
+
+def run_child(job: Mapping[str, Any]) -> dict[str, Any]:
+    """Run one OpenSim job (:func:`child_main`) in a child process; its JSON answer."""
+    from solver.io.opensim.worker import readable  # the worker's message cleaning
+
+    with tempfile.TemporaryDirectory(prefix="motionx-osim-export-") as d:
+        out = os.path.join(d, "answer.json")
+        root = str(Path(__file__).resolve().parents[2])
+        env = dict(os.environ)
+        env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+        code = "from solver.export.opensim import child_main; child_main()"
+        try:
+            proc = subprocess.run([sys.executable, "-c", code], input=json.dumps({**job, "answer": out}), text=True,
+                                  capture_output=True, env=env, timeout=CHILD_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            raise OpenSimExportError(f"OpenSim's {job['job']} did not finish within {CHILD_TIMEOUT_S:.0f} s") from None
+        if proc.returncode != 0:
+            err = Path(out + ".err")
+            msg = err.read_text() if err.exists() else (proc.stderr.strip().splitlines() or ["(no message)"])[-1]
+            if "No module named 'opensim'" in proc.stderr:
+                msg = "the 'opensim' package is not installed (pip install opensim)"
+            raise OpenSimExportError(f"OpenSim's {job['job']} failed: {readable(msg)}")
+        return dict(json.loads(Path(out).read_text()))
+
+
+def child_main() -> None:  # pragma: no cover - runs in the child process (exercised by every export test)
+    """Child entry: a JSON job on stdin (``ik`` or ``id``), its answer as JSON."""
+    import opensim as osim  # first heavy import of the process: OpenSim's casadi wins
+
+    osim.Logger.setLevelString("error")
+    job = json.loads(sys.stdin.read())
+    try:
+        answer = {"ik": _child_ik, "id": _child_id}[job["job"]](osim, job)
+        Path(job["answer"]).write_text(json.dumps(answer))
+    except Exception as e:
+        Path(job["answer"] + ".err").write_text(str(e))
+        sys.exit(3)
+
+
+def _child_ik(osim, job):  # pragma: no cover - child
+    """OpenSim's InverseKinematicsTool on virtual markers added to a scratch copy of the model,
+    its solution refined to the optimum of the same weighted marker cost (:func:`_refine`), the
+    coordinates file written with the tool's own header."""
+    model = osim.Model(job["model"])
+    for name, body, local in job["markers"]:
+        model.addMarker(osim.Marker(name, model.getBodySet().get(body), osim.Vec3(*local)))
+    model.finalizeConnections()
+    scratch = job["scratch"]
+    marked = os.path.join(scratch, "model_with_virtual_markers.osim")
+    model.printToXML(marked)
+    weights = {name: float(job["weights"].get(name, 1.0)) for name, _, _ in job["markers"]}
+    tasks = osim.IKTaskSet()
+    for name, w in weights.items():
+        task = osim.IKMarkerTask()
+        task.setName(name)
+        task.setApply(True)
+        task.setWeight(w)
+        tasks.cloneAndAppend(task)
+    tool = osim.InverseKinematicsTool()
+    tool.set_model_file(marked)
+    tool.setMarkerDataFileName(job["trc"])
+    tool.set_IKTaskSet(tasks)
+    tool.setStartTime(float(job["t0"]))
+    tool.setEndTime(float(job["t1"]))
+    tool.setOutputMotionFileName(os.path.join(scratch, "ik_tool.mot"))
+    tool.setResultsDir(scratch)
+    t = time.perf_counter()
+    if not tool.run():
+        raise RuntimeError("the InverseKinematicsTool did not run")
+    tool_s = time.perf_counter() - t
+    t = time.perf_counter()
+    answer = _refine(osim, marked, os.path.join(scratch, "ik_tool.mot"), job["markers"], weights,
+                     np.asarray(job["xyz"], dtype=float), job["out"])
+    answer.update({"tool_s": tool_s, "refine_s": time.perf_counter() - t})
+    return answer
+
+
+def _refine(osim, model_path, tool_mot, markers, weights, xyz, out):  # pragma: no cover - child
+    """Gauss-Newton on the weighted marker cost from the InverseKinematicsTool's solution, frame by
+    frame, OpenSim evaluating the model (its assembler stops up to ~2 mm short of the optimum even
+    on markers the model can fit exactly, which shows as ±1° jitter in the coordinates). Coupled
+    coordinates follow their CoordinateCouplerConstraint; clamped ones stay in their range."""
+    model = osim.Model(model_path)
+    state = model.initSystem()
+    cs = model.getCoordinateSet()
+    coords = [cs.get(i) for i in range(cs.getSize())]
+    names = [c.getName() for c in coords]
+    couplers = []
+    for i in range(model.getConstraintSet().getSize()):
+        con = model.getConstraintSet().get(i)
+        ccc = osim.CoordinateCouplerConstraint.safeDownCast(con)
+        if ccc is not None and ccc.get_isEnforced():
+            ind = ccc.getIndependentCoordinateNames()
+            couplers.append((names.index(ccc.getDependentCoordinateName()),
+                             [names.index(ind.get(k)) for k in range(ind.getSize())], ccc.getFunction()))
+    dependent = {d for d, _, _ in couplers}
+    free = [i for i, c in enumerate(coords) if not c.getLocked(state) and i not in dependent]
+    lo = np.array([c.getRangeMin() if c.getClamped(state) else -np.inf for c in coords])
+    hi = np.array([c.getRangeMax() if c.getClamped(state) else np.inf for c in coords])
+    bodies = [model.getBodySet().get(b) for b in dict.fromkeys(m[1] for m in markers)]
+    bidx = {b.getName(): k for k, b in enumerate(bodies)}
+    mb = np.array([bidx[m[1]] for m in markers])
+    local = np.array([m[2] for m in markers], dtype=float)
+    sw = np.sqrt(np.array([weights[m[0]] for m in markers]))[:, None]
+    with open(tool_mot) as f:
+        lines = f.read().splitlines()
+    end = next(i for i, ln in enumerate(lines) if ln.strip().lower() == "endheader")
+    labels = lines[end + 1].split("\t")
+    rows = np.array([[float(x) for x in ln.split()] for ln in lines[end + 2:] if ln.strip()])
+    deg = any(ln.strip().lower() == "indegrees=yes" for ln in lines[:end])
+    col = [labels.index(n) for n in names]
+    Q = rows[:, col].copy()
+    rot = [c.getMotionType() == osim.Coordinate.Rotational for c in coords]
+    if deg:
+        Q[:, rot] = np.radians(Q[:, rot])
+
+    def place(q):
+        for d, ind, fn in couplers:
+            v = osim.Vector(len(ind), 0.0)
+            for k, j in enumerate(ind):
+                v.set(k, float(q[j]))
+            q[d] = fn.calcValue(v)
+        for i, c in enumerate(coords):
+            c.setValue(state, float(q[i]), False)
+        model.realizePosition(state)
+        R = np.empty((len(bodies), 3, 3))
+        P = np.empty((len(bodies), 3))
+        for k, b in enumerate(bodies):
+            tr = b.getTransformInGround(state)
+            r = tr.R()
+            R[k] = [[r.get(a, c) for c in range(3)] for a in range(3)]
+            P[k] = tr.p().to_numpy()
+        return P[mb] + np.einsum("mij,mj->mi", R[mb], local)
+
+    h = 1e-7
+    errs = np.empty((Q.shape[0], len(markers)))
+    for k in range(Q.shape[0]):
+        q = np.clip(Q[k].copy(), lo, hi)
+        base = place(q.copy())
+        J = np.empty((base.size, len(free)))
+        for a, i in enumerate(free):  # the Jacobian once per frame (the tool's solution is close)
+            qp = q.copy()
+            qp[i] += h
+            J[:, a] = (sw * (place(qp) - base)).ravel() / h
+        pinv = np.linalg.pinv(J)
+        for _ in range(8):
+            step = -pinv @ (sw * (base - xyz[k])).ravel()
+            q[free] = np.clip(q[free] + step, lo[free], hi[free])
+            base = place(q.copy())
+            if np.max(np.abs(step)) < 1e-8:
+                break
+        final = place(q)  # couplers applied
+        Q[k] = [c.getValue(state) for c in coords]
+        errs[k] = np.linalg.norm(final - xyz[k], axis=1)
+    out_rows = rows.copy()
+    vals = Q.copy()
+    if deg:
+        vals[:, rot] = np.degrees(vals[:, rot])
+    out_rows[:, col] = vals
+    body = ["\t".join(f"{v:16.8f}" for v in row) for row in out_rows]
+    with open(out, "w") as f:
+        f.write("\n".join(lines[:end + 2] + body) + "\n")
+    return {"marker_rms_m": np.sqrt(np.mean(errs**2, axis=1)).tolist(), "marker_max_m": errs.max(axis=1).tolist(),
+            "per_marker_rms_m": dict(zip((m[0] for m in markers), np.sqrt(np.mean(errs**2, axis=0)).tolist()))}
+
+
+def _labels(sto) -> list[str]:  # pragma: no cover - child
+    a = sto.getColumnLabels()
+    return [a.get(i) for i in range(a.getSize())]
+
+
+def _coordinate_rows(osim, model, path):  # pragma: no cover - child
+    """The rows of a coordinates file (radians, metres) in the model's coordinate order."""
+    sto = osim.Storage(path)
+    if sto.isInDegrees():
+        model.getSimbodyEngine().convertDegreesToRadians(sto)
+    labels = _labels(sto)
+    cs = model.getCoordinateSet()
+    coords = [cs.get(i) for i in range(cs.getSize())]
+    times, rows = [], []
+    for k in range(sto.getSize()):
+        sv = sto.getStateVector(k)
+        data = sv.getData()
+        times.append(sv.getTime())
+        rows.append({c.getName(): data.get(labels.index(c.getName()) - 1) for c in coords
+                     if c.getName() in labels})
+    return coords, times, rows
+
+
+def _child_pelvis_twists(osim, model_path, coordinates):  # pragma: no cover - child
+    """Per coordinates row: the twist (ω, v at ground's origin) each coordinate of the model's
+    free root joint gives the whole model, and the whole-body centre of mass."""
+    model = osim.Model(model_path)
+    state = model.initSystem()
+    root_joint = next(j for j in (model.getJointSet().get(i) for i in range(model.getJointSet().getSize()))
+                      if j.getParentFrame().findBaseFrame().getName() == "ground")
+    names = [root_joint.get_coordinates(i).getName() for i in range(root_joint.numCoordinates())]
+    body = root_joint.getChildFrame().findBaseFrame()
+    coords, times, rows = _coordinate_rows(osim, model, coordinates)
+    by_name = {c.getName(): c for c in coords}
+    h = 1e-6
+    twists, com = [], []
+
+    def pose():
+        model.realizePosition(state)
+        tr = body.getTransformInGround(state)
+        R = np.array([[tr.R().get(i, j) for j in range(3)] for i in range(3)])
+        return R, tr.p().to_numpy()
+
+    for row in rows:
+        for n, v in row.items():
+            by_name[n].setValue(state, v, False)
+        model.realizePosition(state)
+        com.append(list(model.calcMassCenterPosition(state).to_numpy()))
+        G = []
+        for n in names:
+            c = by_name[n]
+            v0 = c.getValue(state)
+            c.setValue(state, v0 + h, False)
+            Rp, pp = pose()
+            c.setValue(state, v0 - h, False)
+            Rm, pm = pose()
+            c.setValue(state, v0, False)
+            Om = ((Rp - Rm) / (2 * h)) @ (0.5 * (Rp + Rm)).T
+            w = np.array([Om[2, 1] - Om[1, 2], Om[0, 2] - Om[2, 0], Om[1, 0] - Om[0, 1]]) / 2
+            v = (pp - pm) / (2 * h) - np.cross(w, 0.5 * (pp + pm))
+            G.append([*w.tolist(), *v.tolist()])
+        twists.append(G)
+    return {"root_coordinates": names, "twist_times": times, "twists": twists, "com": com,
+            "mass": model.getTotalMass(state)}
+
+
+def _child_id(osim, job):  # pragma: no cover - child
+    """OpenSim's InverseDynamicsTool from a setup file, run in its folder: the output table; with
+    ``twists``, also :func:`_child_pelvis_twists` along the setup's coordinates."""
+    setup = os.path.abspath(job["setup"])
+    os.chdir(os.path.dirname(setup))
+    tool = osim.InverseDynamicsTool(os.path.basename(setup))
+    t = time.perf_counter()
+    if not tool.run():
+        raise RuntimeError("the InverseDynamicsTool did not run")
+    elapsed = time.perf_counter() - t
+    out = os.path.join(tool.getResultsDir(), tool.getOutputGenForceFileName())
+    sto = osim.Storage(out)
+    labels = _labels(sto)[1:]
+    times, data = [], []
+    for k in range(sto.getSize()):
+        sv = sto.getStateVector(k)
+        times.append(sv.getTime())
+        data.append([sv.getData().get(i) for i in range(sv.getSize())])
+    answer = {"labels": labels, "times": times, "data": data, "time_s": elapsed, "output": os.path.abspath(out)}
+    if job.get("twists"):
+        answer.update(_child_pelvis_twists(osim, tool.getModelFileName(), tool.getCoordinatesFileName()))
+    return answer
+
+
+# --- residuals ------------------------------------------------------------------------------------
+
+
+def _setup_fields(setup: Path) -> dict[str, str]:
+    root = ET.parse(setup).getroot()
+    tool = root.find("InverseDynamicsTool")
+    if tool is None:
+        raise OpenSimExportError(f"{setup}: not an InverseDynamicsTool setup")
+    return {el.tag: (el.text or "").strip() for el in tool}
+
+
+def _grf_in_range(folder: Path, fields: Mapping[str, str], t0: float, t1: float) -> tuple[np.ndarray, np.ndarray]:
+    """The ground reactions an ExternalLoads file applies (net force (S, 3) and the foot
+    forces' rows) over [t0, t1]."""
+    from solver.io.opensim.external_loads import external_loads
+    from solver.io.opensim.storage import read_mot
+
+    xml = folder / fields["external_loads_file"]
+    specs = external_loads(xml)
+    datafile = (ET.parse(xml).getroot().findtext(".//datafile") or "").strip()
+    sto = read_mot(xml.parent / datafile)
+    keep = (sto.time >= t0 - 1e-9) & (sto.time <= t1 + 1e-9)
+    F = np.zeros((int(keep.sum()), 3))
+    for s in specs:
+        F += np.stack([sto.column(s.force + c)[keep] for c in "xyz"], axis=1)
+    return sto.time[keep], F
+
+
+def residual_figures(labels: Sequence[str], data: np.ndarray, root_coordinates: Sequence[str],
+                     net_force: np.ndarray, com_height: float) -> dict[str, Any]:
+    """Hicks et al. (2015) figures from an inverse-dynamics table: peak and RMS of every root
+    coordinate's generalised force, against 5 % of the peak net external force (forces) and
+    1 % of centre-of-mass height × that force (moments)."""
+    peak_ext = float(np.max(np.linalg.norm(net_force, axis=1))) if net_force.size else 0.0
+    f_lim = HICKS_FORCE_FRACTION * peak_ext
+    m_lim = HICKS_MOMENT_FRACTION * com_height * peak_ext
+    forces, moments = {}, {}
+    fvec = []
+    for c in root_coordinates:
+        lab_f, lab_m = f"{c}_force", f"{c}_moment"
+        if lab_f in labels:
+            col = data[:, list(labels).index(lab_f)]
+            forces[c] = {"peak_N": float(np.max(np.abs(col))), "rms_N": float(np.sqrt(np.mean(col**2)))}
+            fvec.append(col)
+        elif lab_m in labels:
+            col = data[:, list(labels).index(lab_m)]
+            moments[c] = {"peak_Nm": float(np.max(np.abs(col))), "rms_Nm": float(np.sqrt(np.mean(col**2)))}
+    peak_f = max((v["peak_N"] for v in forces.values()), default=float("nan"))
+    peak_fvec = float(np.max(np.linalg.norm(np.stack(fvec, axis=1), axis=1))) if fvec else float("nan")
+    peak_m = max((v["peak_Nm"] for v in moments.values()), default=float("nan"))
+    return {
+        "forces": forces, "moments": moments,
+        "peak_net_external_force_N": peak_ext, "com_height_m": com_height,
+        "peak_residual_force_N": peak_f, "peak_residual_force_vector_N": peak_fvec,
+        "peak_residual_moment_Nm": peak_m,
+        "force_limit_N": f_lim, "moment_limit_Nm": m_lim,
+        "force_percent_of_peak_external": 100.0 * peak_fvec / peak_ext if peak_ext else float("nan"),
+        "moment_percent_of_com_height_x_peak_external": 100.0 * peak_m / (com_height * peak_ext)
+        if peak_ext and com_height else float("nan"),
+        "meets_hicks_2015": bool(peak_fvec <= f_lim and peak_m <= m_lim),
+        "criteria": "Hicks et al. 2015 (J Biomech Eng 137(2):020905), Table 2: peak residual force <= 5 % of the "
+                    "peak net external force (here the largest magnitude of the pelvis residual force vector); "
+                    "peak residual moment <= 1 % of centre-of-mass height x peak net external force (each "
+                    "rotational pelvis coordinate's generalised force)",
+    }
+
+
+def run_inverse_dynamics(folder: str | Path, setup: str = SETUP_FILE) -> dict[str, Any]:
+    """OpenSim's InverseDynamicsTool on a folder's setup (child process): the generalised forces
+    (``labels``, ``times``, ``data``), and at every row of the coordinates file the twists of the
+    model's free root joint's coordinates (``twists`` (rows, 6, 6): ω, v at ground's origin),
+    the whole-body centre of mass (``com``) and the model's mass."""
+    setup_path = Path(folder).resolve() / setup
+    if not setup_path.is_file():
+        raise OpenSimExportError(f"no inverse-dynamics setup {setup_path}")
+    ans = run_child({"job": "id", "setup": str(setup_path), "twists": True})
+    ans["fields"] = _setup_fields(setup_path)
+    return ans
+
+
+def figures_of(folder: str | Path, ans: Mapping[str, Any]) -> dict[str, Any]:
+    """:func:`residual_figures` of an inverse-dynamics run (:func:`run_inverse_dynamics`) on a
+    folder: net external force from its ExternalLoads over the analysed rows, centre-of-mass
+    height = its mean over those rows above the floor (the ground reactions' point height)."""
+    folder = Path(folder).resolve()
+    fields = ans["fields"]
+    times = np.asarray(ans["times"], dtype=float)
+    data = np.asarray(ans["data"], dtype=float)
+    _, F = _grf_in_range(folder, fields, float(times[0]), float(times[-1]))
+    tc = np.asarray(ans["twist_times"], dtype=float)
+    keep = (tc >= times[0] - 1e-9) & (tc <= times[-1] + 1e-9)
+    com_h = float(np.mean(np.asarray(ans["com"], dtype=float)[keep, 1]) - _floor_height(folder, fields))
+    out = residual_figures(ans["labels"], data, ans["root_coordinates"], F, com_h)
+    out.update({"time_range_s": [float(times[0]), float(times[-1])], "rows": int(times.size),
+                "id_time_s": round(float(ans["time_s"]), 3), "model_mass_kg": float(ans["mass"]),
+                "lowpass_hz": float(fields.get("lowpass_cutoff_frequency_for_coordinates") or -1)})
+    return out
+
+
+def opensim_residuals(folder: str | Path, setup: str = SETUP_FILE) -> dict[str, Any]:
+    """OpenSim's InverseDynamicsTool run on a folder's setup as written (in a child process),
+    and the residuals of the model's free root joint (the pelvis) against Hicks et al. (2015)
+    (:func:`residual_figures`, :func:`figures_of`)."""
+    return figures_of(folder, run_inverse_dynamics(folder, setup))
+
+
+def _floor_height(folder: Path, fields: Mapping[str, str]) -> float:
+    from solver.io.opensim.external_loads import external_loads
+    from solver.io.opensim.storage import read_mot
+
+    xml = folder / fields["external_loads_file"]
+    specs = external_loads(xml)
+    sto = read_mot(xml.parent / (ET.parse(xml).getroot().findtext(".//datafile") or "").strip())
+    ys, ws = [], []
+    for s in specs:
+        fy = sto.column(s.force + "y")
+        on = fy > 100.0
+        ys.append(sto.column(s.point + "y")[on])
+        ws.append(fy[on])
+    y, w = np.concatenate(ys), np.concatenate(ws)
+    return float(np.sum(y * w) / np.sum(w)) if w.size else 0.0
+
+
+# --- the export ---------------------------------------------------------------------------------------
+
+
+def reduce_residuals_on_feet(w_in: np.ndarray, ans: Mapping[str, Any], t: np.ndarray, min_load: float
+                             ) -> tuple[np.ndarray, np.ndarray]:
+    """The feet's wrenches (2, 6, S) (OpenSim ground, moment about its origin) with the external
+    wrench an inverse-dynamics run (:func:`run_inverse_dynamics`) still needed added, shared by
+    the loaded feet in proportion to their vertical forces (see the module doc). Returns the
+    new wrenches and the wrench added per row (S, 6) (zero where no row was analysed)."""
+    labels = list(ans["labels"])
+    roots = list(ans["root_coordinates"])
+    cols = [labels.index(f"{c}_moment") if f"{c}_moment" in labels else labels.index(f"{c}_force") for c in roots]
+    r = np.asarray(ans["data"], dtype=float)[:, cols]  # (rows, 6)
+    t_id = np.asarray(ans["times"], dtype=float)
+    tw_t = np.asarray(ans["twist_times"], dtype=float)
+    G = np.asarray(ans["twists"], dtype=float)  # (rows, 6 coords, 6)
+    out = np.array(w_in, copy=True)
+    added = np.zeros((t.size, 6))
+    for k, tk in enumerate(t_id):
+        j = int(np.argmin(np.abs(t - tk)))
+        g = int(np.argmin(np.abs(tw_t - tk)))
+        if abs(t[j] - tk) > 1e-6 or abs(tw_t[g] - tk) > 1e-6:
+            continue
+        dW = np.linalg.solve(G[g], r[k])  # r = G W: the wrench (M about the origin, F) still missing
+        fy = np.maximum(out[:, 4, j], 0.0)
+        on = fy > min_load
+        if not on.any():
+            continue
+        share = np.where(on, fy, 0.0) / fy[on].sum()
+        out[:, :, j] += share[:, None] * dW[None, :]
+        added[j] = dW
+    return out, added
+
+
+def _adjustment_figures(before: np.ndarray, after: np.ndarray, t: np.ndarray, window: tuple[float, float],
+                        min_load: float) -> dict[str, Any]:
+    """How much the ground reactions moved (per foot, over the analysed window): force change,
+    centre-of-pressure shift on the floor while loaded, free-moment change."""
+    keep = (t >= window[0] - 1e-9) & (t <= window[1] + 1e-9)
+    out: dict[str, Any] = {}
+    for f, side in enumerate(("right", "left")):
+        b, a = before[f, keep], after[f, keep]
+        dF = np.linalg.norm(a[:, :3] - b[:, :3], axis=1)
+        loaded = (b[:, 1] > min_load) & (a[:, 1] > min_load)
+        dp = np.linalg.norm(a[loaded, 3:6] - b[loaded, 3:6], axis=1)
+        dm = np.abs(a[:, 7] - b[:, 7])
+        out[side] = {"force_change_N": {"max": float(dF.max(initial=0.0)), "rms": float(np.sqrt(np.mean(dF**2)))},
+                     "cop_shift_mm": {"max": 1e3 * float(dp.max(initial=0.0)),
+                                      "rms": 1e3 * float(np.sqrt(np.mean(dp**2))) if dp.size else 0.0},
+                     "free_moment_change_Nm": {"max": float(dm.max(initial=0.0))},
+                     "free_moment_Nm": {"max_before": float(np.abs(b[:, 7]).max(initial=0.0)),
+                                        "max_after": float(np.abs(a[:, 7]).max(initial=0.0))}}
+    return out
+
+
+def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, rate: float = RATE_HZ,
+                  lowpass: float = LOWPASS_HZ, reduce_residuals: bool = True) -> dict[str, Any]:
+    """Write ``motion`` on its source OpenSim model into ``folder`` (created; see the module doc
+    for every file) and return the summary (also ``summary.json``): files, sampling, the
+    inverse-kinematics fit, the residuals of OpenSim's InverseDynamicsTool on the files as
+    written (and, with ``reduce_residuals``, before the ground reactions were adjusted, with
+    the adjustment's size)."""
+    from solver.io.opensim.base import OpenSimError
+    from solver.io.opensim.rig import unpack_model
+    from solver.io.opensim.worker import run_worker
+
+    t_begin = time.perf_counter()
+    rig = source_rig(motion)
+    if not (isinstance(cycles, int) and 1 <= cycles <= 10):
+        raise OpenSimExportError(f"cycles must be an integer from 1 to 10, got {cycles!r}")
+    if not (isinstance(rate, (int, float)) and math.isfinite(rate) and 10.0 <= rate <= 1000.0):
+        raise OpenSimExportError(f"rate must be 10-1000 Hz, got {rate!r}")
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    model_info = rig["model"]
+    text, repaired = repaired_model_text(unpack_model(model_info["osim_xz_b64"]))
+    model_file = Path(str(model_info.get("file") or "model.osim")).name
+    if not model_file.endswith(".osim"):
+        model_file += ".osim"
+    (folder / model_file).write_bytes(text)
+    timing: dict[str, float] = {}
+    try:
+        # the model's bodies along the captured trial, then against our segments
+        tk = time.perf_counter()
+        names = list(rig["coordinates"]["names"])
+        ev = run_worker(str(folder / model_file), names, np.asarray(rig["coordinates"]["values"], dtype=float), False)
+        timing["evaluate_capture_s"] = time.perf_counter() - tk
+        cyc = motion.provenance["source"]["cycle"]
+        cal = calibration(rig, motion.character, ev, cyc)
+        t, q, w, D = cycle_samples(motion, cycles, float(rate))
+        W, P = body_poses(motion, q, t, D, cal)
+        defs, xyz = virtual_markers(list(rig["bodies"]), np.asarray(ev["body_com"], dtype=float), W, P)
+        with tempfile.TemporaryDirectory(prefix="motionx-osim-ik-") as scratch:
+            trc = Path(scratch) / "virtual_markers.trc"
+            write_trc(trc, [m[0] for m in defs], t, xyz, float(rate))
+            tk = time.perf_counter()
+            ik = run_child({"job": "ik", "model": str(folder / model_file), "markers": defs, "xyz": xyz.tolist(),
+                            "weights": {m[0]: float(os.environ.get("MX_PW", "1")) for m in defs if m[1] == "pelvis"},
+                            "trc": str(trc), "t0": float(t[0]), "t1": float(t[-1]),
+                            "out": str((folder / COORDINATES_FILE).resolve()), "scratch": scratch})
+            timing["inverse_kinematics_s"] = time.perf_counter() - tk
+        # ground reactions in the model's ground frame
+        frame = GroundFrame.from_dict(motion.provenance.get("frame"))
+        floor_y = float(GroundFrame.from_dict(rig["frame"]).point_to_input(np.zeros(3))[1])
+        min_load = MIN_LOAD_FRACTION * motion.character.weight
+        w_in = wrenches_to_input(w, float(cyc["t_start"]) + t, frame)
+        naive = grf_columns(w_in, floor_y, min_load)
+        write_mot(folder / GRF_FILE, "grf", GRF_LABELS, t, _grf_table(naive), in_degrees=False)
+        (folder / EXTERNAL_LOADS_FILE).write_text(external_loads_xml(rig["feet"], GRF_FILE))
+        window = (D, 2 * D) if cycles >= 3 else (float(t[0]), float(t[-1]))
+        (folder / SETUP_FILE).write_text(id_setup_xml(model_file, COORDINATES_FILE, EXTERNAL_LOADS_FILE, *window,
+                                                      lowpass=lowpass))
+        residuals: dict[str, Any] = {}
+        adjustment: dict[str, Any] | None = None
+        cols = naive
+        if reduce_residuals:
+            # OpenSim's ID over every row (the naive loads), then the wrench it still needs, on the feet
+            full = "setup_id_all_rows.xml"
+            (folder / full).write_text(id_setup_xml(model_file, COORDINATES_FILE, EXTERNAL_LOADS_FILE,
+                                                    float(t[0]), float(t[-1]), lowpass=lowpass,
+                                                    output="inverse_dynamics_all.sto"))
+            tk = time.perf_counter()
+            ans = run_inverse_dynamics(folder, full)
+            timing["inverse_dynamics_naive_s"] = time.perf_counter() - tk
+            for name in (full, "inverse_dynamics_all.sto"):
+                (folder / name).unlink(missing_ok=True)
+            keep = (np.asarray(ans["times"]) >= window[0] - 1e-9) & (np.asarray(ans["times"]) <= window[1] + 1e-9)
+            residuals["before_reduction"] = figures_of(folder, {**ans, "times": np.asarray(ans["times"])[keep],
+                                                                "data": np.asarray(ans["data"])[keep]})
+            w_new, added = reduce_residuals_on_feet(w_in, ans, t, min_load)
+            cols = grf_columns(w_new, floor_y, min_load)
+            write_mot(folder / GRF_FILE, "grf", GRF_LABELS, t, _grf_table(cols), in_degrees=False)
+            inside = (t >= window[0] - 1e-9) & (t <= window[1] + 1e-9)
+            adjustment = {"per_foot": _adjustment_figures(naive, cols, t, window, min_load),
+                          "added_force_N": {"max": float(np.linalg.norm(added[inside, 3:], axis=1).max()),
+                                            "rms": float(np.sqrt(np.mean(np.sum(added[inside, 3:]**2, axis=1))))}}
+        tk = time.perf_counter()
+        residuals["as_written"] = opensim_residuals(folder)
+        timing["inverse_dynamics_s"] = time.perf_counter() - tk
+    except OpenSimError as e:
+        raise OpenSimExportError(str(e)) from None
+    timing["total_s"] = time.perf_counter() - t_begin
+    ik_rms = np.asarray(ik["marker_rms_m"], dtype=float)
+    ik_max = np.asarray(ik["marker_max_m"], dtype=float)
+    summary = {
+        "format": "motionx.opensim-export",
+        "version": 1,
+        "motion": {"step": motion.provenance.get("step"), "lambda": motion.provenance.get("lambda"),
+                   "character": motion.character.name, "fps": motion.fps, "frames": motion.T,
+                   "cycle_s": D, "source_cycle": dict(cyc)},
+        "model": {"file": model_file, "name": model_info.get("name"), "sha256_source": model_info.get("sha256"),
+                  "socket_paths_repaired": repaired},
+        "files": {"model": model_file, "coordinates": COORDINATES_FILE, "ground_reactions": GRF_FILE,
+                  "external_loads": EXTERNAL_LOADS_FILE, "inverse_dynamics_setup": SETUP_FILE},
+        "sampling": {"rate_hz": float(rate), "cycles": cycles, "rows": int(t.size),
+                     "time_s": [float(t[0]), float(t[-1])], "analysed_cycle_s": list(window),
+                     "interpolation": motion.interpolation},
+        "ground_frame": {"axes": "OpenSim ground: x forward, y up, z right", "floor_y_m": floor_y,
+                         "belt_velocity_m_s": frame.vector_to_input(frame.velocity).tolist(),
+                         "feet": dict(rig["feet"])},
+        "inverse_kinematics": {"tool": "OpenSim InverseKinematicsTool", "virtual_markers": len(defs),
+                               "bodies_marked": sorted({m[1] for m in defs}),
+                               "anchors": dict(cal.anchors),
+                               "calibration": {"harmonics": cal.harmonics,
+                                               "smoothing_rms_deg": cal.fit_rms_deg,
+                                               "smoothing_rms_mm": cal.fit_rms_mm},
+                               "marker_rms_mm": {"mean": 1e3 * float(ik_rms.mean()), "max": 1e3 * float(ik_rms.max())},
+                               "marker_max_mm": 1e3 * float(ik_max.max()),
+                               "worst_markers_rms_mm": {n: round(1e3 * v, 2) for n, v in sorted(
+                                   ik["per_marker_rms_m"].items(), key=lambda kv: -kv[1])[:5]}},
+        "residual_reduction": adjustment,
+        "residuals": residuals,
+        "opensim_version": _opensim_version(),
+        "timing_s": {k: round(v, 3) for k, v in timing.items()},
+    }
+    (folder / SUMMARY_FILE).write_text(json.dumps(summary, indent=1, default=float) + "\n")
+    (folder / README_FILE).write_text(readme(summary))
+    return summary
+
+
+def _opensim_version() -> str | None:
+    try:
+        from importlib.metadata import version
+
+        return version("opensim")
+    except Exception:
+        return None
+
+
+def readme(summary: Mapping[str, Any]) -> str:
+    """The folder's README: what the files are and what OpenSim's inverse dynamics says of them."""
+    res = summary["residuals"]["as_written"]
+    before = summary["residuals"].get("before_reduction")
+    f = summary["files"]
+    repaired = " (3.x socket paths rewritten to /bodyset/...)" if summary["model"]["socket_paths_repaired"] else ""
+    lines = [
+        "# A motionx motion on your OpenSim model", "",
+        f"Motion: {summary['motion']['step']} (λ = {summary['motion']['lambda']}), character "
+        f"{summary['motion']['character']}, gait cycle {summary['motion']['cycle_s']:.3f} s; model "
+        f"`{f['model']}`.", "",
+        "| file | content |", "|---|---|",
+        f"| `{f['model']}` | the trial's model{repaired} |",
+        f"| `{f['coordinates']}` | the model's coordinates (degrees, metres), {summary['sampling']['cycles']} gait "
+        f"cycles at {summary['sampling']['rate_hz']:g} Hz, by OpenSim's InverseKinematicsTool (refined) |",
+        f"| `{f['ground_reactions']}` | ground reactions per foot: force (N), centre of pressure on the floor (m), "
+        "free moment (N·m), OpenSim ground (x forward, y up, z right) |",
+        f"| `{f['external_loads']}` | the forces applied to {', '.join(summary['ground_frame']['feet'].values())} |",
+        f"| `{f['inverse_dynamics_setup']}` | OpenSim's InverseDynamicsTool on these files, coordinates low-passed at "
+        f"{res['lowpass_hz']:g} Hz, over the middle cycle {res['time_range_s'][0]:.3f}-"
+        f"{res['time_range_s'][1]:.3f} s |",
+        "| `summary.json` | everything below, and more |", "",
+        "Run the inverse dynamics yourself: `opensim-cmd run-tool setup_id.xml` (in this folder), or",
+        "`opensim.InverseDynamicsTool('setup_id.xml').run()` from Python.", "",
+        "## Residuals (OpenSim's InverseDynamicsTool on these files)", "",
+        "Hicks et al. 2015: peak residual force <= 5 % of the peak net external force, peak residual moment",
+        "<= 1 % of centre-of-mass height x peak net external force.", "",
+        "| | peak residual force (N) | limit (N) | peak residual moment (N·m) | limit (N·m) | meets |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name, r in ((("before ground-reaction adjustment", before),) if before else ()) + (("as written", res),):
+        lines.append(f"| {name} | {r['peak_residual_force_vector_N']:.2f} | {r['force_limit_N']:.1f} | "
+                     f"{r['peak_residual_moment_Nm']:.2f} | {r['moment_limit_Nm']:.2f} | "
+                     f"{'yes' if r['meets_hicks_2015'] else 'no'} |")
+    adj = summary.get("residual_reduction")
+    if adj:
+        lines += ["", "The ground reactions were adjusted by the external wrench OpenSim's inverse dynamics still",
+                  "needed on this model (its arms, trunk and joints are not those of the motion's character);",
+                  "by at most: " + "; ".join(
+                      f"{side} foot {v['force_change_N']['max']:.1f} N, centre of pressure "
+                      f"{v['cop_shift_mm']['max']:.1f} mm, free moment {v['free_moment_change_Nm']['max']:.2f} N·m"
+                      for side, v in adj["per_foot"].items()) + "."]
+    return "\n".join(lines) + "\n"
+
+
+def to_opensim(motion: Motion, *, cycles: int = CYCLES, rate: float = RATE_HZ, reduce_residuals: bool = True) -> bytes:
+    """The folder :func:`write_opensim` writes, as a zip archive (``export_motion(motion,
+    "opensim")``; with ``path=DIR`` it is unpacked into DIR)."""
+    with tempfile.TemporaryDirectory(prefix="motionx-osim-export-") as d:
+        write_opensim(motion, d, cycles=cycles, rate=rate, reduce_residuals=reduce_residuals)
+        buf = io.BytesIO()
+        with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
+            for p in sorted(Path(d).iterdir()):
+                if p.is_file():
+                    z.write(p, p.name)
+        return buf.getvalue()
