@@ -85,8 +85,17 @@ def finite_list(flag: str):
     return lambda text: [one(part.strip()) for part in text.split(",")]
 
 
+def _joints(text: str) -> dict[str, str]:
+    from solver.io.roles import RoleError, parse_joint_mapping  # lazy: only a command given --joints reads it
+
+    try:
+        return parse_joint_mapping(text)
+    except RoleError as e:
+        raise CliError(f"--joints: {e}") from None
+
+
 #: the importer options whose text is converted (a mistake is one line, exit status 2)
-_CONVERT = {"mass": _positive_kg, "belt_speed": _belt, "units": _unit}
+_CONVERT = {"mass": _positive_kg, "belt_speed": _belt, "units": _unit, "joints": _joints}
 #: every importer option (``solver.formats.reader_options()``) as a flag: (flag, argparse
 #: keywords). Every command that imports a trial offers them all (``add_import_options``); a test
 #: checks that each reader option has its flag.
@@ -108,6 +117,11 @@ IMPORT_FLAGS: dict[str, tuple[str, dict]] = {
                           "help": f"BVH: length unit of the file, {', '.join(BVH_UNITS)} or metres per unit "
                                   "(default: auto)"}),
     "up": ("--up", {"choices": ["y", "z"], "help": "BVH: the file's up axis (default: y)"}),
+    "joints": ("--joints", {"metavar": "ROLE=NAME,...",
+                            "help": "BVH: joint mapping for unrecognised joint names, ROLE=NAME,... (roles hips, "
+                                    "hip_l, knee_l, ankle_l, mtp_l, …, e.g. hip_l=Thigh_L,knee_l=Shin_L) or a file "
+                                    "with one ROLE=NAME per line (docs/import.md; default: roles detected from the "
+                                    "names and the hierarchy)"}),
     "in_degrees": ("--in-degrees", {"action": argparse.BooleanOptionalAction,
                                     "help": "OpenSim: the coordinates file is in degrees (--no-in-degrees: radians; "
                                             "default: its header says)"}),

@@ -406,24 +406,26 @@ def is_motion_file(files: list[tuple[str, bytes]]) -> bool:
 
 #: the importer options a trial upload takes as form fields beside ``mass`` and ``belt_speed``
 #: (``solver.formats.reader_options()``; a test checks that every one is here)
-OPTION_FIELDS = ("lower_only", "markers", "units", "up", "in_degrees")
+OPTION_FIELDS = ("lower_only", "markers", "units", "up", "in_degrees", "joints")
 _BOOLEAN = {"true": True, "false": False, "1": True, "0": False, "yes": True, "no": False}
 _ROLE = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,31}$")
 
 
-def _marker_map(text: str) -> dict[str, str]:
-    """``ROLE=label,ROLE=label`` (C3D roles -> the file's labels; an empty label: do not use the
-    role). Only the inline form: the server reads no mapping file."""
+def _role_map(text: str, field: str = "markers") -> dict[str, str]:
+    """``ROLE=label,ROLE=label``: C3D roles -> the file's marker labels (``markers``, roles upper
+    case) or BVH joint roles -> the file's joint names (``joints``, roles lower case); an empty
+    label: do not use the role. Only the inline form: the server reads no mapping file."""
     out: dict[str, str] = {}
     parts = [p for p in text.split(",") if p.strip()]
+    what, example = ("label", "LASI=L_IAS") if field == "markers" else ("NAME", "hip_l=Thigh_L")
     if not parts or len(parts) > 64:
-        raise UploadError("markers must be 1 to 64 entries ROLE=label, separated by commas")
+        raise UploadError(f"{field} must be 1 to 64 entries ROLE={what}, separated by commas")
     for part in parts:
         role, sep, label = part.partition("=")
         role, label = role.strip(), label.strip()
         if not sep or not _ROLE.match(role) or len(label) > 64 or _CONTROL.search(label):
-            raise UploadError(f"markers: {clip(part, 60)!r} is not ROLE=label (e.g. LASI=L_IAS)")
-        out[role.upper()] = label
+            raise UploadError(f"{field}: {clip(part, 60)!r} is not ROLE={what} (e.g. {example})")
+        out[role.upper() if field == "markers" else role.lower()] = label
     return out
 
 
@@ -449,7 +451,7 @@ def trial_options(fields: Mapping[str, str]) -> dict[str, Any]:
                 raise UploadError(f"up must be y or z, got {clip(v, 20)!r}")
             out[key] = v
         else:
-            out[key] = _marker_map(v)
+            out[key] = _role_map(v, key)
     return out
 
 
@@ -469,7 +471,8 @@ def trial_upload(files: list[tuple[str, bytes]], mass: float | None, belt_speed:
 
 
 #: importer parameters (``solver.errors.InputError.parameter``) -> how a client sends them
-FORM_FIELDS = {"mass": "send the form field 'mass' (kg)", "belt_speed": "send the form field 'belt_speed' (m/s)"}
+FORM_FIELDS = {"mass": "send the form field 'mass' (kg)", "belt_speed": "send the form field 'belt_speed' (m/s)",
+               "joints": "send the form field 'joints' (ROLE=NAME,...)"}
 
 
 def _hide_folder(text: str, tmp: str) -> str:

@@ -57,6 +57,10 @@ UPLOAD_BODY = {
                                   "description": "BVH: the file's length unit (default: auto)"},
                         "up": {"type": "string", "enum": ["y", "z"], "description": "BVH: the file's up axis "
                                                                                        "(default: y)"},
+                        "joints": {"type": "string", "maxLength": 4000, "pattern": "^[^\\x00-\\x1f\\x7f]*$",
+                                   "description": "BVH: joint mapping ROLE=NAME,... for unrecognised joint names "
+                                                  "(roles hips, hip_l, knee_l, ankle_l, mtp_l, …, e.g. "
+                                                  "hip_l=Thigh_L,knee_l=Shin_L)"},
                         "in_degrees": {"type": "boolean", "description": "OpenSim: the coordinates are in degrees "
                                                                           "(default: the file's header says)"},
                         "name": {"type": "string", "maxLength": 200, "pattern": "^[^\\x00-\\x1f\\x7f]*$"},

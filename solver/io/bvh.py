@@ -3,8 +3,9 @@
 Public API::
 
     read_bvh(path) -> BvhClip                        # hierarchy + channels, no interpretation
-    bvh_track(path, *, mass=None, units="auto", up="y", floor_height=None) -> SkeletonTrack
-    load_bvh(path, *, mass=None, units="auto", up="y", floor_height=None, lower_only=None) -> Capture
+    bvh_track(path, *, mass=None, units="auto", up="y", floor_height=None, joints=None) -> SkeletonTrack
+    load_bvh(path, *, mass=None, units="auto", up="y", floor_height=None, lower_only=None,
+             joints=None) -> Capture
 
 A small reader of our own (numpy only; the ``bvhio`` package would add PyGLM and
 SpatialTransform for what is ~100 lines here). Rotation channels are applied in the order
@@ -12,19 +13,16 @@ listed, intrinsically (``Zrotation Xrotation Yrotation`` means R = Rz Rx Ry, the
 convention); position channels (root, and any other joint that has them) are added to
 the joint's OFFSET.
 
-**Joint names** (case-insensitive; prefixes such as ``mixamorig:``, ``Bip01``, ``Character1_``
-are ignored): CMU/Mixamo/MotionBuilder styles — ``Hips``; ``RightUpLeg`` / ``RightHip`` /
-``RThigh`` (hip), ``RightLeg`` / ``RightKnee`` / ``RightShin`` (knee), ``RightFoot`` /
-``RightAnkle`` (ankle), ``RightToeBase`` / ``RightToe`` (metatarsal heads; its End Site or
-child = toe tip); ``LowerBack`` / ``Spine*`` / ``Chest`` (lumbar: the first spine joint more
-than 3 cm from the hips), ``Neck``, ``Head`` (its End Site =
-head top), ``RightShoulder`` / ``RightCollar`` / ``RightClavicle`` (clavicle), ``RightArm`` /
-``RightUpArm`` (shoulder), ``RightForeArm`` / ``RightElbow`` (elbow), ``RightHand`` / ``RightWrist``
-(wrist; its End Site or first child = hand tip) — and ``Left*`` / ``L*`` alike. Our own
-segment names (``pelvis``, ``thigh_r``, ``shank_r``, ``foot_r``, ``toes_r``, ``abdomen``,
-``thorax``, ``head``, ``clavicle_r``, ``upper_arm_r``, ``forearm_r``, ``hand_r``, as written by
-``solver.export.bvh``) are understood too. The lower body is required; the upper body is
-used when every upper landmark can be placed.
+**Joint roles** (:mod:`solver.io.roles`): from the names (CMU/ASF, Mixamo/MotionBuilder,
+Unreal, Unity, Blender, 3ds Max Biped, DAZ styles; sides as ``Left…``/``L…``/``l…`` prefixes or
+``_l``/``.L`` suffixes; namespaces and tool prefixes ignored) and the hierarchy (a knee below its
+hip, …; lumbar = the first joint of the hips -> neck chain more than 3 cm from the hip joints in
+the rest pose). ``joints`` (role -> joint name, ``"hip_l=Thigh_L,knee_l=Shin_L"``) overrides the
+detection; a file whose required roles (hips; hip, knee, ankle each side; toes: a joint, or the
+ankle's End Site or child) cannot be found is refused with the roles missing and the joint
+names seen. The metatarsal heads are the toes joint (its End Site or child = toe tip), the head
+top the Head's End Site, the hand tip the wrist's End Site or first child. The lower body is
+required; the upper body is used when every upper landmark can be placed.
 
 **Landmarks**: joint positions; pelvis = mid-point of the hips; neck = the Head joint
 (base of the head); sternum = mid-point of the clavicle joints (else the Neck joint, else
@@ -47,7 +45,6 @@ heights over the clip. BVH has no subject mass: pass ``mass`` (kg).
 from __future__ import annotations
 
 import logging
-import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -60,6 +57,14 @@ from solver.capture import Capture, GroundFrame
 from solver.errors import InputError
 from solver.io.fit import fit_track
 from solver.io.readers import one_file
+from solver.io.roles import (
+    RoleError,
+    describe_names,
+    joint_roles,
+    missing_roles,
+    parse_joint_mapping,
+    spine_joints,
+)
 from solver.io.track import SkeletonTrack, add_pelvis
 from solver.rig import Rig, segment_roles
 
@@ -248,55 +253,28 @@ def parse_bvh(text: str, where: str = "BVH") -> BvhClip:
     return BvhClip(tuple(names), tuple(parents), np.array(offsets, dtype=float), tuple(channels), ends, dt, motion)
 
 
-# --- name mapping -----------------------------------------------------------------------------
+# --- joint roles ------------------------------------------------------------------------------
 
-_SIDE = {"right": "r", "left": "l", "r": "r", "l": "l"}
-_ROLES = {
-    "hip": ("upleg", "hip", "thigh", "upperleg", "femur"),
-    "knee": ("leg", "knee", "shin", "calf", "lowerleg", "tibia"),
-    "ankle": ("foot", "ankle"),
-    "mtp": ("toebase", "toe", "toes", "ball"),
-    "clavicle": ("shoulder", "collar", "clavicle"),
-    "shoulder": ("arm", "uparm", "upperarm", "humerus"),
-    "elbow": ("forearm", "elbow", "lowerarm", "radius"),
-    "wrist": ("hand", "wrist"),
-}
-_OURS = {
-    "pelvis": "hips", "abdomen": "spine", "thorax": "spine", "head": "head",
-    **{f"{seg}_{s}": f"{role}_{s}" for s in "rl" for seg, role in (
-        ("thigh", "hip"), ("shank", "knee"), ("foot", "ankle"), ("toes", "mtp"), ("clavicle", "clavicle"),
-        ("upper_arm", "shoulder"), ("forearm", "elbow"), ("hand", "wrist"))},
-}
-
-
-def _clean(name: str) -> str:
-    n = name.split(":")[-1]
-    n = re.sub(r"^(bip0?1|character\d*|mixamorig\d*)[\s_]*", "", n, flags=re.I)
-    return re.sub(r"[\s_.\-]", "", n).lower()
-
-
-def _role(name: str) -> str | None:
-    """Our role for a BVH joint name: 'hips', 'spine', 'neck', 'head', 'knee_r', ..."""
-    low = name.lower()
-    if low in _OURS:
-        return _OURS[low]
-    n = _clean(name)
-    if n in ("hips", "hip", "pelvis", "root") and not n.startswith(("left", "right")):
-        return "hips"
-    if n == "neck" or n == "neck1":
-        return "neck"
-    if n == "head":
-        return "head"
-    if re.fullmatch(r"(spine|chest|back|torso|lowerback|upperback|abdomen|thorax)\d*", n):
-        return "spine"
-    m = re.fullmatch(r"(right|left|r|l)(.*)", n)
-    if m:
-        rest = m.group(2)
-        for role, keys in _ROLES.items():
-            if rest in keys:
-                return f"{role}_{_SIDE[m.group(1)]}"
-        return None
-    return None
+def _roles(clip: BvhClip, path: str | Path, joints: str | Path | Mapping[str, str] | None,
+           rest_m: np.ndarray | None = None) -> tuple[dict[str, int], list[int]]:
+    """Joint index per role (:func:`solver.io.roles.joint_roles`; ``rest_m``: rest-pose joint
+    positions in metres, for ``lumbar``) and the spine chain; a :class:`BvhError` naming the
+    required roles it cannot find (a foot without a toes joint needs an End Site or a child)."""
+    try:
+        roles = joint_roles(clip.names, clip.parents, parse_joint_mapping(joints), rest=rest_m)
+    except RoleError as e:
+        raise BvhError(f"{path}: {e}") from None
+    missing = missing_roles(roles)
+    for s in "rl":
+        a = roles.get(f"ankle_{s}")
+        if (a is not None and f"mtp_{s}" not in roles and a not in clip.end_sites
+                and a not in clip.parents):
+            missing.append(f"mtp_{s}")
+    if missing:
+        raise BvhError(f"{path}: cannot find the joints for the roles {', '.join(missing)} among the joints "
+                       f"{describe_names(clip.names)}; name them in a joint mapping ROLE=NAME,... (the roles: "
+                       "docs/import.md)", parameter="joints")
+    return roles, spine_joints(clip.parents, roles)
 
 
 def _minimal_unit(v: np.ndarray) -> np.ndarray:
@@ -304,26 +282,6 @@ def _minimal_unit(v: np.ndarray) -> np.ndarray:
     if n < 1e-12:
         raise BvhError("degenerate skeleton geometry (zero-length bone)")
     return v / n
-
-
-def _roles(clip: BvhClip, path: str | Path) -> tuple[dict[str, int], list[int]]:
-    """Joint index per role (CMU/Mixamo names; the root is the hips when no name says so) and the spine joints."""
-    roles: dict[str, int] = {}
-    spines: list[int] = []
-    for j, n in enumerate(clip.names):
-        r = _role(n)
-        if r == "spine":
-            spines.append(j)
-        elif r is not None and r not in roles:
-            roles[r] = j
-    if "hips" not in roles:
-        roles["hips"] = 0
-    need = [f"{r}_{s}" for s in "rl" for r in ("hip", "knee", "ankle")]
-    missing = [r for r in need if r not in roles]
-    if missing:
-        raise BvhError(f"{path}: cannot find the leg joints {missing} among {list(clip.names)} "
-                       "(expected CMU/Mixamo names such as RightUpLeg, RightLeg, RightFoot)")
-    return roles, spines
 
 
 def _unit_scale(units: str | float, leg: float, path: str | Path) -> tuple[str | float, float]:
@@ -400,16 +358,14 @@ class _Pose:
         add_pelvis(raw)
         return raw
 
-    def upper_body(self, roles: Mapping[str, int], spines: list[int], scale: float) -> dict[str, np.ndarray]:
+    def upper_body(self, roles: Mapping[str, int]) -> dict[str, np.ndarray]:
         """Lumbar, neck, head top, sternum, arms; a KeyError naming what the clip lacks."""
         P = self.P
         upper: dict[str, np.ndarray] = {}
         # lumbar: the first spine joint clearly above the hips (CMU's LowerBack sits on the root)
-        mid_hips = 0.5 * (P[roles["hip_r"]] + P[roles["hip_l"]])
-        above = [j for j in spines if np.median(np.linalg.norm(P[j] - mid_hips, axis=1)) * scale > 0.03]
-        if not above:
+        if "lumbar" not in roles:
             raise KeyError("spine joint above the hips")
-        upper["lumbar"] = P[above[0]]
+        upper["lumbar"] = P[roles["lumbar"]]
         head = roles["head"]
         upper["neck"] = P[head]
         ht = self.tip(head)
@@ -441,9 +397,10 @@ def bvh_track(
     units: str | float = "auto",
     up: str = "y",
     floor_height: float | None = None,
+    joints: str | Path | Mapping[str, str] | None = None,
 ) -> SkeletonTrack:
     clip = read_bvh(path)
-    roles, spines = _roles(clip, path)
+    roles, spines = _roles(clip, path, joints)
     # axes: file -> our axes (before the facing rotation)
     if up not in ("y", "z"):
         raise BvhError(f"up must be 'y' or 'z', got {up!r}")
@@ -454,6 +411,7 @@ def bvh_track(
     leg = np.mean([np.linalg.norm(P_rest[roles[f"hip_{s}"], 0] - P_rest[roles[f"knee_{s}"], 0])
                    + np.linalg.norm(P_rest[roles[f"knee_{s}"], 0] - P_rest[roles[f"ankle_{s}"], 0]) for s in "rl"])
     units, scale = _unit_scale(units, float(leg), path)
+    roles, spines = _roles(clip, path, joints, P_rest[:, 0] * scale)  # lumbar: 3 cm clear of the hips
     # facing: perpendicular to the hip line, horizontal, averaged over the clip
     hl = pose.P[roles["hip_l"]] - pose.P[roles["hip_r"]]  # (T, 3)
     hl = hl - np.outer(hl @ up_v, up_v)
@@ -462,7 +420,7 @@ def bvh_track(
     A = np.stack([x_dir, y_dir, up_v])  # rows: our axes in file coordinates -> ours = A @ file
     raw = pose.feet(roles, scale, path)
     try:  # upper body (all or nothing)
-        raw.update(pose.upper_body(roles, spines, scale))
+        raw.update(pose.upper_body(roles))
     except KeyError as e:
         log.info("%s: no usable upper body (%s missing): lower-body track", path, e)
     # floor along up (file units), then our frame in metres
@@ -496,27 +454,22 @@ def load_bvh(
     up: str = "y",
     floor_height: float | None = None,
     lower_only: bool | None = None,
+    joints: str | Path | Mapping[str, str] | None = None,
 ) -> Capture:
     """Import a BVH clip as a :class:`Capture` (conventions in the module doc), with the file's
-    own skeleton as its rig (:func:`bvh_rig`)."""
-    track = bvh_track(path, mass=mass, units=units, up=up, floor_height=floor_height)
+    own skeleton as its rig (:func:`bvh_rig`). ``joints``: role -> joint name, for the joints
+    whose names are not recognised (``"hip_l=Thigh_L,knee_l=Shin_L"``, a dict or a mapping file;
+    :func:`solver.io.roles.parse_joint_mapping`)."""
+    track = bvh_track(path, mass=mass, units=units, up=up, floor_height=floor_height, joints=joints)
     capture = fit_track(track, lower_only=lower_only)
     return capture.evolve(rig=bvh_rig(read_bvh(path), track))
 
 
 def bvh_rig(clip: BvhClip, track: SkeletonTrack) -> Rig:
     """The clip's own skeleton and animation as a :class:`solver.rig.Rig` (the roles the track
-    found: hips -> pelvis, RightUpLeg -> thigh_r, …; lumbar = the first spine joint more than
-    3 cm from the hips in the rest pose)."""
+    found: hips -> pelvis, RightUpLeg -> thigh_r, lumbar -> abdomen, …)."""
     by_name = {n: j for j, n in enumerate(clip.names)}
     roles = {r: by_name[n] for r, n in track.source["joint_roles"].items() if n in by_name}
-    R_rest, P_rest = clip.forward(np.zeros((1, clip.motion.shape[1])))
-    scale = float(track.source["metres_per_unit"])
-    mid_hips = 0.5 * (P_rest[roles["hip_r"], 0] + P_rest[roles["hip_l"], 0])
-    for n in track.source.get("spine_joints", []):
-        if np.linalg.norm(P_rest[by_name[n], 0] - mid_hips) * scale > 0.03:
-            roles["lumbar"] = by_name[n]
-            break
     J, T = len(clip.names), clip.T
     local = np.empty((T, J, 3, 3))
     pos = np.empty((T, J, 3))
