@@ -345,7 +345,8 @@ def calibrate(rig: Rig, character: Any, q: np.ndarray, fps: float, *, t_start: f
             C[:, j] = Rotation.from_matrix(C[:, j]).mean().as_matrix()
     pel = seg.get("pelvis", 0)
     Rp, Pp = np.moveaxis(Rs[pel], -1, 0), Ps[pel].T
-    root_in_pelvis = np.einsum("fji,fj->fi", Rp, Po[:, 0] - Pp)
+    anchor = rig.roles.get("pelvis", 0)
+    root_in_pelvis = np.einsum("fji,fj->fi", Rp, Po[:, anchor] - Pp)
     ankles = np.zeros((t.size, 2, 3))
     for k, side in enumerate("rl"):
         thigh, shank, foot = LEG_SEGMENTS[side]
@@ -554,20 +555,31 @@ def retarget(motion: Any, rig: Rig, *, frame_time: float | None = None) -> RigPo
     for j, p in enumerate(rig.parents):
         if j in driven:
             Wo[:, j] = Rs[seg[driven[j]]] @ C[:, j]
-        elif p < 0:
-            raise RigError("the rig's root joint moves no segment of the motion's character")
+        elif p < 0:  # a root above the pelvis (Unreal's "root"): as captured
+            Wo[:, j] = np.einsum("ji,fjk->fik", frame.R, local_c[:, j])
         else:
             Wo[:, j] = Wo[:, p] @ local_c[:, j]
-    root_pos = Ps[seg["pelvis"]] + np.einsum("fij,fj->fi", Rs[seg["pelvis"]], root_in_pelvis)
+    pelvis_pos = Ps[seg["pelvis"]] + np.einsum("fij,fj->fi", Rs[seg["pelvis"]], root_in_pelvis)
+    anchor = rig.roles.get("pelvis", 0)
+    if anchor == 0:
+        root_pos = pelvis_pos
+    else:  # the pelvis joint is placed through its own position channels
+        if positions is None:
+            raise RigError(f"the joint that moves the pelvis ({rig.names[anchor]}) is not the root and has no "
+                           "position channels: the rig cannot follow the motion's pelvis")
+        root_pos = frame.point_from_input(root_c, tc)
     unit = rig.frame.unit_m
 
     def fk(Wo: np.ndarray) -> np.ndarray:
         P = np.empty((F, rig.J, 3))
         P[:, 0] = root_pos
         for j, p in enumerate(rig.parents):
-            if p >= 0:
-                off = rig.offsets[j] if positions is None else positions[:, j]
-                P[:, j] = P[:, p] + unit * np.einsum("fij,fj->fi", Wo[:, p], np.broadcast_to(off, (F, 3)))
+            if p < 0:
+                continue
+            if j == anchor and positions is not None:
+                positions[:, j] = np.einsum("fji,fj->fi", Wo[:, p], pelvis_pos - P[:, p]) / unit
+            off = rig.offsets[j] if positions is None else positions[:, j]
+            P[:, j] = P[:, p] + unit * np.einsum("fij,fj->fi", Wo[:, p], np.broadcast_to(off, (F, 3)))
         return P
 
     Po = fk(Wo)
@@ -615,7 +627,7 @@ def retarget(motion: Any, rig: Rig, *, frame_time: float | None = None) -> RigPo
     local = _locals(rig.parents, Wo)
     local[:, 0] = np.einsum("ij,fjk->fik", frame.R, Wo[:, 0])  # the root's rotation in input axes
     t_frame = tc  # the frame's time dependence (treadmill belt) follows the capture's clock
-    root_in = frame.point_to_input(root_pos, t_frame)
+    root_in = root_c if anchor else frame.point_to_input(root_pos, t_frame)
     return RigPose(t, local, root_in, positions, tc, targets, tuple(sorted(driven.values())))
 
 

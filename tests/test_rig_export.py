@@ -26,7 +26,7 @@ from solver.trajectory import sample
 bvhio = pytest.importorskip("bvhio")
 
 #: the rig the walk comes in on (Mixamo-style names, cm, ZXY channels: not the CMU skeleton)
-RIG_TRIAL = "cmu16_bvh/16_15_walk.bvh"
+RIG_TRIAL = "mixamo_style_walk/walk.bvh"
 MASS = 70.0
 
 
@@ -218,3 +218,15 @@ def test_source_rig_export_refuses_what_it_cannot_do(runs, shared_data):
     no_rig = motions["tutor"].evolve(provenance={k: v for k, v in motions["tutor"].provenance.items() if k != "rig"})
     with pytest.raises(ExportError, match="no source rig"):
         solver.export_motion(no_rig, "bvh", rig="source")
+
+
+def test_a_z_up_metre_rig_comes_out_on_itself(shared_data):
+    """Unreal-style names, metres, Z up, a static root above the pelvis: the tutor on that rig."""
+    path = shared_data / "mixamo_style_walk" / "walk_unreal_style.bvh"
+    tutor = solver.make_tutor(solver.load_trial([path], mass=MASS, up="z")).motion
+    text = solver.export_motion(tutor, "bvh", rig="source")
+    _same_hierarchy(parse_bvh(text), read_bvh(path))
+    rig = Rig.from_dict(tutor.provenance["rig"])
+    rep = feet_report(tutor, rig, retarget(tutor, rig))
+    for side in ("right", "left"):
+        assert rep[side]["ankle_error_m"] <= 0.02 and rep[side]["slide_m"] <= 0.01, rep
