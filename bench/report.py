@@ -82,6 +82,15 @@ def blas_table(res: dict) -> str:
     return "\n".join(rows)
 
 
+def rig_export_table(res: dict) -> str:
+    rows = ["| motion | ankle joint from the motion's foot, stance (max, mm) | contact slide on the rig (max, mm) "
+            "| locked joints vs the input at the same phase (RMS, °) | export (s) |", "|---|---|---|---|---|"]
+    for name, r in res["motions"].items():
+        rows.append(f"| {name} | {r['ankle_error_mm']:.1f} | {r['slide_mm']:.1f} | {r['locked_joints_rms_deg']:.3f} "
+                    f"| {r['export_s']:.3f} |")
+    return "\n".join(rows)
+
+
 def front_door_table(res: dict) -> str:
     rows = ["| docs/api.md's script (median, s) | `motionx tutor` + `motionx extrapolate --slope 10` (median, s) "
             "| ratio |", "|---|---|---|",
@@ -92,7 +101,8 @@ def front_door_table(res: dict) -> str:
 
 FILL = {"tutor": ("docs/spacetime.md", tutor_table), "continuation": ("docs/continuation.md", continuation_table),
         "compiled": ("docs/spacetime.md", compiled_table), "blas": ("docs/spacetime.md", blas_table),
-        "front_door": ("docs/api.md", front_door_table)}
+        "front_door": ("docs/api.md", front_door_table),
+        "rig_export": ("docs/export.md", rig_export_table)}
 
 
 def fill(sec: dict, only: list[str] | None = None) -> None:
