@@ -100,6 +100,8 @@ class Exporter:
     description: str
     #: (option, value) -> the media type when that option changes the result's type
     media_by_option: MappingProxyType[tuple[str, Any], str] = field(default_factory=lambda: MappingProxyType({}))
+    #: the result is a folder, as a zip archive (``export_motion(..., path=DIR)`` and the CLI write the folder)
+    folder: bool = False
 
 
 EXPORTERS: MappingProxyType[str, Exporter] = MappingProxyType({e.name: e for e in (
@@ -113,6 +115,9 @@ EXPORTERS: MappingProxyType[str, Exporter] = MappingProxyType({e.name: e for e i
              "BVH (Y up); rig=source: on the input BVH's own skeleton"),
     Exporter("deepmimic", "solver.export.deepmimic", "to_deepmimic", "application/json",
              "DeepMimic motion on the input DeepMimic character (rig=source)"),
+    Exporter("opensim", "solver.export.opensim", "to_opensim", "application/zip",
+             "the motion on its OpenSim trial's model: coordinates and GRF .mot, ExternalLoads, the model, an "
+             "inverse-dynamics setup and its residuals (a folder; zipped over HTTP)", folder=True),
 )})
 
 

@@ -22,7 +22,8 @@ def test_every_exporter_in_the_registry_is_callable_with_its_media_type():
         assert callable(func) and media_type(name) == e.media_type
         for (option, value), mt in e.media_by_option.items():
             assert option in export_options(name) and media_type(name, **{option: value}) == mt
-    assert set(export_media_types()) == {"application/json", "model/gltf-binary", "model/gltf+json", "text/plain"}
+    assert set(export_media_types()) == {"application/json", "model/gltf-binary", "model/gltf+json", "text/plain",
+                                        "application/zip"}
 
 
 def test_front_ends_enumerate_the_registries():

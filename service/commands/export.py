@@ -45,9 +45,15 @@ def cmd_export(args: argparse.Namespace) -> int:
         if args.out == "-":
             raise CliError("--out - (stdout) is only for text formats; give a .glb file name "
                            "(or --embedded for the .gltf JSON)")
+    folder = EXPORTERS[fmt].folder
+    if folder and (args.out == "-" or args.rig is not None or args.y_up):
+        raise CliError(f"--format {fmt} writes a folder on the trial's own model: give --out DIR "
+                       "(no stdout, --rig or --y-up)")
     motion = load_motion(args.motion)
     try:
         data = export_motion(motion, fmt, **options)
+        if folder:
+            return _write_folder(data, Path(args.out), args.format, motion)
     except ExportError as e:
         raise CliError(str(e)) from None
     if args.out == "-":
@@ -67,6 +73,25 @@ def cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
+def _write_folder(data: bytes, out: Path, fmt: str, motion) -> int:
+    """A folder format (OpenSim): the folder written, one JSON line with its files and residuals."""
+    from solver.export import write_folder
+
+    try:
+        write_folder(data, out)
+    except OSError as e:
+        raise CliError(f"cannot write {out}: {e.strerror or e}") from None
+    line = {"out": str(out), "format": fmt, "files": sorted(p.name for p in out.iterdir() if p.is_file()),
+            "frames": motion.T, "fps": motion.fps, "character": motion.character.name}
+    summary = out / "summary.json"
+    if summary.is_file():
+        res = json.loads(summary.read_text()).get("residuals", {}).get("as_written", {})
+        line["residuals"] = {k: res.get(k) for k in ("peak_residual_force_vector_N", "force_limit_N",
+                                                     "peak_residual_moment_Nm", "moment_limit_Nm", "meets_hicks_2015")}
+    print(json.dumps(line))
+    return 0
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     s = add_command(sub, "export", "export a motion file as a JSON clip, glTF 2.0 (.glb) or BVH", """\
 Write a motion file for other tools: a compact JSON clip (schema solver/export/clip.schema.json),
@@ -75,8 +100,10 @@ JSON) or BVH (Y-up, cm by default), or, with --rig source, on the input's own sk
 glTF, DeepMimic motion). solver.export.reimport reads the JSON clip, glTF and BVH back.""")
     s.add_argument("motion", metavar="MOTION.json", help="motion file v1 (JSON), e.g. a tutor or a λ optimum")
     s.add_argument("--format", required=True, choices=CHOICES,
-                   help="json: motionx clip; gltf (alias glb): binary glTF 2.0 (.glb); bvh")
-    s.add_argument("--out", required=True, metavar="FILE", help="output file (- for stdout, text formats only)")
+                   help="json: motionx clip; gltf (alias glb): binary glTF 2.0 (.glb); bvh; opensim: a folder on "
+                        "the OpenSim trial's own model (checked by OpenSim's inverse dynamics)")
+    s.add_argument("--out", required=True, metavar="FILE",
+                   help="output file (- for stdout, text formats only); a folder for --format opensim")
     s.add_argument("--embedded", action="store_true",
                    help="with --format gltf: the .gltf JSON with its buffer embedded (base64) instead of the .glb")
     s.add_argument("--y-up", action="store_true",

@@ -7,7 +7,11 @@ Formats (see ``docs/export.md``):
 - ``gltf`` (alias ``glb``): glTF 2.0 skinned character and animation, binary ``.glb`` by
   default (:func:`solver.export.gltf.to_gltf`; ``binary=False`` gives the ``.gltf`` JSON
   with its buffer embedded);
-- ``bvh``: Biovision hierarchy (:func:`solver.export.bvh.to_bvh`).
+- ``bvh``: Biovision hierarchy (:func:`solver.export.bvh.to_bvh`);
+- ``opensim``: the motion on the OpenSim model of the trial it was made from, a folder
+  (coordinates, ground reactions, ExternalLoads, model, inverse-dynamics setup) zipped
+  (:func:`solver.export.opensim.to_opensim`; :func:`solver.export.opensim.write_opensim` writes
+  the folder).
 
 The JSON clip and the glTF animations carry the game-ready data of :mod:`solver.export.game`
 (loop points, root motion, foot contacts, cycle metadata); ``gltf``/``glb`` with ``loop=True``
@@ -269,8 +273,10 @@ def export_options(fmt: str) -> tuple[str, ...]:
 
 
 def export_motion(motion: Motion, fmt: str, path: str | Path | None = None, **options: Any) -> str | bytes:
-    """Export ``motion`` as ``fmt`` (json, gltf, glb, bvh): text for text formats, bytes for
-    binary glTF (``gltf`` by default, ``glb``); written to ``path`` too when given.
+    """Export ``motion`` as ``fmt`` (json, gltf, glb, bvh, opensim, …): text for text formats,
+    bytes for binary glTF (``gltf`` by default, ``glb``) and for the zip archive of a folder
+    format (``opensim``); written to ``path`` too when given — a folder format's folder,
+    unpacked there (:func:`write_folder`).
 
     Unknown options are refused with an :class:`ExportError` naming the accepted ones.
     """
@@ -280,7 +286,26 @@ def export_motion(motion: Motion, fmt: str, path: str | Path | None = None, **op
     if unknown:
         raise ExportError(f"unknown option(s) {unknown} for format {fmt!r}; accepted: {list(known)}")
     data = func(motion, **options)
-    if path is not None:
+    if path is not None and EXPORTERS[fmt].folder:
+        write_folder(data, path)
+    elif path is not None:
         Path(path).parent.mkdir(parents=True, exist_ok=True)
         Path(path).write_bytes(data if isinstance(data, bytes) else data.encode())
     return data
+
+
+def write_folder(archive: bytes, path: str | Path) -> Path:
+    """A folder format's zip archive unpacked into ``path`` (created; files of the same names replaced)."""
+    import io
+    import zipfile
+
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise ExportError(f"{out} exists and is not a folder: this format writes a folder")
+    out.mkdir(parents=True, exist_ok=True)
+    with zipfile.ZipFile(io.BytesIO(archive)) as z:
+        for name in z.namelist():
+            if Path(name).name != name:
+                raise ExportError(f"unexpected entry {name!r} in the archive")
+            (out / name).write_bytes(z.read(name))
+    return out

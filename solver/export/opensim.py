@@ -87,8 +87,17 @@ from solver.trajectory import ROOT_XY, ROOT_YAW, cycle_turn, sample
 RATE_HZ = 100.0
 #: gait cycles written (the inverse-dynamics setup analyses the middle one)
 CYCLES = 3
-#: low-pass cut-off of the coordinates in the inverse-dynamics setup (Hz), as OpenSim's examples
-LOWPASS_HZ = 6.0
+#: low-pass cut-off of the written coordinates in the inverse-dynamics setup (Hz; None: no filter).
+#: They are samples of a smooth motion, not measurements: a filter would take away part of the
+#: motion the ground reactions balance (the optimizer's spline has content up to half its frame rate)
+LOWPASS_HZ: float | None = None
+#: OpenSim's examples' cut-off for measured coordinates: the trial's own check, and the written
+#: files' figures reported under it for information
+CAPTURE_LOWPASS_HZ = 6.0
+#: a plate carrying less vertical force (N) than this is off in the trial's own check
+PLATE_MIN_N = 20.0
+#: the calibration's harmonics reach this frequency (Hz)
+CALIBRATION_CUTOFF_HZ = 6.0
 #: virtual markers: this far (m) from a body's centre of mass along each of its axes
 MARKER_OFFSET_M = 0.1
 #: a foot loaded less than this fraction of the body weight keeps its last centre of pressure
@@ -255,23 +264,33 @@ class Calibration:
     harmonics: int
     fit_rms_deg: float  # how far the smooth calibration is from the per-frame one (rotation, RMS)
     fit_rms_mm: float
+    right: np.ndarray  # (B, 3, 3) a merged body in its host body (identity for the others)
+    offset: np.ndarray  # (B, 3) its origin in the host body (metres, host axes)
 
     def at(self, phase: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Rotations (S, B, 3, 3) and origins (S, B, 3) at gait phases (S,)."""
         basis = _fourier(np.mod(phase, 1.0), self.harmonics)
         rv = np.einsum("sj,bjk->sbk", basis, self.rot)
-        R = np.einsum("bij,sbjk->sbik", self.mean, Rotation.from_rotvec(rv.reshape(-1, 3)).as_matrix().reshape(
-            rv.shape[:2] + (3, 3)))
-        return R, np.einsum("sj,bjk->sbk", basis, self.pos)
+        H = np.einsum("bij,sbjk->sbik", self.mean, Rotation.from_rotvec(rv.reshape(-1, 3)).as_matrix().reshape(
+            rv.shape[:2] + (3, 3)))  # the host's (or the body's own) rotation in the anchor segment
+        p = np.einsum("sj,bjk->sbk", basis, self.pos) + np.einsum("sbij,bj->sbi", H, self.offset)
+        return H @ self.right, p
 
 
 def calibration(rig: Mapping[str, Any], character: Character, evaluation: Mapping[str, Any],
-                cycle: Mapping[str, Any], cutoff_hz: float = LOWPASS_HZ) -> Calibration:
+                cycle: Mapping[str, Any], posture: tuple[np.ndarray, np.ndarray],
+                cutoff_hz: float = CALIBRATION_CUTOFF_HZ) -> Calibration:
     """The model's bodies against the motion's character at the captured cycle's frames (our
     world; ``evaluation``: OpenSim's body frames along the trial's coordinates,
     :func:`solver.io.opensim.worker.run_worker`; the capture skeleton's fit in the rig), as a
     periodic function of the phase with harmonics up to ``cutoff_hz`` (the capture's frame
-    noise and the cycle's small non-closure do not reach the written motion)."""
+    noise and the cycle's small non-closure do not reach the written motion).
+
+    A body riding on a segment that is not its own (merged into it) is rigid on that segment:
+    it is where the model puts it in ``posture`` (the body frames (B, 3, 3), (B, 3) in OpenSim
+    ground at the cycle's mean coordinates) relative to the model body that is the segment's
+    own (the pelvis), that host taken at its mean calibration — one pose of the model, so the
+    model can take it, and the posture in which the character holds the merged segments."""
     bodies = list(evaluation["body_names"])
     if bodies != list(rig["bodies"]):
         raise OpenSimExportError("the motion's OpenSim model does not have the bodies its rig records")
@@ -296,17 +315,22 @@ def calibration(rig: Mapping[str, Any], character: Character, evaluation: Mappin
     own = {b: ("abdomen" if s == "torso" else s) for b, s in dict(rig["body_segments"]).items()}
     B = len(bodies)
     mean = np.empty((B, 3, 3))
+    right = np.tile(np.eye(3), (B, 1, 1))  # body in its host body (merged bodies), identity otherwise
+    offset = np.zeros((B, 3))
     rot = np.zeros((B, 2 * K + 1, 3))
     pos = np.zeros((B, 2 * K + 1, 3))
     err_r, err_p = [], []
+    merged = [b for b in bodies if own.get(b) != anchors[b]]
     for i, b in enumerate(bodies):
+        if b in merged:
+            continue
         a = names.index(anchors[b])
         Ra = np.moveaxis(Rs[a], -1, 0)  # (F, 3, 3)
         C = np.einsum("tji,tjk->tik", Ra, W[:, i])
         d = np.einsum("tji,tj->ti", Ra, p[:, i] - Ps[a].T)
         m = Rotation.from_matrix(C).mean()
         rv = (m.inv() * Rotation.from_matrix(C)).as_rotvec()  # (F, 3)
-        k = K if own.get(b) == anchors[b] and not UNMARKED_BODIES.fullmatch(b) else 0
+        k = 0 if UNMARKED_BODIES.fullmatch(b) else K
         sub = basis[:, :2 * k + 1]
         rot[i, :2 * k + 1] = np.linalg.lstsq(sub, rv, rcond=None)[0]
         pos[i, :2 * k + 1] = np.linalg.lstsq(sub, d, rcond=None)[0]
@@ -314,9 +338,23 @@ def calibration(rig: Mapping[str, Any], character: Character, evaluation: Mappin
         if k:
             err_r.append(rv - sub @ rot[i, :2 * k + 1])
             err_p.append(d - sub @ pos[i, :2 * k + 1])
+    R_post, P_post = np.asarray(posture[0], dtype=float), np.asarray(posture[1], dtype=float)
+    for b in merged:  # rigid on the anchor segment's own body, in the model's own posture
+        i = bodies.index(b)
+        host = next(h for h in bodies if own.get(h) == anchors[b] and h not in merged)
+        j = bodies.index(host)
+        rel_R = R_post[j].T @ R_post[i]  # body in host (OpenSim body axes: frame-independent)
+        rel_p = R_post[j].T @ (P_post[i] - P_post[j])
+        # the host's mean calibration (constant: rigid on the anchor segment, as the character holds it), then
+        # the body where the model's posture puts it in the host
+        mean[i] = mean[j]
+        pos[i, 0] = pos[j, 0]
+        right[i] = rel_R
+        offset[i] = rel_p
     er = np.degrees(np.linalg.norm(np.concatenate(err_r), axis=1)) if err_r else np.zeros(1)
     ep = 1e3 * np.linalg.norm(np.concatenate(err_p), axis=1) if err_p else np.zeros(1)
-    return Calibration(anchors, mean, rot, pos, K, float(np.sqrt(np.mean(er**2))), float(np.sqrt(np.mean(ep**2))))
+    return Calibration(anchors, mean, rot, pos, K, float(np.sqrt(np.mean(er**2))), float(np.sqrt(np.mean(ep**2))),
+                       right, offset)
 
 
 def body_poses(motion: Motion, q: np.ndarray, t: np.ndarray, D: float, cal: Calibration
@@ -446,18 +484,22 @@ def write_trc(path: str | Path, names: Sequence[str], times: np.ndarray, xyz: np
     Path(path).write_text("\n".join(head + rows) + "\n")
 
 
-def external_loads_xml(feet: Mapping[str, str], datafile: str) -> str:
-    """ExternalLoads for the two feet (columns ``ground_force_{r,l}_v/p``, ``ground_torque_{r,l}_``)."""
+def external_loads_xml(feet: Mapping[str, str], datafile: str,
+                       columns: Sequence[tuple[str, str, str, str]] | None = None) -> str:
+    """ExternalLoads for the two feet: by default columns ``ground_force_{r,l}_v/p`` and
+    ``ground_torque_{r,l}_``; ``columns``: (side, force, point, torque) identifiers instead."""
+    cols = columns or [(side, f"ground_force_{s}_v", f"ground_force_{s}_p", f"ground_torque_{s}_")
+                       for side, s in (("right", "r"), ("left", "l"))]
     forces = []
-    for side, s in (("right", "r"), ("left", "l")):
-        forces.append(f"""			<ExternalForce name="{side}_foot">
-				<applies_force>true</applies_force>
+    for k, (side, f_id, p_id, t_id) in enumerate(cols):
+        forces.append(f"""			<ExternalForce name="{side}_foot_{k + 1}">
+				<appliesForce>true</appliesForce>
 				<applied_to_body>{feet[side]}</applied_to_body>
 				<force_expressed_in_body>ground</force_expressed_in_body>
 				<point_expressed_in_body>ground</point_expressed_in_body>
-				<force_identifier>ground_force_{s}_v</force_identifier>
-				<point_identifier>ground_force_{s}_p</point_identifier>
-				<torque_identifier>ground_torque_{s}_</torque_identifier>
+				<force_identifier>{f_id}</force_identifier>
+				<point_identifier>{p_id}</point_identifier>
+				<torque_identifier>{t_id}</torque_identifier>
 			</ExternalForce>""")
     body = "\n".join(forces)
     return f"""<?xml version="1.0" encoding="UTF-8" ?>
@@ -474,8 +516,10 @@ def external_loads_xml(feet: Mapping[str, str], datafile: str) -> str:
 
 
 def id_setup_xml(model: str, coordinates: str, external_loads: str, t0: float, t1: float, *,
-                 lowpass: float = LOWPASS_HZ, output: str = ID_OUTPUT_FILE, results: str = ".") -> str:
-    """An InverseDynamicsTool setup (muscles excluded, coordinates low-passed at ``lowpass`` Hz)."""
+                 lowpass: float | None = LOWPASS_HZ, output: str = ID_OUTPUT_FILE, results: str = ".") -> str:
+    """An InverseDynamicsTool setup (muscles excluded, coordinates low-passed at ``lowpass`` Hz,
+    or not filtered: None)."""
+    lowpass = -1.0 if lowpass is None else float(lowpass)
     return f"""<?xml version="1.0" encoding="UTF-8" ?>
 <OpenSimDocument Version="40000">
 	<InverseDynamicsTool name="inverse_dynamics">
@@ -544,13 +588,13 @@ def run_child(job: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def child_main() -> None:  # pragma: no cover - runs in the child process (exercised by every export test)
-    """Child entry: a JSON job on stdin (``ik`` or ``id``), its answer as JSON."""
+    """Child entry: a JSON job on stdin (``ik``, ``id`` or ``couple``), its answer as JSON."""
     import opensim as osim  # first heavy import of the process: OpenSim's casadi wins
 
     osim.Logger.setLevelString("error")
     job = json.loads(sys.stdin.read())
     try:
-        answer = {"ik": _child_ik, "id": _child_id}[job["job"]](osim, job)
+        answer = {"ik": _child_ik, "id": _child_id, "couple": _child_couple}[job["job"]](osim, job)
         Path(job["answer"]).write_text(json.dumps(answer))
     except Exception as e:
         Path(job["answer"] + ".err").write_text(str(e))
@@ -564,6 +608,9 @@ def _child_ik(osim, job):  # pragma: no cover - child
     model = osim.Model(job["model"])
     for name, body, local in job["markers"]:
         model.addMarker(osim.Marker(name, model.getBodySet().get(body), osim.Vec3(*local)))
+    cs = model.getCoordinateSet()
+    for i in range(cs.getSize()):  # the motion's pose, even where it leaves a coordinate's range
+        cs.get(i).set_clamped(False)
     model.finalizeConnections()
     scratch = job["scratch"]
     marked = os.path.join(scratch, "model_with_virtual_markers.osim")
@@ -595,28 +642,81 @@ def _child_ik(osim, job):  # pragma: no cover - child
     return answer
 
 
+def _couplers(osim, model, names):  # pragma: no cover - child
+    """The model's enforced CoordinateCouplerConstraints: (dependent index, independent indices, function)."""
+    out = []
+    for i in range(model.getConstraintSet().getSize()):
+        ccc = osim.CoordinateCouplerConstraint.safeDownCast(model.getConstraintSet().get(i))
+        if ccc is not None and ccc.get_isEnforced():
+            ind = ccc.getIndependentCoordinateNames()
+            out.append((names.index(ccc.getDependentCoordinateName()),
+                        [names.index(ind.get(k)) for k in range(ind.getSize())], ccc.getFunction()))
+    return out
+
+
+def _coupled(osim, couplers, q):  # pragma: no cover - child
+    """``q`` (model order, radians/metres) with every coupled coordinate set by its coupler."""
+    for d, ind, fn in couplers:
+        v = osim.Vector(len(ind), 0.0)
+        for k, j in enumerate(ind):
+            v.set(k, float(q[j]))
+        q[d] = fn.calcValue(v)
+    return q
+
+
+def _child_couple(osim, job):  # pragma: no cover - child
+    """A coordinates file with every coupled coordinate set by its CoordinateCouplerConstraint
+    (a file whose ``knee_angle_r_beta`` merely repeats ``knee_angle_r`` violates the constraint,
+    and the inverse dynamics answers with the constraint's forces in the pelvis residuals)."""
+    model = osim.Model(job["model"])
+    state = model.initSystem()
+    cs = model.getCoordinateSet()
+    coords = [cs.get(i) for i in range(cs.getSize())]
+    names = [c.getName() for c in coords]
+    couplers = _couplers(osim, model, names)
+    with open(job["coordinates"]) as f:
+        lines = f.read().splitlines()
+    end = next(i for i, ln in enumerate(lines) if ln.strip().lower() == "endheader")
+    labels = lines[end + 1].split()
+    rows = np.array([[float(x) for x in ln.split()] for ln in lines[end + 2:] if ln.strip()])
+    deg = any(ln.replace(" ", "").lower() == "indegrees=yes" for ln in lines[:end])
+    rot = [c.getMotionType() == osim.Coordinate.Rotational for c in coords]
+    changed = []
+    for d, ind, _ in couplers:
+        if names[d] not in labels or any(names[j] not in labels for j in ind):
+            continue
+        changed.append(names[d])
+        for r in rows:
+            q = np.array([c.getDefaultValue() for c in coords])
+            for j in [*ind, d]:
+                v = r[labels.index(names[j])]
+                q[j] = np.radians(v) if deg and rot[j] else v
+            v = _coupled(osim, couplers, q)[d]
+            r[labels.index(names[d])] = np.degrees(v) if deg and rot[d] else v
+    del state
+    body = ["\t".join(f"{v:.8f}" for v in row) for row in rows]
+    with open(job["out"], "w") as f:
+        f.write("\n".join(lines[:end + 2] + body) + "\n")
+    return {"coupled": changed}
+
+
 def _refine(osim, model_path, tool_mot, markers, weights, xyz, out):  # pragma: no cover - child
     """Gauss-Newton on the weighted marker cost from the InverseKinematicsTool's solution, frame by
     frame, OpenSim evaluating the model (its assembler stops up to ~2 mm short of the optimum even
     on markers the model can fit exactly, which shows as ±1° jitter in the coordinates). Coupled
-    coordinates follow their CoordinateCouplerConstraint; clamped ones stay in their range."""
+    coordinates follow their CoordinateCouplerConstraint. No coordinate is clamped to its range
+    (a clamp is a kink in the motion, i.e. an acceleration spike); those that leave it are
+    reported (``outside_range``: the largest excursion, radians or metres)."""
     model = osim.Model(model_path)
     state = model.initSystem()
     cs = model.getCoordinateSet()
     coords = [cs.get(i) for i in range(cs.getSize())]
     names = [c.getName() for c in coords]
-    couplers = []
-    for i in range(model.getConstraintSet().getSize()):
-        con = model.getConstraintSet().get(i)
-        ccc = osim.CoordinateCouplerConstraint.safeDownCast(con)
-        if ccc is not None and ccc.get_isEnforced():
-            ind = ccc.getIndependentCoordinateNames()
-            couplers.append((names.index(ccc.getDependentCoordinateName()),
-                             [names.index(ind.get(k)) for k in range(ind.getSize())], ccc.getFunction()))
+    couplers = _couplers(osim, model, names)
     dependent = {d for d, _, _ in couplers}
     free = [i for i, c in enumerate(coords) if not c.getLocked(state) and i not in dependent]
-    lo = np.array([c.getRangeMin() if c.getClamped(state) else -np.inf for c in coords])
-    hi = np.array([c.getRangeMax() if c.getClamped(state) else np.inf for c in coords])
+    lo = np.array([c.getRangeMin() for c in coords])
+    hi = np.array([c.getRangeMax() for c in coords])
     bodies = [model.getBodySet().get(b) for b in dict.fromkeys(m[1] for m in markers)]
     bidx = {b.getName(): k for k, b in enumerate(bodies)}
     mb = np.array([bidx[m[1]] for m in markers])
@@ -635,11 +735,7 @@ def _refine(osim, model_path, tool_mot, markers, weights, xyz, out):  # pragma: 
         Q[:, rot] = np.radians(Q[:, rot])
 
     def place(q):
-        for d, ind, fn in couplers:
-            v = osim.Vector(len(ind), 0.0)
-            for k, j in enumerate(ind):
-                v.set(k, float(q[j]))
-            q[d] = fn.calcValue(v)
+        _coupled(osim, couplers, q)
         for i, c in enumerate(coords):
             c.setValue(state, float(q[i]), False)
         model.realizePosition(state)
@@ -654,21 +750,30 @@ def _refine(osim, model_path, tool_mot, markers, weights, xyz, out):  # pragma: 
 
     h = 1e-7
     errs = np.empty((Q.shape[0], len(markers)))
+    iterations = []
     for k in range(Q.shape[0]):
-        q = np.clip(Q[k].copy(), lo, hi)
+        q = Q[k].copy()
         base = place(q.copy())
-        J = np.empty((base.size, len(free)))
-        for a, i in enumerate(free):  # the Jacobian once per frame (the tool's solution is close)
-            qp = q.copy()
-            qp[i] += h
-            J[:, a] = (sw * (place(qp) - base)).ravel() / h
-        pinv = np.linalg.pinv(J)
-        for _ in range(8):
-            step = -pinv @ (sw * (base - xyz[k])).ravel()
-            q[free] = np.clip(q[free] + step, lo[free], hi[free])
-            base = place(q.copy())
-            if np.max(np.abs(step)) < 1e-8:
+        n_it = 0
+        for _ in range(4):  # Gauss-Newton, each Jacobian reused for a few steps (the start is close)
+            J = np.empty((base.size, len(free)))
+            for a, i in enumerate(free):
+                qp = q.copy()
+                qp[i] += h
+                J[:, a] = (sw * (place(qp) - base)).ravel() / h
+            pinv = np.linalg.pinv(J)
+            done = False
+            for _ in range(4):
+                step = -pinv @ (sw * (base - xyz[k])).ravel()
+                q[free] = q[free] + step
+                base = place(q.copy())
+                n_it += 1
+                if np.max(np.abs(step)) < 1e-9:
+                    done = True
+                    break
+            if done:
                 break
+        iterations.append(n_it)
         final = place(q)  # couplers applied
         Q[k] = [c.getValue(state) for c in coords]
         errs[k] = np.linalg.norm(final - xyz[k], axis=1)
@@ -680,7 +785,11 @@ def _refine(osim, model_path, tool_mot, markers, weights, xyz, out):  # pragma: 
     body = ["\t".join(f"{v:16.8f}" for v in row) for row in out_rows]
     with open(out, "w") as f:
         f.write("\n".join(lines[:end + 2] + body) + "\n")
-    return {"marker_rms_m": np.sqrt(np.mean(errs**2, axis=1)).tolist(), "marker_max_m": errs.max(axis=1).tolist(),
+    below, above = np.maximum(lo - Q, 0.0), np.maximum(Q - hi, 0.0)
+    outside = {names[i]: float(max(below[:, i].max(), above[:, i].max())) for i in range(len(names))
+               if below[:, i].max() > 1e-9 or above[:, i].max() > 1e-9}
+    return {"outside_range": outside, "refine_iterations_max": int(max(iterations)),
+            "marker_rms_m": np.sqrt(np.mean(errs**2, axis=1)).tolist(), "marker_max_m": errs.max(axis=1).tolist(),
             "per_marker_rms_m": dict(zip((m[0] for m in markers), np.sqrt(np.mean(errs**2, axis=0)).tolist()))}
 
 
@@ -897,6 +1006,93 @@ def _floor_height(folder: Path, fields: Mapping[str, str]) -> float:
     return float(np.sum(y * w) / np.sum(w)) if w.size else 0.0
 
 
+def capture_residuals(model: str | Path, coordinates: str | Path, grf: str | Path,
+                      external_loads: str | Path | None = None, *, t0: float, t1: float,
+                      lowpass: float = CAPTURE_LOWPASS_HZ, feet: Mapping[str, str] | None = None
+                      ) -> dict[str, Any]:
+    """The residuals of a trial's own inverse dynamics — its coordinates file and force plates on
+    its model — by OpenSim's InverseDynamicsTool over [t0, t1] (s), coordinates low-passed at
+    ``lowpass`` Hz as OpenSim's examples do (:func:`residual_figures`). Without an
+    ExternalLoads file the GRF columns are told by their names (``ground_force_r_vx``…) and
+    applied to ``feet`` (default ``calcn_r``, ``calcn_l``). The files are copied to a scratch
+    folder (a 3.x model's socket paths repaired as for an export; coupled coordinates set by
+    their CoordinateCouplerConstraint, :func:`_child_couple`); a plate carrying less than
+    ``PLATE_MIN_N`` vertically is zeroed there (force, point, torque), as force-plate
+    thresholds do: its centre of pressure is meaningless (33 km away in the loaded-walking
+    trial's file) and would turn a few newtons of noise into kilonewton-metres."""
+    from solver.io.opensim.base import OpenSimError
+    from solver.io.opensim.external_loads import external_loads as read_loads
+    from solver.io.opensim.external_loads import guess_force_specs
+    from solver.io.opensim.storage import read_mot
+
+    feet = dict(feet or {"right": "calcn_r", "left": "calcn_l"})
+    try:
+        sto = read_mot(grf)
+        specs = read_loads(external_loads) if external_loads is not None else guess_force_specs(sto)
+        cols = []
+        for sp in specs:
+            t_id = next((c for c in (sp.torque + "_", sp.torque) if sp.torque and all(
+                c + a in sto.labels for a in "xyz")), "")
+            cols.append((sp.side, sp.force, sp.point, t_id))
+        with tempfile.TemporaryDirectory(prefix="motionx-osim-capture-") as d:
+            folder = Path(d)
+            text, _ = repaired_model_text(Path(model).read_bytes())
+            (folder / "model.osim").write_bytes(text)
+            coupled = run_child({"job": "couple", "model": str(folder / "model.osim"),
+                                 "coordinates": str(Path(coordinates).resolve()),
+                                 "out": str(folder / "coordinates.mot")})["coupled"]
+            data = np.array(sto.data, copy=True)
+            for _, f_id, p_id, t_id in cols:  # a plate under no load: its point is meaningless (far away)
+                idx = [sto.labels.index(f_id + a) for a in "xyz"] + [sto.labels.index(p_id + a) for a in "xyz"]
+                idx += [sto.labels.index(t_id + a) for a in "xyz"] if t_id else []
+                off = sto.column(f_id + "y") < PLATE_MIN_N
+                data[np.ix_(off, idx)] = 0.0
+            write_mot(folder / "grf.mot", "grf", sto.labels, sto.time, data, in_degrees=False)
+            (folder / EXTERNAL_LOADS_FILE).write_text(external_loads_xml(feet, "grf.mot", cols))
+            (folder / SETUP_FILE).write_text(id_setup_xml("model.osim", "coordinates.mot", EXTERNAL_LOADS_FILE,
+                                                          t0, t1, lowpass=lowpass))
+            out = opensim_residuals(folder)
+            out["coupled_coordinates_recomputed"] = coupled
+            out["plates_below_N_zeroed"] = PLATE_MIN_N
+            return out
+    except OpenSimError as e:
+        raise OpenSimExportError(str(e)) from None
+
+
+def _capture_reference(rig: Mapping[str, Any], model_path: Path, cycle: Mapping[str, Any],
+                       rotational: Mapping[str, bool]) -> dict[str, Any]:
+    """The trial's own residuals over the captured cycle where the plates are complete, when the
+    trial's GRF file is still where it was imported from; otherwise why not (``rotational``:
+    coordinate name -> whether OpenSim says it is a rotation)."""
+    plates = rig.get("plates") or {}
+    grf = plates.get("grf")
+    if not grf or not Path(grf).is_file():
+        return {"available": False, "why": "the trial's force-plate file is not available" if grf else
+                "the trial has no force plates"}
+    xml = plates.get("external_loads")
+    if xml and not Path(xml).is_file():
+        return {"available": False, "why": "the trial's ExternalLoads file is not available"}
+    t0, t1 = float(cycle["t_start"]), float(cycle["t_start"]) + float(cycle["period_s"])
+    span = plates.get("complete_s")
+    if span:
+        t0, t1 = max(t0, float(span[0])), min(t1, float(span[1]))
+    if t1 - t0 < 0.2:
+        return {"available": False, "why": "the plates do not cover the captured cycle"}
+    with tempfile.TemporaryDirectory(prefix="motionx-osim-capture-") as d:
+        names = list(rig["coordinates"]["names"])
+        values = np.asarray(rig["coordinates"]["values"], dtype=float).copy()
+        rot = np.array([bool(rotational[n]) for n in names], dtype=bool)
+        values[:, rot] = np.degrees(values[:, rot])
+        mot = Path(d) / "capture_coordinates.mot"
+        write_mot(mot, "Coordinates", names, np.asarray(rig["times"], dtype=float), values, in_degrees=True)
+        out = capture_residuals(model_path, mot, grf, xml, t0=t0, t1=t1, feet=rig["feet"])
+    out["available"] = True
+    out["what"] = ("the trial's own coordinates and force plates on its model, OpenSim's InverseDynamicsTool, "
+                   f"coordinates low-passed at {out['lowpass_hz']:g} Hz, over the captured cycle where every loaded "
+                   "foot is on a plate")
+    return out
+
+
 # --- the export ---------------------------------------------------------------------------------------
 
 
@@ -953,7 +1149,7 @@ def _adjustment_figures(before: np.ndarray, after: np.ndarray, t: np.ndarray, wi
 
 
 def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, rate: float = RATE_HZ,
-                  lowpass: float = LOWPASS_HZ, reduce_residuals: bool = True) -> dict[str, Any]:
+                  lowpass: float | None = LOWPASS_HZ, reduce_residuals: bool = True) -> dict[str, Any]:
     """Write ``motion`` on its source OpenSim model into ``folder`` (created; see the module doc
     for every file) and return the summary (also ``summary.json``): files, sampling, the
     inverse-kinematics fit, the residuals of OpenSim's InverseDynamicsTool on the files as
@@ -982,10 +1178,16 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
         # the model's bodies along the captured trial, then against our segments
         tk = time.perf_counter()
         names = list(rig["coordinates"]["names"])
-        ev = run_worker(str(folder / model_file), names, np.asarray(rig["coordinates"]["values"], dtype=float), False)
-        timing["evaluate_capture_s"] = time.perf_counter() - tk
+        values = np.asarray(rig["coordinates"]["values"], dtype=float)
         cyc = motion.provenance["source"]["cycle"]
-        cal = calibration(rig, motion.character, ev, cyc)
+        times = np.asarray(rig["times"], dtype=float)
+        in_cycle = (times >= float(cyc["t_start"]) - 1e-9) & (times < float(cyc["t_start"]) + float(cyc["period_s"]))
+        mean_row = values[in_cycle].mean(axis=0) if in_cycle.any() else values.mean(axis=0)
+        ev = run_worker(str(folder / model_file), names, np.vstack([values, mean_row]), False)
+        posture = (np.asarray(ev["R"])[-1], np.asarray(ev["P"])[-1])
+        ev = {**ev, "R": np.asarray(ev["R"])[:-1], "P": np.asarray(ev["P"])[:-1]}
+        timing["evaluate_capture_s"] = time.perf_counter() - tk
+        cal = calibration(rig, motion.character, ev, cyc, posture)
         t, q, w, D = cycle_samples(motion, cycles, float(rate))
         W, P = body_poses(motion, q, t, D, cal)
         defs, xyz = virtual_markers(list(rig["bodies"]), np.asarray(ev["body_com"], dtype=float), W, P)
@@ -1036,9 +1238,25 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
         tk = time.perf_counter()
         residuals["as_written"] = opensim_residuals(folder)
         timing["inverse_dynamics_s"] = time.perf_counter() - tk
+        other = CAPTURE_LOWPASS_HZ if lowpass is None else None  # the same files under the other filter choice
+        extra = "setup_id_other_filter.xml"
+        (folder / extra).write_text(id_setup_xml(model_file, COORDINATES_FILE, EXTERNAL_LOADS_FILE, *window,
+                                                 lowpass=other, output="inverse_dynamics_other_filter.sto"))
+        try:
+            residuals["as_written_other_filter"] = opensim_residuals(folder, extra)
+        finally:
+            for name in (extra, "inverse_dynamics_other_filter.sto"):
+                (folder / name).unlink(missing_ok=True)
+        for name in (ID_OUTPUT_FILE, "opensim.log"):  # outputs of running the setup, not part of the export
+            (folder / name).unlink(missing_ok=True)
+        tk = time.perf_counter()
+        reference = _capture_reference(rig, folder / model_file, cyc,
+                                       dict(zip(ev["coord_names"], (bool(r) for r in ev["coord_rotational"]))))
+        timing["capture_inverse_dynamics_s"] = time.perf_counter() - tk
     except OpenSimError as e:
         raise OpenSimExportError(str(e)) from None
     timing["total_s"] = time.perf_counter() - t_begin
+    translational = {n for n, r in zip(ev["coord_names"], ev["coord_rotational"]) if not r}
     ik_rms = np.asarray(ik["marker_rms_m"], dtype=float)
     ik_max = np.asarray(ik["marker_max_m"], dtype=float)
     summary = {
@@ -1065,10 +1283,14 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
                                                "smoothing_rms_mm": cal.fit_rms_mm},
                                "marker_rms_mm": {"mean": 1e3 * float(ik_rms.mean()), "max": 1e3 * float(ik_rms.max())},
                                "marker_max_mm": 1e3 * float(ik_max.max()),
+                               "coordinates_outside_model_range_deg_or_m": {
+                                   n: round(float(np.degrees(v)) if n not in translational else float(v), 4)
+                                   for n, v in ik["outside_range"].items()},
                                "worst_markers_rms_mm": {n: round(1e3 * v, 2) for n, v in sorted(
                                    ik["per_marker_rms_m"].items(), key=lambda kv: -kv[1])[:5]}},
         "residual_reduction": adjustment,
         "residuals": residuals,
+        "capture_residuals": reference,
         "opensim_version": _opensim_version(),
         "timing_s": {k: round(v, 3) for k, v in timing.items()},
     }
@@ -1092,6 +1314,8 @@ def readme(summary: Mapping[str, Any]) -> str:
     before = summary["residuals"].get("before_reduction")
     f = summary["files"]
     repaired = " (3.x socket paths rewritten to /bodyset/...)" if summary["model"]["socket_paths_repaired"] else ""
+    filt = ("coordinates not filtered (samples of a smooth motion)" if res["lowpass_hz"] <= 0 else
+            f"coordinates low-passed at {res['lowpass_hz']:g} Hz")
     lines = [
         "# A motionx motion on your OpenSim model", "",
         f"Motion: {summary['motion']['step']} (λ = {summary['motion']['lambda']}), character "
@@ -1104,9 +1328,8 @@ def readme(summary: Mapping[str, Any]) -> str:
         f"| `{f['ground_reactions']}` | ground reactions per foot: force (N), centre of pressure on the floor (m), "
         "free moment (N·m), OpenSim ground (x forward, y up, z right) |",
         f"| `{f['external_loads']}` | the forces applied to {', '.join(summary['ground_frame']['feet'].values())} |",
-        f"| `{f['inverse_dynamics_setup']}` | OpenSim's InverseDynamicsTool on these files, coordinates low-passed at "
-        f"{res['lowpass_hz']:g} Hz, over the middle cycle {res['time_range_s'][0]:.3f}-"
-        f"{res['time_range_s'][1]:.3f} s |",
+        f"| `{f['inverse_dynamics_setup']}` | OpenSim's InverseDynamicsTool on these files, {filt}, over the middle "
+        f"cycle {res['time_range_s'][0]:.3f}-{res['time_range_s'][1]:.3f} s |",
         "| `summary.json` | everything below, and more |", "",
         "Run the inverse dynamics yourself: `opensim-cmd run-tool setup_id.xml` (in this folder), or",
         "`opensim.InverseDynamicsTool('setup_id.xml').run()` from Python.", "",
@@ -1116,7 +1339,17 @@ def readme(summary: Mapping[str, Any]) -> str:
         "| | peak residual force (N) | limit (N) | peak residual moment (N·m) | limit (N·m) | meets |",
         "|---|---|---|---|---|---|",
     ]
-    for name, r in ((("before ground-reaction adjustment", before),) if before else ()) + (("as written", res),):
+    other = summary["residuals"].get("as_written_other_filter")
+    rows: list[tuple[str, Mapping[str, Any]]] = [("before ground-reaction adjustment", before)] if before else []
+    rows.append(("as written", res))
+    if other:
+        rows.append(("as written, " + ("not filtered" if other["lowpass_hz"] <= 0 else
+                                       f"coordinates low-passed at {other['lowpass_hz']:g} Hz"), other))
+    cap = summary.get("capture_residuals") or {}
+    if cap.get("available"):
+        rows.append((f"the trial's own IK and plates ({cap['time_range_s'][0]:.2f}-{cap['time_range_s'][1]:.2f} s, "
+                     f"{cap['lowpass_hz']:g} Hz)", cap))
+    for name, r in rows:
         lines.append(f"| {name} | {r['peak_residual_force_vector_N']:.2f} | {r['force_limit_N']:.1f} | "
                      f"{r['peak_residual_moment_Nm']:.2f} | {r['moment_limit_Nm']:.2f} | "
                      f"{'yes' if r['meets_hicks_2015'] else 'no'} |")
@@ -1131,11 +1364,12 @@ def readme(summary: Mapping[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def to_opensim(motion: Motion, *, cycles: int = CYCLES, rate: float = RATE_HZ, reduce_residuals: bool = True) -> bytes:
+def to_opensim(motion: Motion, *, cycles: int = CYCLES, rate: float = RATE_HZ, lowpass: float | None = LOWPASS_HZ,
+               reduce_residuals: bool = True) -> bytes:
     """The folder :func:`write_opensim` writes, as a zip archive (``export_motion(motion,
     "opensim")``; with ``path=DIR`` it is unpacked into DIR)."""
     with tempfile.TemporaryDirectory(prefix="motionx-osim-export-") as d:
-        write_opensim(motion, d, cycles=cycles, rate=rate, reduce_residuals=reduce_residuals)
+        write_opensim(motion, d, cycles=cycles, rate=rate, lowpass=lowpass, reduce_residuals=reduce_residuals)
         buf = io.BytesIO()
         with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
             for p in sorted(Path(d).iterdir()):

@@ -50,7 +50,10 @@ tibia_s (+ patella_s)       shank_s
 calcn_s + talus_s           foot_s  (talus: ankle landmark; calcn: heel, orientation)
 toes_s                      toes_s
 torso                       abdomen + thorax + head (mass split by Winter's ratios
-                            0.139 : 0.196 : 0.081 [: clavicles 0.010 each]) — or, without
+                            0.139 : 0.196 : 0.081, each part at the torso's centre of mass
+                            with its share of the torso's inertia: together, rigid with the
+                            torso, they are the torso body; the clavicles, which such a model
+                            does not have, are placeholders of negligible mass) — or, without
                             arms in the model (gait2354: the torso body is head, arms and
                             trunk), the abdomen alone, with the body's own mass, centre of
                             mass and inertia (see below)
@@ -204,5 +207,10 @@ def load_opensim(
             if warn:
                 log.warning("%s: %s", Path(grf).name, warn)
                 src["mass_warning"] = warn
-        cap = cap.evolve(measured=measured, source=src)
+        complete = cap.times[measured.valid]
+        rig = {**(cap.rig or {}), "plates": {
+            "grf": str(Path(grf).resolve()),
+            "external_loads": None if grf_xml is None else str(Path(grf_xml).resolve()),
+            "complete_s": [float(complete[0]), float(complete[-1])] if complete.size else None}}
+        cap = cap.evolve(measured=measured, source=src, rig=rig)
     return cap

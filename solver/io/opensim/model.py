@@ -18,7 +18,7 @@ import numpy as np
 
 from solver.capture import GroundFrame
 from solver.character import capture_full
-from solver.io.fit import HIP_HEIGHT_FRACTION, SEGMENT_LANDMARKS
+from solver.io.fit import HIP_HEIGHT_FRACTION, SEGMENT_LANDMARKS, THORAX_JOINT_FRACTION
 from solver.io.opensim.base import C_OSIM, OpenSimError, to_ours_p, to_ours_R
 from solver.io.opensim.external_loads import floor_from_grf
 from solver.io.opensim.ik import solve_ik
@@ -44,8 +44,15 @@ _SEGMENT_RULES: list[tuple[str, str]] = [
 #: which body gives the segment's orientation
 _ORIENTING = {"pelvis": "pelvis", "thigh": "femur", "shank": "tibia", "foot": "calcn", "toes": "toes",
               "upper_arm": "humerus", "forearm": "radius", "hand": "hand", "abdomen": "torso"}
-#: torso mass split (Winter) when the capture skeleton has an upper body
-_TORSO_SPLIT = {"abdomen": 0.139, "thorax": 0.196, "head": 0.081, "clavicle_r": 0.010, "clavicle_l": 0.010}
+#: torso mass split (Winter's ratios) between the trunk segments of a model with arms; each part
+#: gets the torso body's centre of mass and its share of the torso's inertia, so that the trunk,
+#: rigid with the torso in the data, has the torso body's mass distribution exactly
+_TORSO_SPLIT = {"abdomen": 0.139, "thorax": 0.196, "head": 0.081}
+#: the trunk segments' origins (a virtual landmark for the thorax, see solver.io.fit)
+_TRUNK_ORIGINS = {"abdomen": "lumbar", "thorax": "@thorax_joint", "head": "neck"}
+#: the shoulder girdle has no body of its own in such a model (the humerus hangs on the torso):
+#: placeholders of negligible mass, rigid with the torso
+_CLAVICLES = ("clavicle_r", "clavicle_l")
 #: canonical upper-body segments an arm-less model (gait2354: one torso body for head, arms and
 #: trunk) does not have: rigid with its torso in the data, they exist for the topology only
 _ARMLESS_PLACEHOLDERS = ("thorax", "head") + tuple(
@@ -285,6 +292,10 @@ def _segment_masses(body_mass: Mapping[str, float], seg_of: Mapping[str, str | N
             raise OpenSimError(f"{model}: cannot map body {b!r} to a segment")
         if seg == "torso":
             split_mass(m, _TORSO_SPLIT, into=seg_mass)
+            eps = PLACEHOLDER_MASS_FRACTION * float(sum(body_mass.values()))
+            for c in _CLAVICLES:
+                seg_mass[c] = eps
+            seg_mass["abdomen"] -= eps * len(_CLAVICLES)
             continue
         seg_mass[seg] = seg_mass.get(seg, 0.0) + m
     if armless_torso:
@@ -430,11 +441,29 @@ def _with_segment_inertias(track: SkeletonTrack, res, seg_of, off) -> SkeletonTr
     bi = {b: i for i, b in enumerate(names)}
     R0, P0 = res["R0"], res["P0"]
     Rb, Pb = res["R"], res["P"]
+    out: dict[str, dict] = {}
+
+    def origin_in_body(landmark: np.ndarray, i: int) -> np.ndarray:
+        """A segment origin (ours, (3, T)) in body i's frame (OpenSim axes), median over the trial."""
+        o_ground = (np.asarray(landmark).T @ C_OSIM) + off  # ours -> OpenSim ground
+        return np.median(np.einsum("tji,tj->ti", Rb[:, i], o_ground - Pb[:, i]), axis=0)
+
+    if "torso" in seg_of.values() and "lumbar" in track.landmarks and "neck" in track.landmarks:
+        # a torso split between trunk segments: each part at the torso's centre of mass with its share of
+        # the torso's inertia (the composite is the torso body's mass, centre of mass and inertia)
+        t_i = bi[next(b for b, sg in seg_of.items() if sg == "torso")]
+        lm = dict(track.landmarks)
+        lm["@thorax_joint"] = lm["lumbar"] + THORAX_JOINT_FRACTION * (lm["neck"] - lm["lumbar"])
+        m_t = float(res["body_mass"][t_i])
+        com_t = np.asarray(res["body_com"][t_i], dtype=float)
+        inertia_t = C_OSIM @ np.asarray(res["body_inertia"][t_i], dtype=float) @ C_OSIM.T
+        for seg, origin in _TRUNK_ORIGINS.items():
+            share = float((track.segment_masses or {}).get(seg, 0.0)) / m_t if m_t > 0 else 0.0
+            out[seg] = {"com": C_OSIM @ (com_t - origin_in_body(lm[origin], t_i)), "inertia": share * inertia_t}
     groups: dict[str, list[str]] = {}
     for b, s in seg_of.items():
         if s is not None and s != "torso":
             groups.setdefault(s, []).append(b)
-    out: dict[str, dict] = {}
     for seg, bodies in groups.items():
         kind = seg.rsplit("_", 1)[0] if seg[-2:] in ("_r", "_l") else seg
         main = next((b for b in bodies if b.startswith(_ORIENTING.get(kind, "\0"))), None)
@@ -444,9 +473,7 @@ def _with_segment_inertias(track: SkeletonTrack, res, seg_of, off) -> SkeletonTr
         if origin_name not in track.landmarks:
             continue
         m_i = bi[main]
-        # segment origin in the main body's frame (OpenSim axes), median over the trial
-        o_ground = (np.asarray(track.landmarks[origin_name]).T @ C_OSIM) + off  # ours -> OpenSim ground
-        o_body = np.median(np.einsum("tji,tj->ti", Rb[:, m_i], o_ground - Pb[:, m_i]), axis=0)
+        o_body = origin_in_body(track.landmarks[origin_name], m_i)  # the segment origin in the main body's frame
         M = 0.0
         mc = np.zeros(3)
         parts = []

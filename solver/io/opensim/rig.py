@@ -16,7 +16,10 @@ trial came with:
 * ``bodies``: the model's bodies and, per body, the segment of ours it belongs to;
   ``feet``: the bodies the ground reactions are applied to (``calcn_r``, ``calcn_l``);
 * ``frame``: the capture's :class:`~solver.capture.GroundFrame` (our world → OpenSim
-  ground, the belt velocity of a treadmill trial included).
+  ground, the belt velocity of a treadmill trial included);
+* ``plates`` (a trial with force plates): the GRF file and ExternalLoads paths as imported and
+  the span (s) where every loaded foot is on a plate — to check the trial's own inverse
+  dynamics beside an export's, where those files still are.
 """
 
 from __future__ import annotations
