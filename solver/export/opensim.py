@@ -1046,7 +1046,7 @@ def capture_residuals(model: str | Path, coordinates: str | Path, grf: str | Pat
                 idx = [sto.labels.index(f_id + a) for a in "xyz"] + [sto.labels.index(p_id + a) for a in "xyz"]
                 idx += [sto.labels.index(t_id + a) for a in "xyz"] if t_id else []
                 off = sto.column(f_id + "y") < PLATE_MIN_N
-                data[np.ix_(off, idx)] = 0.0
+                data[np.ix_(np.flatnonzero(off), np.asarray(idx, dtype=int))] = 0.0
             write_mot(folder / "grf.mot", "grf", sto.labels, sto.time, data, in_degrees=False)
             (folder / EXTERNAL_LOADS_FILE).write_text(external_loads_xml(feet, "grf.mot", cols))
             (folder / SETUP_FILE).write_text(id_setup_xml("model.osim", "coordinates.mot", EXTERNAL_LOADS_FILE,
