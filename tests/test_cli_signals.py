@@ -217,7 +217,8 @@ def test_a_signal_cancels_the_demo_keeping_what_its_jobs_reached(shared_data, tm
     "canceled", the demo says where and exits 130 (143)."""
     out = tmp_path / "demo"
     env = dict(os.environ, MOTIONX_DATA=str(shared_data), TMPDIR=str(tmp_path), PYTHONUNBUFFERED="1")
-    run = Run("demo", "--no-library", "--curve", "0", "--step-height", "0", "--out", out, env=env)
+    run = Run("demo", "--no-library", "--curve", "0", "--step-height", "0", "--fullbody-slope", "0", "--out", out,
+              env=env)
     run.line(when, stream="out")
     code, stdout, err = run.signal(sig)
     assert code == EXIT[sig], stdout[-3000:] + err[-3000:]

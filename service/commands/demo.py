@@ -2,15 +2,20 @@
 
 Starts ``motionx serve`` (SQLite + local process pool) on a free port in a temporary data
 directory, uploads a real captured walk over HTTP (the DeepMimic walk shipped in ``data/``
-by default), asks for three extrapolations of the same capture — a downhill slope, a
-curve and stairs — and a small motion library (3 slopes × 3 curves, one job per cell, queued
-with them so that the workers never idle), follows the jobs with a progress bar, and
-downloads into ``--out``, per job: every
-λ optimum (``step_NNN_lambda_L.motion.json``, ``.clip.json``, ``.glb``, ``.bvh``,
-``.validation.json``, named as ``motionx extrapolate`` names them), ``progress.csv`` and
-``progress.png``, and the final motion's GRF and residual plots; then the library's
+by default) and queues, on that one capture: a downhill slope, a full-body walk up a small
+slope (the ``fullbody`` character), a curve and stairs, then a small motion library (3 slopes ×
+3 curves, one job per cell, queued with them so that the workers never idle). The service makes
+each tutor once (``service.store.claim_tutor``): the first job makes the HalfBoy tutor while the
+full-body job makes its own beside it, and every other job and cell takes the stored tutor
+(waiting for it while it is being made). The demo follows the jobs with a progress bar and
+downloads into ``--out``, per job: every λ optimum (``step_NNN_lambda_L.motion.json``,
+``.clip.json``, ``.glb``, ``.bvh``, ``.validation.json``, named as ``motionx extrapolate`` names
+them; the full-body job's also on the input's own rig — for a DeepMimic input
+``.deepmimic.txt``, a DeepMimic motion for the same character file), ``progress.csv`` and
+``progress.png``, and the final motion's GRF, residual and filmstrip plots; then the library's
 ``library/manifest.json`` and ``library/library.glb`` (one looping animation per cell;
-``--no-library`` skips it); then prints a short summary.
+``--no-library`` skips it); then prints a short summary, with which job made each tutor and
+which took it from the store (``summary.json``: ``tutors``).
 
 Ctrl-C or SIGTERM while the jobs run cancels them (each stops at its next IPOPT iteration),
 downloads what they reached into ``--out`` with ``summary.json`` saying "canceled", and exits
@@ -47,13 +52,17 @@ from service.topology import Proc, TopologyError, free_port, motionx_cmd, wait_a
 from solver.outputs import progress_csv, step_stem
 from solver.status import TERMINAL, Status
 
-#: what each λ optimum is downloaded as: (query format, file suffix)
-EXPORTS = (("motion", "motion.json"), ("json", "clip.json"), ("gltf", "glb"), ("bvh", "bvh"))
+#: what each λ optimum is downloaded as: (export query, file suffix)
+EXPORTS = (("format=motion", "motion.json"), ("format=json", "clip.json"), ("format=gltf", "glb"),
+           ("format=bvh", "bvh"))
+#: what the full-body job's λ optima are downloaded as too: on the input's own rig, by the
+#: upload's input format (its ``input.format``); other inputs have no rig
+SOURCE_RIG_EXPORTS = {"deepmimic": (("format=deepmimic", "deepmimic.txt"),)}
 #: the plots of a job's final motion: (endpoint name, file)
 MOTION_PLOTS = (("grf", "grf.png"), ("residuals", "residuals.png"), ("filmstrip", "filmstrip.png"))
 #: the demo's walk, in the trials folder (``service.examples.data_dir()``)
 DEMO_TRIAL = ("deepmimic_humanoid3d_walk", ("humanoid3d_walk.txt", "humanoid3d_character.txt"))
-JOB_NAMES = ("downhill", "uphill", "curve", "stairs")
+JOB_NAMES = ("downhill", "uphill", "fullbody", "curve", "stairs")
 #: without a terminal, a running job's progress line is repeated this often (its clock moves)
 LOG_EVERY_S = 5.0
 #: after Ctrl-C or SIGTERM, how long the canceled jobs are given to stop (each stops at its next
@@ -77,7 +86,9 @@ def _default_trial() -> list[Path]:
 class _Job:
     name: str
     target: dict
+    tutor: dict  # the job's tutor options (character, fps)
     url: str = ""
+    rig_exports: tuple[tuple[str, str], ...] = ()  # (export query, file suffix) on the input's own rig
     state: dict = field(default_factory=dict)
     started: float | None = None  # time.monotonic() when first seen running
     finished: float | None = None  # ... and finished
@@ -104,15 +115,20 @@ class _Job:
 
 
 def _targets(args: argparse.Namespace) -> list[_Job]:
+    """The jobs in the order they are queued: the full-body job second, so that its own tutor
+    is made beside the first job's (the other jobs and the library cells share that one)."""
+    tutor = {"character": args.character, "fps": args.fps}
     jobs = []
     if args.slope:
-        jobs.append(_Job("downhill" if args.slope < 0 else "uphill", {"slope_deg": args.slope}))
+        jobs.append(_Job("downhill" if args.slope < 0 else "uphill", {"slope_deg": args.slope}, tutor))
     if args.curve:
-        jobs.append(_Job("curve", {"curve_deg": args.curve}))
+        jobs.append(_Job("curve", {"curve_deg": args.curve}, tutor))
     if args.step_height:
-        jobs.append(_Job("stairs", {"step_height_m": args.step_height}))
+        jobs.append(_Job("stairs", {"step_height_m": args.step_height}, tutor))
+    if args.fullbody_slope:
+        jobs.insert(1, _Job("fullbody", {"slope_deg": args.fullbody_slope}, {"character": "fullbody", "fps": args.fps}))
     if not jobs:
-        raise CliError("nothing to do: give a non-zero --slope, --curve and/or --step-height")
+        raise CliError("nothing to do: give a non-zero --slope, --curve, --step-height and/or --fullbody-slope")
     return jobs
 
 
@@ -221,15 +237,22 @@ def _work(args, http, files: list[Path], jobs: list[_Job], out: Path, key: str, 
     print(f"[demo] uploaded {', '.join(f.name for f in files)} -> motion {motion['id']} "
           f"({motion['kind']}, {motion['frames']} frames)")
     tutor = {"character": args.character, "fps": args.fps}
+    rig_format = (motion.get("input") or {}).get("format")
+    for j in jobs:
+        if j.name == "fullbody":
+            j.rig_exports = SOURCE_RIG_EXPORTS.get(rig_format, ())
+            if not j.rig_exports:
+                print(f"[demo] job fullbody: a {rig_format or 'motion file'} input has no rig of its own to export "
+                      "onto; its results come out on the synthesis character only")
     for j in jobs:
         if cancel():
             break
-        r = http.post(f"/motions/{motion['id']}/extrapolate", json={"target": j.target, "tutor": tutor},
+        r = http.post(f"/motions/{motion['id']}/extrapolate", json={"target": j.target, "tutor": j.tutor},
                       headers={"Idempotency-Key": f"{key}-{j.name}"})
         _check(r, 202, f"extrapolate ({j.name})")
         j.url = r.headers["Location"]
         j.seen(r.json())
-        print(f"[demo] job {j.name}: {j.target} queued at {j.url}")
+        print(f"[demo] job {j.name}: {j.target} on {j.tutor['character']} queued at {j.url}")
     # the library's cells queue behind the jobs: a worker freed by a short job takes a cell
     library = _queue_library(http, motion["id"], tutor) if args.library and not cancel() else None
     queued = [j for j in jobs if j.url]
@@ -241,6 +264,7 @@ def _work(args, http, files: list[Path], jobs: list[_Job], out: Path, key: str, 
     if library is not None:
         summary["library"] = _library(http, library, out / "library", t0,
                                       deadline=time.monotonic() + args.timeout, cancel=cancel)
+    summary["tutors"] = _tutors(http, queued, library)
     summary["wall_time_s"] = round(time.perf_counter() - t0, 2)
     found = {j["status"] for j in summary["jobs"]} | ({summary["library"]["status"]} if library else set())
     summary["status"] = "canceled" if cancel() else next((s for s in WORST_FIRST if s in found), "succeeded")
@@ -304,6 +328,39 @@ def _library(http, lib: dict, out: Path, t0: float, deadline: float, cancel=lamb
           flush=True)
     return {"id": lib["id"], "status": lib["status"], "cells": len(lib["cells"]), "realistic": realistic,
             "grid": LIBRARY_GRID, "time_s": round(time.perf_counter() - t0, 2)}
+
+
+def _tutors(http, jobs: list[_Job], library: dict | None) -> list[dict]:
+    """Each tutor the jobs and the library's cells used: the job that made it (its tutor
+    progress point is the pipeline's, ``tutor succeeded``) and those that took it from the
+    store (``tutor made by job …``; the service makes a tutor once, service.store.claim_tutor)."""
+    states = [(j.name, j.state) for j in jobs]
+    if library is not None:
+        for c in library.get("cells", []):
+            r = http.get(f"/jobs/{c['job_id']}")
+            _check(r, 200, "library cell")
+            states.append((f"library {c['key']}", r.json()))
+    names = {s.get("id"): name for name, s in states}
+    tutors: dict[str, dict] = {}
+    for name, s in states:
+        point = next((p for p in s.get("progress") or [] if p.get("phase") == "tutor"), None)
+        if not s.get("tutor_motion_id") or point is None:
+            continue
+        t = tutors.get(s["tutor_motion_id"])
+        if t is None:
+            r = http.get(f"/motions/{s['tutor_motion_id']}")
+            _check(r, 200, "tutor")
+            t = tutors[s["tutor_motion_id"]] = {"id": s["tutor_motion_id"], "character": r.json()["character"],
+                                                "made_by": [], "taken_from_store_by": []}
+        if point["status"] == "tutor succeeded":
+            t["made_by"].append({"job": name, "time_s": round(point["wall_time"], 2),
+                                 "iterations": point["iterations"]})
+        else:
+            maker = point["status"].removeprefix("tutor made by job ") if point["status"].startswith(
+                "tutor made by job ") else None  # None: stored before the demo's jobs
+            t["taken_from_store_by"].append({"job": name, "maker": names.get(maker, maker),
+                                             "waited_s": round(point["wall_time"], 2)})
+    return list(tutors.values())
 
 
 def _check(resp, code: int, what: str) -> None:
@@ -434,9 +491,9 @@ def _download(http, job: _Job, out: Path) -> dict:
     reports = []
     for m in motions:
         stem = step_stem(m["step"], m["lam"] if m.get("lam") is not None else float("nan"))
-        for fmt, suffix in EXPORTS:
-            r = http.get(f"/motions/{m['id']}?format={fmt}")
-            _check(r, 200, f"export {fmt}")
+        for query, suffix in EXPORTS + job.rig_exports:
+            r = http.get(f"/motions/{m['id']}?{query}")
+            _check(r, 200, f"export {query}")
             (out / f"{stem}.{suffix}").write_bytes(r.content)
         r = http.get(f"/motions/{m['id']}/validation")
         _check(r, 200, "validation")
@@ -450,7 +507,8 @@ def _download(http, job: _Job, out: Path) -> dict:
     prog = s.get("progress") or []
     env = next((p.get("environment") or {} for p in reversed(prog) if p.get("accepted") and p.get("environment")), {})
     return {
-        "name": job.name, "target": job.target, "status": s["status"], "message": s.get("message") or "",
+        "name": job.name, "target": job.target, "character": job.tutor["character"], "status": s["status"],
+        "message": s.get("message") or "", "rig_exports": [suffix for _, suffix in job.rig_exports],
         "lambda_reached": s.get("lam_reached"),
         "reached": {k: env[k] for k in job.target if k in env},
         "motions": len(motions), "solves": s.get("solves"),
@@ -477,19 +535,32 @@ def _print_summary(summary: dict, out: Path) -> None:
               f"{j['motions']:7d} {j['plausible']:>4d}/{j['motions']:<4d} {j['natural']:>4d}/{j['motions']:<4d} "
               f"{j['job_time_s']:5.1f}s "
               f"{'-' if res is None else format(res, '.1e'):>19s}")
+    for t in summary.get("tutors", []):
+        made = ", ".join(f"{m['job']} ({m['time_s']:.1f} s, {m['iterations']} iterations)" for m in t["made_by"])
+        takers = [u["job"] for u in t["taken_from_store_by"]]
+        cells = sum(1 for u in takers if u.startswith("library "))
+        shared = [u for u in takers if not u.startswith("library ")] + ([f"{cells} library cells"] if cells else [])
+        print(f"[demo] tutor {t['character']}: made {len(t['made_by'])}× by {made or '-'}"
+              + (f"; taken from the store by {', '.join(shared)}" if shared else ""))
     print(f"[demo] total {summary['wall_time_s']:.1f} s; in {out}/<job>/: every λ optimum as "
           f"step_NNN_lambda_L.motion.json, .clip.json, .glb, .bvh, .validation.json; progress.csv, progress.png, "
           f"final.grf.png, final.residuals.png, final.filmstrip.png (summary.json)")
+    for j in summary["jobs"]:
+        if j["rig_exports"]:
+            print(f"[demo] {out}/{j['name']}/: each λ optimum also on the input's own rig, as "
+                  f"{', '.join('.' + k for k in j['rig_exports'])}")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     s = add_command(sub, "demo", "the main job end to end through the embedded service (make demo)", """\
 Start `motionx serve` on its embedded defaults (SQLite + local process pool, in a temporary
 folder, on a free port), upload a captured walk over HTTP (default: the DeepMimic walk in
-data/), ask for a downhill slope, a curve and stairs, and a 3 × 3 motion library (slopes ×
-curves), follow the jobs with a progress bar and
-download every λ optimum (motion file, JSON clip, GLB, BVH, plausibility report), the
-progress curve (CSV, PNG) and the final motion's plots into --out/<job>/. Ctrl-C or SIGTERM
+data/), ask for a downhill slope, a full-body walk up a small slope, a curve and stairs, and a
+3 × 3 motion library (slopes × curves), follow the jobs with a progress bar and
+download every λ optimum (motion file, JSON clip, GLB, BVH, plausibility report; the full-body
+job's also on the input's own rig: for a DeepMimic input a DeepMimic motion for its character
+file), the progress curve (CSV, PNG) and the final motion's plots into
+--out/<job>/. Each tutor is made once and shared by the jobs that need it. Ctrl-C or SIGTERM
 cancels the jobs, downloads what they reached (summary.json: status canceled) and exits 130
 (143). The service is stopped and its temporary folder removed at the end, on Ctrl-C and on
 SIGTERM.""")
@@ -504,7 +575,11 @@ SIGTERM.""")
     s.add_argument("--step-height", type=float, default=0.10, metavar="M",
                    help="stairs: riser height in metres, negative = down; 0 = no stairs job")
     s.add_argument("--character", choices=["halfboy", "fullbody"], default="halfboy",
-                   help="synthesis character of the tutor")
+                   help="synthesis character of the tutor (of the jobs but the full-body one, and of the library)")
+    s.add_argument("--fullbody-slope", type=float, default=5.0, metavar="DEG",
+                   help="the full-body job: the walk on the fullbody character up (or, negative, down) this slope, "
+                        "each λ optimum also on the input's own rig (DeepMimic input: a DeepMimic motion for its "
+                        "character file); 0 = no full-body job")
     s.add_argument("--fps", type=float, choices=[15.0, 30.0], default=15.0, help="frames per second of the tutor")
     add_import_options(s)
     s.add_argument("--timeout", type=float, default=900.0, metavar="S", help="seconds to wait for the jobs")

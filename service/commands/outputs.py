@@ -15,16 +15,18 @@ from service.cli import CliError
 
 #: the suffixes of one λ optimum's files (motion file, exports, plausibility report)
 STEP_KINDS = ("motion.json", "clip.json", "glb", "bvh", "validation.json")
+#: ... and of its exports on the input's own rig (``motionx demo``'s full-body job)
+SOURCE_RIG_KINDS = ("rig.glb", "rig.bvh", "deepmimic.txt")
 #: files a job folder holds besides the steps (extrapolate's plots are grf/residuals.png,
-#: the demo's final.grf/final.residuals.png, tutor.motion.json and job.json)
+#: the demo's final.grf/final.residuals/final.filmstrip.png, tutor.motion.json and job.json)
 JOB_FILES = ("progress.csv", "progress.png", "summary.json", "grf.png", "residuals.png", "final.grf.png",
-             "final.residuals.png", "tutor.motion.json", "job.json")
+             "final.residuals.png", "final.filmstrip.png", "tutor.motion.json", "job.json")
 
 
 def written_here(folder: Path) -> list[Path]:
     """The files in ``folder`` that a job's output consists of (and nothing else)."""
     found: set[Path] = set()
-    for kind in STEP_KINDS:
+    for kind in STEP_KINDS + SOURCE_RIG_KINDS:
         found.update(folder.glob(f"step_[0-9][0-9][0-9]_lambda_*.{kind}"))
     found.update(folder / name for name in JOB_FILES if (folder / name).exists())
     return sorted(p for p in found if p.is_file())

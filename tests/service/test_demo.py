@@ -1,9 +1,9 @@
 """``make demo`` end to end: ``motionx demo`` with its defaults (the DeepMimic walk shipped in
-data/, a downhill slope of −11.25°, a 90° curve and stairs of 0.10 m over HTTP on the embedded
-service, and a 3 × 3 library) writes
-every λ motion, its exports, plausibility reports, progress curve and plots, and a summary
-that states what was reached. The files are checked with their own formats' readers, not by
-name only.
+data/, a downhill slope of −11.25°, a full-body walk up 5°, a 90° curve and stairs of 0.10 m
+over HTTP on the embedded service, and a 3 × 3 library) writes every λ motion, its exports
+(the full-body job's also for the DeepMimic character itself), plausibility reports, progress
+curve and plots, and a summary that states what was reached and that each tutor was made once.
+The files are checked with their own formats' readers, not by name only.
 
 One run serves every test: ``motionx demo --serve``, stopped with SIGTERM once the web page
 is up, as a user's ``kill`` would — then no process of the service may be left and no
@@ -115,8 +115,9 @@ def test_demo_reaches_every_target_and_prints_a_summary(demo_run):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["input"] == ["humanoid3d_walk.txt", "humanoid3d_character.txt"]
     jobs = {j["name"]: j for j in summary["jobs"]}
-    assert set(jobs) == {"downhill", "curve", "stairs"}
+    assert set(jobs) == {"downhill", "fullbody", "curve", "stairs"}
     assert jobs["downhill"]["target"] == {"slope_deg": -11.25}
+    assert jobs["fullbody"]["target"] == {"slope_deg": 5.0} and jobs["fullbody"]["character"] == "fullbody"
     assert jobs["curve"]["target"] == {"curve_deg": 90.0}
     assert jobs["stairs"]["target"] == {"step_height_m": 0.1}
     for name, j in jobs.items():
@@ -230,7 +231,7 @@ def test_the_demo_clock_runs_during_the_tutor_phase():
     """While the job makes its tutor (no progress point yet) its line says so and its time moves."""
     from service.commands.demo import _bar, _Job
 
-    job = _Job("downhill", {"slope_deg": -11.25})
+    job = _Job("downhill", {"slope_deg": -11.25}, {"character": "halfboy", "fps": 15.0})
     job.seen({"status": "queued", "progress": []})
     assert job.elapsed == 0.0
     job.seen({"status": "running", "progress": [], "steps": 0})
@@ -243,3 +244,65 @@ def test_the_demo_clock_runs_during_the_tutor_phase():
     frozen = job.elapsed
     time.sleep(0.1)
     assert job.elapsed == frozen
+
+
+def test_the_fullbody_job_comes_out_on_the_deepmimic_character(demo_run, shared_data):
+    """The full-body walk up 5°: each λ optimum of the fullbody character (43 coordinates), also
+    as a DeepMimic motion for the humanoid's own character file, which the DeepMimic importer
+    reads back."""
+    from solver.io import load_trial
+    from solver.io.deepmimic import read_deepmimic_character
+
+    out = demo_run.out
+    summary = json.loads((out / "summary.json").read_text())
+    job = next(j for j in summary["jobs"] if j["name"] == "fullbody")
+    assert job["status"] == "succeeded" and job["lambda_reached"] == pytest.approx(1.0), job
+    assert job["reached"]["slope_deg"] == pytest.approx(5.0)
+    assert job["motions"] >= 2 and job["plausible"] == job["natural"] == job["motions"], job
+    assert job["rig_exports"] == ["deepmimic.txt"]
+    character = shared_data / "deepmimic_humanoid3d_walk" / "humanoid3d_character.txt"
+    sk = read_deepmimic_character(character)
+    d = out / "fullbody"
+    motions = sorted(d.glob("step_*_lambda_*.motion.json"))
+    assert len(motions) == job["motions"]
+    assert {p.name for p in d.iterdir() if p.name.startswith("step_")} == {
+        f"{m.name[: -len('.motion.json')]}.{kind}" for m in motions
+        for kind in (*STEP_KINDS, "deepmimic.txt")}
+    for mf in motions:
+        stem = mf.name[: -len(".motion.json")]
+        m = motion_from_dict(json.loads(mf.read_text()))
+        assert m.character.name == "fullbody" and m.n == 43
+        # the DeepMimic motion: the character's frame layout, looping, read back by the importer
+        text = (d / f"{stem}.deepmimic.txt").read_text()
+        dm = json.loads(text)
+        assert dm["Loop"] == "wrap" and {len(f) for f in dm["Frames"]} == {sk.frame_size}
+        back = load_trial([d / f"{stem}.deepmimic.txt", character])
+        assert len(dm["Frames"]) == back.T
+    assert len({p.name for p in d.glob("*.png")}) == 4  # progress + the final motion's three plots
+
+
+def test_each_tutor_is_made_once(demo_run):
+    """The HalfBoy tutor is made by one job; the other HalfBoy jobs and the library's cells take it
+    from the store (their tutor progress point names its maker). The full-body job makes its own."""
+    out = demo_run.out
+    summary = json.loads((out / "summary.json").read_text())
+    tutors = {t["character"]: t for t in summary["tutors"]}
+    assert set(tutors) == {"halfboy", "fullbody"}
+    half, full = tutors["halfboy"], tutors["fullbody"]
+    assert [m["job"] for m in full["made_by"]] == ["fullbody"] and full["taken_from_store_by"] == []
+    assert len(half["made_by"]) == 1 and half["made_by"][0]["iterations"] > 0, half
+    maker = half["made_by"][0]["job"]
+    takers = [u["job"] for u in half["taken_from_store_by"]]
+    assert sorted(t for t in takers if not t.startswith("library ")) == sorted(
+        {"downhill", "curve", "stairs"} - {maker})
+    assert sum(t.startswith("library ") for t in takers) == 9
+    assert {u["maker"] for u in half["taken_from_store_by"]} == {maker}
+    # the jobs' own records say the same: one tutor computation among the HalfBoy jobs, one tutor
+    records = {name: json.loads((out / name / "job.json").read_text()) for name in ("downhill", "curve", "stairs")}
+    points = {name: [p for p in r["progress"] if p["phase"] == "tutor"] for name, r in records.items()}
+    assert all(len(p) == 1 for p in points.values()), points
+    assert [n for n, p in points.items() if p[0]["status"] == "tutor succeeded"] == [maker]
+    assert {r["tutor_motion_id"] for r in records.values()} == {half["id"]}
+    assert all(p[0]["iterations"] == 0 and p[0]["status"] == f"tutor made by job {records[maker]['id']}"
+               for n, p in points.items() if n != maker)
+    assert "[demo] tutor halfboy: made 1× by " in demo_run.stdout
