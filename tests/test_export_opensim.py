@@ -90,6 +90,8 @@ def test_the_ground_reactions_moved_little_to_balance_the_model(exports, trials,
         assert foot["force_change_N"]["max"] < 0.05 * weight, (side, foot)
         assert foot["cop_shift_mm"]["max"] < 50.0, (side, foot)
         assert foot["free_moment_change_Nm"]["max"] < 20.0, (side, foot)
+    for side, out in summary["residual_reduction"]["cop_outside_footprint_mm"].items():
+        assert out["after"] <= out["before"] + 20.0, (side, out)  # no further out of the foot than the tutor had it
     ik = summary["inverse_kinematics"]
     assert ik["marker_rms_mm"]["mean"] < 3.0 and ik["marker_max_mm"] < 30.0
 

@@ -1127,6 +1127,42 @@ def reduce_residuals_on_feet(w_in: np.ndarray, ans: Mapping[str, Any], t: np.nda
     return out, added
 
 
+#: half-width (m) of a foot's footprint around its heel-to-toe line
+FOOT_HALF_WIDTH_M = 0.05
+
+
+def footprints(bodies: Sequence[str], body_com: np.ndarray, W: np.ndarray, P: np.ndarray,
+               feet: Mapping[str, str]) -> np.ndarray:
+    """Per foot (right, left) and row, its heel-to-toe line on the floor (2, S, 2, 2): (x, z) of
+    the foot body's origin (the heel of a gait model's calcn) and of the toe tip (the toes
+    body's origin moved forward by twice its centre of mass, as the importer places it)."""
+    out = np.empty((2, W.shape[0], 2, 2))
+    for f, (side, s) in enumerate((("right", "r"), ("left", "l"))):
+        heel = P[:, list(bodies).index(feet[side])]
+        ti = list(bodies).index(f"toes_{s}") if f"toes_{s}" in bodies else list(bodies).index(feet[side])
+        tip = P[:, ti] + 2.0 * np.einsum("tij,j->ti", W[:, ti], np.array([body_com[ti][0], 0.0, 0.0]))
+        out[f, :, 0], out[f, :, 1] = heel[:, [0, 2]], tip[:, [0, 2]]
+    return out
+
+
+def cop_outside_feet(cols: np.ndarray, prints: np.ndarray, rows: np.ndarray, min_load: float) -> list[float]:
+    """Per foot, how far (m) its centre of pressure leaves its footprint (the heel-to-toe line
+    widened by ``FOOT_HALF_WIDTH_M``) at worst over ``rows`` where it is loaded."""
+    out = []
+    for f in range(2):
+        loaded = rows & (cols[f, :, 1] > min_load)
+        if not loaded.any():
+            out.append(0.0)
+            continue
+        c = cols[f, loaded][:, [3, 5]]
+        a, b = prints[f, loaded, 0], prints[f, loaded, 1]
+        ab = b - a
+        u = np.clip(np.einsum("ti,ti->t", c - a, ab) / np.maximum(np.einsum("ti,ti->t", ab, ab), 1e-9), 0.0, 1.0)
+        d = np.linalg.norm(c - (a + u[:, None] * ab), axis=1)
+        out.append(float(np.maximum(d - FOOT_HALF_WIDTH_M, 0.0).max()))
+    return out
+
+
 def _adjustment_figures(before: np.ndarray, after: np.ndarray, t: np.ndarray, window: tuple[float, float],
                         min_load: float) -> dict[str, Any]:
     """How much the ground reactions moved (per foot, over the analysed window): force change,
@@ -1232,7 +1268,14 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
             cols = grf_columns(w_new, floor_y, min_load)
             write_mot(folder / GRF_FILE, "grf", GRF_LABELS, t, _grf_table(cols), in_degrees=False)
             inside = (t >= window[0] - 1e-9) & (t <= window[1] + 1e-9)
+            prints = footprints(list(rig["bodies"]), np.asarray(ev["body_com"], dtype=float), W, P, rig["feet"])
+            out_before = cop_outside_feet(naive, prints, inside, min_load)
+            out_after = cop_outside_feet(cols, prints, inside, min_load)
             adjustment = {"per_foot": _adjustment_figures(naive, cols, t, window, min_load),
+                          "cop_outside_footprint_mm": {
+                              side: {"before": 1e3 * out_before[f], "after": 1e3 * out_after[f]}
+                              for f, side in enumerate(("right", "left"))},
+                          "footprint": f"heel-to-toe line widened by {1e3 * FOOT_HALF_WIDTH_M:g} mm each side",
                           "added_force_N": {"max": float(np.linalg.norm(added[inside, 3:], axis=1).max()),
                                             "rms": float(np.sqrt(np.mean(np.sum(added[inside, 3:]**2, axis=1))))}}
         tk = time.perf_counter()
