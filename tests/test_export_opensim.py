@@ -1,7 +1,7 @@
 """The OpenSim export on both shared OpenSim trials: the tutor written on the trial's own model,
 checked by OpenSim's own InverseDynamicsTool on the files as written (Hicks et al. 2015).
 
-Runtime (2-core x86_64): about 80 s — two tutors (~10 s), two exports (~15 s treadmill, ~35 s
+Runtime (2-core x86_64): 80–100 s — two tutors (~10 s), two exports (~15 s treadmill, ~35 s
 overground: OpenSim's inverse kinematics refined frame by frame), OpenSim's inverse dynamics
 re-run on each folder and the command line on one motion file; it is the thing being verified.
 """

@@ -14,9 +14,10 @@ Only motions made from an OpenSim trial can be written (their ``provenance["rig"
   moment, vertical), in the model's ground frame (x forward, y up, z right);
 * ``external_loads.xml``: the two forces applied to the model's feet (``calcn_r``, ``calcn_l``),
   force and point expressed in ground;
-* ``setup_id.xml``: OpenSim's InverseDynamicsTool on these files, coordinates low-passed at
-  ``LOWPASS_HZ`` (as OpenSim's examples do), over the middle cycle (the outer ones keep the
-  filter's edges away from it), muscles excluded;
+* ``setup_id.xml``: OpenSim's InverseDynamicsTool on these files over the middle cycle (the
+  outer ones keep a filter's edges away from it), muscles excluded, the coordinates not
+  filtered by default (``LOWPASS_HZ``: they sample a smooth motion; ``lowpass=6.0`` writes
+  OpenSim's examples' 6 Hz);
 * ``summary.json`` and ``README.md``: what was written, how, and the residuals OpenSim's
   InverseDynamicsTool reports on exactly these files.
 
@@ -34,11 +35,13 @@ of mass and 10 cm along each axis) follow those poses; OpenSim's InverseKinemati
 fits the model to them (``.trc`` and a copy of the model carrying the markers in a scratch
 folder, not in the export).
 
-**Ground reactions.** The motion's wrenches (linear between frames, the optimizer's
-convention) are carried to the model's ground frame with the motion's ``GroundFrame``
-(a treadmill trial's belt velocity included) and written as force, centre of pressure on
-the floor plane and free moment: the same wrench exactly (a foot loaded below 1 % of the
-body weight keeps its last centre of pressure and takes the remainder as torque).
+**Ground reactions.** The motion's wrenches, linear between the frames and midpoints where
+the optimizer's equations hold (frames 1…T−2; frame T−2 and the midpoint after it stand for
+frame 0 and the midpoint of [0, 1], whose stored wrench is not constrained), are carried
+to the model's ground frame with the motion's ``GroundFrame`` (a treadmill trial's belt
+velocity included) and written as force, centre of pressure on the floor plane and free
+moment: the same wrench exactly (a foot loaded below 1 % of the body weight keeps its last
+centre of pressure and takes the remainder as torque).
 
 **Residual reduction** (``reduce_residuals=True``, the default). The model is not our
 character: its arms and trunk move relative to the pelvis where a HalfBoy's do not, its
@@ -169,7 +172,8 @@ def _rotz(a: float) -> np.ndarray:
 def cycle_samples(motion: Motion, cycles: int, rate: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """The motion repeated ``cycles`` times and sampled at ``rate``: times (S,) from 0, q (n, S)
     (the periodic spline; each repetition moved by the cycle's own turn and displacement),
-    wrenches (2, 6, S) (linear between frames, moved alike) and the cycle duration D (s)."""
+    wrenches (2, 6, S) (linear between the frames and midpoints where the optimizer's
+    equations hold, moved alike) and the cycle duration D (s)."""
     N = motion.T - 2  # frames T-2, T-1 repeat 0, 1
     D = N / motion.fps
     S = int(math.floor(cycles * D * rate + 1e-9)) + 1
@@ -177,15 +181,32 @@ def cycle_samples(motion: Motion, cycles: int, rate: float) -> tuple[np.ndarray,
     c = np.minimum(np.floor(t / D + 1e-12).astype(int), cycles - 1)
     tau = t - c * D
     q1 = sample(motion.q, motion.fps, tau, cyclic=True, interpolation=motion.interpolation)
-    W = np.asarray(motion.wrenches, dtype=float)
-    s = np.clip(tau * motion.fps, 0.0, N)
-    k = np.minimum(np.floor(s).astype(int), N - 1)
-    u = s - k
-    w1 = W[:, :, k] * (1 - u) + W[:, :, k + 1] * u  # (2, 6, S)
     dpsi = cycle_turn(motion.q)
     R2 = _rotz(dpsi)[:2, :2]
     x0, xN = motion.q[list(ROOT_XY), 0], motion.q[list(ROOT_XY), N]
     b = xN - R2 @ x0  # xy_{k+N} = R xy_k + b
+    # the wrenches where the optimizer's equations hold — frames 1..N and the midpoints between
+    # them, frame N and the midpoint after it standing for frame 0 and the midpoint of [0, 1]
+    # (carried back by the cycle's transform: frame 0's own wrench is not constrained) — and
+    # linear between those samples
+    W = np.asarray(motion.wrenches, dtype=float)
+    R3, b3 = np.eye(3), np.array([b[0], b[1], 0.0])
+    R3[:2, :2] = R2
+
+    def back(w: np.ndarray) -> np.ndarray:  # a wrench of cycle 1 expressed in cycle 0
+        F = R3.T @ w[:, 3:].T
+        M = R3.T @ (w[:, :3].T - np.cross(b3, w[:, 3:]).T)
+        return np.concatenate([M, F]).T
+
+    half = np.empty((2, 6, 2 * N + 1))
+    half[:, :, 2::2] = W[:, :, 1:N + 1]
+    half[:, :, 3::2] = 0.5 * (W[:, :, 1:N] + W[:, :, 2:N + 1])
+    half[:, :, 0] = back(W[:, :, N])
+    half[:, :, 1] = back(0.5 * (W[:, :, N] + W[:, :, N + 1]))
+    s2 = np.clip(2 * tau * motion.fps, 0.0, 2 * N)
+    k = np.minimum(np.floor(s2).astype(int), 2 * N - 1)
+    u = s2 - k
+    w1 = half[:, :, k] * (1 - u) + half[:, :, k + 1] * u  # (2, 6, S)
     q = q1.copy()
     w = w1.copy()
     for j in range(S):
@@ -750,11 +771,12 @@ def _refine(osim, model_path, tool_mot, markers, weights, xyz, out):  # pragma: 
 
     h = 1e-7
     errs = np.empty((Q.shape[0], len(markers)))
-    iterations = []
+    iterations, last_steps = [], []
     for k in range(Q.shape[0]):
         q = Q[k].copy()
         base = place(q.copy())
         n_it = 0
+        size = np.inf
         for _ in range(4):  # Gauss-Newton, each Jacobian reused for a few steps (the start is close)
             J = np.empty((base.size, len(free)))
             for a, i in enumerate(free):
@@ -768,12 +790,14 @@ def _refine(osim, model_path, tool_mot, markers, weights, xyz, out):  # pragma: 
                 q[free] = q[free] + step
                 base = place(q.copy())
                 n_it += 1
-                if np.max(np.abs(step)) < 1e-9:
+                size = float(np.max(np.abs(step)))
+                if size < 1e-9:
                     done = True
                     break
             if done:
                 break
         iterations.append(n_it)
+        last_steps.append(size)
         final = place(q)  # couplers applied
         Q[k] = [c.getValue(state) for c in coords]
         errs[k] = np.linalg.norm(final - xyz[k], axis=1)
@@ -789,6 +813,7 @@ def _refine(osim, model_path, tool_mot, markers, weights, xyz, out):  # pragma: 
     outside = {names[i]: float(max(below[:, i].max(), above[:, i].max())) for i in range(len(names))
                if below[:, i].max() > 1e-9 or above[:, i].max() > 1e-9}
     return {"outside_range": outside, "refine_iterations_max": int(max(iterations)),
+            "refine_last_step_max": float(max(last_steps)),
             "marker_rms_m": np.sqrt(np.mean(errs**2, axis=1)).tolist(), "marker_max_m": errs.max(axis=1).tolist(),
             "per_marker_rms_m": dict(zip((m[0] for m in markers), np.sqrt(np.mean(errs**2, axis=0)).tolist()))}
 
@@ -1326,6 +1351,8 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
                                                "smoothing_rms_mm": cal.fit_rms_mm},
                                "marker_rms_mm": {"mean": 1e3 * float(ik_rms.mean()), "max": 1e3 * float(ik_rms.max())},
                                "marker_max_mm": 1e3 * float(ik_max.max()),
+                               "refinement_iterations_max": ik.get("refine_iterations_max"),
+                               "refinement_last_step_max": ik.get("refine_last_step_max"),
                                "coordinates_outside_model_range_deg_or_m": {
                                    n: round(float(np.degrees(v)) if n not in translational else float(v), 4)
                                    for n, v in ik["outside_range"].items()},
