@@ -1,9 +1,10 @@
 """The OpenSim export on both shared OpenSim trials: the tutor written on the trial's own model,
 checked by OpenSim's own InverseDynamicsTool on the files as written (Hicks et al. 2015).
 
-Runtime (2-core x86_64): 80–100 s — two tutors (~10 s), two exports (~15 s treadmill, ~35 s
+Runtime (2-core x86_64): 110–130 s — two tutors (~10 s), three exports (~15 s treadmill, ~35 s
 overground: OpenSim's inverse kinematics refined frame by frame), OpenSim's inverse dynamics
-re-run on each folder and the command line on one motion file; it is the thing being verified.
+re-run on each folder, the command line on one motion file and a 5° slope λ optimum; it is the
+thing being verified.
 """
 
 from __future__ import annotations
@@ -123,7 +124,8 @@ def test_the_files_are_the_models_coordinates_and_feet(exports, trials, name):
     # OpenSim ground: y up; the feet carry the body weight on average, centres of pressure on the floor
     fy = grf.column("ground_force_r_vy") + grf.column("ground_force_l_vy")
     assert np.mean(fy) == pytest.approx(trials[name][1].character.weight, rel=0.05)
-    floor = summary["ground_frame"]["floor_y_m"]
+    assert summary["ground_frame"]["ground_normal"] == pytest.approx([0.0, 1.0, 0.0], abs=1e-9)  # level ground
+    floor = summary["ground_frame"]["ground_point_m"][1]
     assert np.allclose(grf.column("ground_force_r_py"), floor) and np.allclose(grf.column("ground_force_l_py"), floor)
     assert np.allclose(grf.column("ground_torque_r_x")[grf.column("ground_force_r_vy") > 50], 0.0)
     # ExternalLoads names bodies of the model written beside it, and the GRF file's columns
@@ -171,3 +173,26 @@ def test_motions_that_cannot_be_written_on_an_opensim_model_are_refused(trials, 
     with pytest.raises(OpenSimExportError, match="carries no OpenSim model"):
         export_motion(foreign, "opensim")
     assert not (tmp_path / "capture").exists()
+
+
+def test_a_slope_optimum_is_written_on_an_inclined_ground_under_the_models_gravity(trials, tmp_path):
+    """The optimizer tilts gravity over a level ground for a slope; OpenSim's gravity is down its
+    y axis: the export turns the motion, and the ground plane the reactions are written on
+    rises at the slope's angle."""
+    import solver
+
+    walk = solver.extrapolate(trials["treadmill"][1], solver.Target(slope_deg=5))
+    assert walk.status == "succeeded" and walk.lam_reached == pytest.approx(1.0)
+    export_motion(walk.steps[-1].motion, "opensim", path=tmp_path)
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    normal = np.asarray(summary["ground_frame"]["ground_normal"])
+    assert np.degrees(np.arccos(normal[1])) == pytest.approx(5.0, abs=1e-6) and normal[0] < 0  # rising forward
+    assert summary["ground_frame"]["gravity_m_s2"] == pytest.approx([0.0, -9.81, 0.0], abs=1e-6)
+    res = opensim_residuals(tmp_path)
+    assert res["meets_hicks_2015"], res
+    grf = read_mot(tmp_path / "grf.mot")
+    p = np.stack([grf.column(f"ground_force_r_p{c}") for c in "xyz"], axis=1)
+    o = np.asarray(summary["ground_frame"]["ground_point_m"])
+    # the points lie on the inclined ground (the treadmill frame's origin moves with the belt)
+    belt = np.asarray(summary["ground_frame"]["belt_velocity_m_s"])
+    assert np.allclose((p - o - np.outer(grf.time, -belt)) @ normal, 0.0, atol=1e-6)

@@ -378,16 +378,17 @@ def calibration(rig: Mapping[str, Any], character: Character, evaluation: Mappin
                        right, offset)
 
 
-def body_poses(motion: Motion, q: np.ndarray, t: np.ndarray, D: float, cal: Calibration
-               ) -> tuple[np.ndarray, np.ndarray]:
+def body_poses(motion: Motion, q: np.ndarray, t: np.ndarray, D: float, cal: Calibration,
+               frame: GroundFrame | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The model's bodies (S, B, 3, 3), (S, B, 3) in OpenSim ground, placed on the motion's
     anchors ``q`` (n, S) at times ``t`` (s; ``D`` the motion's cycle) with the calibration at
-    the same gait phase."""
+    the same gait phase; ``frame``: the motion's world → OpenSim ground (default
+    :func:`export_frame`)."""
     t_start = float(motion.provenance["source"]["cycle"]["t_start"])
     C, d = cal.at(t / D)
     Rs, Ps = segment_frames(motion.character, q)
     names = [s.name for s in motion.character.segments]
-    frame = GroundFrame.from_dict(motion.provenance.get("frame"))
+    frame = export_frame(motion)[0] if frame is None else frame
     W = np.empty_like(C)
     P = np.empty_like(d)
     for i, b in enumerate(cal.anchors):
@@ -429,34 +430,58 @@ def wrenches_to_input(w: np.ndarray, t_abs: np.ndarray, frame: GroundFrame) -> n
     return np.moveaxis(np.concatenate([Mi, Fi], axis=-1), -1, 1)
 
 
-def grf_columns(w_in: np.ndarray, floor_y: float, min_load: float) -> np.ndarray:
-    """Per foot (2, S, 9): force, point on the floor plane y = ``floor_y``, torque — OpenSim's
-    ground-reaction columns — for wrenches ``w_in`` (2, 6, S) about OpenSim's ground origin (y up).
+def grf_columns(w_in: np.ndarray, normal: np.ndarray, origin: np.ndarray, min_load: float) -> np.ndarray:
+    """Per foot (2, S, 9): force, point on the ground plane, torque — OpenSim's ground-reaction
+    columns — for wrenches ``w_in`` (2, 6, S) about OpenSim's ground origin; the ground is the
+    plane through ``origin`` (S, 3) with unit ``normal`` (3,) (the level floor: y up).
 
-    Loaded (vertical force above ``min_load``): the point is the centre of pressure, the
-    torque the vertical free moment. Otherwise the foot's nearest loaded centre of pressure
-    is kept and the torque is whatever keeps the wrench (zero for an unloaded foot)."""
+    Loaded (force along the normal above ``min_load``): the point is the centre of pressure
+    ``o + n × M_o / (n · F)`` (``M_o`` the moment about ``o``), the torque the free moment
+    along the normal. Otherwise the foot's nearest loaded centre of pressure is kept and the
+    torque is whatever keeps the wrench (zero for an unloaded foot)."""
+    n = np.asarray(normal, dtype=float) / np.linalg.norm(normal)
+    o = np.broadcast_to(np.asarray(origin, dtype=float), (w_in.shape[2], 3))
     out = np.zeros((2, w_in.shape[2], 9))
     for f in range(2):
         M, F = w_in[f, :3].T, w_in[f, 3:].T  # (S, 3)
-        loaded = F[:, 1] > min_load
-        p = np.full((F.shape[0], 3), np.nan)
-        fy = np.where(loaded, F[:, 1], 1.0)
-        p[:, 0] = (M[:, 2] + floor_y * F[:, 0]) / fy
-        p[:, 2] = (floor_y * F[:, 2] - M[:, 0]) / fy
-        p[:, 1] = floor_y
+        fn = F @ n
+        loaded = fn > min_load
+        Mo = M - np.cross(o, F)
+        p = o + np.cross(n, Mo) / np.where(loaded, fn, 1.0)[:, None]
         p[~loaded] = np.nan
         if loaded.any():
             idx = np.where(loaded)[0]
             near = idx[np.abs(np.arange(F.shape[0])[:, None] - idx[None]).argmin(axis=1)]
             p[~loaded] = p[near[~loaded]]
         else:
-            p[:] = [0.0, floor_y, 0.0]
+            p[:] = o
         tq = M - np.cross(p, F)
-        tq[loaded, 0] = 0.0  # exactly zero at the centre of pressure (rounding only)
-        tq[loaded, 2] = 0.0
+        tq[loaded] = np.outer(tq[loaded] @ n, n)  # along the normal at the centre of pressure (rounding only)
         out[f] = np.concatenate([F, p, tq], axis=1)
     return out
+
+
+def export_frame(motion: Motion) -> tuple[GroundFrame, np.ndarray]:
+    """The map from the motion's world to the trial's ground for OpenSim, and the gravity there.
+
+    The optimizer models a slope by tilting gravity over a level ground; OpenSim's gravity
+    points down its y axis. The motion is first turned (about the origin, its ground and a
+    treadmill's belt velocity with it) so that its gravity points down, then mapped by its
+    ``GroundFrame``: the written ground is the inclined plane. Returns that frame and the
+    gravity vector in OpenSim ground (the motion's own magnitude)."""
+    from solver.environment import environment_of
+
+    frame = GroundFrame.from_dict(motion.provenance.get("frame"))
+    g = np.asarray(environment_of(motion).gravity, dtype=float)
+    gn = float(np.linalg.norm(g))
+    down = np.array([0.0, 0.0, -1.0])
+    u = g / gn if gn > 0 else down
+    axis = np.cross(u, down)
+    angle = math.atan2(float(np.linalg.norm(axis)), float(u @ down))
+    Rg = Rotation.from_rotvec(axis / np.linalg.norm(axis) * angle).as_matrix() if angle > 1e-12 else np.eye(3)
+    out = GroundFrame(R=frame.R @ Rg, offset=frame.offset, unit_m=frame.unit_m, velocity=frame.velocity,
+                      axes=frame.axes)
+    return out, out.R @ g
 
 
 GRF_LABELS = tuple(f"ground_{kind}_{s}_{c}" for s in "rl" for kind, cs in (
@@ -555,6 +580,22 @@ def id_setup_xml(model: str, coordinates: str, external_loads: str, t0: float, t
 	</InverseDynamicsTool>
 </OpenSimDocument>
 """
+
+
+def with_gravity(text: bytes, gravity: np.ndarray) -> tuple[bytes, str | None]:
+    """The model with its ``<gravity>`` set to ``gravity`` (OpenSim ground, m/s²) when it differs
+    from the model's by more than 1e-6 m/s² (a motion in another gravity, e.g. a λ optimum on
+    the gravity axis); returns the text and what was changed (None: unchanged)."""
+    m = re.search(rb"<gravity>([^<]*)</gravity>", text)
+    old = np.array([0.0, -9.80665, 0.0]) if m is None else np.array([float(v) for v in m.group(1).split()])
+    g = np.asarray(gravity, dtype=float)
+    if old.shape == (3,) and np.max(np.abs(old - g)) <= 1e-6:
+        return text, None
+    new = "<gravity>{:.9g} {:.9g} {:.9g}</gravity>".format(*g).encode()
+    if m is None:
+        raise OpenSimExportError("the motion's OpenSim model has no <gravity> element to set the motion's gravity in")
+    changed = f"gravity {old.tolist()} -> {np.round(g, 6).tolist()} m/s² (the motion's environment)"
+    return text[:m.start()] + new + text[m.end():], changed
 
 
 def repaired_model_text(text: bytes) -> tuple[bytes, bool]:
@@ -1233,6 +1274,8 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
     model_file = Path(str(model_info.get("file") or "model.osim")).name
     if not model_file.endswith(".osim"):
         model_file += ".osim"
+    frame, gravity = export_frame(motion)
+    text, model_gravity = with_gravity(text, gravity)
     (folder / model_file).write_bytes(text)
     timing: dict[str, float] = {}
     try:
@@ -1250,7 +1293,7 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
         timing["evaluate_capture_s"] = time.perf_counter() - tk
         cal = calibration(rig, motion.character, ev, cyc, posture)
         t, q, w, D = cycle_samples(motion, cycles, float(rate))
-        W, P = body_poses(motion, q, t, D, cal)
+        W, P = body_poses(motion, q, t, D, cal, frame)
         defs, xyz = virtual_markers(list(rig["bodies"]), np.asarray(ev["body_com"], dtype=float), W, P)
         with tempfile.TemporaryDirectory(prefix="motionx-osim-ik-") as scratch:
             trc = Path(scratch) / "virtual_markers.trc"
@@ -1261,12 +1304,17 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
                             "trc": str(trc), "t0": float(t[0]), "t1": float(t[-1]),
                             "out": str((folder / COORDINATES_FILE).resolve()), "scratch": scratch})
             timing["inverse_kinematics_s"] = time.perf_counter() - tk
-        # ground reactions in the model's ground frame
-        frame = GroundFrame.from_dict(motion.provenance.get("frame"))
-        floor_y = float(GroundFrame.from_dict(rig["frame"]).point_to_input(np.zeros(3))[1])
-        min_load = MIN_LOAD_FRACTION * motion.character.weight
-        w_in = wrenches_to_input(w, float(cyc["t_start"]) + t, frame)
-        naive = grf_columns(w_in, floor_y, min_load)
+        # ground reactions in the model's ground frame, on the motion's ground plane there
+        t_abs = float(cyc["t_start"]) + t
+        # the motion stands its contact points on z = 0, the capture's soles were that much lower:
+        # the floor (the trial's plates) is z = -shift in the motion's world
+        m_frame, c_frame = GroundFrame.from_dict(motion.provenance.get("frame")), GroundFrame.from_dict(rig["frame"])
+        shift = float((m_frame.R.T @ (m_frame.offset - c_frame.offset))[2]) * m_frame.unit_m
+        normal = frame.R @ np.array([0.0, 0.0, 1.0])
+        origin = frame.point_to_input(np.tile([0.0, 0.0, -shift], (t.size, 1)), t_abs)
+        min_load = MIN_LOAD_FRACTION * float(np.linalg.norm(gravity)) * motion.character.total_mass
+        w_in = wrenches_to_input(w, t_abs, frame)
+        naive = grf_columns(w_in, normal, origin, min_load)
         write_mot(folder / GRF_FILE, "grf", GRF_LABELS, t, _grf_table(naive), in_degrees=False)
         (folder / EXTERNAL_LOADS_FILE).write_text(external_loads_xml(rig["feet"], GRF_FILE))
         window = (D, 2 * D) if cycles >= 3 else (float(t[0]), float(t[-1]))
@@ -1290,7 +1338,7 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
             residuals["before_reduction"] = figures_of(folder, {**ans, "times": np.asarray(ans["times"])[keep],
                                                                 "data": np.asarray(ans["data"])[keep]})
             w_new, added = reduce_residuals_on_feet(w_in, ans, t, min_load)
-            cols = grf_columns(w_new, floor_y, min_load)
+            cols = grf_columns(w_new, normal, origin, min_load)
             write_mot(folder / GRF_FILE, "grf", GRF_LABELS, t, _grf_table(cols), in_degrees=False)
             inside = (t >= window[0] - 1e-9) & (t <= window[1] + 1e-9)
             prints = footprints(list(rig["bodies"]), np.asarray(ev["body_com"], dtype=float), W, P, rig["feet"])
@@ -1334,13 +1382,15 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
                    "character": motion.character.name, "fps": motion.fps, "frames": motion.T,
                    "cycle_s": D, "source_cycle": dict(cyc)},
         "model": {"file": model_file, "name": model_info.get("name"), "sha256_source": model_info.get("sha256"),
-                  "socket_paths_repaired": repaired},
+                  "socket_paths_repaired": repaired, "gravity_changed": model_gravity},
         "files": {"model": model_file, "coordinates": COORDINATES_FILE, "ground_reactions": GRF_FILE,
                   "external_loads": EXTERNAL_LOADS_FILE, "inverse_dynamics_setup": SETUP_FILE},
         "sampling": {"rate_hz": float(rate), "cycles": cycles, "rows": int(t.size),
                      "time_s": [float(t[0]), float(t[-1])], "analysed_cycle_s": list(window),
                      "interpolation": motion.interpolation},
-        "ground_frame": {"axes": "OpenSim ground: x forward, y up, z right", "floor_y_m": floor_y,
+        "ground_frame": {"axes": "OpenSim ground: x forward, y up, z right",
+                         "ground_normal": normal.round(9).tolist(), "ground_point_m": origin[0].round(6).tolist(),
+                         "contact_plane_shift_m": shift, "gravity_m_s2": gravity.round(6).tolist(),
                          "belt_velocity_m_s": frame.vector_to_input(frame.velocity).tolist(),
                          "feet": dict(rig["feet"])},
         "inverse_kinematics": {"tool": "OpenSim InverseKinematicsTool", "virtual_markers": len(defs),
