@@ -91,6 +91,7 @@ def test_the_ground_reactions_moved_little_to_balance_the_model(exports, trials,
         assert foot["force_change_N"]["max"] < 0.05 * weight, (side, foot)
         assert foot["cop_shift_mm"]["max"] < 50.0, (side, foot)
         assert foot["free_moment_change_Nm"]["max"] < 20.0, (side, foot)
+    assert summary["residual_reduction"]["large"] is False
     for side, out in summary["residual_reduction"]["cop_outside_footprint_mm"].items():
         assert out["after"] <= out["before"] + 20.0, (side, out)  # no further out of the foot than the tutor had it
     ik = summary["inverse_kinematics"]

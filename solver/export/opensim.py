@@ -230,10 +230,30 @@ def cycle_samples(motion: Motion, cycles: int, rate: float) -> tuple[np.ndarray,
 # --- calibration: the model's bodies against our segments at the captured frames ---------------
 
 
-def _anchors(rig: Mapping[str, Any], character: Character, parents: Mapping[str, str]) -> dict[str, str]:
-    """Each model body -> the segment of the motion's character it rides on (see the module doc)."""
+#: a torso body shared between our trunk segments (a model with arms), which it follows together
+TRUNK_PARTS = ("abdomen", "thorax", "head")
+
+
+def trunk_parts(rig: Mapping[str, Any], character: Character) -> tuple[str | None, list[tuple[str, float]]]:
+    """The model body split between trunk segments the motion's character has (the torso of a
+    model with arms, for a full-body character) and those segments with their masses; (None,
+    []) when the character moves at most one of them."""
+    body = next((b for b, sg in dict(rig["body_segments"]).items() if sg == "torso"), None)
+    names = {sg.name: sg for sg in character.segments}
+    parts = [(p, float(names[p].mass)) for p in TRUNK_PARTS if p in names]
+    return (body, parts) if body is not None and len(parts) > 1 else (None, [])
+
+
+def _own_segments(rig: Mapping[str, Any]) -> dict[str, str | None]:
+    return {b: ("abdomen" if s == "torso" else s) for b, s in dict(rig["body_segments"]).items()}
+
+
+def _anchors(rig: Mapping[str, Any], character: Character, parents: Mapping[str, str],
+             override: Mapping[str, str] | None = None) -> dict[str, str]:
+    """Each model body -> the segment of the motion's character it rides on (see the module doc);
+    ``override``: body -> its own segment instead of the rig's."""
     segs = {s.name for s in character.segments}
-    own = {b: ("abdomen" if s == "torso" else s) for b, s in dict(rig["body_segments"]).items()}
+    own = {**_own_segments(rig), **dict(override or {})}
     out: dict[str, str] = {}
 
     def anchor(b: str, seen: tuple[str, ...] = ()) -> str:
@@ -300,7 +320,8 @@ class Calibration:
 
 def calibration(rig: Mapping[str, Any], character: Character, evaluation: Mapping[str, Any],
                 cycle: Mapping[str, Any], posture: tuple[np.ndarray, np.ndarray],
-                cutoff_hz: float = CALIBRATION_CUTOFF_HZ) -> Calibration:
+                cutoff_hz: float = CALIBRATION_CUTOFF_HZ, override: Mapping[str, str] | None = None
+                ) -> Calibration:
     """The model's bodies against the motion's character at the captured cycle's frames (our
     world; ``evaluation``: OpenSim's body frames along the trial's coordinates,
     :func:`solver.io.opensim.worker.run_worker`; the capture skeleton's fit in the rig), as a
@@ -316,7 +337,7 @@ def calibration(rig: Mapping[str, Any], character: Character, evaluation: Mappin
     if bodies != list(rig["bodies"]):
         raise OpenSimExportError("the motion's OpenSim model does not have the bodies its rig records")
     parents = dict(zip(evaluation["joint_child"], evaluation["joint_parent"]))
-    anchors = _anchors(rig, character, parents)
+    anchors = _anchors(rig, character, parents, override)
     frame = GroundFrame.from_dict(rig["frame"])
     times = np.asarray(rig["times"], dtype=float)
     t_start, period = float(cycle["t_start"]), float(cycle["period_s"])
@@ -333,7 +354,7 @@ def calibration(rig: Mapping[str, Any], character: Character, evaluation: Mappin
     p = frame.point_from_input(Pb, times[inside][:, None])
     Rs, Ps = segment_frames(character, _fit_q(rig, character)[:, inside])  # (S, 3, 3, F), (S, 3, F)
     names = [s.name for s in character.segments]
-    own = {b: ("abdomen" if s == "torso" else s) for b, s in dict(rig["body_segments"]).items()}
+    own = {**_own_segments(rig), **dict(override or {})}
     B = len(bodies)
     mean = np.empty((B, 3, 3))
     right = np.tile(np.eye(3), (B, 1, 1))  # body in its host body (merged bodies), identity otherwise
@@ -379,11 +400,25 @@ def calibration(rig: Mapping[str, Any], character: Character, evaluation: Mappin
 
 
 def body_poses(motion: Motion, q: np.ndarray, t: np.ndarray, D: float, cal: Calibration,
-               frame: GroundFrame | None = None) -> tuple[np.ndarray, np.ndarray]:
+               frame: GroundFrame | None = None,
+               blend: Mapping[str, Sequence[tuple[Calibration, float]]] | None = None
+               ) -> tuple[np.ndarray, np.ndarray]:
     """The model's bodies (S, B, 3, 3), (S, B, 3) in OpenSim ground, placed on the motion's
     anchors ``q`` (n, S) at times ``t`` (s; ``D`` the motion's cycle) with the calibration at
     the same gait phase; ``frame``: the motion's world → OpenSim ground (default
-    :func:`export_frame`)."""
+    :func:`export_frame`). ``blend``: body -> (calibration, weight) pairs whose poses it takes
+    the weighted mean of (a torso shared by our abdomen, thorax and head, weighed by mass)."""
+    if blend:
+        W, P = body_poses(motion, q, t, D, cal, frame)
+        bodies = list(cal.anchors)
+        for b, cals in blend.items():
+            i = bodies.index(b)
+            poses = [body_poses(motion, q, t, D, c, frame) for c, _ in cals]
+            w = np.array([float(x) for _, x in cals])
+            P[:, i] = np.einsum("k,kti->ti", w / w.sum(), np.stack([pp[1][:, i] for pp in poses]))
+            for s_ in range(t.size):
+                W[s_, i] = Rotation.from_matrix(np.stack([pp[0][s_, i] for pp in poses])).mean(weights=w).as_matrix()
+        return W, P
     t_start = float(motion.provenance["source"]["cycle"]["t_start"])
     C, d = cal.at(t / D)
     Rs, Ps = segment_frames(motion.character, q)
@@ -1193,6 +1228,8 @@ def reduce_residuals_on_feet(w_in: np.ndarray, ans: Mapping[str, Any], t: np.nda
     return out, added
 
 
+#: an adjustment moving a foot's centre of pressure further than this (mm) is flagged as large
+LARGE_COP_SHIFT_MM = 50.0
 #: half-width (m) of a foot's footprint around its heel-to-toe line
 FOOT_HALF_WIDTH_M = 0.05
 
@@ -1292,8 +1329,14 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
         ev = {**ev, "R": np.asarray(ev["R"])[:-1], "P": np.asarray(ev["P"])[:-1]}
         timing["evaluate_capture_s"] = time.perf_counter() - tk
         cal = calibration(rig, motion.character, ev, cyc, posture)
+        torso, parts = trunk_parts(rig, motion.character)
+        blend = None
+        if torso is not None:
+            blend = {torso: [(cal if k == 0 else calibration(rig, motion.character, ev, cyc, posture,
+                                                              override={torso: seg}), m)
+                             for k, (seg, m) in enumerate(parts)]}
         t, q, w, D = cycle_samples(motion, cycles, float(rate))
-        W, P = body_poses(motion, q, t, D, cal, frame)
+        W, P = body_poses(motion, q, t, D, cal, frame, blend)
         defs, xyz = virtual_markers(list(rig["bodies"]), np.asarray(ev["body_com"], dtype=float), W, P)
         with tempfile.TemporaryDirectory(prefix="motionx-osim-ik-") as scratch:
             trc = Path(scratch) / "virtual_markers.trc"
@@ -1344,7 +1387,17 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
             prints = footprints(list(rig["bodies"]), np.asarray(ev["body_com"], dtype=float), W, P, rig["feet"])
             out_before = cop_outside_feet(naive, prints, inside, min_load)
             out_after = cop_outside_feet(cols, prints, inside, min_load)
-            adjustment = {"per_foot": _adjustment_figures(naive, cols, t, window, min_load),
+            per_foot = _adjustment_figures(naive, cols, t, window, min_load)
+            weight = float(np.linalg.norm(gravity)) * motion.character.total_mass
+            large = [side for side, v in per_foot.items()
+                     if v["cop_shift_mm"]["max"] > LARGE_COP_SHIFT_MM or v["force_change_N"]["max"] > 0.1 * weight]
+            adjustment = {"per_foot": per_foot,
+                          "large": bool(large),
+                          "note": (f"the ground reaction of the {' and '.join(large)} foot moved by more than "
+                                   f"{LARGE_COP_SHIFT_MM:g} mm or 10 % of the body weight: this model cannot follow "
+                                   "the motion's character closely (its joints, or trunk segments the character "
+                                   "moves and the model holds rigid); the files balance on the model but the "
+                                   "adjusted ground reactions are not the motion's") if large else None,
                           "cop_outside_footprint_mm": {
                               side: {"before": 1e3 * out_before[f], "after": 1e3 * out_after[f]}
                               for f, side in enumerate(("right", "left"))},
@@ -1395,7 +1448,8 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
                          "feet": dict(rig["feet"])},
         "inverse_kinematics": {"tool": "OpenSim InverseKinematicsTool", "virtual_markers": len(defs),
                                "bodies_marked": sorted({m[1] for m in defs}),
-                               "anchors": dict(cal.anchors),
+                               "anchors": {**dict(cal.anchors), **({torso: "+".join(p for p, _ in parts)}
+                                                                    if torso is not None else {})},
                                "calibration": {"harmonics": cal.harmonics,
                                                "smoothing_rms_deg": cal.fit_rms_deg,
                                                "smoothing_rms_mm": cal.fit_rms_mm},
@@ -1481,6 +1535,8 @@ def readme(summary: Mapping[str, Any]) -> str:
                       f"{side} foot {v['force_change_N']['max']:.1f} N, centre of pressure "
                       f"{v['cop_shift_mm']['max']:.1f} mm, free moment {v['free_moment_change_Nm']['max']:.2f} N·m"
                       for side, v in adj["per_foot"].items()) + "."]
+        if adj.get("note"):
+            lines += ["", "**Large adjustment**: " + adj["note"] + "."]
     return "\n".join(lines) + "\n"
 
 
