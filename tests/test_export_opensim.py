@@ -174,6 +174,10 @@ def test_motions_that_cannot_be_written_on_an_opensim_model_are_refused(trials, 
     with pytest.raises(OpenSimExportError, match="carries no OpenSim model"):
         export_motion(foreign, "opensim")
     assert not (tmp_path / "capture").exists()
+    for bad, msg in (({"cycles": 0}, "cycles"), ({"lowpass": "6 Hz"}, "lowpass"), ({"lowpass": 80.0}, "lowpass"),
+                     ({"rate": 5}, "rate"), ({"reduce_residuals": "yes"}, "reduce_residuals")):
+        with pytest.raises(OpenSimExportError, match=msg):
+            export_motion(tutor, "opensim", **bad)
 
 
 def test_a_slope_optimum_is_written_on_an_inclined_ground_under_the_models_gravity(trials, tmp_path):

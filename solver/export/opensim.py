@@ -1300,10 +1300,15 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
 
     t_begin = time.perf_counter()
     rig = source_rig(motion)
-    if not (isinstance(cycles, int) and 1 <= cycles <= 10):
+    if not (isinstance(cycles, int) and not isinstance(cycles, bool) and 1 <= cycles <= 10):
         raise OpenSimExportError(f"cycles must be an integer from 1 to 10, got {cycles!r}")
     if not (isinstance(rate, (int, float)) and math.isfinite(rate) and 10.0 <= rate <= 1000.0):
         raise OpenSimExportError(f"rate must be 10-1000 Hz, got {rate!r}")
+    if lowpass is not None and not (isinstance(lowpass, (int, float)) and not isinstance(lowpass, bool)
+                                    and math.isfinite(lowpass) and 0.0 < lowpass <= 0.5 * rate):
+        raise OpenSimExportError(f"lowpass must be None (no filter) or a cut-off in (0, rate/2] Hz, got {lowpass!r}")
+    if not isinstance(reduce_residuals, bool):
+        raise OpenSimExportError(f"reduce_residuals must be true or false, got {reduce_residuals!r}")
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     model_info = rig["model"]
