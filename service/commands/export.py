@@ -45,6 +45,10 @@ def cmd_export(args: argparse.Namespace) -> int:
         if args.out == "-":
             raise CliError("--out - (stdout) is only for text formats; give a .glb file name "
                            "(or --embedded for the .gltf JSON)")
+    if args.generic_model:
+        if fmt != "opensim":
+            raise CliError("--generic-model applies to --format opensim only")
+        options["model"] = "generic"
     folder = EXPORTERS[fmt].folder
     if folder and (args.out == "-" or args.rig is not None or args.y_up):
         raise CliError(f"--format {fmt} writes a folder on the trial's own model: give --out DIR "
@@ -104,6 +108,9 @@ glTF, DeepMimic motion). solver.export.reimport reads the JSON clip, glTF and BV
                         "the OpenSim trial's own model (checked by OpenSim's inverse dynamics)")
     s.add_argument("--out", required=True, metavar="FILE",
                    help="output file (- for stdout, text formats only); a folder for --format opensim")
+    s.add_argument("--generic-model", action="store_true",
+                   help="with --format opensim, a motion not made from an OpenSim trial: write it on OpenSim's "
+                        "gait2354 model scaled to the motion's character")
     s.add_argument("--embedded", action="store_true",
                    help="with --format gltf: the .gltf JSON with its buffer embedded (base64) instead of the .glb")
     s.add_argument("--y-up", action="store_true",

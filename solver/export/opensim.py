@@ -130,23 +130,11 @@ class OpenSimExportError(ExportError):
 # --- what the motion must carry ---------------------------------------------------------------
 
 
-def source_rig(motion: Motion) -> Mapping[str, Any]:
-    """The OpenSim rig a motion carries (``provenance["rig"]``), checked; refused otherwise."""
+def exportable(motion: Motion) -> Motion:
+    """``motion`` if the OpenSim export can write it (ground reactions, a gait cycle, the captured
+    cycle it stands for); refused otherwise."""
     if not isinstance(motion, Motion):
         raise OpenSimExportError(f"expected a solver.motion.Motion, got {type(motion).__name__}")
-    rig = motion.provenance.get("rig")
-    fmt = (motion.provenance.get("source") or {}).get("format")
-    if not isinstance(rig, Mapping) or rig.get("format") != "opensim":
-        have = f"its source is {fmt!r}" if fmt else "it records no source"
-        raise OpenSimExportError(
-            f"the OpenSim export writes a motion on the OpenSim model of the trial it was made from; this motion "
-            f"carries no OpenSim model ({have}; provenance['rig'] is "
-            f"{'absent' if rig is None else repr(rig.get('format')) if isinstance(rig, Mapping) else 'not a mapping'})."
-            " Make the tutor from an OpenSim trial (.osim + coordinates or markers) to export it for OpenSim")
-    missing = [k for k in ("model", "coordinates", "times", "fit", "bodies", "body_segments", "feet", "frame")
-               if k not in rig]
-    if missing:
-        raise OpenSimExportError(f"the motion's OpenSim rig lacks {missing}")
     if motion.wrenches is None:
         raise OpenSimExportError("the motion has no ground reactions (contact wrenches): the OpenSim export "
                                  "writes them as the model's external loads; export a tutor or a λ optimum, "
@@ -158,6 +146,26 @@ def source_rig(motion: Motion) -> Mapping[str, Any]:
     if not all(isinstance(cycle.get(k), (int, float)) for k in ("t_start", "period_s")):
         raise OpenSimExportError("the motion does not record the captured gait cycle it stands for "
                                  "(provenance['source']['cycle'] with t_start and period_s)")
+    return motion
+
+
+def source_rig(motion: Motion) -> Mapping[str, Any]:
+    """The OpenSim rig a motion carries (``provenance["rig"]``), checked; refused otherwise."""
+    exportable(motion)
+    rig = motion.provenance.get("rig")
+    fmt = (motion.provenance.get("source") or {}).get("format")
+    if not isinstance(rig, Mapping) or rig.get("format") != "opensim":
+        have = f"its source is {fmt!r}" if fmt else "it records no source"
+        raise OpenSimExportError(
+            f"the OpenSim export writes a motion on the OpenSim model of the trial it was made from; this motion "
+            f"carries no OpenSim model ({have}; provenance['rig'] is "
+            f"{'absent' if rig is None else repr(rig.get('format')) if isinstance(rig, Mapping) else 'not a mapping'})."
+            " Make the tutor from an OpenSim trial (.osim + coordinates or markers), or pass model='generic' "
+            "(motionx export --generic-model) to write it on the generic gait2354 model scaled to its character")
+    missing = [k for k in ("model", "coordinates", "times", "fit", "bodies", "body_segments", "feet", "frame")
+               if k not in rig]
+    if missing:
+        raise OpenSimExportError(f"the motion's OpenSim rig lacks {missing}")
     return rig
 
 
@@ -672,7 +680,7 @@ def run_child(job: Mapping[str, Any]) -> dict[str, Any]:
         code = "from solver.export.opensim import child_main; child_main()"
         try:
             proc = subprocess.run([sys.executable, "-c", code], input=json.dumps({**job, "answer": out}), text=True,
-                                  capture_output=True, env=env, timeout=CHILD_TIMEOUT_S)
+                                  capture_output=True, env=env, timeout=CHILD_TIMEOUT_S, cwd=d)  # OpenSim's log there
         except subprocess.TimeoutExpired:
             raise OpenSimExportError(f"OpenSim's {job['job']} did not finish within {CHILD_TIMEOUT_S:.0f} s") from None
         if proc.returncode != 0:
@@ -685,13 +693,14 @@ def run_child(job: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def child_main() -> None:  # pragma: no cover - runs in the child process (exercised by every export test)
-    """Child entry: a JSON job on stdin (``ik``, ``id`` or ``couple``), its answer as JSON."""
+    """Child entry: a JSON job on stdin (``ik``, ``id``, ``couple``, ``scale``, ``masses``), its answer as JSON."""
     import opensim as osim  # first heavy import of the process: OpenSim's casadi wins
 
     osim.Logger.setLevelString("error")
     job = json.loads(sys.stdin.read())
     try:
-        answer = {"ik": _child_ik, "id": _child_id, "couple": _child_couple}[job["job"]](osim, job)
+        answer = {"ik": _child_ik, "id": _child_id, "couple": _child_couple, "scale": _child_scale,
+                  "masses": _child_masses}[job["job"]](osim, job)
         Path(job["answer"]).write_text(json.dumps(answer))
     except Exception as e:
         Path(job["answer"] + ".err").write_text(str(e))
@@ -892,6 +901,40 @@ def _refine(osim, model_path, tool_mot, markers, weights, xyz, out):  # pragma: 
             "refine_last_step_max": float(max(last_steps)),
             "marker_rms_m": np.sqrt(np.mean(errs**2, axis=1)).tolist(), "marker_max_m": errs.max(axis=1).tolist(),
             "per_marker_rms_m": dict(zip((m[0] for m in markers), np.sqrt(np.mean(errs**2, axis=0)).tolist()))}
+
+
+def _child_scale(osim, job):  # pragma: no cover - child
+    """A model scaled body by body (OpenSim's ``Model.scale``: joint locations, muscle paths,
+    masses and inertias; the mass distribution kept, the total set to ``mass``), printed to ``out``."""
+    model = osim.Model(job["model"])
+    state = model.initSystem()
+    scales = osim.ScaleSet()
+    for body, f in job["factors"].items():
+        sc = osim.Scale()
+        sc.setSegmentName(body)
+        sc.setScaleFactors(osim.Vec3(*f))
+        sc.setApply(True)
+        scales.cloneAndAppend(sc)
+    if not model.scale(state, scales, True, float(job["mass"])):
+        raise RuntimeError("OpenSim could not scale the generic model")
+    model.setName(job["name"])
+    model.printToXML(job["out"])
+    return {"mass": model.getTotalMass(model.initSystem())}
+
+
+def _child_masses(osim, job):  # pragma: no cover - child
+    """A model with its bodies' masses, centres of mass and inertias (body frame, about the
+    centre of mass) set as given, printed to ``out``."""
+    model = osim.Model(job["model"])
+    for body, (m, c, inertia) in job["bodies"].items():
+        b = model.getBodySet().get(body)
+        b.setMass(float(m))
+        b.setMassCenter(osim.Vec3(*c))
+        i = np.asarray(inertia, dtype=float)
+        b.setInertia(osim.Inertia(i[0, 0], i[1, 1], i[2, 2], i[0, 1], i[0, 2], i[1, 2]))
+    model.finalizeConnections()
+    model.printToXML(job["out"])
+    return {"mass": model.getTotalMass(model.initSystem())}
 
 
 def _labels(sto) -> list[str]:  # pragma: no cover - child
@@ -1194,6 +1237,141 @@ def _capture_reference(rig: Mapping[str, Any], model_path: Path, cycle: Mapping[
     return out
 
 
+#: the generic model for motions of other sources: the OpenSim gait2354 model as scaled for the
+#: example subject01 (1.80 m, 72.6 kg; opensim-core, Apache-2.0; see models/README.md),
+#: scaled again to the motion's character at export
+GENERIC_MODEL = Path(__file__).with_name("models") / "gait2354_subject01.osim"
+#: frames of the generic model's calibration "trial" (its default pose, repeated over the cycle)
+_GENERIC_FRAMES = 10
+
+
+def generic_rig(motion: Motion, scratch: str | Path) -> dict[str, Any]:
+    """An OpenSim rig for a motion of another source (BVH, C3D, DeepMimic…): the generic model
+    (:data:`GENERIC_MODEL`) scaled to the motion's character — pelvis by the hip width, each
+    femur, tibia and foot by our thigh, shank and foot lengths, the torso by the legs' mean —
+    and given the character's mass distribution (pelvis, thighs, shanks, feet, toes on the
+    corresponding bodies, every other segment on the torso; a HalfBoy's pelvis carries its
+    upper body, so its torso is left nearly massless); calibrated in the default
+    standing pose (the model's coordinates at their defaults, ours at zero: both stand with the
+    segments aligned), the model's hip mid-point on ours. The rig has the keys of an imported
+    one (:mod:`solver.io.opensim.rig`); the motion is then written in OpenSim's own axes."""
+    from solver.capture import GroundFrame as Frame
+    from solver.io.opensim.base import C_OSIM
+    from solver.io.opensim.model import _body_segments
+    from solver.io.opensim.rig import pack_model
+    from solver.io.opensim.worker import run_worker
+
+    ch = motion.character
+    names = [sg.name for sg in ch.segments]
+    need = ["pelvis", "thigh_r", "thigh_l", "shank_r", "shank_l", "foot_r", "foot_l"]
+    if [n for n in need if n not in names]:
+        raise OpenSimExportError(f"the generic OpenSim model needs a character with a pelvis, thighs, shanks and feet; "
+                                 f"{ch.name!r} has {names}")
+    R0, P0 = segment_frames(ch, np.zeros(ch.n))
+    ours = {n: P0[names.index(n)] for n in need}
+    heel_toe = {}
+    for side in ("right", "left"):
+        pts = sorted((c for c in ch.contacts if c.side == side), key=lambda c: float(c.position[0]))
+        heel_toe[side] = float(np.linalg.norm(np.asarray(pts[-1].position) - np.asarray(pts[0].position))) \
+            if len(pts) >= 2 else None
+    # the generic model's own default geometry (OpenSim ground)
+    base = run_worker(str(GENERIC_MODEL), ["pelvis_ty"], np.array([[0.0]]), False)
+    jc = {c: np.asarray(base["JC"])[0, k] for k, c in enumerate(base["joint_child"])}
+    bc = {b: np.asarray(base["body_com"])[k] for k, b in enumerate(base["body_names"])}
+    Pm = {b: np.asarray(base["P"])[0, k] for k, b in enumerate(base["body_names"])}
+
+    def ratio(a: float, b: float) -> float:
+        return float(a / b) if b > 1e-6 else 1.0
+
+    factors: dict[str, list[float]] = {}
+    hip = ratio(float(np.linalg.norm(ours["thigh_r"] - ours["thigh_l"])),
+                float(np.linalg.norm(jc["femur_r"] - jc["femur_l"])))
+    factors["pelvis"] = [hip] * 3
+    legs = []
+    for s, side in (("r", "right"), ("l", "left")):
+        thigh = ratio(float(np.linalg.norm(ours[f"shank_{s}"] - ours[f"thigh_{s}"])),
+                      float(np.linalg.norm(jc[f"tibia_{s}"] - jc[f"femur_{s}"])))
+        shank = ratio(float(np.linalg.norm(ours[f"foot_{s}"] - ours[f"shank_{s}"])),
+                      float(np.linalg.norm(jc[f"talus_{s}"] - jc[f"tibia_{s}"])))
+        tip = Pm[f"toes_{s}"] + np.array([2.0 * bc[f"toes_{s}"][0], 0.0, 0.0])
+        length = heel_toe[side]
+        foot = ratio(length, float(np.linalg.norm((tip - Pm[f"calcn_{s}"])[[0, 2]]))) if length else shank
+        factors[f"femur_{s}"] = [thigh] * 3
+        factors[f"tibia_{s}"] = [shank] * 3
+        for b in (f"talus_{s}", f"calcn_{s}", f"toes_{s}"):
+            factors[b] = [foot] * 3
+        legs += [thigh, shank]
+    factors["torso"] = [float(np.mean(legs))] * 3
+    scaled = Path(scratch) / "generic_scaled.osim"
+    run_child({"job": "scale", "model": str(GENERIC_MODEL), "factors": factors, "mass": ch.total_mass,
+               "name": f"gait2354_scaled_{ch.name}".replace("-", "_"), "out": str(scaled)})
+    res = run_worker(str(scaled), ["pelvis_ty"], np.array([[0.0]]), False)
+    coords = list(res["coord_names"])
+    default = np.array(res["coord_default"], dtype=float)
+    default[coords.index("pelvis_ty")] = 0.0
+    jc = {c: np.asarray(res["JC"])[0, k] for k, c in enumerate(res["joint_child"])}
+    # the model's hip mid-point on ours (OpenSim ground = C_OSIM^T ours)
+    target = C_OSIM.T @ (0.5 * (ours["thigh_r"] + ours["thigh_l"]))
+    delta = target - 0.5 * (jc["femur_r"] + jc["femur_l"])
+    for k, c in enumerate(("pelvis_tx", "pelvis_ty", "pelvis_tz")):
+        default[coords.index(c)] += delta[k]
+    seg_of, _, _ = _body_segments(res, str(scaled))
+    # the character's mass distribution on the model's bodies (default pose, hip mid-points together):
+    # pelvis <- our pelvis; femur, tibia, calcn, toes <- thigh, shank, foot, toes; torso <- every other
+    # segment of ours (none for a HalfBoy, whose pelvis carries the upper body); talus (and an empty
+    # torso) a negligible mass
+    R_b = {b: C_OSIM @ np.asarray(res["R"])[0, k] for k, b in enumerate(res["body_names"])}
+    p_b = {b: C_OSIM @ (np.asarray(res["P"])[0, k] + delta) for k, b in enumerate(res["body_names"])}
+    groups: dict[str, list[str]] = {"pelvis": ["pelvis"], "torso": []}
+    for s, _ in (("r", 0), ("l", 1)):
+        groups.update({f"femur_{s}": [f"thigh_{s}"], f"tibia_{s}": [f"shank_{s}"], f"calcn_{s}": [f"foot_{s}"],
+                       f"toes_{s}": [f"toes_{s}"] if f"toes_{s}" in names else [], f"talus_{s}": []})
+    used = {x for v in groups.values() for x in v}
+    groups["torso"] = [n for n in names if n not in used]
+    eps = 1e-3
+    props: dict[str, tuple[float, list[float], list[list[float]]]] = {}
+    for body, segs in groups.items():
+        if body not in R_b:
+            continue
+        m, mc = 0.0, np.zeros(3)
+        parts = []
+        for sname in segs:
+            sg = ch.segments[names.index(sname)]
+            i_s = names.index(sname)
+            c_w = P0[i_s] + R0[i_s] @ np.asarray(sg.com)
+            parts.append((sg.mass, c_w, R0[i_s] @ np.asarray(sg.inertia) @ R0[i_s].T))
+            m += sg.mass
+            mc += sg.mass * c_w
+        if m <= eps:
+            props[body] = (eps, [0.0, 0.0, 0.0], (1e-6 * np.eye(3)).tolist())
+            continue
+        com = mc / m
+        inertia = sum(ii + mi * (float((c - com) @ (c - com)) * np.eye(3) - np.outer(c - com, c - com))
+                      for mi, c, ii in parts)
+        Rb = R_b[body]
+        props[body] = (m, (Rb.T @ (com - p_b[body])).tolist(), (Rb.T @ inertia @ Rb).tolist())
+    massed = Path(scratch) / "generic_massed.osim"
+    run_child({"job": "masses", "model": str(scaled), "bodies": props, "out": str(massed)})
+    scaled = massed
+    cyc = motion.provenance["source"]["cycle"]
+    times = float(cyc["t_start"]) + float(cyc["period_s"]) * np.arange(_GENERIC_FRAMES) / _GENERIC_FRAMES
+    return {
+        "format": "opensim",
+        "generic": {"model": GENERIC_MODEL.name, "scale_factors": {b: round(f[0], 4) for b, f in factors.items()},
+                    "mass_kg": ch.total_mass},
+        "model": {"file": f"gait2354_scaled_{ch.name}.osim", "name": f"gait2354 scaled to {ch.name}",
+                  "sha256": None, "osim_xz_b64": pack_model(scaled.read_bytes())},
+        "model_coordinates": coords,
+        "coordinates": {"names": coords, "values": np.tile(default, (_GENERIC_FRAMES, 1)).tolist()},
+        "times": times.tolist(),
+        "fit": {"names": list(ch.coordinate_names), "q": np.zeros((ch.n, _GENERIC_FRAMES)).tolist()},
+        "bodies": list(res["body_names"]),
+        "body_segments": dict(seg_of),
+        "feet": {"right": "calcn_r", "left": "calcn_l"},
+        "frame": Frame(R=C_OSIM.T, axes="OpenSim ground: x forward, y up, z right").to_dict(),
+    }
+
+
 # --- the export ---------------------------------------------------------------------------------------
 
 
@@ -1288,7 +1466,8 @@ def _adjustment_figures(before: np.ndarray, after: np.ndarray, t: np.ndarray, wi
 
 
 def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, rate: float = RATE_HZ,
-                  lowpass: float | None = LOWPASS_HZ, reduce_residuals: bool = True) -> dict[str, Any]:
+                  lowpass: float | None = LOWPASS_HZ, reduce_residuals: bool = True,
+                  model: str = "source") -> dict[str, Any]:
     """Write ``motion`` on its source OpenSim model into ``folder`` (created; see the module doc
     for every file) and return the summary (also ``summary.json``): files, sampling, the
     inverse-kinematics fit, the residuals of OpenSim's InverseDynamicsTool on the files as
@@ -1299,6 +1478,20 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
     from solver.io.opensim.worker import run_worker
 
     t_begin = time.perf_counter()
+    if model not in ("source", "generic"):
+        raise OpenSimExportError(f"model must be 'source' (the trial's own OpenSim model) or 'generic' (gait2354 "
+                                 f"scaled to the motion's character), got {model!r}")
+    if model == "generic":
+        from solver.io.opensim.base import OpenSimError as _OpenSimError
+
+        exportable(motion)
+        try:
+            with tempfile.TemporaryDirectory(prefix="motionx-osim-generic-") as scratch:
+                generic = generic_rig(motion, scratch)
+        except _OpenSimError as e:
+            raise OpenSimExportError(str(e)) from None
+        # written in OpenSim's own axes: the source's ground frame (BVH's y up, centimetres…) is not the model's
+        motion = motion.evolve(provenance={**motion.provenance, "rig": generic, "frame": generic["frame"]})
     rig = source_rig(motion)
     if not (isinstance(cycles, int) and not isinstance(cycles, bool) and 1 <= cycles <= 10):
         raise OpenSimExportError(f"cycles must be an integer from 1 to 10, got {cycles!r}")
@@ -1309,7 +1502,7 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
         raise OpenSimExportError(f"lowpass must be None (no filter) or a cut-off in (0, rate/2] Hz, got {lowpass!r}")
     if not isinstance(reduce_residuals, bool):
         raise OpenSimExportError(f"reduce_residuals must be true or false, got {reduce_residuals!r}")
-    folder = Path(folder)
+    folder = Path(folder).resolve()
     folder.mkdir(parents=True, exist_ok=True)
     model_info = rig["model"]
     text, repaired = repaired_model_text(unpack_model(model_info["osim_xz_b64"]))
@@ -1440,7 +1633,8 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
                    "character": motion.character.name, "fps": motion.fps, "frames": motion.T,
                    "cycle_s": D, "source_cycle": dict(cyc)},
         "model": {"file": model_file, "name": model_info.get("name"), "sha256_source": model_info.get("sha256"),
-                  "socket_paths_repaired": repaired, "gravity_changed": model_gravity},
+                  "socket_paths_repaired": repaired, "gravity_changed": model_gravity,
+                  "generic": rig.get("generic")},
         "files": {"model": model_file, "coordinates": COORDINATES_FILE, "ground_reactions": GRF_FILE,
                   "external_loads": EXTERNAL_LOADS_FILE, "inverse_dynamics_setup": SETUP_FILE},
         "sampling": {"rate_hz": float(rate), "cycles": cycles, "rows": int(t.size),
@@ -1546,11 +1740,12 @@ def readme(summary: Mapping[str, Any]) -> str:
 
 
 def to_opensim(motion: Motion, *, cycles: int = CYCLES, rate: float = RATE_HZ, lowpass: float | None = LOWPASS_HZ,
-               reduce_residuals: bool = True) -> bytes:
+               reduce_residuals: bool = True, model: str = "source") -> bytes:
     """The folder :func:`write_opensim` writes, as a zip archive (``export_motion(motion,
     "opensim")``; with ``path=DIR`` it is unpacked into DIR)."""
     with tempfile.TemporaryDirectory(prefix="motionx-osim-export-") as d:
-        write_opensim(motion, d, cycles=cycles, rate=rate, lowpass=lowpass, reduce_residuals=reduce_residuals)
+        write_opensim(motion, d, cycles=cycles, rate=rate, lowpass=lowpass, reduce_residuals=reduce_residuals,
+                      model=model)
         buf = io.BytesIO()
         with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
             for p in sorted(Path(d).iterdir()):
