@@ -56,6 +56,7 @@ from solver import spatial as sp
 from solver.capture import Capture, GroundFrame
 from solver.errors import InputError
 from solver.io.fit import fit_track
+from solver.io.joint_track import JointPose, ground_landmarks
 from solver.io.readers import one_file
 from solver.io.roles import (
     RoleError,
@@ -65,7 +66,7 @@ from solver.io.roles import (
     parse_joint_mapping,
     spine_joints,
 )
-from solver.io.track import SkeletonTrack, add_pelvis
+from solver.io.track import SkeletonTrack
 from solver.rig import Rig, segment_roles
 
 log = logging.getLogger(__name__)
@@ -277,13 +278,6 @@ def _roles(clip: BvhClip, path: str | Path, joints: str | Path | Mapping[str, st
     return roles, spine_joints(clip.parents, roles)
 
 
-def _minimal_unit(v: np.ndarray) -> np.ndarray:
-    n = np.linalg.norm(v)
-    if n < 1e-12:
-        raise BvhError("degenerate skeleton geometry (zero-length bone)")
-    return v / n
-
-
 def _unit_scale(units: str | float, leg: float, path: str | Path) -> tuple[str | float, float]:
     """The file's length unit and metres per unit: given, or (``"auto"``) the first unit that
     makes the rest leg length ``leg`` (file units) a human's."""
@@ -305,89 +299,11 @@ def _unit_scale(units: str | float, leg: float, path: str | Path) -> tuple[str |
     return cands[0], UNIT_M[cands[0]]  # first in the order cm, m, mm, in, cmu
 
 
-class _Pose:
-    """The clip's joints along the motion and in the rest pose (file axes and units)."""
-
-    def __init__(self, clip: BvhClip, up_v: np.ndarray) -> None:
-        self.clip, self.up_v = clip, up_v
-        self.R_rest, self.P_rest = clip.forward(np.zeros((1, clip.motion.shape[1])))
-        self.R, self.P = clip.forward()
-        self.children = {j: [c for c, p in enumerate(clip.parents) if p == j] for j in range(len(clip.names))}
-
-    def tip(self, j: int) -> np.ndarray | None:
-        """Rest-pose position of a joint's tip: its End Site or its first child."""
-        if j in self.clip.end_sites:
-            return self.P_rest[j, 0] + self.R_rest[j, 0] @ self.clip.end_sites[j]
-        if self.children[j]:
-            return self.P_rest[self.children[j][0], 0]
-        return None
-
-    def world(self, j: int, local: np.ndarray) -> np.ndarray:
-        return self.P[j] + np.einsum("tij,j->ti", self.R[j], local)
-
-    def attached(self, j: int, rest_point: np.ndarray) -> np.ndarray:
-        """A rest-pose point carried by joint j along the motion."""
-        return self.world(j, self.R_rest[j, 0].T @ (rest_point - self.P_rest[j, 0]))
-
-    def feet(self, roles: Mapping[str, int], scale: float, path: str | Path) -> dict[str, np.ndarray]:
-        """Leg joints, heel and toe on the sole (and the metatarsal heads of a foot without a toes joint)."""
-        P_rest, R_rest, up_v = self.P_rest, self.R_rest, self.up_v
-        raw: dict[str, np.ndarray] = {}
-        for s in "rl":
-            for r in ("hip", "knee", "ankle"):
-                raw[f"{r}_{s}"] = self.P[roles[f"{r}_{s}"]]
-            a = roles[f"ankle_{s}"]
-            mtp_j = roles.get(f"mtp_{s}")
-            toe_rest = self.tip(mtp_j) if mtp_j is not None else self.tip(a)
-            if toe_rest is None:
-                raise BvhError(f"{path}: the {'right' if s == 'r' else 'left'} foot has no toe joint nor End Site: "
-                               "cannot place the toes")
-            ank = P_rest[a, 0]
-            sole_h = min(float(toe_rest @ up_v), float(P_rest[mtp_j, 0] @ up_v) if mtp_j is not None else np.inf)
-            fwd = (toe_rest - ank) - ((toe_rest - ank) @ up_v) * up_v
-            heel = ank - 0.25 * fwd + (sole_h - ank @ up_v) * up_v
-            toe_sole = toe_rest + (sole_h - toe_rest @ up_v) * up_v
-            body = mtp_j if mtp_j is not None else a
-            if mtp_j is None:  # no toes joint: metatarsal heads at 72 % heel -> toe, 2 cm (scaled) above the sole
-                m = heel + 0.72 * (toe_sole - heel) + (0.02 / scale) * up_v
-                raw[f"mtp_{s}"] = self.world(a, R_rest[a, 0].T @ (m - ank))
-            else:
-                raw[f"mtp_{s}"] = self.P[mtp_j]
-            raw[f"heel_{s}"] = self.world(a, R_rest[a, 0].T @ (heel - ank))
-            raw[f"toe_{s}"] = self.world(body, R_rest[body, 0].T @ (toe_sole - P_rest[body, 0]))
-        add_pelvis(raw)
-        return raw
-
-    def upper_body(self, roles: Mapping[str, int]) -> dict[str, np.ndarray]:
-        """Lumbar, neck, head top, sternum, arms; a KeyError naming what the clip lacks."""
-        P = self.P
-        upper: dict[str, np.ndarray] = {}
-        # lumbar: the first spine joint clearly above the hips (CMU's LowerBack sits on the root)
-        if "lumbar" not in roles:
-            raise KeyError("spine joint above the hips")
-        upper["lumbar"] = P[roles["lumbar"]]
-        head = roles["head"]
-        upper["neck"] = P[head]
-        ht = self.tip(head)
-        if ht is None:
-            raise KeyError("head top")
-        upper["head_top"] = self.attached(head, ht)
-        if "clavicle_r" in roles and "clavicle_l" in roles:
-            upper["sternum"] = 0.5 * (P[roles["clavicle_r"]] + P[roles["clavicle_l"]])
-        elif "neck" in roles:
-            upper["sternum"] = P[roles["neck"]]
-        else:
-            upper["sternum"] = 0.5 * (P[roles["shoulder_r"]] + P[roles["shoulder_l"]])
-        for s in "rl":
-            upper[f"shoulder_{s}"] = P[roles[f"shoulder_{s}"]]
-            upper[f"elbow_{s}"] = P[roles[f"elbow_{s}"]]
-            w = roles[f"wrist_{s}"]
-            upper[f"wrist_{s}"] = P[w]
-            ht = self.tip(w)
-            if ht is None:
-                raise KeyError(f"hand tip {s}")
-            upper[f"hand_{s}"] = self.attached(w, ht)
-        return upper
+def _pose(clip: BvhClip, up_v: np.ndarray) -> JointPose:
+    """The clip's joints along the motion and in the rest pose (all channels 0), file axes and units."""
+    R_rest, P_rest = clip.forward(np.zeros((1, clip.motion.shape[1])))
+    R, P = clip.forward()
+    return JointPose(clip.parents, R_rest[:, 0], P_rest[:, 0], R, P, clip.end_sites, up_v, BvhError)
 
 
 def bvh_track(
@@ -405,30 +321,17 @@ def bvh_track(
     if up not in ("y", "z"):
         raise BvhError(f"up must be 'y' or 'z', got {up!r}")
     up_v = np.array([0.0, 1.0, 0.0]) if up == "y" else np.array([0.0, 0.0, 1.0])
-    pose = _Pose(clip, up_v)
+    pose = _pose(clip, up_v)
     P_rest = pose.P_rest
     # units from the rest leg length
-    leg = np.mean([np.linalg.norm(P_rest[roles[f"hip_{s}"], 0] - P_rest[roles[f"knee_{s}"], 0])
-                   + np.linalg.norm(P_rest[roles[f"knee_{s}"], 0] - P_rest[roles[f"ankle_{s}"], 0]) for s in "rl"])
+    leg = np.mean([np.linalg.norm(P_rest[roles[f"hip_{s}"]] - P_rest[roles[f"knee_{s}"]])
+                   + np.linalg.norm(P_rest[roles[f"knee_{s}"]] - P_rest[roles[f"ankle_{s}"]]) for s in "rl"])
     units, scale = _unit_scale(units, float(leg), path)
-    roles, spines = _roles(clip, path, joints, P_rest[:, 0] * scale)  # lumbar: 3 cm clear of the hips
-    # facing: perpendicular to the hip line, horizontal, averaged over the clip
-    hl = pose.P[roles["hip_l"]] - pose.P[roles["hip_r"]]  # (T, 3)
-    hl = hl - np.outer(hl @ up_v, up_v)
-    y_dir = _minimal_unit(np.mean(hl / np.linalg.norm(hl, axis=1, keepdims=True), axis=0))
-    x_dir = np.cross(y_dir, up_v)
-    A = np.stack([x_dir, y_dir, up_v])  # rows: our axes in file coordinates -> ours = A @ file
-    raw = pose.feet(roles, scale, path)
-    try:  # upper body (all or nothing)
-        raw.update(pose.upper_body(roles))
-    except KeyError as e:
-        log.info("%s: no usable upper body (%s missing): lower-body track", path, e)
-    # floor along up (file units), then our frame in metres
-    if floor_height is None:
-        soles = np.concatenate([raw[f"{k}_{s}"] @ up_v for k in ("heel", "toe") for s in "rl"])
-        floor_height = float(np.percentile(soles, 2))
-    offset_file = floor_height * up_v
-    lm = {k: ((v - offset_file) @ A.T * scale).T for k, v in raw.items()}
+    roles, spines = _roles(clip, path, joints, P_rest * scale)  # lumbar: 3 cm clear of the hips
+    g = ground_landmarks(pose, roles, scale, floor_height, path)
+    if not g.upper_body:
+        log.info("%s: no usable upper body (%s missing): lower-body track", path, g.missing_upper)
+    lm, A, x_dir, offset_file, floor_height = g.landmarks, g.R, g.facing, g.offset, g.floor_height
     times = np.arange(clip.T) * clip.frame_time
     frame = GroundFrame(R=A.T, offset=offset_file * scale, unit_m=scale,
                         axes=f"BVH: {up.upper()} up, facing {np.round(x_dir, 3).tolist()} (file axes), units {units}")
