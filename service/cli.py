@@ -118,10 +118,12 @@ IMPORT_FLAGS: dict[str, tuple[str, dict]] = {
                                   "(default: auto)"}),
     "up": ("--up", {"choices": ["y", "z"], "help": "BVH: the file's up axis (default: y)"}),
     "joints": ("--joints", {"metavar": "ROLE=NAME,...",
-                            "help": "BVH: joint mapping for unrecognised joint names, ROLE=NAME,... (roles hips, "
+                            "help": "BVH, glTF: joint mapping for unrecognised joint names, ROLE=NAME,... (roles hips, "
                                     "hip_l, knee_l, ankle_l, mtp_l, …, e.g. hip_l=Thigh_L,knee_l=Shin_L) or a file "
                                     "with one ROLE=NAME per line (docs/import.md; default: roles detected from the "
                                     "names and the hierarchy)"}),
+    "animation": ("--animation", {"metavar": "NAME|INDEX",
+                                  "help": "glTF: the animation to read, by name or index (default: the first)"}),
     "in_degrees": ("--in-degrees", {"action": argparse.BooleanOptionalAction,
                                     "help": "OpenSim: the coordinates file is in degrees (--no-in-degrees: radians; "
                                             "default: its header says)"}),

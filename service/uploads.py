@@ -406,7 +406,7 @@ def is_motion_file(files: list[tuple[str, bytes]]) -> bool:
 
 #: the importer options a trial upload takes as form fields beside ``mass`` and ``belt_speed``
 #: (``solver.formats.reader_options()``; a test checks that every one is here)
-OPTION_FIELDS = ("lower_only", "markers", "units", "up", "in_degrees", "joints")
+OPTION_FIELDS = ("lower_only", "markers", "units", "up", "in_degrees", "joints", "animation")
 _BOOLEAN = {"true": True, "false": False, "1": True, "0": False, "yes": True, "no": False}
 _ROLE = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,31}$")
 
@@ -450,6 +450,11 @@ def trial_options(fields: Mapping[str, str]) -> dict[str, Any]:
             if v not in ("y", "z"):
                 raise UploadError(f"up must be y or z, got {clip(v, 20)!r}")
             out[key] = v
+        elif key == "animation":
+            if len(v) > 128 or _CONTROL.search(v):
+                raise UploadError("animation must be the glTF animation's name or index (at most 128 characters, "
+                                  "no control characters)")
+            out[key] = v
         else:
             out[key] = _role_map(v, key)
     return out
@@ -472,7 +477,8 @@ def trial_upload(files: list[tuple[str, bytes]], mass: float | None, belt_speed:
 
 #: importer parameters (``solver.errors.InputError.parameter``) -> how a client sends them
 FORM_FIELDS = {"mass": "send the form field 'mass' (kg)", "belt_speed": "send the form field 'belt_speed' (m/s)",
-               "joints": "send the form field 'joints' (ROLE=NAME,...)"}
+               "joints": "send the form field 'joints' (ROLE=NAME,...)",
+               "animation": "send the form field 'animation' (the glTF animation's name or index)"}
 
 
 def _hide_folder(text: str, tmp: str) -> str:

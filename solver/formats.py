@@ -69,6 +69,12 @@ READERS: tuple[Reader, ...] = (
     Reader("deepmimic", _ro({".txt": "DeepMimic motion or character", ".json": "DeepMimic motion or character"}),
            "DeepMimic motion .txt/.json + character .txt/.json", _ro(dict(_COMMON)),
            "solver.io.deepmimic", "trial_files", "load_deepmimic"),
+    Reader("gltf", _ro({".glb": "glTF 2.0 binary", ".gltf": "glTF 2.0 (buffers embedded)"}),
+           "one skinned, animated .glb or .gltf character (buffers embedded)",
+           _ro({**_COMMON,
+                "joints": "joint role mapping (role -> joint name, e.g. hip_l=Thigh_L) for unrecognised names",
+                "animation": "glTF: the animation to read, its name or index (default: the first)"}),
+           "solver.io.gltf", "trial_files", "load_gltf"),
 )
 
 
@@ -108,9 +114,11 @@ EXPORTERS: MappingProxyType[str, Exporter] = MappingProxyType({e.name: e for e i
     Exporter("json", "solver.export.clip", "to_clip_json", "application/json",
              "the JSON clip (local transforms, contacts, ground reactions)"),
     Exporter("gltf", "solver.export.gltf", "to_gltf", "model/gltf-binary",
-             "glTF 2.0, binary (.glb); binary=False: the .gltf JSON with its buffer embedded",
+             "glTF 2.0, binary (.glb); binary=False: the .gltf JSON with its buffer embedded; rig=source: on the "
+             "input's own glTF character, BVH or DeepMimic skeleton",
              MappingProxyType({("binary", False): "model/gltf+json"})),
-    Exporter("glb", "solver.export.gltf", "to_glb", "model/gltf-binary", "binary glTF 2.0 (.glb)"),
+    Exporter("glb", "solver.export.gltf", "to_glb", "model/gltf-binary",
+             "binary glTF 2.0 (.glb); rig=source: on the input's own character or skeleton"),
     Exporter("bvh", "solver.export.bvh", "to_bvh", "text/plain",
              "BVH (Y up); rig=source: on the input BVH's own skeleton"),
     Exporter("deepmimic", "solver.export.deepmimic", "to_deepmimic", "application/json",

@@ -33,7 +33,7 @@ def test_front_ends_enumerate_the_registries():
     from service.routes.motions import FORMATS, ExportFormat
 
     assert set(uploads.TRIAL_SUFFIXES) == set(reader_suffixes()) == {
-        ".osim", ".mot", ".sto", ".trc", ".xml", ".c3d", ".bvh", ".txt", ".json"}
+        ".osim", ".mot", ".sto", ".trc", ".xml", ".c3d", ".bvh", ".txt", ".json", ".glb", ".gltf"}
     assert set(TRIAL_SUFFIXES) <= set(reader_suffixes())
     assert tuple(EXPORTERS) == CHOICES
     assert FORMATS == (*EXPORTERS, "motion") == typing.get_args(ExportFormat)

@@ -354,26 +354,51 @@ def _glb(doc: dict, data: bytes) -> bytes:
     ])
 
 
-def to_glb(motion: Motion, *, meshes: bool = True, loop: bool = False) -> bytes:
+def _source(rig: Any) -> bool:
+    """Whether ``rig`` asks for the input's own rig ("source") rather than the motion's ("character")."""
+    if rig not in ("character", "source"):
+        raise ExportError(f"rig must be 'character' (the motion's own skeleton) or 'source' (the input's character "
+                          f"or skeleton), got {rig!r}")
+    return rig == "source"
+
+
+def to_glb(motion: Motion, *, meshes: bool = True, loop: bool = False, rig: str = "character") -> bytes:
     """Binary glTF (.glb): JSON chunk and BIN chunk. ``meshes``: include the segment ellipsoids.
     ``loop``: the animation is one cycle, frames 0 … P (its last key repeats the first under
-    the loop transform: ``extras.loop``), instead of every frame."""
+    the loop transform: ``extras.loop``), instead of every frame. ``rig="source"``: on the
+    input's own character or skeleton, one gait cycle (:func:`solver.export.rig_gltf.rig_glb`:
+    the skinned glTF input with its meshes, skin and materials; a BVH or DeepMimic input's
+    skeleton with bone shapes when ``meshes``)."""
+    _check_flag("loop", loop)
+    if _source(rig):
+        from solver.export.rig_gltf import rig_glb
+
+        return rig_glb(motion, meshes=meshes)
     return _glb(*_document(motion, meshes, loop))
 
 
-def to_gltf_embedded(motion: Motion, *, meshes: bool = True, loop: bool = False) -> str:
-    """glTF JSON (.gltf) with the buffer embedded as a base64 data URI."""
+def to_gltf_embedded(motion: Motion, *, meshes: bool = True, loop: bool = False, rig: str = "character") -> str:
+    """glTF JSON (.gltf) with the buffer embedded as a base64 data URI (``rig`` as :func:`to_glb`)."""
+    _check_flag("loop", loop)
+    if _source(rig):
+        from solver.export.rig_gltf import rig_gltf_embedded
+
+        return rig_gltf_embedded(motion, meshes=meshes)
     doc, data = _document(motion, meshes, loop)
     doc["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64.b64encode(data).decode("ascii")
     return json.dumps(doc, allow_nan=False, separators=(",", ":"))
 
 
-def to_gltf(motion: Motion, *, meshes: bool = True, binary: bool = True, loop: bool = False) -> bytes | str:
+def to_gltf(motion: Motion, *, meshes: bool = True, binary: bool = True, loop: bool = False,
+            rig: str = "character") -> bytes | str:
     """glTF 2.0 of ``motion``: the binary ``.glb`` (bytes, the default, as :func:`to_glb`), or
-    with ``binary=False`` the ``.gltf`` JSON text with its buffer embedded (:func:`to_gltf_embedded`)."""
+    with ``binary=False`` the ``.gltf`` JSON text with its buffer embedded (:func:`to_gltf_embedded`);
+    ``rig="source"``: on the input's own character or skeleton."""
     if not isinstance(binary, bool):
         raise ExportError(f"binary must be a boolean, got {binary!r}")
-    return to_glb(motion, meshes=meshes, loop=loop) if binary else to_gltf_embedded(motion, meshes=meshes, loop=loop)
+    if binary:
+        return to_glb(motion, meshes=meshes, loop=loop, rig=rig)
+    return to_gltf_embedded(motion, meshes=meshes, loop=loop, rig=rig)
 
 
 def to_library_glb(clips: list[tuple[str, Motion]], *, extras: dict | None = None, meshes: bool = True,

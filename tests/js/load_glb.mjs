@@ -13,9 +13,13 @@
 // of every skinned mesh and the height (Y) of its lowest skinned vertex (three.js's own
 // skinning: SkinnedMesh.getVertexPosition).
 //
-// Shims: none. GLTFLoader.parse() on an ArrayBuffer needs only TextDecoder, which Node has;
-// it touches the DOM (document, createImageBitmap, URL from `self`) only to decode images,
-// and our files have none. Errors (and GLTFLoader's onError) exit with status 1.
+// Shims: none by default. GLTFLoader.parse() on an ArrayBuffer needs only TextDecoder, which Node
+// has; it touches the DOM (document, createImageBitmap, URL from `self`) only to decode images.
+// IMAGES=stub (for a textured character): `self` is Node's global (URL.createObjectURL and Blob
+// are Node's) and three.js's TextureLoader hands back a 1x1 placeholder image instead of decoding
+// one, so the image's buffer view, the texture, its sampler and the material's map still go
+// through GLTFLoader; `materials` lists each mesh material and whether it has a colour map.
+// Errors (and GLTFLoader's onError) exit with status 1.
 
 import { readFileSync } from 'node:fs';
 import { dirname, resolve } from 'node:path';
@@ -27,6 +31,16 @@ const threeDir = process.env.THREE_DIR || resolve(here, '../../service/web/node_
 // so both share one module instance
 const THREE = await import(pathToFileURL(resolve(threeDir, 'build/three.module.js')).href);
 const { GLTFLoader } = await import(pathToFileURL(resolve(threeDir, 'examples/jsm/loaders/GLTFLoader.js')).href);
+
+if (process.env.IMAGES === 'stub') {
+  globalThis.self = globalThis;
+  THREE.TextureLoader.prototype.load = function (url, onLoad) {
+    const texture = new THREE.Texture();
+    texture.image = { width: 1, height: 1, placeholder: url };
+    setTimeout(() => onLoad && onLoad(texture), 0);
+    return texture;
+  };
+}
 
 const [file, ...timeArgs] = process.argv.slice(2);
 if (!file) {
@@ -51,6 +65,14 @@ scene.traverse((o) => {
   if (o.isSkinnedMesh) skinned.push(o);
 });
 const skeletons = new Set(skinned.map((m) => m.skeleton));
+const materials = [];
+scene.traverse((o) => {
+  if (o.isMesh) {
+    for (const m of Array.isArray(o.material) ? o.material : [o.material]) {
+      materials.push({ mesh: o.name, name: m.name, map: Boolean(m.map), color: m.color ? m.color.toArray() : null });
+    }
+  }
+});
 
 const vec = (v) => [v.x, v.y, v.z];
 const quat = (q) => [q.x, q.y, q.z, q.w];
@@ -132,6 +154,7 @@ process.stdout.write(JSON.stringify({
   skeletons: skeletons.size,
   skinned_meshes: skinned.length,
   meshes,
+  materials,
   asset: gltf.asset,
   animations,
   animation_extras: animationExtras,
