@@ -12,6 +12,7 @@ model compiled in memory (:func:`compile_model`), and the XML is for viewing/exc
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import mujoco
 import numpy as np
@@ -37,7 +38,87 @@ def _quat_z_to(direction: np.ndarray) -> np.ndarray:
     return q
 
 
-def build_spec(character: Character, gravity: Sequence[float] = DEFAULT_GRAVITY) -> mujoco.MjSpec:
+#: collision classes of a model with contacts on: soles touch the ground (bit 1), every other
+#: segment's geom touches only the ground too (bit 2: a fall), segments never touch each other
+_SOLE, _BODY, _GROUND = (1, 0), (2, 0), (1, 3)
+
+
+@dataclass(frozen=True)
+class Tread:
+    """A block of ground (world frame): centre, half extents, heading (rad about +z)."""
+
+    center: tuple[float, float, float]
+    half: tuple[float, float, float]
+    yaw: float = 0.0
+
+
+@dataclass(frozen=True)
+class ContactOptions:
+    """What makes a model *performable*: contacts on, an unactuated root, a motor per joint.
+
+    Each foot gets a box sole whose bottom face holds the foot's heel and toe contact points
+    (the optimizer's two-point centre-line foot) and spans the foot box's width; the sole is
+    turned about the heel-toe line by ``sole_roll[side]`` (rad, right then left) so that it lies
+    flat on the ground at the foot's mean stance orientation. Joint limits are off (every
+    joint torque is a motor's), the ground is the plane z = 0 plus ``treads``."""
+
+    sole_roll: tuple[float, float] = (0.0, 0.0)
+    sole_thickness: float = 0.01
+    #: half width of the sole (m); None: the foot box's
+    sole_half_width: float | None = None
+    #: > 0: the sole hangs from the foot on an actuated hinge about the heel-toe line (a subtalar
+    #: joint) and weighs this much (kg); its angle ``sole_roll`` lays it flat at the mean stance
+    subtalar_mass: float = 0.0
+    friction: float = 1.0
+    timestep: float = 0.001
+    treads: tuple[Tread, ...] = ()
+    floor: bool = True
+    #: contact softness: time constant (s) and damping ratio of the contact spring (MuJoCo solref)
+    solref: tuple[float, float] = (0.01, 1.0)
+    #: elliptic friction cones, frictional-to-normal impedance ratio (high: little creep)
+    impratio: float = 10.0
+
+
+def sole_corners(character: Character, side: str, roll: float,
+                 half_width: float | None = None) -> tuple[str, np.ndarray]:
+    """The foot segment and the 4 bottom corners of the sole (segment frame; rows: heel +w,
+    heel −w, toe +w, toe −w) turned by ``roll`` (rad) about the heel-toe line: the heel and toe
+    contact points are the midpoints of the sole's back and front bottom edges."""
+    pts = character.contact_points(side)
+    if len(pts) != 2:
+        raise ValueError(f"a sole needs the foot's two contact points (heel, toe), {side} foot has {len(pts)}")
+    heel, toe = sorted(pts, key=lambda c: float(c.position[0]))
+    if heel.segment != toe.segment:
+        raise ValueError(f"{side} heel and toe contact points are on different segments")
+    half_w = float(character.foot(side).half[1]) if half_width is None else float(half_width)
+    h, t = heel.position, toe.position
+    ax = (t - h) / np.linalg.norm(t - h)
+    y0 = np.cross([0.0, 0.0, 1.0], ax)
+    y0 /= np.linalg.norm(y0)
+    y = y0 * np.cos(roll) + np.cross(ax, y0) * np.sin(roll)  # y0 turned about the heel-toe line
+    return heel.segment, np.array([h + half_w * y, h - half_w * y, t + half_w * y, t - half_w * y])
+
+
+def _sole_box(character: Character, side: str, roll: float, thickness: float,
+              half_width: float | None) -> tuple[str, np.ndarray, np.ndarray, np.ndarray]:
+    seg, corners = sole_corners(character, side, roll, half_width)
+    heel, toe = corners[0:2].mean(axis=0), corners[2:4].mean(axis=0)
+    axis_x = (toe - heel) / np.linalg.norm(toe - heel)
+    axis_y = corners[0] - corners[1]
+    axis_y = axis_y - axis_x * float(axis_x @ axis_y)
+    axis_y /= np.linalg.norm(axis_y)
+    axis_z = np.cross(axis_x, axis_y)
+    rot = np.column_stack([axis_x, axis_y, axis_z])
+    half = np.array([0.5 * float(np.linalg.norm(toe - heel)), 0.5 * float(np.linalg.norm(corners[0] - corners[1])),
+                     0.5 * thickness])
+    center = 0.5 * (heel + toe) + axis_z * half[2]
+    return seg, center, half, rot
+
+
+def build_spec(character: Character, gravity: Sequence[float] = DEFAULT_GRAVITY,
+               contacts: ContactOptions | None = None) -> mujoco.MjSpec:
+    """The character's model; ``contacts`` turns it into a performable one (see
+    :class:`ContactOptions`); without, geoms are visual only and nothing is actuated."""
     spec = mujoco.MjSpec()
     spec.modelname = character.name
     spec.compiler.degree = False
@@ -50,8 +131,29 @@ def build_spec(character: Character, gravity: Sequence[float] = DEFAULT_GRAVITY)
     )
     floor.contype = 1
     floor.conaffinity = 1
+    root_dofs = {d.name for d in character.segments[0].dofs} if contacts is not None else set()
+    if contacts is not None:
+        spec.option.timestep = float(contacts.timestep)
+        spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+        spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+        spec.option.impratio = float(contacts.impratio)
+        floor.contype, floor.conaffinity = _GROUND
+        floor.friction = [float(contacts.friction), 0.005, 0.0001]
+        if not contacts.floor:
+            floor.contype = floor.conaffinity = 0
+        for k, tr in enumerate(contacts.treads):
+            g = spec.worldbody.add_geom(name=f"tread_{k}", type=mujoco.mjtGeom.mjGEOM_BOX, size=list(tr.half),
+                                        pos=list(tr.center), rgba=[0.7, 0.7, 0.75, 1.0])
+            g.quat = [float(np.cos(tr.yaw / 2)), 0.0, 0.0, float(np.sin(tr.yaw / 2))]
+            g.contype, g.conaffinity = _GROUND
+            g.friction = [float(contacts.friction), 0.005, 0.0001]
 
     bodies: dict[str, mujoco.MjsBody] = {}
+    # the feet and what hangs from them (toes) never count as a fall
+    foot_segments = {f.segment for f in character.feet}
+    for seg in character.segments:
+        if seg.parent in foot_segments:
+            foot_segments.add(seg.name)
     for seg in character.segments:
         parent = spec.worldbody if seg.parent is None else bodies[seg.parent]
         body = parent.add_body(name=seg.name, pos=seg.offset.tolist())
@@ -68,7 +170,7 @@ def build_spec(character: Character, gravity: Sequence[float] = DEFAULT_GRAVITY)
         for d in seg.dofs:
             jt = mujoco.mjtJoint.mjJNT_HINGE if d.kind == "hinge" else mujoco.mjtJoint.mjJNT_SLIDE
             joint = body.add_joint(name=d.name, type=jt, axis=d.axis.tolist(), pos=[0.0, 0.0, 0.0])
-            if np.isfinite(d.lower) and np.isfinite(d.upper):
+            if contacts is None and np.isfinite(d.lower) and np.isfinite(d.upper):
                 joint.range = [float(d.lower), float(d.upper)]
                 joint.limited = mujoco.mjtLimited.mjLIMITED_TRUE
             else:
@@ -84,6 +186,8 @@ def build_spec(character: Character, gravity: Sequence[float] = DEFAULT_GRAVITY)
             )
             g.contype = 0
             g.conaffinity = 0
+            if contacts is not None and seg.name not in foot_segments:
+                g.contype, g.conaffinity = _BODY
             g.mass = 0.0
         if seg.length > 0:
             body.add_site(name=f"{MARKER_PREFIX}{seg.name}", pos=seg.marker.tolist(), size=[0.008, 0, 0])
@@ -102,6 +206,48 @@ def build_spec(character: Character, gravity: Sequence[float] = DEFAULT_GRAVITY)
         g.mass = 0.0
     for c in character.contacts:
         bodies[c.segment].add_site(name=c.name, pos=c.position.tolist(), size=[0.01, 0, 0], rgba=[1, 0, 0, 1])
+    if contacts is not None:
+        subtalar = []
+        for side, roll in zip(("right", "left"), contacts.sole_roll, strict=True):
+            seg_name, center, half, rot = _sole_box(character, side, float(roll), contacts.sole_thickness,
+                                                    contacts.sole_half_width)
+            holder = bodies[seg_name]
+            if contacts.subtalar_mass > 0:
+                # the sole on a hinge about the heel-toe line (a subtalar joint); at angle
+                # ``roll`` it is the sole described above
+                heel = 0.5 * (sole_corners(character, side, 0.0)[1][0] + sole_corners(character, side, 0.0)[1][1])
+                seg0, center, half, rot = _sole_box(character, side, 0.0, contacts.sole_thickness,
+                                                    contacts.sole_half_width)
+                holder = holder.add_body(name=f"sole_body_{side}", pos=heel.tolist())
+                holder.explicitinertial = True
+                holder.mass = float(contacts.subtalar_mass)
+                holder.ipos = (center - heel).tolist()
+                box = 2.0 * half
+                holder.inertia = [contacts.subtalar_mass / 12.0 * float(box[1] ** 2 + box[2] ** 2),
+                                  contacts.subtalar_mass / 12.0 * float(box[0] ** 2 + box[2] ** 2),
+                                  contacts.subtalar_mass / 12.0 * float(box[0] ** 2 + box[1] ** 2)]
+                holder.iquat = _quat(rot).tolist()
+                holder.add_joint(name=f"subtalar_{side}", type=mujoco.mjtJoint.mjJNT_HINGE,
+                                 axis=rot[:, 0].tolist(), pos=[0.0, 0.0, 0.0])
+                subtalar.append(f"subtalar_{side}")
+                center = center - heel
+            g = holder.add_geom(name=f"sole_{side}", type=mujoco.mjtGeom.mjGEOM_BOX, size=half.tolist(),
+                                pos=center.tolist(), quat=_quat(rot).tolist(), rgba=[0.3, 0.3, 0.3, 1.0])
+            g.contype, g.conaffinity = _SOLE
+            g.friction = [float(contacts.friction), 0.005, 0.0001]
+            g.solref = list(map(float, contacts.solref))
+            g.mass = 0.0
+        for name in subtalar:
+            a = spec.add_actuator(name=name, target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+            a.gear = [1.0, 0, 0, 0, 0, 0]
+            a.ctrllimited = mujoco.mjtLimited.mjLIMITED_FALSE
+        for seg in character.segments:
+            for d in seg.dofs:
+                if d.name in root_dofs:
+                    continue
+                a = spec.add_actuator(name=d.name, target=d.name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+                a.gear = [1.0, 0, 0, 0, 0, 0]
+                a.ctrllimited = mujoco.mjtLimited.mjLIMITED_FALSE
     return spec
 
 
@@ -109,7 +255,8 @@ def compile_model(character: Character, gravity: Sequence[float] = DEFAULT_GRAVI
     return build_spec(character, gravity).compile()
 
 
-def to_xml(character: Character, gravity: Sequence[float] = DEFAULT_GRAVITY) -> str:
-    spec = build_spec(character, gravity)
+def to_xml(character: Character, gravity: Sequence[float] = DEFAULT_GRAVITY,
+           contacts: ContactOptions | None = None) -> str:
+    spec = build_spec(character, gravity, contacts)
     spec.compile()
     return spec.to_xml()

@@ -16,6 +16,7 @@ MODULES = [  # the order of the command list: the main job first
     "service.commands.demo",
     "service.commands.grf",  # grf, grf-compare
     "service.commands.physics",  # mjcf, check-dynamics
+    "service.commands.simulate",
     "service.commands.serve",  # serve, stack, db, apikey, openapi
     "worker.command",  # worker (named, not imported: service/ never imports worker/)
 ]

@@ -1,0 +1,853 @@
+"""Forward simulation of a motion in MuJoCo with contacts on, tracked by a balancing QP controller.
+
+The model (:func:`performable_model`) is the character's (``mjcf.builder``) with contacts on:
+box soles under the optimizer's heel and toe points, flat at the foot's mean stance
+orientation, the environment's gravity, friction and treads, an unactuated 6-DOF root (the
+character's three slides and three hinges) and one motor per joint; timestep 1 ms. The only
+forces on the bodies are gravity, the motors (through the joints) and the contacts.
+
+The controller (:class:`Tracker`) solves, every control step, one quadratic program
+(``quadprog``) over the generalized accelerations q̈ and the contact forces at the stance
+sole corners (non-negative combinations of the edges of a pyramidal friction cone), subject to
+the equations of motion's unactuated root rows (M q̈ + h = Jᵀf there: the contact forces must
+move the root) and joint torque limits; the torques follow from the actuated rows,
+τ = (M q̈ + h − Jᵀf)_joints, and are what the motors apply. Its costs track
+
+* the joints' reference accelerations with PD feedback,
+* the root's reference pose in the world with PD feedback (what balances: only the contact
+  forces can supply it),
+* zero acceleration (with velocity damping) of the stance sole corners,
+* the swing foot's reference position shifted by SIMBICON-style foot-placement feedback
+  (centre-of-mass position and velocity errors), i.e. stepping to recover balance,
+* the motion's stored foot forces and moments (regularization), and small torques.
+
+The reference loops over cycles under the cycle transform (turn and translation, the rise of
+stairs) of ``solver.trajectory``; the walk starts in mid single support with the reference's
+velocities (no impact).
+"""
+
+from __future__ import annotations
+
+import math
+import time as _time
+from dataclasses import dataclass, field
+from typing import Any
+
+import mujoco
+import numpy as np
+import quadprog
+
+from mjcf.builder import ContactOptions, Tread, build_spec, sole_corners
+from solver.environment import body_weight, environment_of, ground_of
+from solver.motion import FEET, Motion
+from solver.trajectory import ROOT_XY, ROOT_YAW, cycle_turn, dynamics_samples, spline_velocities
+
+ROOT_Z = 2
+
+
+class SimulationError(ValueError):
+    """A motion cannot be simulated (no contact schedule, no wrenches, not a gait cycle...)."""
+
+
+def _rot2(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s], [s, c]])
+
+
+def _rotz(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+class Reference:
+    """The motion as a function of time over any number of cycles: the C² spline through its
+    frames (q, q̇, q̈), the stored foot wrenches (linear between frames) and the contact
+    schedule, cycle k moved by k times the cycle transform."""
+
+    def __init__(self, motion: Motion) -> None:
+        if not motion.cyclic or motion.T < 5:
+            raise SimulationError("simulation needs a gait cycle (a cyclic motion: frames T−2, T−1 repeat 0, 1)")
+        if motion.contacts is None or motion.wrenches is None:
+            raise SimulationError("simulation needs the motion's contact schedule and foot wrenches")
+        self.motion = motion
+        self.q = np.asarray(motion.q, dtype=float)
+        self.dt = float(motion.dt)
+        self.P = motion.T - 2
+        self.period = self.P * self.dt
+        if motion.interpolation == "cubic-spline":
+            self.v = spline_velocities(self.q, self.dt)
+        else:
+            self.v = np.gradient(self.q, self.dt, axis=1)
+        self.turn = cycle_turn(self.q)
+        xy = self.q[list(ROOT_XY)]
+        self.shift_xy = xy[:, self.P] - _rot2(self.turn) @ xy[:, 0]
+        self.rise = float(self.q[ROOT_Z, self.P] - self.q[ROOT_Z, 0])
+        self.contacts = np.asarray(motion.contacts, dtype=bool)
+        self.wrenches = np.asarray(motion.wrenches, dtype=float)
+        self.ground = ground_of(motion)
+
+    def transform(self, k: int) -> tuple[float, np.ndarray, float]:
+        """Cycle k's turn (rad), horizontal translation (2,) and rise (m): x ↦ R x + d."""
+        R2 = _rot2(self.turn)
+        d = np.zeros(2)
+        for _ in range(k):
+            d = R2 @ d + self.shift_xy
+        return k * self.turn, d, k * self.rise
+
+    def _split(self, t: float) -> tuple[int, int, float]:
+        k = math.floor(t / self.period)
+        s = (t - k * self.period) / self.dt
+        i = min(int(math.floor(s)), self.P - 1)
+        return k, i, s - i
+
+    def state(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """q, q̇, q̈ at time t (s from frame 0 of cycle 0)."""
+        k, i, u = self._split(t)
+        h = self.dt
+        q0, q1, v0, v1 = self.q[:, i], self.q[:, i + 1], self.v[:, i], self.v[:, i + 1]
+        q = (2 * u**3 - 3 * u**2 + 1) * q0 + (u**3 - 2 * u**2 + u) * h * v0 + (-2 * u**3 + 3 * u**2) * q1 \
+            + (u**3 - u**2) * h * v1
+        qd = ((6 * u**2 - 6 * u) * q0 + (3 * u**2 - 4 * u + 1) * h * v0 + (-6 * u**2 + 6 * u) * q1
+              + (3 * u**2 - 2 * u) * h * v1) / h
+        qdd = ((12 * u - 6) * q0 + (6 * u - 4) * h * v0 + (-12 * u + 6) * q1 + (6 * u - 2) * h * v1) / h**2
+        if k:
+            turn, d, rise = self.transform(k)
+            R2 = _rot2(turn)
+            xy = list(ROOT_XY)
+            q[xy] = R2 @ q[xy] + d
+            qd[xy] = R2 @ qd[xy]
+            qdd[xy] = R2 @ qdd[xy]
+            q[ROOT_YAW] += turn
+            q[ROOT_Z] += rise
+        return q, qd, qdd
+
+    def wrench(self, t: float) -> np.ndarray:
+        """(2, 6) stored foot wrenches at t (world; moment about the origin; force)."""
+        k, i, u = self._split(t)
+        w = (1 - u) * self.wrenches[:, :, i] + u * self.wrenches[:, :, i + 1]
+        if k:
+            turn, d, rise = self.transform(k)
+            R = _rotz(turn)
+            p = np.array([d[0], d[1], rise])
+            f = w[:, 3:] @ R.T
+            m = w[:, :3] @ R.T + np.cross(p, f)
+            w = np.concatenate([m, f], axis=1)
+        return w
+
+    def active(self, t: float) -> np.ndarray:
+        """(P,) contact points in contact at the frame before or after t (the stored wrench
+        between them may be non-zero)."""
+        _, i, u = self._split(t)
+        if u == 0.0:
+            return self.contacts[:, i].copy()
+        return self.contacts[:, i] | self.contacts[:, i + 1]
+
+
+def mid_stance_time(motion: Motion) -> float:
+    """Middle of the longest single support with the whole stance foot (heel and toe) down,
+    else of the longest double support: a start without impact."""
+    ch = motion.character
+    P = motion.T - 2
+    C = np.asarray(motion.contacts, dtype=bool)[:, :P]
+    full = np.zeros((2, P), dtype=bool)
+    anyc = np.zeros((2, P), dtype=bool)
+    for f, side in enumerate(FEET):
+        idx = [i for i, c in enumerate(ch.contacts) if c.side == side]
+        full[f] = C[idx].all(axis=0)
+        anyc[f] = C[idx].any(axis=0)
+    single = (full[0] & ~anyc[1]) | (full[1] & ~anyc[0])
+    mask = single if single.any() else (anyc[0] & anyc[1])
+    if not mask.any():
+        raise SimulationError("the contact schedule has neither single nor double support")
+    best, best_len = 0, 0
+    for start in range(P):  # longest cyclic run
+        if mask[start] and not mask[(start - 1) % P]:
+            n = 0
+            while n < P and mask[(start + n) % P]:
+                n += 1
+            if n > best_len:
+                best, best_len = start, n
+    if best_len == 0:  # the whole cycle
+        best, best_len = 0, P
+    return ((best + (best_len - 1) / 2.0) % P) * motion.dt
+
+
+def _mean_stance_roll(motion: Motion, model: mujoco.MjModel, qpos_index: np.ndarray) -> tuple[float, float]:
+    """Per foot, the roll about the heel-toe line that makes the sole flat on the ground, averaged
+    over the frames where the whole foot is down."""
+    ch = motion.character
+    d = mujoco.MjData(model)
+    out = []
+    P = motion.T - 2
+    C = np.asarray(motion.contacts, dtype=bool)
+    for side in FEET:
+        seg, corners = sole_corners(ch, side, 0.0)
+        ax = corners[2] - corners[0]
+        ax /= np.linalg.norm(ax)
+        y0 = corners[0] - corners[1]
+        y0 /= np.linalg.norm(y0)
+        bid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, seg)
+        idx = [i for i, c in enumerate(ch.contacts) if c.side == side]
+        frames = [t for t in range(P) if C[idx, t].all()] or [t for t in range(P) if C[idx, t].any()]
+        rolls = []
+        for t in frames:
+            d.qpos[qpos_index] = motion.q[:, t]
+            mujoco.mj_kinematics(model, d)
+            R = d.xmat[bid].reshape(3, 3)
+            # y(a) = y0 cos a + (ax × y0) sin a, in world; want its vertical component 0
+            a_, b_ = float((R @ y0)[2]), float((R @ np.cross(ax, y0))[2])
+            rolls.append(math.atan2(-a_, b_))
+        out.append(float(np.mean(rolls)) if rolls else 0.0)
+    return out[0], out[1]
+
+
+def _treads(motion: Motion, ref: Reference, cycles: int, t0: float) -> tuple[Tread, ...]:
+    """Stairs: one block per stance of the walk, top at its tread height, spanning the whole
+    width, from halfway to the previous stance to halfway to the next (along the heading)."""
+    env = environment_of(motion)
+    if not env.step_height_m:
+        return ()
+    ch = motion.character
+    model = build_spec(ch).compile()
+    data = mujoco.MjData(model)
+    ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, nm) for nm in ch.coordinate_names]
+    qadr = np.array([model.jnt_qposadr[i] for i in ids])
+    B = ref.motion.foot_contact()
+    P = ref.P
+    stances = []  # (time, foot, height, heading, position)
+    for k in range(-1, cycles + 2):
+        for f, side in enumerate(FEET):
+            for t in range(P):
+                if B[f, t] and not B[f, (t - 1) % P]:
+                    # the stance's middle frame
+                    n = 0
+                    while n < P and B[f, (t + n) % P]:
+                        n += 1
+                    tm = (k * P + t + n / 2.0) * ref.dt
+                    q, _, _ = ref.state(max(tm, 0.0) if k >= 0 else tm + ref.period)
+                    if k < 0:
+                        turn, dxy, rise = ref.transform(1)
+                        R2 = _rot2(-turn)
+                        q[list(ROOT_XY)] = R2 @ (q[list(ROOT_XY)] - dxy)
+                        q[ROOT_YAW] -= turn
+                        q[ROOT_Z] -= rise
+                    data.qpos[qadr] = q
+                    mujoco.mj_kinematics(model, data)
+                    pts = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, c.name) for c in ch.contact_points(side)]
+                    pos = np.mean([data.site_xpos[s] for s in pts], axis=0)
+                    h = float(ref.ground[f, (t + n // 2) % P]) + k * ref.rise
+                    stances.append((tm, f, h, float(q[ROOT_YAW]), pos))
+    stances.sort(key=lambda s: s[0])
+    out = []
+    for j in range(1, len(stances) - 1):
+        tm, f, h, yaw, pos = stances[j]
+        prev, nxt = stances[j - 1][4], stances[j + 1][4]
+        fwd = np.array([math.cos(yaw), math.sin(yaw), 0.0])
+        back = min(float(fwd @ (pos - prev)) / 2.0, 0.3)
+        front = min(float(fwd @ (nxt - pos)) / 2.0, 0.3)
+        depth = 1.0
+        c = pos - fwd * (back - front) / 2.0
+        c = np.array([c[0], c[1], h - depth])
+        out.append(Tread((float(c[0]), float(c[1]), float(c[2])), ((back + front) / 2.0, 0.6, depth), yaw))
+    _ = t0
+    return tuple(out)
+
+
+@dataclass(frozen=True)
+class Gains:
+    """Controller gains: natural frequencies (rad/s, critically damped PD) and QP weights."""
+
+    joint_freq: float = 20.0
+    root_freq: float = 10.0
+    root_weight: float = 100.0
+    root_xy_freq: float = 6.0
+    root_xy_saturation: float = 0.05  # m
+    swing_freq: float = 10.0
+    swing_weight: float = 5.0
+    swing_orientation_weight: float = 0.0
+    contact_weight: float = 1000.0
+    contact_damping: float = 20.0
+    force_weight: float = 30.0  # per (BW)²
+    moment_weight: float = 3.0  # per (BW·m)²... scaled by 1/(BW·0.1 m)²
+    torque_weight: float = 1e-6
+    placement_position: float = 1.0  # foot-placement feedback: Δ = c_d (com − com_ref) + c_v (v − v_ref)
+    placement_velocity: float = 0.3
+    friction_margin: float = 0.8
+    torque_limit_scale: float = 2.0  # |τ| ≤ scale × the motion's inverse-dynamics peak (per joint)
+    torque_limit_floor: float = 0.05  # ... and at least this fraction of the largest peak
+    contact_distance: float = 0.005  # a scheduled sole corner bears load when MuJoCo has a contact this near it (m)
+    contact_height: float = 0.003  # ... or, on a foot already touching, when this close to the ground (m)
+    sole_half_width: float | None = None  # m; None: the foot box's half width
+    subtalar_mass: float = 0.0  # kg; > 0: the sole hangs on an actuated subtalar hinge (0: rigid sole)
+    subtalar_weight: float = 0.01  # its pull toward the flat-sole angle (stance: the sole-flat task rules)
+    sole_flat_weight: float = 0.0
+    sole_flat_freq: float = 20.0
+    flat_stance: bool = False  # stance tasks on the sole's corners (else on the heel/toe points only)
+    reanchor: bool = True  # re-plant the reference's horizontal position on each touchdown
+    anchor_time: float = 0.1  # s
+    control_period: int = 1  # control steps every this many simulation steps
+
+
+@dataclass
+class SimulationResult:
+    """What :func:`simulate` produced: the model it ran (XML), the rollout and the measures."""
+
+    xml: str
+    timestep: float
+    qpos0: np.ndarray
+    qvel0: np.ndarray
+    time: np.ndarray  # (S,) s since the start
+    ctrl: np.ndarray  # (S, nu) actuator order
+    qpos: np.ndarray  # (S, nq) after each step
+    actuator_names: tuple[str, ...]
+    coordinate_qpos: np.ndarray  # our coordinate i -> qpos address
+    t0: float  # reference time of the start
+    cycle_duration_s: float
+    cycles_requested: int
+    fell: bool
+    fall_time: float | None
+    fall_reason: str | None
+    wall_time_s: float
+    report: dict[str, Any] = field(default_factory=dict)
+    series: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+def id_peaks(motion: Motion) -> np.ndarray:
+    """Per joint coordinate (n − 6), the motion's own inverse-dynamics peak |τ| (N·m), at its
+    dynamics samples with its stored foot wrenches."""
+    from mjcf.replay import MujocoReplay
+
+    env = environment_of(motion)
+    rep = MujocoReplay.create(motion.character, env.gravity)
+    s = dynamics_samples(motion)
+    fext = {}
+    if s.wrenches is not None:
+        for f, side in enumerate(FEET):
+            seg = motion.character.contact_points(side)[0].segment
+            fext[seg] = s.wrenches[f]
+    tau, _ = rep.inverse(s.q, s.qd, s.qdd, fext)
+    return np.max(np.abs(tau[6:]), axis=1)
+
+
+def performable_model(motion: Motion, cycles: int = 10, t0: float | None = None,
+                      ref: Reference | None = None, sole_half_width: float | None = None,
+                      subtalar_mass: float = 0.0) -> tuple[str, mujoco.MjModel, tuple[float, float]]:
+    """The model XML, the model compiled *from that XML* (so a replay from the file is what
+    was simulated) and the soles' roll (rad, right and left) that lays them flat in stance."""
+    ch = motion.character
+    env = environment_of(motion)
+    ref = ref or Reference(motion)
+    base = build_spec(ch, env.gravity).compile()
+    ids = [mujoco.mj_name2id(base, mujoco.mjtObj.mjOBJ_JOINT, nm) for nm in ch.coordinate_names]
+    qadr = np.array([base.jnt_qposadr[i] for i in ids])
+    roll = _mean_stance_roll(motion, base, qadr)
+    treads = _treads(motion, ref, cycles, 0.0 if t0 is None else t0)
+    opts = ContactOptions(sole_roll=roll, friction=env.friction, treads=treads, floor=not treads,
+                          sole_half_width=sole_half_width, subtalar_mass=subtalar_mass)
+    spec = build_spec(ch, env.gravity, opts)
+    spec.compile()
+    xml = spec.to_xml()
+    return xml, mujoco.MjModel.from_xml_string(xml), roll
+
+
+class Tracker:
+    """The balancing QP tracking controller (module docstring)."""
+
+    def __init__(self, motion: Motion, model: mujoco.MjModel, ref: Reference, gains: Gains,
+                 sole_roll: tuple[float, float] = (0.0, 0.0)) -> None:
+        ch = motion.character
+        self.m, self.ref, self.g = model, ref, gains
+        self.nv = model.nv
+        ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, nm) for nm in ch.coordinate_names]
+        self.qadr = np.array([model.jnt_qposadr[i] for i in ids])
+        self.vadr = np.array([model.jnt_dofadr[i] for i in ids])
+        self.root_v = self.vadr[:6]
+        self.joint_v = self.vadr[6:]
+        self.act_v = np.array([model.jnt_dofadr[model.actuator_trnid[a, 0]] for a in range(model.nu)])
+        env = environment_of(motion)
+        self.mu = env.friction * gains.friction_margin
+        self.bw = body_weight(motion)
+        self.ref_data = mujoco.MjData(model)
+        # soles: body, corners in body frame, which contact point each corner belongs to (heel/toe)
+        self.soles = []
+        for side in FEET:
+            gid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, f"sole_{side}")
+            bid = int(model.geom_bodyid[gid])
+            size = model.geom_size[gid]
+            R9 = np.zeros(9)
+            mujoco.mju_quat2Mat(R9, model.geom_quat[gid])
+            R = R9.reshape(3, 3)
+            pos = model.geom_pos[gid]
+            corners = np.array([pos + R @ np.array([sx * size[0], sy * size[1], -size[2]])
+                                for sx in (-1, 1) for sy in (1, -1)])  # heel ±, toe ±
+            pts = sorted([(float(c.position[0]), i) for i, c in enumerate(ch.contacts) if c.side == side])
+            owner = [pts[0][1], pts[0][1], pts[1][1], pts[1][1]]
+            self.soles.append((gid, bid, corners, owner, R @ np.array([0, 0, -1.0]) * size[2] + pos))
+        self.n_edges = 4
+        s = 1.0 / math.sqrt(1 + self.mu**2)
+        self.edges = np.array([[self.mu * s, 0, s], [-self.mu * s, 0, s], [0, self.mu * s, s], [0, -self.mu * s, s]]).T
+        # subtalar joints (when the model has them): held at the roll that lays the sole flat
+        sub = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, f"subtalar_{side}") for side in FEET]
+        has_sub = [j >= 0 for j in sub]
+        self.sub_q = np.array([model.jnt_qposadr[j] for j in sub if j >= 0], dtype=int)
+        self.sub_v = np.array([model.jnt_dofadr[j] for j in sub if j >= 0], dtype=int)
+        self.sub_ref = np.array([r for r, h in zip(sole_roll, has_sub, strict=True) if h])
+        self.ref_data.qpos[self.sub_q] = self.sub_ref
+        peaks = id_peaks(motion)
+        lim = np.maximum(gains.torque_limit_scale * peaks, gains.torque_limit_floor * float(peaks.max()))
+        # actuator order; a subtalar joint (not a coordinate of the motion) gets its ankle's limit
+        names = list(ch.coordinate_names[6:])
+        self.act_is_coordinate = np.array([v in set(self.vadr) for v in self.act_v])
+        joint_of_act = []
+        for a in range(model.nu):
+            nm = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a)
+            if nm in names:
+                joint_of_act.append(names.index(nm))
+            else:
+                side = nm.rsplit("_", 1)[-1][0]
+                ankle = [i for i, n in enumerate(names) if n.startswith("ankle") and n.endswith("_" + side)]
+                joint_of_act.append(ankle[0] if ankle else int(np.argmax(peaks)))
+        self.peaks = peaks[joint_of_act]
+        self.tau_limit = lim[joint_of_act]
+        self.com_body = int(model.body_rootid[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, ch.segments[0].name)])
+        self._jp = np.zeros((3, self.nv))
+        self._jr = np.zeros((3, self.nv))
+        self._M = np.zeros((self.nv, self.nv))
+        self.predicted = np.zeros((2, 3))
+        self.n_corners = [0, 0]
+        # horizontal shift of the reference: re-planted at every touchdown on the actual foot
+        self.anchor = np.zeros(2)
+        self.anchor_target = np.zeros(2)
+        self.was_down = [True, True]
+        self.owner_feet = [[i for i, c in enumerate(ch.contacts) if c.side == side] for side in FEET]
+        self.treads = any((mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, i) or "").startswith("tread_")
+                          for i in range(model.ngeom))
+
+    def _reanchor(self, d: mujoco.MjData, qr: np.ndarray, active: np.ndarray) -> None:
+        """At a reference touchdown, move the reference horizontally so that its landing foot is
+        where the simulated foot is; blend the shift in over ``anchor_time``."""
+        g = self.g
+        for f, (_gid, bid, _corners, _owner, centre) in enumerate(self.soles):
+            down = bool(active[self.owner_feet[f]].any())
+            if down and not self.was_down[f]:
+                rd = self.ref_data
+                rd.qpos[self.qadr] = qr
+                mujoco.mj_kinematics(self.m, rd)
+                p_ref = rd.xpos[bid] + rd.xmat[bid].reshape(3, 3) @ centre
+                p_sim = d.xpos[bid] + d.xmat[bid].reshape(3, 3) @ centre
+                self.anchor_target = (p_sim - p_ref)[:2]
+            self.was_down[f] = down
+        a = min(1.0, self.m.opt.timestep * g.control_period / g.anchor_time)
+        self.anchor = self.anchor + a * (self.anchor_target - self.anchor)
+
+    def ground(self, d: mujoco.MjData, p: np.ndarray) -> float:
+        return _ground_height(self.m, d, p) if self.treads else 0.0
+
+    def _point(self, d: mujoco.MjData, bid: int,
+               local: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """World position, velocity, Jacobian and J̇q̇ of a body point."""
+        p = d.xpos[bid] + d.xmat[bid].reshape(3, 3) @ local
+        jp, jr = np.zeros((3, self.nv)), np.zeros((3, self.nv))
+        mujoco.mj_jac(self.m, d, jp, jr, p, bid)
+        jdp, jdr = np.zeros((3, self.nv)), np.zeros((3, self.nv))
+        mujoco.mj_jacDot(self.m, d, jdp, jdr, p, bid)
+        return p, jp @ d.qvel, jp, jdp @ d.qvel
+
+    def _com(self, d: mujoco.MjData, qvel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        jc = np.zeros((3, self.nv))
+        mujoco.mj_jacSubtreeCom(self.m, d, jc, self.com_body)
+        return d.subtree_com[self.com_body].copy(), jc @ qvel
+
+    def control(self, d: mujoco.MjData, t_ref: float) -> np.ndarray:
+        """Joint torques (actuator order) for the state in ``d`` (after mj_forward)."""
+        m, g, ref = self.m, self.g, self.ref
+        nv = self.nv
+        qr, qdr, qddr = ref.state(t_ref)
+        q = d.qpos[self.qadr]
+        qd = d.qvel[self.vadr]
+        active = ref.active(t_ref)
+        if g.reanchor:
+            self._reanchor(d, qr, active)
+            qr = qr.copy()
+            qr[list(ROOT_XY)] += self.anchor
+        # reference kinematics (feet, centre of mass)
+        rd = self.ref_data
+        rd.qpos[self.qadr] = qr
+        rd.qvel[self.vadr] = qdr
+        mujoco.mj_kinematics(m, rd)
+        mujoco.mj_comPos(m, rd)
+        mujoco.mj_comVel(m, rd)
+        qacc_r = np.zeros(nv)
+        qacc_r[self.vadr] = qddr
+        com, vcom = self._com(d, d.qvel)
+        com_r, vcom_r = self._com(rd, rd.qvel)
+
+        mujoco.mj_fullM(m, d, self._M)
+        M = self._M
+        h = d.qfrc_bias
+        W = ref.wrench(t_ref)
+
+        # stance corners
+        corner_rows = []  # (foot, J, Jdqd, vel)
+        swing = []
+        point_rows = []
+        flat_rows: list[tuple[np.ndarray, np.ndarray]] = []
+        for f, (gid, bid, corners, owner, centre) in enumerate(self.soles):
+            used = []
+            touching = [d.contact[i].pos.copy() for i in range(d.ncon)
+                        if gid in (d.contact[i].geom1, d.contact[i].geom2) and d.contact[i].dist < 0]
+            edge_ref = {}  # reference acceleration and velocity of the heel / toe point
+            for e in (0, 2):
+                if active[owner[e]] and touching:
+                    _, vr, Jr, jdqr = self._point(rd, bid, 0.5 * (corners[e] + corners[e + 1]))
+                    edge_ref[e] = (Jr @ qacc_r + jdqr, vr)
+            for c in range(4):
+                if active[owner[c]]:
+                    p, v, J, jdq = self._point(d, bid, corners[c])
+                    near = touching and p[2] - self.ground(d, p) < g.contact_height
+                    if near or any(np.linalg.norm(p - x) < g.contact_distance for x in touching):
+                        used.append((f, J, jdq, v, p))
+                        if g.flat_stance:  # the sole stays flat: its corners move as the reference's point
+                            point_rows.append((J, jdq, v, *edge_ref[c - c % 2]))
+            if not used:
+                swing.append((f, bid, centre))
+            elif g.sole_flat_weight > 0 and (len(self.sub_v) or (active[owner[0]] and active[owner[2]])):
+                # the sole lies flat on the ground: roll (and pitch, with heel and toe both down) to
+                # the ground's normal, no spin
+                R = d.geom_xmat[gid].reshape(3, 3)
+                nrm = R[:, 2]
+                err = np.cross(nrm, np.array([0.0, 0.0, 1.0]))
+                if not (active[owner[0]] and active[owner[2]]):
+                    err = R[:, 0] * float(R[:, 0] @ err)  # roll only: the foot rocks on heel or toe
+                jp, jr = np.zeros((3, nv)), np.zeros((3, nv))
+                mujoco.mj_jac(m, d, jp, jr, d.geom_xpos[gid], bid)
+                jdp, jdr = np.zeros((3, nv)), np.zeros((3, nv))
+                mujoco.mj_jacDot(m, d, jdp, jdr, d.geom_xpos[gid], bid)
+                w = jr @ d.qvel
+                wdes = np.zeros(3)
+                if not (active[owner[0]] and active[owner[2]]):
+                    jr_ref = np.zeros((3, nv))
+                    mujoco.mj_jac(m, rd, None, jr_ref, rd.xpos[bid], bid)
+                    wr = jr_ref @ rd.qvel
+                    wdes = wr - R[:, 0] * float(R[:, 0] @ wr)  # the reference's pitch rate, no roll
+                kp, kd = g.sole_flat_freq**2, 2 * g.sole_flat_freq
+                flat_rows.append((jr, kp * err + kd * (wdes - w) - jdr @ d.qvel))
+            corner_rows.extend(used)
+            half_w = 0.5 * float(np.linalg.norm(corners[0] - corners[1]))
+            # the optimizer's contact points (mid-edges of the sole) move as the reference's
+            for e in edge_ref if not g.flat_stance else ():
+                p, v, J, jdq = self._point(d, bid, 0.5 * (corners[e] + corners[e + 1]))
+                if any(np.linalg.norm(p - x) < g.contact_distance + half_w for x in touching):
+                    point_rows.append((J, jdq, v, *edge_ref[e]))
+        nc = len(corner_rows)
+        nb = nc * self.n_edges
+        nx = nv + nb
+        # f_c = E β_c; generalized force of contacts: Σ J_cᵀ E β_c = Jf β
+        Jf = np.zeros((nv, nb))
+        for i, (_, J, _, _, _) in enumerate(corner_rows):
+            Jf[:, i * 4:(i + 1) * 4] = J.T @ self.edges
+        A_list: list[np.ndarray] = []
+        b_list: list[np.ndarray] = []
+        w_list: list[float] = []
+
+        def task(A: np.ndarray, b: np.ndarray, w: float) -> None:
+            A_list.append(np.atleast_2d(A))
+            b_list.append(np.atleast_1d(b))
+            w_list.append(w)
+
+        kpj, kdj = g.joint_freq**2, 2 * g.joint_freq
+        acc_j = qddr[6:] + kpj * (qr[6:] - q[6:]) + kdj * (qdr[6:] - qd[6:])
+        A = np.zeros((len(self.joint_v), nx))
+        A[np.arange(len(self.joint_v)), self.joint_v] = 1.0
+        task(A, acc_j, 1.0)
+        if len(self.sub_v):
+            A = np.zeros((len(self.sub_v), nx))
+            A[np.arange(len(self.sub_v)), self.sub_v] = 1.0
+            task(A, kpj * (self.sub_ref - d.qpos[self.sub_q]) - kdj * d.qvel[self.sub_v], g.subtalar_weight)
+        kpr, kdr = np.full(6, g.root_freq**2), np.full(6, 2 * g.root_freq)
+        # horizontal position: weak and saturated (foot placement keeps the balance; a large
+        # position error would otherwise ask for accelerations no contact force can give)
+        kpr[list(ROOT_XY)], kdr[list(ROOT_XY)] = g.root_xy_freq**2, 2 * g.root_xy_freq
+        err = qr[:6] - q[:6]
+        err[list(ROOT_XY)] = np.clip(err[list(ROOT_XY)], -g.root_xy_saturation, g.root_xy_saturation)
+        acc_r = qddr[:6] + kpr * err + kdr * (qdr[:6] - qd[:6])
+        A = np.zeros((6, nx))
+        A[np.arange(6), self.root_v] = 1.0
+        task(A, acc_r, g.root_weight)
+        for J, jdq, v, ar, vr in point_rows:
+            A = np.zeros((3, nx))
+            A[:, :nv] = J
+            task(A, ar - jdq + g.contact_damping * (vr - v), g.contact_weight)
+        for jr_, b in flat_rows:
+            A = np.zeros((3, nx))
+            A[:, :nv] = jr_
+            task(A, b, g.sole_flat_weight)
+        # swing foot placement: the reference position moved by the balance feedback
+        dxy = g.placement_position * (com - com_r)[:2] + g.placement_velocity * (vcom - vcom_r)[:2]
+        kps, kds = g.swing_freq**2, 2 * g.swing_freq
+        for _f, bid, centre in swing:
+            p, v, J, jdq = self._point(d, bid, centre)
+            pr = rd.xpos[bid] + rd.xmat[bid].reshape(3, 3) @ centre
+            jr_, jdr_ = np.zeros((3, nv)), np.zeros((3, nv))
+            mujoco.mj_jac(m, rd, jr_, None, pr, bid)
+            mujoco.mj_jacDot(m, rd, jdr_, None, pr, bid)
+            vr = jr_ @ rd.qvel
+            ar = jr_ @ qacc_r + jdr_ @ rd.qvel
+            target = pr + np.array([dxy[0], dxy[1], 0.0])
+            A = np.zeros((3, nx))
+            A[:, :nv] = J
+            task(A, ar + kps * (target - p) + kds * (vr - v) - jdq, g.swing_weight)
+            if g.swing_orientation_weight > 0:  # the swing foot turns as the reference's
+                jr_s, jdr_s, jr_r, jdr_r = (np.zeros((3, nv)) for _ in range(4))
+                mujoco.mj_jac(m, d, None, jr_s, p, bid)
+                mujoco.mj_jacDot(m, d, None, jdr_s, p, bid)
+                mujoco.mj_jac(m, rd, None, jr_r, pr, bid)
+                mujoco.mj_jacDot(m, rd, None, jdr_r, pr, bid)
+                Rs, Rr = d.xmat[bid].reshape(3, 3), rd.xmat[bid].reshape(3, 3)
+                qe = np.zeros(4)
+                mujoco.mju_mat2Quat(qe, (Rr @ Rs.T).reshape(9))
+                rot = np.zeros(3)
+                mujoco.mju_quat2Vel(rot, qe, 1.0)
+                alpha_r = jr_r @ qacc_r + jdr_r @ rd.qvel
+                A = np.zeros((3, nx))
+                A[:, :nv] = jr_s
+                task(A, alpha_r + kps * rot + kds * (jr_r @ rd.qvel - jr_s @ d.qvel) - jdr_s @ d.qvel,
+                     g.swing_orientation_weight)
+        # stored foot wrenches (regularization): force and moment about the origin per foot
+        if nb:
+            for f in range(2):
+                cols = [i for i, r in enumerate(corner_rows) if r[0] == f]
+                if not cols:
+                    continue
+                Af = np.zeros((3, nx))
+                Am = np.zeros((3, nx))
+                for i in cols:
+                    p = corner_rows[i][4]
+                    Af[:, nv + 4 * i:nv + 4 * i + 4] = self.edges
+                    Am[:, nv + 4 * i:nv + 4 * i + 4] = np.cross(p, self.edges.T).T
+                task(Af / self.bw, W[f, 3:] / self.bw, g.force_weight)
+                task(Am / (0.1 * self.bw), W[f, :3] / (0.1 * self.bw), g.moment_weight)
+        # torques: τ = (M q̈ + h − Jf β)_act
+        At = np.zeros((m.nu, nx))
+        At[:, :nv] = M[self.act_v]
+        At[:, nv:] = -Jf[self.act_v]
+        bt = h[self.act_v]
+        task(At / self.tau_limit[:, None], -bt / self.tau_limit, g.torque_weight)
+
+        Amat = np.vstack([a * math.sqrt(w) for a, w in zip(A_list, w_list, strict=True)])
+        bvec = np.concatenate([b * math.sqrt(w) for b, w in zip(b_list, w_list, strict=True)])
+        G = Amat.T @ Amat + 1e-8 * np.eye(nx)
+        G[nv:, nv:] += 1e-6 * np.eye(nb)
+        a = Amat.T @ bvec
+        # equalities: root rows of the equations of motion; inequalities: β ≥ 0, |τ| ≤ limit
+        Ceq = np.zeros((6, nx))
+        Ceq[:, :nv] = M[self.root_v]
+        Ceq[:, nv:] = -Jf[self.root_v]
+        beq = -h[self.root_v]
+        Cin = [np.eye(nx)[nv:], At, -At]
+        bin_ = [np.zeros(nb), -self.tau_limit + bt, -self.tau_limit - bt]
+        C = np.vstack([Ceq, *Cin])
+        b = np.concatenate([beq, *bin_])
+        try:
+            x = quadprog.solve_qp(G, a, C.T, b, 6)[0]
+        except ValueError:
+            # infeasible within the torque limits (should not happen: q̈ is free): drop them
+            x = quadprog.solve_qp(G, a, np.vstack([Ceq, np.eye(nx)[nv:]]).T, np.concatenate([beq, np.zeros(nb)]), 6)[0]
+        tau = At @ x + bt
+        pred = np.zeros((2, 3))
+        for i, r in enumerate(corner_rows):
+            pred[r[0]] += self.edges @ x[nv + 4 * i:nv + 4 * i + 4]
+        self.predicted = pred
+        self.n_corners = [sum(1 for r in corner_rows if r[0] == f) for f in range(2)]
+        return tau
+
+
+def _foot_forces(m: mujoco.MjModel, d: mujoco.MjData, sole_geoms: tuple[int, int]) -> np.ndarray:
+    """(2, 3) world contact force on each sole."""
+    out = np.zeros((2, 3))
+    f6 = np.zeros(6)
+    for i in range(d.ncon):
+        c = d.contact[i]
+        for f, gid in enumerate(sole_geoms):
+            if c.geom1 == gid or c.geom2 == gid:
+                mujoco.mj_contactForce(m, d, i, f6)
+                fw = c.frame.reshape(3, 3).T @ f6[:3]
+                out[f] += fw if c.geom2 == gid else -fw
+    return out
+
+
+def simulate(motion: Motion, cycles: int = 10, gains: Gains | None = None, *,
+             stop_on_fall: bool = True) -> SimulationResult:
+    """Simulate ``cycles`` gait cycles of ``motion`` under the tracking controller."""
+    if cycles < 1:
+        raise SimulationError("cycles must be at least 1")
+    gains = gains or Gains()
+    ref = Reference(motion)
+    t0 = mid_stance_time(motion)
+    xml, m, roll = performable_model(motion, cycles, t0, ref, gains.sole_half_width, gains.subtalar_mass)
+    d = mujoco.MjData(m)
+    ctl = Tracker(motion, m, ref, gains, roll)
+    d.qpos[ctl.sub_q] = ctl.sub_ref
+    ch = motion.character
+    qr, qdr, _ = ref.state(t0)
+    d.qpos[ctl.qadr] = qr
+    d.qvel[ctl.vadr] = qdr
+    # lift or lower the body so the lowest stance sole corner touches the ground
+    mujoco.mj_forward(m, d)
+    active = ref.active(t0)
+    lows = []
+    for _gid, bid, corners, owner, _c in ctl.soles:
+        for c in range(4):
+            if active[owner[c]]:
+                p = d.xpos[bid] + d.xmat[bid].reshape(3, 3) @ corners[c]
+                lows.append(p[2] - _ground_height(m, d, p))
+    if lows:
+        d.qpos[ctl.qadr[ROOT_Z]] -= min(lows) + 2e-4
+    mujoco.mj_forward(m, d)
+    qpos0, qvel0 = d.qpos.copy(), d.qvel.copy()
+
+    dt = float(m.opt.timestep)
+    steps = int(round(cycles * ref.period / dt))
+    time = np.zeros(steps)
+    ctrl = np.zeros((steps, m.nu))
+    qpos = np.zeros((steps, m.nq))
+    sole_geoms = (ctl.soles[0][0], ctl.soles[1][0])
+    body_geoms = {i for i in range(m.ngeom) if m.geom_contype[i] == 2}
+    pelvis = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, ch.segments[0].name)
+    every = max(1, int(round(0.01 / dt)))  # measures every 10 ms
+    sim_forces: list[np.ndarray] = []
+    ref_forces: list[np.ndarray] = []
+    com_s: list[np.ndarray] = []
+    qref_s: list[np.ndarray] = []
+    q_s: list[np.ndarray] = []
+    t_s: list[float] = []
+    pred_forces: list[np.ndarray] = []
+    ncorn: list[list[int]] = []
+    pelvis_h0 = float(d.xpos[pelvis][2])
+    fell, fall_time, reason = False, None, None
+    tau = np.zeros(m.nu)
+    wall0 = _time.perf_counter()
+    done = steps
+    for s in range(steps):
+        t = s * dt
+        if s % gains.control_period == 0:
+            tau = ctl.control(d, t0 + t)
+        d.ctrl[:] = tau
+        if s % every == 0:
+            sim_forces.append(_foot_forces(m, d, sole_geoms))
+            pred_forces.append(ctl.predicted.copy())
+            ncorn.append(list(ctl.n_corners))
+            ref_forces.append(ref.wrench(t0 + t)[:, 3:])
+            qrr = ref.state(t0 + t)[0]
+            qref_s.append(qrr)
+            q_s.append(d.qpos[ctl.qadr].copy())
+            t_s.append(t)
+            com_s.append(d.subtree_com[ctl.com_body].copy())
+        mujoco.mj_step(m, d)
+        time[s] = t + dt
+        ctrl[s] = d.ctrl
+        qpos[s] = d.qpos
+        mujoco.mj_forward(m, d)
+        # a fall: pelvis sunk, or any non-foot body on the ground
+        bad = None
+        ph = float(d.xpos[pelvis][2]) - float(ref.state(t0 + t + dt)[0][ROOT_Z] - qr[ROOT_Z]) - 0.0
+        if ph < 0.6 * pelvis_h0:
+            bad = f"pelvis height {ph:.3f} m (start {pelvis_h0:.3f} m)"
+        for i in range(d.ncon):
+            c = d.contact[i]
+            if c.geom1 in body_geoms or c.geom2 in body_geoms:
+                gb = c.geom1 if c.geom1 in body_geoms else c.geom2
+                bad = f"{mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, gb)} touches the ground"
+                break
+        if not np.all(np.isfinite(d.qpos)):
+            bad = "the simulation diverged"
+        if bad is not None and not fell:
+            fell, fall_time, reason = True, t + dt, bad
+            if stop_on_fall:
+                done = s + 1
+                break
+    wall = _time.perf_counter() - wall0
+    time, ctrl, qpos = time[:done], ctrl[:done], qpos[:done]
+    series = {
+        "t": np.array(t_s), "q": np.array(q_s), "q_ref": np.array(qref_s),
+        "foot_force": np.array(sim_forces), "foot_force_ref": np.array(ref_forces),
+        "foot_force_qp": np.array(pred_forces), "stance_corners": np.array(ncorn), "com": np.array(com_s),
+    }
+    res = SimulationResult(
+        xml=xml, timestep=dt, qpos0=qpos0, qvel0=qvel0, time=time, ctrl=ctrl, qpos=qpos,
+        actuator_names=tuple(mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_ACTUATOR, a) for a in range(m.nu)),
+        coordinate_qpos=ctl.qadr, t0=t0, cycle_duration_s=ref.period, cycles_requested=cycles,
+        fell=fell, fall_time=fall_time, fall_reason=reason, wall_time_s=wall, series=series,
+    )
+    res.report = _report(res, motion, ref, ctl)
+    return res
+
+
+def _ground_height(m: mujoco.MjModel, d: mujoco.MjData, p: np.ndarray) -> float:
+    """Height of the ground (floor or the tread below) at a world point."""
+    best = 0.0 if m.geom_contype[0] else -math.inf
+    for i in range(m.ngeom):
+        nm = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, i) or ""
+        if not nm.startswith("tread_"):
+            continue
+        R = d.geom_xmat[i].reshape(3, 3)
+        loc = R.T @ (p - d.geom_xpos[i])
+        hs = m.geom_size[i]
+        if abs(loc[0]) <= hs[0] and abs(loc[1]) <= hs[1]:
+            best = max(best, float(d.geom_xpos[i][2] + hs[2]))
+    return best if np.isfinite(best) else 0.0
+
+
+def _wrap(a: np.ndarray) -> np.ndarray:
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+def _report(res: SimulationResult, motion: Motion, ref: Reference, ctl: Tracker) -> dict[str, Any]:
+    S = res.series
+    walked_s = float(res.time[-1]) if len(res.time) else 0.0
+    cycles_walked = walked_s / ref.period
+    q, qr = S["q"], S["q_ref"]
+    joint_err = np.degrees(q[:, 6:] - qr[:, 6:]) if len(q) else np.zeros((0, motion.n - 6))
+    names = motion.character.coordinate_names
+    bw = body_weight(motion)
+    ff, fr = S["foot_force"], S["foot_force_ref"]
+    force_rms = float(np.sqrt(np.mean(np.sum((ff - fr) ** 2, axis=2)))) / bw if len(ff) else float("nan")
+    # per cycle drift at each cycle end (reference time t0 + k period)
+    drift = []
+    for k in range(1, int(math.floor(cycles_walked + 0.01)) + 1):
+        i = min(int(round(k * ref.period / 0.01)), len(q) - 1)
+        dxy = q[i, list(ROOT_XY)] - qr[i, list(ROOT_XY)]
+        drift.append({"cycle": k, "position_m": float(np.linalg.norm(dxy)),
+                      "lateral_m": float(dxy @ np.array([-math.sin(qr[i, ROOT_YAW]), math.cos(qr[i, ROOT_YAW])])),
+                      "heading_deg": float(np.degrees(_wrap(q[i, ROOT_YAW] - qr[i, ROOT_YAW])))})
+    peaks_sim = np.max(np.abs(res.ctrl), axis=0) if len(res.ctrl) else np.zeros(len(ctl.peaks))
+    ratio = peaks_sim / np.maximum(ctl.peaks, 1e-9)
+    act = res.actuator_names
+    return {
+        "motion": {"character": motion.character.name, "fps": motion.fps, "frames": motion.T,
+                   "environment": environment_of(motion).to_dict()},
+        "cycle_duration_s": ref.period,
+        "cycles_requested": res.cycles_requested,
+        "cycles_walked": cycles_walked,
+        "simulated_s": walked_s,
+        "fell": res.fell,
+        "fall": None if not res.fell else {"time_s": res.fall_time, "cycle": (res.fall_time or 0.0) / ref.period,
+                                           "reason": res.fall_reason},
+        "start_reference_time_s": res.t0,
+        "timestep_s": res.timestep,
+        "control_period_s": res.timestep * ctl.g.control_period,
+        "joint_tracking_rms_deg": float(np.sqrt(np.mean(joint_err**2))) if joint_err.size else float("nan"),
+        "joint_tracking_rms_deg_per_joint": {names[6 + j]: float(np.sqrt(np.mean(joint_err[:, j] ** 2)))
+                                             for j in range(joint_err.shape[1])} if joint_err.size else {},
+        "root_height_rms_m": float(np.sqrt(np.mean((q[:, ROOT_Z] - qr[:, ROOT_Z]) ** 2))) if len(q) else float("nan"),
+        "drift_per_cycle": drift,
+        "foot_force_rms_bw": force_rms,
+        "body_weight_n": bw,
+        "peak_torque_nm": {a: float(p) for a, p in zip(act, peaks_sim, strict=True)},
+        "id_peak_torque_nm": {a: float(p) for a, p in zip(act, ctl.peaks, strict=True)},
+        "peak_torque_ratio": {a: float(r) for a, r in zip(act, ratio, strict=True)},
+        "peak_torque_ratio_max": float(ratio.max()) if len(ratio) else float("nan"),
+        "torque_limit_nm": {a: float(v) for a, v in zip(act, ctl.tau_limit, strict=True)},
+        "wall_time_s": res.wall_time_s,
+        "realtime_factor": walked_s / res.wall_time_s if res.wall_time_s > 0 else float("nan"),
+    }
