@@ -1,10 +1,10 @@
 """The OpenSim export on both shared OpenSim trials: the tutor written on the trial's own model,
 checked by OpenSim's own InverseDynamicsTool on the files as written (Hicks et al. 2015).
 
-Runtime (2-core x86_64): 140–170 s — three tutors (~15 s), four exports (~15 s treadmill, ~35 s
-overground: OpenSim's inverse kinematics refined frame by frame, ~20 s on the generic model),
-OpenSim's inverse dynamics re-run on each folder, the command line on one motion file and a 5°
-slope λ optimum; it is the thing being verified.
+Runtime (2-core x86_64): 150–250 s with the machine's load — three tutors (~15 s), five exports
+(~15 s treadmill, ~35 s overground: OpenSim's inverse kinematics refined frame by frame, ~20 s
+on the generic model), OpenSim's inverse dynamics re-run on each folder, the command line on
+one motion file and a 5° slope λ optimum; it is the thing being verified.
 """
 
 from __future__ import annotations
