@@ -1541,7 +1541,7 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
             write_trc(trc, [m[0] for m in defs], t, xyz, float(rate))
             tk = time.perf_counter()
             ik = run_child({"job": "ik", "model": str(folder / model_file), "markers": defs, "xyz": xyz.tolist(),
-                            "weights": {m[0]: float(os.environ.get("MX_PW", "1")) for m in defs if m[1] == "pelvis"},
+                            "weights": {},  # every virtual marker weighs 1 (OpenSim's default)
                             "trc": str(trc), "t0": float(t[0]), "t1": float(t[-1]),
                             "out": str((folder / COORDINATES_FILE).resolve()), "scratch": scratch})
             timing["inverse_kinematics_s"] = time.perf_counter() - tk
