@@ -1,17 +1,20 @@
-"""A motion written on the subject's own OpenSim model: coordinates, ground reactions,
-ExternalLoads, the model, an inverse-dynamics setup, checked by OpenSim's own tools.
+"""A motion written on an OpenSim model: coordinates, ground reactions, ExternalLoads, the
+model, an inverse-dynamics setup, checked by OpenSim's own tools.
 
-Only motions made from an OpenSim trial can be written (their ``provenance["rig"]``, see
-:mod:`solver.io.opensim.rig`, holds the model and the trial). The folder holds:
+A motion made from an OpenSim trial is written on the trial's own model (its
+``provenance["rig"]``, see :mod:`solver.io.opensim.rig`, holds the model and the trial); a
+motion of another source, with ``model="generic"``, on OpenSim's gait2354 model scaled to its
+character (:func:`generic_rig`). The folder holds:
 
-* ``<model>.osim``: the trial's model (a 3.x-era file whose sockets name bodies as
-  ``../body`` gets those paths rewritten to ``/bodyset/body``, nothing else changed);
-* ``coordinates.mot``: the model's coordinates (degrees and metres, ``inDegrees=yes``),
-  written by OpenSim's InverseKinematicsTool, ``CYCLES`` repetitions of the gait cycle
-  sampled at ``RATE_HZ`` from the motion's own interpolation (the optimizer's C² spline);
+* ``<model>.osim``: the model (a 3.x-era file whose sockets name bodies as ``../body`` gets
+  those paths rewritten to ``/bodyset/body``, nothing else changed; its ``<gravity>`` set to
+  the motion's when that differs);
+* ``coordinates.mot``: the model's coordinates (degrees and metres, ``inDegrees=yes``, the
+  header of OpenSim's InverseKinematicsTool), ``CYCLES`` repetitions of the gait cycle sampled
+  at ``RATE_HZ`` from the motion's own interpolation (the optimizer's C² spline);
 * ``grf.mot``: per foot ``ground_force_{r,l}_v{x,y,z}`` (N), ``ground_force_{r,l}_p{x,y,z}``
-  (centre of pressure on the floor, m) and ``ground_torque_{r,l}_{x,y,z}`` (the free
-  moment, vertical), in the model's ground frame (x forward, y up, z right);
+  (centre of pressure on the floor, m) and ``ground_torque_{r,l}_{x,y,z}`` (the free moment
+  about the floor's normal), in the model's ground frame (x forward, y up, z right);
 * ``external_loads.xml``: the two forces applied to the model's feet (``calcn_r``, ``calcn_l``),
   force and point expressed in ground;
 * ``setup_id.xml``: OpenSim's InverseDynamicsTool on these files over the middle cycle (the
@@ -22,42 +25,44 @@ Only motions made from an OpenSim trial can be written (their ``provenance["rig"
   InverseDynamicsTool reports on exactly these files.
 
 **Coordinates.** The motion drives our segments; the model has its own bodies. At each
-captured frame the importer's OpenSim evaluation gives every body's pose, and the capture
-skeleton's fit gives our segments' poses: the rigid map between a body and its *anchor*
-segment (the segment it belongs to when the motion's character has it, else its parent
-body's anchor: the torso and arms of a HalfBoy ride on its pelvis) is the *calibration*. It
-holds what our character does not model (subtalar, knee translations, arms, the lumbar
-joint of a HalfBoy…) at that gait phase. A motion time ``t`` is at phase ``φ = t / D``
-(``D`` the motion's cycle) and so at capture time ``t_start + φ · period`` (the captured
-cycle, ``provenance["source"]["cycle"]``): each body is placed at the motion's anchor pose
-composed with the calibration there. Four body-fixed virtual markers per body (its centre
-of mass and 10 cm along each axis) follow those poses; OpenSim's InverseKinematicsTool
-fits the model to them (``.trc`` and a copy of the model carrying the markers in a scratch
-folder, not in the export).
+captured frame of the cycle the importer's OpenSim evaluation gives every body's pose, and
+the capture skeleton's fit gives our segments' poses: the rigid map between a body and its
+*anchor* segment (the segment it belongs to when the motion's character has it) is the
+*calibration*, a smooth periodic function of the gait phase (:class:`Calibration`). It holds
+what our character does not model (subtalar, knee translations, toes…) as the trial had it
+at that phase. A motion time ``t`` is at phase ``φ = t / D`` (``D`` the motion's cycle) and
+so at capture time ``t_start + φ · period`` (``provenance["source"]["cycle"]``): each body is
+placed at the motion's anchor pose composed with the calibration there. Bodies whose segment
+the character merged (the torso and arms of a HalfBoy, lumped into its pelvis) stay rigid on
+it, in the model's own posture at the cycle's mean coordinates; a torso shared by our
+abdomen, thorax and head follows their mass-weighted mean pose. Four body-fixed virtual
+markers per body (its centre of mass and 10 cm along each axis) follow those poses;
+OpenSim's InverseKinematicsTool fits the model to them (``.trc`` and a copy of the model
+carrying the markers in a scratch folder, not in the export) and Gauss–Newton iterations
+finish its fit (:func:`_refine`).
 
 **Ground reactions.** The motion's wrenches, linear between the frames and midpoints where
 the optimizer's equations hold (frames 1…T−2; frame T−2 and the midpoint after it stand for
 frame 0 and the midpoint of [0, 1], whose stored wrench is not constrained), are carried
-to the model's ground frame with the motion's ``GroundFrame`` (a treadmill trial's belt
-velocity included) and written as force, centre of pressure on the floor plane and free
-moment: the same wrench exactly (a foot loaded below 1 % of the body weight keeps its last
-centre of pressure and takes the remainder as torque).
+to the model's ground frame (:func:`export_frame`: a slope's tilted gravity turned down,
+a treadmill trial's belt velocity included) and written as force, centre of pressure on the
+floor plane and free moment: the same wrench exactly (a foot loaded below 1 % of the body
+weight keeps its last centre of pressure and takes the remainder as torque).
 
 **Residual reduction** (``reduce_residuals=True``, the default). The model is not our
-character: its arms and trunk move relative to the pelvis where a HalfBoy's do not, its
-knees translate, the coordinate filter smooths. OpenSim's InverseDynamicsTool is run on the
+character: its joints differ (knee translations, oblique ankle axes), the merged bodies are
+where the character held them only on average. OpenSim's InverseDynamicsTool is run on the
 written files; its pelvis residuals ``r`` (generalised forces of the six ground-pelvis
 coordinates) are the external wrench ``W`` the model still misses, ``r = G W`` where the
 rows of ``G`` are the twists each pelvis coordinate imparts to the whole model (computed by
 OpenSim at every row). That wrench is added to the feet in contact (in proportion to their
-vertical loads) and the ground-reaction file rewritten; the summary reports by how much the
-forces, centres of pressure and free moments moved. Then the InverseDynamicsTool is run
-again on the folder as written: those are the residuals reported.
+loads) and the ground-reaction file rewritten; the summary reports by how much the forces,
+centres of pressure and free moments moved (and flags a large adjustment). Then the
+InverseDynamicsTool is run again on the folder as written: those are the residuals reported.
 
 OpenSim runs in a child process (CasADi and OpenSim cannot share one: see
 :mod:`solver.io.opensim.worker`); :func:`child_main` is its entry point.
 """
-
 from __future__ import annotations
 
 import io
@@ -534,16 +539,6 @@ GRF_LABELS = tuple(f"ground_{kind}_{s}_{c}" for s in "rl" for kind, cs in (
 def _grf_table(cols: np.ndarray) -> np.ndarray:
     """(2, S, 9) -> (S, 18) in GRF_LABELS order."""
     return np.concatenate([cols[0], cols[1]], axis=1)
-
-
-def _grf_wrench(table: np.ndarray) -> np.ndarray:
-    """(S, 18) -> (2, 6, S) wrench (moment about the origin; force) per foot."""
-    out = np.empty((2, 6, table.shape[0]))
-    for f in range(2):
-        F, p, tq = table[:, 9 * f:9 * f + 3], table[:, 9 * f + 3:9 * f + 6], table[:, 9 * f + 6:9 * f + 9]
-        out[f, :3] = (np.cross(p, F) + tq).T
-        out[f, 3:] = F.T
-    return out
 
 
 # --- writing OpenSim's text files ----------------------------------------------------------------
