@@ -63,6 +63,7 @@ InverseDynamicsTool is run again on the folder as written: those are the residua
 OpenSim runs in a child process (CasADi and OpenSim cannot share one: see
 :mod:`solver.io.opensim.worker`); :func:`child_main` is its entry point.
 """
+
 from __future__ import annotations
 
 import io
