@@ -77,6 +77,8 @@ class ContactOptions:
     solref: tuple[float, float] = (0.01, 1.0)
     #: elliptic friction cones, frictional-to-normal impedance ratio (high: little creep)
     impratio: float = 10.0
+    #: torsional friction of the soles (m: the radius of the contact patch resisting spin; 0: none)
+    torsional_friction: float = 0.0
 
 
 def sole_corners(character: Character, side: str, roll: float,
@@ -234,7 +236,8 @@ def build_spec(character: Character, gravity: Sequence[float] = DEFAULT_GRAVITY,
             g = holder.add_geom(name=f"sole_{side}", type=mujoco.mjtGeom.mjGEOM_BOX, size=half.tolist(),
                                 pos=center.tolist(), quat=_quat(rot).tolist(), rgba=[0.3, 0.3, 0.3, 1.0])
             g.contype, g.conaffinity = _SOLE
-            g.friction = [float(contacts.friction), 0.005, 0.0001]
+            g.friction = [float(contacts.friction), float(contacts.torsional_friction), 0.0001]
+            g.condim = 4 if contacts.torsional_friction > 0 else 3
             g.solref = list(map(float, contacts.solref))
             g.mass = 0.0
         for name in subtalar:
