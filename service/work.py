@@ -82,13 +82,18 @@ def export(data: bytes, fmt: str, options: dict[str, Any]) -> tuple[bytes, str]:
     return (out.encode("utf-8") if isinstance(out, str) else out), mt
 
 
-def library_glb(items: list[tuple[str, bytes]], extras: dict) -> tuple[bytes, str]:
-    """One GLB of a library: (animation name, stored motion) per cell (solver.export.gltf)."""
+def library_glb(items: list[tuple[str, bytes]], extras: dict, rig: str = "character") -> tuple[bytes, str]:
+    """One GLB of a library: (animation name, stored motion) per cell (solver.export.gltf), on the
+    motions' own character or (``rig="source"``) on the input's (solver.export.rig_gltf)."""
     from solver.export import ExportError  # lazy: runs in a compute process; the API process does not load the solver
     from solver.export.gltf import to_library_glb
+    from solver.export.rig_gltf import rig_glb_library
 
     try:
-        return to_library_glb([(k, _load(d)) for k, d in items], extras=extras), "model/gltf-binary"
+        clips = [(k, _load(d)) for k, d in items]
+        if rig == "source":
+            return rig_glb_library(clips), "model/gltf-binary"
+        return to_library_glb(clips, extras=extras), "model/gltf-binary"
     except ExportError as e:
         raise WorkError(422, str(e)[:1000]) from None
 

@@ -239,7 +239,7 @@ class CellResult:
 
 
 #: files a library folder holds besides its cells' CELL.motion.json and CELL.clip.json
-LIBRARY_FILES = ("manifest.json", "library.glb")
+LIBRARY_FILES = ("manifest.json", "library.glb", "library.rig.glb")
 CELL_KINDS = ("motion.json", "clip.json", "rig.bvh", "deepmimic.txt")
 #: source rig format -> (export format, cell file kind) written beside each cell's clip
 RIG_FILES = {"bvh": ("bvh", "rig.bvh"), "deepmimic": ("deepmimic", "deepmimic.txt")}
@@ -294,11 +294,14 @@ class LibraryResult:
         """Write ``manifest.json``, ``library.glb`` (one animation per cell with a clip) and each
         cell's ``CELL.motion.json`` and ``CELL.clip.json`` (and, for a walk from a BVH or a
         DeepMimic clip, the cell on the input's own skeleton: ``CELL.rig.bvh`` /
-        ``CELL.deepmimic.txt``) into ``folder`` (created when missing;
+        ``CELL.deepmimic.txt``; and for any input with a rig, ``library.rig.glb``: the input's
+        own character with one animation per cell) into ``folder`` (created when missing;
         earlier files of these names are replaced)."""
         from solver.export import export_motion
         from solver.export.clip import to_clip_json
         from solver.export.gltf import to_library_glb
+        from solver.export.rig_gltf import rig_glb_library
+        from solver.rig import RIG_FORMATS
 
         out = Path(folder)
         out.mkdir(parents=True, exist_ok=True)
@@ -319,6 +322,9 @@ class LibraryResult:
         if clips:
             (out / "library.glb").write_bytes(to_library_glb(clips, extras={**manifest["grid"],
                                                                             "manifest": "manifest.json"}))
+            rig = clips[0][1].provenance.get("rig")
+            if isinstance(rig, Mapping) and rig.get("format") in RIG_FORMATS:
+                (out / "library.rig.glb").write_bytes(rig_glb_library(clips))
         (out / "manifest.json").write_text(json.dumps(manifest, indent=1, allow_nan=False))
         return out
 

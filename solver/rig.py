@@ -477,10 +477,11 @@ def foot_pins(motion: Any, q: np.ndarray, t: np.ndarray) -> np.ndarray:
 
     The optimizer holds a contact point still at the motion's frames; between frames the
     interpolated joints let it drift a few millimetres (up to ~1 cm in tight turns at 15 fps).
-    At dense output times each foot is moved so its active contact points stay at their
-    anchors (a point's anchor: where the corrected foot put it when it touched down, so the
-    correction never jumps), and the correction fades out over :data:`PIN_RELEASE_S` once the
-    foot is in the air. A frame counts as in contact when both motion frames around it are."""
+    At dense output times each foot is moved so that its contact point that has been down
+    longest stays at its anchor (a point's anchor: where the corrected foot put it when it
+    touched down, so the correction never jumps when a second point lands), and the
+    correction fades out over :data:`PIN_RELEASE_S` once the foot is in the air. A frame counts
+    as in contact when both motion frames around it are."""
     from solver.kinematics import contact_points
 
     F = t.size
@@ -499,18 +500,24 @@ def foot_pins(motion: Any, q: np.ndarray, t: np.ndarray) -> np.ndarray:
         anchor: dict[int, np.ndarray] = {}
         corr = np.zeros(3)
         released, since = np.zeros(3), 0.0
+        holder = None
         for f in range(F):
             for i in pts:
                 if on[i, f] and i not in anchor:
                     anchor[i] = cp[i, :, f] + corr
                 elif not on[i, f]:
                     anchor.pop(i, None)
-            if anchor:
-                corr = np.mean([anchor[i] - cp[i, :, f] for i in anchor], axis=0)
+            if anchor:  # the point down longest holds the foot (dicts keep insertion order)
+                first = next(iter(anchor))
+                if holder is not None and first != holder:  # the holder lifted: take over without a jump
+                    anchor[first] = cp[first, :, f] + corr
+                holder = first
+                corr = anchor[first] - cp[first, :, f]
                 released, since = corr, 0.0
             else:
                 since += dt
                 corr = released * max(0.0, 1.0 - since / PIN_RELEASE_S)
+                holder = None
             out[f, k] = corr
     return out
 

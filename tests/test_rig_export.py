@@ -187,6 +187,10 @@ def test_saved_library_holds_each_cell_on_the_input_rig(runs, tmp_path):
     src = read_bvh(path)
     for f in files:
         _same_hierarchy(read_bvh(f), src)
+    glb = (out / "library.rig.glb").read_bytes()  # the input's skeleton once, one animation per cell
+    doc = json.loads(glb[20:20 + int.from_bytes(glb[12:16], "little")])
+    assert len(doc["animations"]) == 9
+    assert set(src.names) <= {n.get("name") for n in doc["nodes"]}
 
 
 def test_deepmimic_motion_on_its_own_character(shared_data, tmp_path):

@@ -5,8 +5,9 @@ from __future__ import annotations
 
 import asyncio
 import time
+from typing import Literal
 
-from fastapi import APIRouter, Request
+from fastapi import APIRouter, Query, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse, Response
 from sse_starlette import EventSourceResponse
@@ -136,9 +137,14 @@ def get_manifest(library_id: str, owner: OwnerDep, db: DatabaseDep) -> dict:
             "the grid in asset.extras.library and the game-ready data in each animation's extras",
     responses={200: {"content": {"model/gltf-binary": {}}}, 404: {"description": "no such library for this key"},
                409: {"description": "no cell has a motion yet"},
+               422: {"description": "rig=source on a library whose input has no rig of its own"},
                429: {"description": "the server is busy with heavy requests: retry after Retry-After seconds"}},
 )
-async def get_library_glb(library_id: str, request: Request, owner: OwnerDep, db: DatabaseDep) -> Response:
+async def get_library_glb(library_id: str, request: Request, owner: OwnerDep, db: DatabaseDep,
+                          rig: Literal["character", "source"] = Query(
+                              "character", description="source: on the input's own character (a BVH, skinned "
+                                                       "glTF or DeepMimic input), one animation per cell")
+                          ) -> Response:
     known_id("library", library_id)
 
     def load():
@@ -157,8 +163,8 @@ async def get_library_glb(library_id: str, request: Request, owner: OwnerDep, db
     if not items:
         raise Problem(409, f"library {library_id} has no cell with a motion yet")
     compute: Compute = request.app.state.compute
-    key = ("library.glb", tuple((k, sha) for k, sha, _ in items), repr(grid))
-    body, mt = await compute.cached(key, work.library_glb, [(k, d) for k, _, d in items], grid,
+    key = ("library.glb", tuple((k, sha) for k, sha, _ in items), repr(grid), rig)
+    body, mt = await compute.cached(key, work.library_glb, [(k, d) for k, _, d in items], grid, rig,
                                     what="the library GLB")
     return Response(body, media_type=mt)
 
