@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 import time as _time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import mujoco
@@ -288,7 +288,7 @@ class Gains:
     control_period: int = 1  # control steps every this many simulation steps
 
 
-@dataclass
+@dataclass(frozen=True, eq=False)
 class SimulationResult:
     """What :func:`simulate` produced: the model it ran (XML), the rollout and the measures."""
 
@@ -779,8 +779,7 @@ def simulate(motion: Motion, cycles: int = 10, gains: Gains | None = None, *,
         coordinate_qpos=ctl.qadr, t0=t0, cycle_duration_s=ref.period, cycles_requested=cycles,
         fell=fell, fall_time=fall_time, fall_reason=reason, wall_time_s=wall, series=series,
     )
-    res.report = _report(res, motion, ref, ctl)
-    return res
+    return replace(res, report=_report(res, motion, ref, ctl))
 
 
 def _ground_height(m: mujoco.MjModel, d: mujoco.MjData, p: np.ndarray) -> float:
