@@ -10,8 +10,9 @@ full-body job makes its own beside it, and every other job and cell takes the st
 (waiting for it while it is being made). The demo follows the jobs with a progress bar and
 downloads into ``--out``, per job: every λ optimum (``step_NNN_lambda_L.motion.json``,
 ``.clip.json``, ``.glb``, ``.bvh``, ``.validation.json``, named as ``motionx extrapolate`` names
-them; the full-body job's also on the input's own rig — for a DeepMimic input
-``.deepmimic.txt``, a DeepMimic motion for the same character file), ``progress.csv`` and
+them; the full-body job's also on the input's own rig — for a DeepMimic input ``.rig.glb``,
+its character's skeleton and shapes skinned, and ``.deepmimic.txt``, a DeepMimic motion for the
+same character file; ``.rig.glb`` and ``.rig.bvh`` for a BVH input), ``progress.csv`` and
 ``progress.png``, and the final motion's GRF, residual and filmstrip plots; then the library's
 ``library/manifest.json`` and ``library/library.glb`` (one looping animation per cell;
 ``--no-library`` skips it); then prints a short summary, with which job made each tutor and
@@ -55,9 +56,12 @@ from solver.status import TERMINAL, Status
 #: what each λ optimum is downloaded as: (export query, file suffix)
 EXPORTS = (("format=motion", "motion.json"), ("format=json", "clip.json"), ("format=gltf", "glb"),
            ("format=bvh", "bvh"))
-#: what the full-body job's λ optima are downloaded as too: on the input's own rig, by the
-#: upload's input format (its ``input.format``); other inputs have no rig
-SOURCE_RIG_EXPORTS = {"deepmimic": (("format=deepmimic", "deepmimic.txt"),)}
+#: what the full-body job's λ optima are downloaded as too: on the input's own rig (its skeleton
+#: and shapes), by the upload's input format (its ``input.format``); other inputs: none
+SOURCE_RIG_EXPORTS = {
+    "deepmimic": (("format=gltf&rig=source", "rig.glb"), ("format=deepmimic", "deepmimic.txt")),
+    "bvh": (("format=gltf&rig=source", "rig.glb"), ("format=bvh&rig=source", "rig.bvh")),
+}
 #: the plots of a job's final motion: (endpoint name, file)
 MOTION_PLOTS = (("grf", "grf.png"), ("residuals", "residuals.png"), ("filmstrip", "filmstrip.png"))
 #: the demo's walk, in the trials folder (``service.examples.data_dir()``)
@@ -242,8 +246,9 @@ def _work(args, http, files: list[Path], jobs: list[_Job], out: Path, key: str, 
         if j.name == "fullbody":
             j.rig_exports = SOURCE_RIG_EXPORTS.get(rig_format, ())
             if not j.rig_exports:
-                print(f"[demo] job fullbody: a {rig_format or 'motion file'} input has no rig of its own to export "
-                      "onto; its results come out on the synthesis character only")
+                print(f"[demo] job fullbody: the demo exports onto the input's own rig for "
+                      f"{' and '.join(SOURCE_RIG_EXPORTS)} inputs, not {rig_format or 'a motion file'}: its results "
+                      "come out on the synthesis character only")
     for j in jobs:
         if cancel():
             break
@@ -558,8 +563,8 @@ folder, on a free port), upload a captured walk over HTTP (default: the DeepMimi
 data/), ask for a downhill slope, a full-body walk up a small slope, a curve and stairs, and a
 3 × 3 motion library (slopes × curves), follow the jobs with a progress bar and
 download every λ optimum (motion file, JSON clip, GLB, BVH, plausibility report; the full-body
-job's also on the input's own rig: for a DeepMimic input a DeepMimic motion for its character
-file), the progress curve (CSV, PNG) and the final motion's plots into
+job's also on the input's own rig: for a DeepMimic input a skinned GLB of its character and a
+DeepMimic motion file), the progress curve (CSV, PNG) and the final motion's plots into
 --out/<job>/. Each tutor is made once and shared by the jobs that need it. Ctrl-C or SIGTERM
 cancels the jobs, downloads what they reached (summary.json: status canceled) and exits 130
 (143). The service is stopped and its temporary folder removed at the end, on Ctrl-C and on
@@ -578,8 +583,8 @@ SIGTERM.""")
                    help="synthesis character of the tutor (of the jobs but the full-body one, and of the library)")
     s.add_argument("--fullbody-slope", type=float, default=5.0, metavar="DEG",
                    help="the full-body job: the walk on the fullbody character up (or, negative, down) this slope, "
-                        "each λ optimum also on the input's own rig (DeepMimic input: a DeepMimic motion for its "
-                        "character file); 0 = no full-body job")
+                        "each λ optimum also on the input's own rig (DeepMimic input: a skinned GLB of its "
+                        "character and a DeepMimic motion file); 0 = no full-body job")
     s.add_argument("--fps", type=float, choices=[15.0, 30.0], default=15.0, help="frames per second of the tutor")
     add_import_options(s)
     s.add_argument("--timeout", type=float, default=900.0, metavar="S", help="seconds to wait for the jobs")

@@ -1,7 +1,7 @@
 """``make demo`` end to end: ``motionx demo`` with its defaults (the DeepMimic walk shipped in
 data/, a downhill slope of −11.25°, a full-body walk up 5°, a 90° curve and stairs of 0.10 m
 over HTTP on the embedded service, and a 3 × 3 library) writes every λ motion, its exports
-(the full-body job's also for the DeepMimic character itself), plausibility reports, progress
+(the full-body job's also on the DeepMimic character itself), plausibility reports, progress
 curve and plots, and a summary that states what was reached and that each tutor was made once.
 The files are checked with their own formats' readers, not by name only.
 
@@ -246,10 +246,19 @@ def test_the_demo_clock_runs_during_the_tutor_phase():
     assert job.elapsed == frozen
 
 
+def _glb_json(data: bytes) -> dict:
+    """The JSON chunk of a GLB (after checking its header)."""
+    assert data[:4] == b"glTF" and int.from_bytes(data[4:8], "little") == 2
+    assert int.from_bytes(data[8:12], "little") == len(data)
+    n = int.from_bytes(data[12:16], "little")
+    assert data[16:20] == b"JSON"
+    return json.loads(data[20:20 + n])
+
+
 def test_the_fullbody_job_comes_out_on_the_deepmimic_character(demo_run, shared_data):
     """The full-body walk up 5°: each λ optimum of the fullbody character (43 coordinates), also
-    as a DeepMimic motion for the humanoid's own character file, which the DeepMimic importer
-    reads back."""
+    as a skinned GLB of the DeepMimic humanoid's own skeleton and shapes and a DeepMimic motion
+    for its character file, which the DeepMimic importer reads back."""
     from solver.io import load_trial
     from solver.io.deepmimic import read_deepmimic_character
 
@@ -259,7 +268,7 @@ def test_the_fullbody_job_comes_out_on_the_deepmimic_character(demo_run, shared_
     assert job["status"] == "succeeded" and job["lambda_reached"] == pytest.approx(1.0), job
     assert job["reached"]["slope_deg"] == pytest.approx(5.0)
     assert job["motions"] >= 2 and job["plausible"] == job["natural"] == job["motions"], job
-    assert job["rig_exports"] == ["deepmimic.txt"]
+    assert job["rig_exports"] == ["rig.glb", "deepmimic.txt"]
     character = shared_data / "deepmimic_humanoid3d_walk" / "humanoid3d_character.txt"
     sk = read_deepmimic_character(character)
     d = out / "fullbody"
@@ -267,7 +276,7 @@ def test_the_fullbody_job_comes_out_on_the_deepmimic_character(demo_run, shared_
     assert len(motions) == job["motions"]
     assert {p.name for p in d.iterdir() if p.name.startswith("step_")} == {
         f"{m.name[: -len('.motion.json')]}.{kind}" for m in motions
-        for kind in (*STEP_KINDS, "deepmimic.txt")}
+        for kind in (*STEP_KINDS, "rig.glb", "deepmimic.txt")}
     for mf in motions:
         stem = mf.name[: -len(".motion.json")]
         m = motion_from_dict(json.loads(mf.read_text()))
@@ -278,6 +287,11 @@ def test_the_fullbody_job_comes_out_on_the_deepmimic_character(demo_run, shared_
         assert dm["Loop"] == "wrap" and {len(f) for f in dm["Frames"]} == {sk.frame_size}
         back = load_trial([d / f"{stem}.deepmimic.txt", character])
         assert len(dm["Frames"]) == back.T
+        # the GLB on the humanoid's own skeleton: a skin whose joints are its joints, shapes on them
+        gltf = _glb_json((d / f"{stem}.rig.glb").read_bytes())
+        names = [n.get("name") for n in gltf["nodes"]]
+        assert gltf["skins"] and gltf["meshes"] and len(gltf["animations"]) == 1
+        assert [names[j] for j in gltf["skins"][0]["joints"]] == list(sk.names), names
     assert len({p.name for p in d.glob("*.png")}) == 4  # progress + the final motion's three plots
 
 
