@@ -693,6 +693,7 @@ def child_main() -> None:  # pragma: no cover - runs in the child process (exerc
     import opensim as osim  # first heavy import of the process: OpenSim's casadi wins
 
     osim.Logger.setLevelString("error")
+    osim.Logger.removeFileSink()  # no opensim.log in the working directory
     job = json.loads(sys.stdin.read())
     try:
         answer = {"ik": _child_ik, "id": _child_id, "couple": _child_couple, "scale": _child_scale,

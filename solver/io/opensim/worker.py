@@ -87,6 +87,7 @@ def main() -> None:  # pragma: no cover - runs in the child process (exercised b
     import opensim as osim  # first import of the process: its casadi wins
 
     osim.Logger.setLevelString("error")
+    osim.Logger.removeFileSink()  # no opensim.log in the working directory
     req = json.loads(sys.stdin.read())
     out: dict[str, Any] = {}
     notes: list[str] = []
