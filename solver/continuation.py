@@ -386,6 +386,8 @@ class _Walk:
                     cap = 0.9 * delta  # do not retry this size right after success (the thesis does)
                 delta /= 2.0
                 if delta < c.eps:
+                    if self.should_cancel is not None and self.should_cancel():  # a solve stopped by a cancel
+                        return self.finish("canceled", lam, "canceled")
                     return self.finish("impasse", lam,
                                        f"impasse: no step of at least ε = {c.eps} converges from λ = {lam:.4f}")
         return self.finish("succeeded", lam)

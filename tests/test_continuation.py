@@ -100,6 +100,10 @@ def test_impasse_and_cancel_are_results_not_errors(tutor):
     res = extrapolate(tutor, Target(slope_deg=5.0), StepControl(), should_cancel=cancel)
     assert res.status == "canceled" and res.lam_reached == 0.0 and [s.lam for s in res.steps] == [0.0]
     assert res.records[-1].status == "User_Requested_Stop" and res.records[-1].iterations < 5
+    # ... also when the stopped solve's step, halved, falls below ε: canceled, not an impasse
+    calls.clear()
+    res = extrapolate(tutor, Target(slope_deg=5.0), StepControl(delta0=1e-4, eps=1e-4), should_cancel=cancel)
+    assert res.status == "canceled" and res.records[-1].status == "User_Requested_Stop", res.message
 
 
 def test_thesis_controller_and_motion_at(tutor):
