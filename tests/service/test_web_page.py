@@ -154,7 +154,8 @@ def test_page_and_vendor_files_are_served_locally(api):
         _missing("three.js is not installed: run `npm ci` in service/web")
     for url in (imports["three"], "./vendor/three/build/three.core.js",
                 imports["three/addons/"] + "loaders/GLTFLoader.js",
-                imports["three/addons/"] + "controls/OrbitControls.js", "app.js", "progress.js", "preview.js"):
+                imports["three/addons/"] + "controls/OrbitControls.js", "app.js", "progress.js", "preview.js",
+                "newwalk.js"):
         r = api.anon.get(urljoin("/ui/", url))
         assert r.status_code == 200, (url, r.status_code)
         assert r.headers["content-type"].split(";")[0] == "text/javascript", (url, r.headers["content-type"])

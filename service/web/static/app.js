@@ -1,7 +1,13 @@
-// The motionx page: lists of motions, jobs and libraries, a job's live progress curve, a
+// The motionx page: a form that uploads a trial and starts a job or a library on it
+// (newwalk.js), lists of motions, jobs and libraries, a job's live progress curve, a
 // library's grid of cells (status and λ reached as a heat map; a cell's clip in the 3D
-// preview), a motion's 3D preview, GRF plot and plausibility report. Plain ES modules, no
-// framework, no build step.
+// preview), a motion's 3D preview (on the input's own rig when the export has it), GRF plot,
+// plausibility report and downloads in every export format. Plain ES modules, no framework,
+// no build step.
+//
+// What the forms offer comes from the API itself: the target axes from GET /axes, the upload
+// fields, the tutor's characters and fps, the step control and the export formats from the
+// OpenAPI document (GET /openapi.json).
 //
 // Every API call carries the key (X-API-Key). The key comes from the input box or from the
 // URL fragment (#key=...), and is remembered in localStorage. Authenticated images are
@@ -9,10 +15,11 @@
 // through its Server-Sent Events (GET /jobs/{id}/events, /libraries/{id}/events), read
 // with fetch() since the browser's EventSource cannot send the key in a header.
 //
-// Test hook: window.motionx.state (flags such as progressPoints, previewReady, grfLoaded,
-// libraryCells, cellKey).
+// Test hook: window.motionx.state (flags such as progressPoints, previewReady, previewRig,
+// grfLoaded, libraryCells, cellKey, uploadStatus, startStatus, downloadStatus).
 
 import { drawProgress } from './progress.js';
+import { initNewWalk } from './newwalk.js';
 
 const KEY_STORAGE = 'motionx.apiKey';
 const LIST_POLL_MS = 3000;
@@ -38,6 +45,11 @@ const state = {
   filmstripLoaded: false,
   filmstripError: null,
   validation: null,
+  previewRig: null, // the preview's skeleton: source (the input's own rig) | character (the motion's)
+  previewObjects: 0, // three.js objects of the previewed model
+  environmentReached: null, // the followed job's environment at λ reached (axis -> value)
+  formats: [], // the export formats (GET /motions/{id}?format=…, from the OpenAPI document)
+  downloadStatus: null, // ok | error: the last download
   libraries: [],
   libraryId: null,
   libraryStatus: null,
@@ -46,7 +58,7 @@ const state = {
   cellKey: null, // the cell whose clip is previewed
   errors: [],
 };
-window.motionx = { state, viewer: null, selectJob, selectMotion, selectLibrary };
+window.motionx = { state, viewer: null, selectJob, selectMotion, selectLibrary, previewVariants };
 
 const $ = (id) => document.getElementById(id);
 let apiKey = '';
@@ -58,6 +70,10 @@ let lastProgress = [];
 const streams = { job: null, library: null }; // the AbortController of each open event stream
 let viewerPromise = null;
 const objectUrls = new Map(); // <img> id -> object URL to revoke
+const rigOf = new Map(); // motion id -> the preview variant that worked (source | character)
+const canceling = new Set(); // ids of the jobs and libraries whose cancel the API accepted
+let previewLastOf = null; // a job started from the form: its last λ optimum is previewed when it ends
+let newWalk = null; // the form (newwalk.js)
 
 // ---------------------------------------------------------------- helpers
 
@@ -74,6 +90,8 @@ function h(tag, attrs = {}, ...children) {
   return el;
 }
 
+/** <dl> items: one <div> per (term, value), so each pair stays together in the facts' grid. */
+const factItems = (pairs) => pairs.map(([k, v]) => h('div', {}, h('dt', {}, k), h('dd', {}, v)));
 const sleep = (ms) => new Promise((resolve) => setTimeout(resolve, ms));
 const shortId = (id) => (id ? id.slice(0, 10) : '');
 const fmt = (x, digits = 3) => (typeof x === 'number' && Number.isFinite(x) ? String(+x.toPrecision(digits)) : '–');
@@ -89,6 +107,28 @@ async function loadAxes() {
     if (res.ok) AXES = (await res.json()).axes;
   } catch (err) {
     noteError('axes', err);
+  }
+}
+
+// from the OpenAPI document: the upload form's fields, the tutor, the step control, the export formats
+let SCHEMA = null;
+
+async function loadSchema() {
+  try {
+    const res = await fetch('/openapi.json');
+    if (!res.ok) throw new Error(`GET /openapi.json: ${res.status}`);
+    const doc = await res.json();
+    const get = doc.paths['/motions/{motion_id}'].get;
+    const format = get.parameters.find((p) => p.name === 'format');
+    SCHEMA = {
+      upload: doc.paths['/motions'].post.requestBody.content['multipart/form-data'].schema,
+      tutor: doc.components.schemas.TutorIn,
+      control: doc.components.schemas.StepControlIn,
+      formats: format.schema.enum,
+    };
+    state.formats = SCHEMA.formats.slice();
+  } catch (err) {
+    noteError('schema', err);
   }
 }
 
@@ -116,17 +156,25 @@ class ApiError extends Error {
   }
 }
 
-/** fetch() with the API key; `as` is json | blob | arrayBuffer. Problem details become ApiError. */
-async function api(path, { as = 'json', method = 'GET' } = {}) {
-  if (!apiKey) throw new ApiError(401, 'no API key');
-  const res = await fetch(path, { method, headers: { 'X-API-Key': apiKey } });
+/**
+ * fetch() with the API key; `as` is json | blob | arrayBuffer | response. `json`: a JSON body;
+ * `body`: any other body (FormData: multipart). Problem details become ApiError.
+ */
+async function api(path, { as = 'json', method = 'GET', json, body } = {}) {
+  if (!apiKey) throw new ApiError(401, 'no API key: enter one above');
+  const headers = { 'X-API-Key': apiKey };
+  if (json !== undefined) {
+    headers['Content-Type'] = 'application/json';
+    body = JSON.stringify(json);
+  }
+  const res = await fetch(path, { method, headers, body });
   if (!res.ok) {
     const detail = await problemDetail(res);
     if (res.status === 401) setKeyStatus('invalid', detail);
     throw new ApiError(res.status, detail);
   }
   setKeyStatus('ok');
-  return res[as]();
+  return as === 'response' ? res : res[as]();
 }
 
 /** The `detail` of a problem answer, or its status line when it is not JSON. */
@@ -218,7 +266,9 @@ function useKey(key) {
   Object.assign(state, { motions: [], jobs: [], libraries: [], jobId: null, jobStatus: null, motionId: null,
     libraryId: null, libraryStatus: null, cellKey: null });
   $('job-panel').hidden = $('motion-panel').hidden = $('library-panel').hidden = true;
-  $('intro').hidden = false;
+  $('new-walk-key').hidden = Boolean(apiKey);
+  previewLastOf = null;
+  if (newWalk) newWalk.reset();
   setKeyStatus('none');
   refreshLists();
 }
@@ -292,6 +342,7 @@ function renderMotionList() {
   )));
   if (!motions.length) ul.append(h('li', { class: 'empty' }, emptyText('motions')));
   ul.dataset.count = motions.length;
+  if (newWalk) newWalk.renderSources();
 }
 
 function naturalBadge(natural) {
@@ -306,11 +357,12 @@ function plausibleBadge(plausible) {
 
 // ---------------------------------------------------------------- a job
 
-async function selectJob(id) {
+/** Shows a job and follows it while it runs; `previewLast`: preview its last λ optimum when it ends. */
+async function selectJob(id, { previewLast = false } = {}) {
   const token = ++jobToken;
-  Object.assign(state, { jobId: id, jobStatus: null, progressPoints: 0, jobMotions: [] });
+  Object.assign(state, { jobId: id, jobStatus: null, progressPoints: 0, jobMotions: [], environmentReached: null });
   lastProgress = [];
-  $('intro').hidden = true;
+  previewLastOf = previewLast ? id : null;
   $('job-panel').hidden = false;
   $('job-id').textContent = id;
   $('job-facts').replaceChildren();
@@ -326,11 +378,17 @@ async function selectJob(id) {
       if (token !== jobToken) return;
       renderJob(job);
       await loadJobMotions(id, token);
-      if (job.terminal) return;
+      if (job.terminal) {
+        if (previewLastOf === id && token === jobToken && state.jobMotions.length) {
+          previewLastOf = null;
+          await selectMotion(state.jobMotions[state.jobMotions.length - 1].id);
+        }
+        return;
+      }
       if (await followJob(id, token)) continue; // it ended: read the job's final state at once
     } catch (err) {
       if (token !== jobToken) return;
-      $('job-facts').replaceChildren(h('dt', {}, 'error'), h('dd', {}, err.message));
+      $('job-facts').replaceChildren(...factItems([['error', err.message]]));
       if (err instanceof ApiError && err.status < 500) return;
     }
     if (token === jobToken) await sleep(STREAM_RETRY_MS);
@@ -366,7 +424,7 @@ function renderJob(job) {
   const status = $('job-status');
   status.className = `badge ${job.status}`;
   status.textContent = job.status;
-  $('job-cancel').hidden = job.terminal;
+  cancelButton($('job-cancel'), job, 'Cancel job');
   const facts = [
     ['target', targetText(job.target)],
     ['λ reached', fmt(job.lam_reached, 4)],
@@ -375,8 +433,10 @@ function renderJob(job) {
     ['method', `${job.control.method ?? '–'}, Δ0 = ${job.control.delta0 ?? '–'}`],
     ['started', clock(job.started_at) || '–'],
   ];
+  state.environmentReached = environmentReached(job.progress);
+  if (state.environmentReached) facts.splice(2, 0, ['environment reached', environmentText(job.target, state.environmentReached)]);
   if (job.message) facts.push(['message', job.message]);
-  $('job-facts').replaceChildren(...facts.flatMap(([k, v]) => [h('dt', {}, k), h('dd', {}, v)]));
+  $('job-facts').replaceChildren(...factItems(facts));
   lastProgress = job.progress;
   state.progressPoints = drawProgress($('progress-canvas'), lastProgress);
   // keep the list's badge in step with the panel
@@ -385,6 +445,20 @@ function renderJob(job) {
     Object.assign(listed, job);
     renderJobList();
   }
+}
+
+/** The environment (axis -> value) of the last accepted solve at the λ reached. */
+function environmentReached(points) {
+  const at = points.filter((p) => p.phase === 'extrapolate' && p.accepted && p.lam === p.lam_reached);
+  const last = at[at.length - 1];
+  return last && last.environment && Object.keys(last.environment).length ? last.environment : null;
+}
+
+/** The reached values of the axes the target changes, in the axes' words (slope 2.5°, μ=0.8). */
+function environmentText(target = {}, env) {
+  const parts = AXES.filter((a) => axisChanges(a, target[a.name]) && typeof env[a.name] === 'number')
+    .map((a) => a.words.replace('{}', fmt(env[a.name], 4)));
+  return parts.join(', ') || '–';
 }
 
 async function loadJobMotions(id, token) {
@@ -418,12 +492,30 @@ function plausibleMark(plausible) {
     plausible ? '✓' : '✗');
 }
 
-async function cancelJob() {
-  if (!state.jobId) return;
+/** A job's or library's cancel button: hidden once it has ended, "Canceling…" once asked. */
+function cancelButton(button, run, label) {
+  const asked = Boolean(run.cancel_requested) || canceling.has(run.id); // events may predate the request
+  button.hidden = run.terminal;
+  button.disabled = asked;
+  button.textContent = asked ? 'Canceling…' : label;
+}
+
+/** POST …/cancel from the panel's button; what the API answers is shown at once (a 409 in the facts). */
+async function cancel(kind) {
+  const id = kind === 'job' ? state.jobId : state.libraryId;
+  if (!id) return;
+  const button = $(`${kind}-cancel`);
+  button.disabled = true;
   try {
-    await api(`/jobs/${state.jobId}/cancel`, { method: 'POST' });
+    const run = await api(`/${kind === 'job' ? 'jobs' : 'libraries'}/${id}/cancel`, { method: 'POST' });
+    canceling.add(id);
+    if (id === (kind === 'job' ? state.jobId : state.libraryId)) cancelButton(button, run, button.textContent);
   } catch (err) {
-    noteError('cancel', err);
+    if (!(err instanceof ApiError)) noteError('cancel', err); // the API's answer (a 409: it had ended) is shown
+    button.disabled = false;
+    if (id === (kind === 'job' ? state.jobId : state.libraryId)) {
+      $(`${kind}-facts`).append(h('div', {}, h('dt', {}, 'cancel'), h('dd', { class: 'bad' }, err.message)));
+    }
   }
 }
 
@@ -454,7 +546,6 @@ function renderLibraryList() {
 async function selectLibrary(id) {
   const token = ++libraryToken;
   Object.assign(state, { libraryId: id, libraryStatus: null, libraryCells: 0, libraryDone: 0, cellKey: null });
-  $('intro').hidden = true;
   $('library-panel').hidden = false;
   $('library-id').textContent = id;
   $('library-facts').replaceChildren();
@@ -482,7 +573,7 @@ async function selectLibrary(id) {
       if (ended) continue; // read the library's final state at once
     } catch (err) {
       if (token !== libraryToken) return;
-      $('library-facts').replaceChildren(h('dt', {}, 'error'), h('dd', {}, err.message));
+      $('library-facts').replaceChildren(...factItems([['error', err.message]]));
       if (err instanceof ApiError && err.status < 500) return;
     }
     if (token === libraryToken) await sleep(STREAM_RETRY_MS);
@@ -516,7 +607,7 @@ function renderLibrary(lib) {
   const status = $('library-status');
   status.className = `badge ${lib.status}`;
   status.textContent = lib.status;
-  $('library-cancel').hidden = lib.terminal;
+  cancelButton($('library-cancel'), lib, 'Cancel library');
   const p = lib.progress;
   const times = lib.cells.map((c) => c.wall_time_s).filter((t) => typeof t === 'number');
   const facts = [
@@ -527,7 +618,7 @@ function renderLibrary(lib) {
     ['overall', `${fmt(100 * p.fraction, 3)} %`],
     ['time per cell', times.length ? `${fmt(times.reduce((a, b) => a + b, 0) / times.length)} s` : '–'],
   ];
-  $('library-facts').replaceChildren(...facts.flatMap(([k, v]) => [h('dt', {}, k), h('dd', {}, v)]));
+  $('library-facts').replaceChildren(...factItems(facts));
   $('library-bar-fill').style.width = `${(100 * p.fraction).toFixed(1)}%`;
 
   // the grid: rows = first axis, columns = second (one column for a single axis); a list of
@@ -589,26 +680,15 @@ async function selectCell(cell) {
   }
 }
 
-async function cancelLibrary() {
-  if (!state.libraryId) return;
-  try {
-    await api(`/libraries/${state.libraryId}/cancel`, { method: 'POST' });
-  } catch (err) {
-    noteError('cancel', err);
-  }
-}
-
 async function downloadLibrary(what) {
   const id = state.libraryId;
   if (!id) return;
   try {
     const blob = await api(what === 'glb' ? `/libraries/${id}/library.glb` : `/libraries/${id}/manifest`, { as: 'blob' });
-    const a = h('a', { href: URL.createObjectURL(blob), download: what === 'glb' ? `${id}.glb` : `${id}.manifest.json` });
-    a.click();
-    setTimeout(() => URL.revokeObjectURL(a.href), 10_000);
+    saveBlob(blob, what === 'glb' ? `${id}.glb` : `${id}.manifest.json`);
   } catch (err) {
     noteError('download', err);
-    alert(`Download failed: ${err.message}`);
+    $('library-facts').append(h('div', {}, h('dt', {}, 'download'), h('dd', { class: 'bad' }, `failed: ${err.message}`)));
   }
 }
 
@@ -619,9 +699,12 @@ async function selectMotion(id) {
   Object.assign(state, {
     motionId: id, previewReady: false, previewError: null, grfLoaded: false, grfError: null,
     residualsLoaded: false, residualsError: null, filmstripLoaded: false, filmstripError: null, validation: null,
+    previewRig: null, previewObjects: 0, downloadStatus: null,
   });
-  $('intro').hidden = true;
   $('motion-panel').hidden = false;
+  $('download-status').textContent = '';
+  $('download-rig-box').hidden = true;
+  $('viewer-rig').textContent = '';
   $('motion-id').textContent = id;
   $('motion-facts').textContent = '';
   $('validation').replaceChildren(h('tbody', {}, h('tr', {}, h('td', {}, 'loading…'))));
@@ -751,12 +834,18 @@ async function loadPreview(id, token, validation) {
     return;
   }
   try {
-    const [glb, report] = await Promise.all([api(`/motions/${id}?format=glb`, { as: 'arrayBuffer' }), validation]);
+    const [{ glb, rig }, report] = await Promise.all([previewGlb(id), validation]);
     if (token !== motionToken) return;
     const gravity = report && report.environment ? report.environment.gravity : undefined;
     const treads = report && report.environment ? report.environment.treads : undefined; // stairs
-    await v.show(glb, { gravity, treads });
+    const shown = await v.show(glb, { gravity, treads });
     if (token !== motionToken) return;
+    const meta = motionMeta(id);
+    state.previewRig = rig;
+    state.previewObjects = shown.objects;
+    $('viewer-rig').textContent = rig === 'source' ? "on the input's own rig"
+      : `on the ${meta ? meta.character : "motion's"} character`;
+    $('download-rig-box').hidden = rig !== 'source';
     state.previewReady = true;
   } catch (err) {
     if (token !== motionToken) return;
@@ -764,6 +853,37 @@ async function loadPreview(id, token, validation) {
     viewerMessage(`No 3D preview: ${err.message}`);
   }
 }
+
+/**
+ * The GLB queries a motion's preview tries, in order (the first the API answers is shown):
+ * the motion on the input's own rig (GET /motions/{id}?format=glb&rig=source: a motion made
+ * from a BVH, DeepMimic or glTF trial carries that rig in its provenance), then the motion on
+ * its own character (HalfBoy or the full body). A 4xx moves on to the next.
+ */
+function previewVariants() {
+  return [{ rig: 'source', query: 'format=glb&rig=source' }, { rig: 'character', query: 'format=glb' }];
+}
+
+/** The motion's GLB for the preview and the variant it is ({glb, rig}); remembered per motion. */
+async function previewGlb(id) {
+  const variants = previewVariants();
+  const known = rigOf.get(id);
+  const order = known ? [variants.find((v) => v.rig === known), ...variants.filter((v) => v.rig !== known)] : variants;
+  let last = null;
+  for (const variant of order) {
+    try {
+      const glb = await api(`/motions/${id}?${variant.query}`, { as: 'arrayBuffer' });
+      rigOf.set(id, variant.rig);
+      return { glb, rig: variant.rig };
+    } catch (err) {
+      if (!(err instanceof ApiError && err.status >= 400 && err.status < 500 && err.status !== 401)) throw err;
+      last = err;
+    }
+  }
+  throw last;
+}
+
+const motionMeta = (id) => state.motions.find((m) => m.id === id) || state.jobMotions.find((m) => m.id === id);
 
 /** An authenticated PNG into <img id="{name}-img">, or the API's reason in {name}-message. */
 async function loadImage(name, path, token) {
@@ -793,18 +913,93 @@ async function loadImage(name, path, token) {
   }
 }
 
+/** A blob saved as a file (an <a download> on an object URL: the API wants the key, so no plain link). */
+function saveBlob(blob, name) {
+  const a = h('a', { href: URL.createObjectURL(blob), download: name });
+  a.click();
+  setTimeout(() => URL.revokeObjectURL(a.href), 10_000);
+}
+
+/** What a format's button says (a format this table does not know shows its name). */
+const FORMAT_LABELS = { json: 'JSON clip', gltf: 'glTF', glb: 'GLB', bvh: 'BVH', deepmimic: 'DeepMimic',
+  opensim: 'OpenSim (zip)', motion: 'motion file' };
+
+/** A file name for an export, from its media type: .glb, .gltf, .zip, .FORMAT.json, .bvh … */
+function exportFileName(id, format, mediaType, onRig) {
+  const mt = (mediaType || '').split(';')[0].trim();
+  const ext = { 'model/gltf-binary': 'glb', 'model/gltf+json': 'gltf', 'application/zip': 'zip' }[mt]
+    ?? (mt === 'application/json' ? (format === 'json' ? 'clip.json' : `${format}.json`) : format);
+  return `${id}${onRig ? '.rig' : ''}.${ext}`;
+}
+
+/** One button per export format of the API (the OpenAPI document's enum of GET /motions/{id}?format=). */
+function renderDownloadButtons() {
+  $('download-buttons').replaceChildren(...state.formats.map((f) => h('button', {
+    type: 'button', 'data-format': f, onclick: () => download(f),
+  }, FORMAT_LABELS[f] ?? f)));
+  if (!state.formats.length) $('download-buttons').append(h('span', { class: 'hint' }, 'formats unavailable'));
+}
+
+/** The exporter options typed beside the buttons (NAME=VALUE separated by spaces, commas or &) as a query string. */
+function exportOptions() {
+  const query = new URLSearchParams();
+  for (const part of $('download-options').value.split(/[\s,&]+/).filter(Boolean)) {
+    const eq = part.indexOf('=');
+    if (eq <= 0) throw new Error(`exporter option ${JSON.stringify(part)} is not NAME=VALUE`);
+    query.append(part.slice(0, eq), part.slice(eq + 1));
+  }
+  const text = query.toString();
+  return text ? `&${text}` : '';
+}
+
+/**
+ * Downloads the selected motion as `format`. With "on the input's own rig" ticked (shown when
+ * the motion has that rig) it asks for rig=source first; a format that cannot write the motion
+ * there (4xx) gives the motion on its own character, and the status line says why.
+ */
 async function download(format) {
   const id = state.motionId;
   if (!id) return;
+  const status = $('download-status');
+  const wantRig = !$('download-rig-box').hidden && $('download-rig').checked && format !== 'motion';
+  const fail = (message) => {
+    state.downloadStatus = 'error';
+    status.className = 'status-line bad';
+    status.textContent = `${FORMAT_LABELS[format] ?? format}: ${message}`;
+  };
+  let options;
   try {
-    const blob = await api(`/motions/${id}?format=${format}`, { as: 'blob' });
-    const ext = { glb: 'glb', bvh: 'bvh', json: 'clip.json', motion: 'motion.json' }[format];
-    const a = h('a', { href: URL.createObjectURL(blob), download: `${id}.${ext}` });
-    a.click();
-    setTimeout(() => URL.revokeObjectURL(a.href), 10_000);
+    options = format === 'motion' ? '' : exportOptions();
   } catch (err) {
-    noteError('download', err);
-    alert(`Download failed: ${err.message}`);
+    fail(err.message);
+    return;
+  }
+  state.downloadStatus = 'busy';
+  status.className = 'status-line busy';
+  status.textContent = `preparing ${FORMAT_LABELS[format] ?? format}…`;
+  let note = '';
+  try {
+    let res = null;
+    if (wantRig) {
+      try {
+        res = await api(`/motions/${id}?format=${format}&rig=source${options}`, { as: 'response' });
+      } catch (err) {
+        if (!(err instanceof ApiError && err.status >= 400 && err.status < 500 && err.status !== 401)) throw err;
+        note = ` on the motion's own character (not on the input's rig: ${err.message})`;
+      }
+    }
+    const onRig = res !== null;
+    res ??= await api(`/motions/${id}?format=${format}${options}`, { as: 'response' });
+    const blob = await res.blob();
+    const name = exportFileName(id, format, res.headers.get('content-type'), onRig);
+    saveBlob(blob, name);
+    if (id !== state.motionId) return;
+    state.downloadStatus = 'ok';
+    status.className = 'status-line ok';
+    status.textContent = `downloaded ${name}${onRig ? " (on the input's own rig)" : note}`;
+  } catch (err) {
+    if (!(err instanceof ApiError)) noteError('download', err); // the API's refusals are shown, not errors of the page
+    if (id === state.motionId) fail(err.message);
   }
 }
 
@@ -817,11 +1012,10 @@ function start() {
   });
   $('key-forget').addEventListener('click', () => useKey(''));
   $('show-steps').addEventListener('change', renderMotionList);
-  $('job-cancel').addEventListener('click', cancelJob);
-  $('library-cancel').addEventListener('click', cancelLibrary);
+  $('job-cancel').addEventListener('click', () => cancel('job'));
+  $('library-cancel').addEventListener('click', () => cancel('library'));
   $('library-glb').addEventListener('click', () => downloadLibrary('glb'));
   $('library-manifest').addEventListener('click', () => downloadLibrary('manifest'));
-  document.querySelectorAll('.downloads button').forEach((b) => b.addEventListener('click', () => download(b.dataset.format)));
   $('viewer-play').addEventListener('click', async () => {
     const v = await viewer();
     v.setPlaying(!v.playing);
@@ -837,9 +1031,20 @@ function start() {
   });
 
   const key = keyFromFragment() ?? localStorage.getItem(KEY_STORAGE) ?? '';
-  // the target words and grid labels come from GET /axes; a key entered meanwhile is kept
+  $('new-walk-key').hidden = Boolean(key);
+  // the target words and grid labels come from GET /axes, the forms and the export formats from
+  // the OpenAPI document; a key entered meanwhile is kept
   const before = keyToken;
-  loadAxes().finally(() => {
+  Promise.all([loadAxes(), loadSchema()]).finally(() => {
+    renderDownloadButtons();
+    newWalk = initNewWalk({
+      api, ApiError, h, state, axes: AXES, schema: SCHEMA, noteError, refreshLists, selectMotion,
+      started: (kind, id) => (kind === 'library' ? selectLibrary(id) : selectJob(id, { previewLast: true })),
+      uploaded: (motion) => {
+        if (!state.motions.some((m) => m.id === motion.id)) state.motions.unshift(motion);
+        renderMotionList();
+      },
+    });
     if (keyToken === before) useKey(key);
   });
   setInterval(() => {

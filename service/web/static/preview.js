@@ -88,7 +88,8 @@ export class Viewer {
     this.camera.updateProjectionMatrix();
   }
 
-  /** Shows the motion in `glb` (an ArrayBuffer); `gravity` is the motion's gravity (motionx axes: Z up). */
+  /** Shows the motion in `glb` (an ArrayBuffer); `gravity` is the motion's gravity (motionx axes: Z up).
+   * Returns the clip's duration and name, and how many three.js objects the model has. */
   async show(glb, { gravity, treads } = {}) {
     const gltf = await new GLTFLoader().parseAsync(glb, '');
     this.clear();
@@ -115,7 +116,9 @@ export class Viewer {
     this.world.localToWorld(this.camera.position);
     this.controls.update();
     await this.nextFrame();
-    return { duration: clip ? clip.duration : 0, name: clip ? clip.name : '' };
+    let objects = 0;
+    this.model.traverse(() => { objects += 1; });
+    return { duration: clip ? clip.duration : 0, name: clip ? clip.name : '', objects };
   }
 
   /** Points the camera at the character's first pose (in the untilted world's frame). */
