@@ -50,7 +50,7 @@ def test_the_documented_script_runs(tmp_path):
     assert r.returncode == 0, r.stderr[-3000:]
     assert "tutor: succeeded" in r.stdout
     assert "walk: succeeded reached λ = 1.0" in r.stdout
-    assert "plausible: True natural: True []" in r.stdout, r.stdout
+    assert "plausible: True natural: True" in r.stdout, r.stdout  # verdicts; warnings may be listed
 
     out = tmp_path / "out" / "api"
     from solver import Motion
