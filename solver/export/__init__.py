@@ -29,6 +29,7 @@ from __future__ import annotations
 import importlib
 import inspect
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -309,3 +310,20 @@ def write_folder(archive: bytes, path: str | Path) -> Path:
                 raise ExportError(f"unexpected entry {name!r} in the archive")
             (out / name).write_bytes(z.read(name))
     return out
+
+
+def source_rig(motion: Motion, formats: tuple[str, ...], what: str):
+    """The motion's source rig (``provenance["rig"]``, a :class:`solver.rig.Rig`) when its format
+    is one of ``formats``; otherwise an :class:`ExportError` naming ``what`` it needs and where the
+    motion came from."""
+    from solver.rig import Rig, RigError
+
+    d = motion.provenance.get("rig")
+    if not isinstance(d, Mapping) or d.get("format") not in formats:
+        src = d.get("format") if isinstance(d, Mapping) else None
+        why = f"this one came from {src}" if src else "this one has no source rig"
+        raise ExportError(f"{what} ({why})")
+    try:
+        return Rig.from_dict(d)
+    except RigError as e:
+        raise ExportError(str(e)) from None

@@ -153,17 +153,13 @@ def source_bvh(motion: Motion, *, decimals: int = 6) -> str:
     """``motion`` on the skeleton of the BVH it came from: the input's hierarchy, joint names,
     offsets, channels (order and count), End Sites and units, one gait cycle at the input's
     frame rate (``solver.rig.retarget``)."""
-    from solver.rig import Rig, RigError, retarget
+    from solver.export import source_rig
+    from solver.rig import RigError, retarget
 
     if isinstance(decimals, bool) or not isinstance(decimals, int) or not 1 <= decimals <= 12:
         raise ExportError(f"decimals must be an integer in [1, 12], got {decimals!r}")
-    d = motion.provenance.get("rig")
-    if not isinstance(d, dict) or d.get("format") != "bvh":
-        src = d.get("format") if isinstance(d, dict) else None
-        why = f"this one came from {src}" if src else "this one has no source rig"
-        raise ExportError(f"rig=source needs a motion made from a BVH trial ({why})")
+    rig = source_rig(motion, ("bvh",), "rig=source needs a motion made from a BVH trial")
     try:
-        rig = Rig.from_dict(d)
         pose = retarget(motion, rig)
     except RigError as e:
         raise ExportError(str(e)) from None

@@ -16,9 +16,9 @@ import json
 
 import numpy as np
 
-from solver.export import ExportError, _check_motion
+from solver.export import ExportError, _check_motion, source_rig
 from solver.motion import Motion
-from solver.rig import Rig, RigError, matrices_to_quats, retarget
+from solver.rig import RigError, matrices_to_quats, retarget
 
 
 def to_deepmimic(motion: Motion, *, rig: str = "source", decimals: int = 6) -> str:
@@ -29,13 +29,8 @@ def to_deepmimic(motion: Motion, *, rig: str = "source", decimals: int = 6) -> s
                           f"got {rig!r}")
     if isinstance(decimals, bool) or not isinstance(decimals, int) or not 1 <= decimals <= 12:
         raise ExportError(f"decimals must be an integer in [1, 12], got {decimals!r}")
-    d = motion.provenance.get("rig")
-    if not isinstance(d, dict) or d.get("format") != "deepmimic":
-        src = d.get("format") if isinstance(d, dict) else None
-        why = f"this one came from {src}" if src else "this one has no source rig"
-        raise ExportError(f"format=deepmimic needs a motion made from a DeepMimic clip ({why})")
+    src_rig = source_rig(motion, ("deepmimic",), "format=deepmimic needs a motion made from a DeepMimic clip")
     try:
-        src_rig = Rig.from_dict(d)
         pose = retarget(motion, src_rig)
     except RigError as e:
         raise ExportError(str(e)) from None

@@ -39,6 +39,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from solver.export import Y_UP, ExportError, _check_motion, continuous_quaternions
+from solver.export import source_rig as _source_rig
 from solver.export.gltf import (
     ARRAY_BUFFER,
     ELEMENT_ARRAY_BUFFER,
@@ -63,15 +64,8 @@ _MOVED = 1e-6
 
 def source_rig(motion: Motion) -> Rig:
     """The motion's source rig (``provenance["rig"]``); an :class:`ExportError` saying why not."""
-    d = motion.provenance.get("rig")
-    if not isinstance(d, Mapping) or d.get("format") not in RIG_FORMATS:
-        src = d.get("format") if isinstance(d, Mapping) else None
-        why = f"this one came from {src}" if src else "this one has no source rig"
-        raise ExportError(f"rig=source needs a motion made from a skinned glTF, BVH or DeepMimic input ({why})")
-    try:
-        return Rig.from_dict(d)
-    except RigError as e:
-        raise ExportError(str(e)) from None
+    return _source_rig(motion, RIG_FORMATS,
+                       "rig=source needs a motion made from a skinned glTF, BVH or DeepMimic input")
 
 
 def animation_name(motion: Motion) -> str:
