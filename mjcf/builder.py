@@ -66,9 +66,9 @@ class ContactOptions:
     sole_thickness: float = 0.01
     #: half width of the sole (m); None: the foot box's
     sole_half_width: float | None = None
-    #: > 0: the sole hangs from the foot on an actuated hinge about the heel-toe line (a subtalar
-    #: joint) and weighs this much (kg); its angle ``sole_roll`` lays it flat at the mean stance
-    subtalar_mass: float = 0.0
+    #: an actuated inversion hinge in each foot (about the heel-toe line, through the ankle): the
+    #: stance leg then has six joints, so the sole can lie flat whatever the pelvis's roll
+    inversion: bool = False
     friction: float = 1.0
     timestep: float = 0.001
     treads: tuple[Tread, ...] = ()
@@ -209,30 +209,15 @@ def build_spec(character: Character, gravity: Sequence[float] = DEFAULT_GRAVITY,
     for c in character.contacts:
         bodies[c.segment].add_site(name=c.name, pos=c.position.tolist(), size=[0.01, 0, 0], rgba=[1, 0, 0, 1])
     if contacts is not None:
-        subtalar = []
+        inversion = []
         for side, roll in zip(("right", "left"), contacts.sole_roll, strict=True):
             seg_name, center, half, rot = _sole_box(character, side, float(roll), contacts.sole_thickness,
                                                     contacts.sole_half_width)
             holder = bodies[seg_name]
-            if contacts.subtalar_mass > 0:
-                # the sole on a hinge about the heel-toe line (a subtalar joint); at angle
-                # ``roll`` it is the sole described above
-                heel = 0.5 * (sole_corners(character, side, 0.0)[1][0] + sole_corners(character, side, 0.0)[1][1])
-                seg0, center, half, rot = _sole_box(character, side, 0.0, contacts.sole_thickness,
-                                                    contacts.sole_half_width)
-                holder = holder.add_body(name=f"sole_body_{side}", pos=heel.tolist())
-                holder.explicitinertial = True
-                holder.mass = float(contacts.subtalar_mass)
-                holder.ipos = (center - heel).tolist()
-                box = 2.0 * half
-                holder.inertia = [contacts.subtalar_mass / 12.0 * float(box[1] ** 2 + box[2] ** 2),
-                                  contacts.subtalar_mass / 12.0 * float(box[0] ** 2 + box[2] ** 2),
-                                  contacts.subtalar_mass / 12.0 * float(box[0] ** 2 + box[1] ** 2)]
-                holder.iquat = _quat(rot).tolist()
-                holder.add_joint(name=f"subtalar_{side}", type=mujoco.mjtJoint.mjJNT_HINGE,
-                                 axis=rot[:, 0].tolist(), pos=[0.0, 0.0, 0.0])
-                subtalar.append(f"subtalar_{side}")
-                center = center - heel
+            if contacts.inversion:
+                holder.add_joint(name=f"inversion_{side}", type=mujoco.mjtJoint.mjJNT_HINGE,
+                                           axis=rot[:, 0].tolist(), pos=[0.0, 0.0, 0.0])
+                inversion.append(f"inversion_{side}")
             g = holder.add_geom(name=f"sole_{side}", type=mujoco.mjtGeom.mjGEOM_BOX, size=half.tolist(),
                                 pos=center.tolist(), quat=_quat(rot).tolist(), rgba=[0.3, 0.3, 0.3, 1.0])
             g.contype, g.conaffinity = _SOLE
@@ -240,7 +225,7 @@ def build_spec(character: Character, gravity: Sequence[float] = DEFAULT_GRAVITY,
             g.condim = 4 if contacts.torsional_friction > 0 else 3
             g.solref = list(map(float, contacts.solref))
             g.mass = 0.0
-        for name in subtalar:
+        for name in inversion:
             a = spec.add_actuator(name=name, target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
             a.gear = [1.0, 0, 0, 0, 0, 0]
             a.ctrllimited = mujoco.mjtLimited.mjLIMITED_FALSE

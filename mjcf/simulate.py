@@ -134,6 +134,21 @@ class Reference:
             w = np.concatenate([m, f], axis=1)
         return w
 
+    def swing_progress(self, t: float, points: list[int]) -> float | None:
+        """Where t is within the swing of the foot owning ``points`` (0 at the last contact frame,
+        1 at the next), or None when the foot is in contact at the frame before or after t."""
+        _, i, u = self._split(t)
+        c: np.ndarray = np.asarray(self.contacts[points].any(axis=0))[: self.P]
+        if c[i] or c[(i + 1) % self.P] or not c.any():
+            return None
+        a = i
+        while not c[a % self.P]:
+            a -= 1
+        b = i + 1
+        while not c[b % self.P]:
+            b += 1
+        return (i + u - a) / (b - a)
+
     def active(self, t: float) -> np.ndarray:
         """(P,) contact points in contact at the frame before or after t (the stored wrench
         between them may be non-zero)."""
@@ -201,9 +216,11 @@ def _mean_stance_roll(motion: Motion, model: mujoco.MjModel, qpos_index: np.ndar
     return out[0], out[1]
 
 
-def _treads(motion: Motion, ref: Reference, cycles: int, t0: float) -> tuple[Tread, ...]:
-    """Stairs: one block per stance of the walk, top at its tread height, spanning the whole
-    width, from halfway to the previous stance to halfway to the next (along the heading)."""
+def _treads(motion: Motion, ref: Reference, cycles: int, margin: float = 0.02) -> tuple[Tread, ...]:
+    """Stairs: one block per stance of the walk, its top at the stance's ground height, spanning
+    the width of the walk. Each riser stands where the reference's swing foot clears it: going
+    up, ``margin`` behind the heel of the stance on the higher tread (the swing foot rises onto it
+    late); going down, ``margin`` ahead of the toe of the stance on the higher tread."""
     env = environment_of(motion)
     if not env.step_height_m:
         return ()
@@ -214,42 +231,51 @@ def _treads(motion: Motion, ref: Reference, cycles: int, t0: float) -> tuple[Tre
     qadr = np.array([model.jnt_qposadr[i] for i in ids])
     B = ref.motion.foot_contact()
     P = ref.P
-    stances = []  # (time, foot, height, heading, position)
+    # one heading for the flight of stairs: the cycle's displacement
+    yaw = math.atan2(float(ref.shift_xy[1]), float(ref.shift_xy[0]))
+    fwd = np.array([math.cos(yaw), math.sin(yaw), 0.0])
+    stances = []  # (time, height, centre, back, front): extents along the heading
     for k in range(-1, cycles + 2):
         for f, side in enumerate(FEET):
+            seg, corners = sole_corners(ch, side, 0.0)
+            bid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, seg)
             for t in range(P):
                 if B[f, t] and not B[f, (t - 1) % P]:
-                    # the stance's middle frame
                     n = 0
                     while n < P and B[f, (t + n) % P]:
                         n += 1
-                    tm = (k * P + t + n / 2.0) * ref.dt
+                    tm = (k * P + t + n / 2.0) * ref.dt  # the stance's middle
                     q, _, _ = ref.state(max(tm, 0.0) if k >= 0 else tm + ref.period)
                     if k < 0:
                         turn, dxy, rise = ref.transform(1)
-                        R2 = _rot2(-turn)
-                        q[list(ROOT_XY)] = R2 @ (q[list(ROOT_XY)] - dxy)
+                        q[list(ROOT_XY)] = _rot2(-turn) @ (q[list(ROOT_XY)] - dxy)
                         q[ROOT_YAW] -= turn
                         q[ROOT_Z] -= rise
                     data.qpos[qadr] = q
                     mujoco.mj_kinematics(model, data)
-                    pts = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, c.name) for c in ch.contact_points(side)]
-                    pos = np.mean([data.site_xpos[s] for s in pts], axis=0)
+                    pts = np.array([data.xpos[bid] + data.xmat[bid].reshape(3, 3) @ c for c in corners])
+                    along = pts @ fwd
                     h = float(ref.ground[f, (t + n // 2) % P]) + k * ref.rise
-                    stances.append((tm, f, h, float(q[ROOT_YAW]), pos))
+                    stances.append((tm, h, pts.mean(axis=0), float(along.min()), float(along.max())))
     stances.sort(key=lambda s: s[0])
+    # riser j stands between stance j and stance j + 1
+    risers = []
+    for (_, h0, _, _, front0), (_, h1, _, back1, _) in zip(stances, stances[1:], strict=False):
+        if h1 > h0 + 1e-6:
+            risers.append(back1 - margin)
+        elif h1 < h0 - 1e-6:
+            risers.append(front0 + margin)
+        else:
+            risers.append(0.5 * (front0 + back1))
     out = []
     for j in range(1, len(stances) - 1):
-        tm, f, h, yaw, pos = stances[j]
-        prev, nxt = stances[j - 1][4], stances[j + 1][4]
-        fwd = np.array([math.cos(yaw), math.sin(yaw), 0.0])
-        back = min(float(fwd @ (pos - prev)) / 2.0, 0.3)
-        front = min(float(fwd @ (nxt - pos)) / 2.0, 0.3)
+        _, h, c, _, _ = stances[j]
+        lo, hi = risers[j - 1], risers[j]
+        if hi <= lo:
+            raise SimulationError(f"stairs: no room for the tread of stance {j} between its neighbours' feet")
         depth = 1.0
-        c = pos - fwd * (back - front) / 2.0
-        c = np.array([c[0], c[1], h - depth])
-        out.append(Tread((float(c[0]), float(c[1]), float(c[2])), ((back + front) / 2.0, 0.6, depth), yaw))
-    _ = t0
+        mid = c + fwd * (0.5 * (lo + hi) - float(c @ fwd))
+        out.append(Tread((float(mid[0]), float(mid[1]), h - depth), ((hi - lo) / 2.0, 0.6, depth), yaw))
     return tuple(out)
 
 
@@ -265,6 +291,11 @@ class Gains:
     swing_freq: float = 10.0
     swing_weight: float = 5.0
     swing_orientation_weight: float = 0.0
+    synchronize: bool = True  # the reference's clock follows the simulated touchdowns
+    sync_fast: float = 3.0  # its rate while a foot is down before the reference's
+    sync_slow: float = 0.2  # its rate while the reference waits for a late foot
+    sync_max_wait: float = 0.15  # s: the longest a reference waits for one touchdown
+    swing_lift: float = 0.02  # m: the swing foot's target raised by this much at mid-swing (clearance)
     contact_weight: float = 1000.0
     contact_damping: float = 20.0
     force_weight: float = 30.0  # per (BW)²
@@ -278,11 +309,11 @@ class Gains:
     contact_distance: float = 0.005  # a scheduled sole corner bears load when MuJoCo has a contact this near it (m)
     contact_height: float = 0.003  # ... or, on a foot already touching, when this close to the ground (m)
     sole_half_width: float | None = None  # m; None: the foot box's half width
-    subtalar_mass: float = 0.0  # kg; > 0: the sole hangs on an actuated subtalar hinge (0: rigid sole)
-    subtalar_weight: float = 0.01  # its pull toward the flat-sole angle (stance: the sole-flat task rules)
-    sole_flat_weight: float = 0.0
+    inversion: bool = True  # an actuated inversion hinge in each foot (ContactOptions.inversion)
+    inversion_weight: float = 1.0  # its pull toward 0 (in stance the sole-flat task rules)
+    sole_flat_weight: float = 100.0
     sole_flat_freq: float = 20.0
-    flat_stance: bool = False  # stance tasks on the sole's corners (else on the heel/toe points only)
+    flat_stance: bool = True  # stance tasks on the sole's corners (else on the heel/toe points only)
     reanchor: bool = True  # re-plant the reference's horizontal position on each touchdown
     anchor_time: float = 0.1  # s
     control_period: int = 1  # control steps every this many simulation steps
@@ -331,7 +362,7 @@ def id_peaks(motion: Motion) -> np.ndarray:
 
 def performable_model(motion: Motion, cycles: int = 10, t0: float | None = None,
                       ref: Reference | None = None, sole_half_width: float | None = None,
-                      subtalar_mass: float = 0.0) -> tuple[str, mujoco.MjModel, tuple[float, float]]:
+                      inversion: bool = True) -> tuple[str, mujoco.MjModel, tuple[float, float]]:
     """The model XML, the model compiled *from that XML* (so a replay from the file is what
     was simulated) and the soles' roll (rad, right and left) that lays them flat in stance."""
     ch = motion.character
@@ -341,9 +372,9 @@ def performable_model(motion: Motion, cycles: int = 10, t0: float | None = None,
     ids = [mujoco.mj_name2id(base, mujoco.mjtObj.mjOBJ_JOINT, nm) for nm in ch.coordinate_names]
     qadr = np.array([base.jnt_qposadr[i] for i in ids])
     roll = _mean_stance_roll(motion, base, qadr)
-    treads = _treads(motion, ref, cycles, 0.0 if t0 is None else t0)
+    treads = _treads(motion, ref, cycles)
     opts = ContactOptions(sole_roll=roll, friction=env.friction, treads=treads, floor=not treads,
-                          sole_half_width=sole_half_width, subtalar_mass=subtalar_mass)
+                          sole_half_width=sole_half_width, inversion=inversion)
     spec = build_spec(ch, env.gravity, opts)
     spec.compile()
     xml = spec.to_xml()
@@ -353,8 +384,7 @@ def performable_model(motion: Motion, cycles: int = 10, t0: float | None = None,
 class Tracker:
     """The balancing QP tracking controller (module docstring)."""
 
-    def __init__(self, motion: Motion, model: mujoco.MjModel, ref: Reference, gains: Gains,
-                 sole_roll: tuple[float, float] = (0.0, 0.0)) -> None:
+    def __init__(self, motion: Motion, model: mujoco.MjModel, ref: Reference, gains: Gains) -> None:
         ch = motion.character
         self.m, self.ref, self.g = model, ref, gains
         self.nv = model.nv
@@ -386,16 +416,13 @@ class Tracker:
         self.n_edges = 4
         s = 1.0 / math.sqrt(1 + self.mu**2)
         self.edges = np.array([[self.mu * s, 0, s], [-self.mu * s, 0, s], [0, self.mu * s, s], [0, -self.mu * s, s]]).T
-        # subtalar joints (when the model has them): held at the roll that lays the sole flat
-        sub = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, f"subtalar_{side}") for side in FEET]
-        has_sub = [j >= 0 for j in sub]
-        self.sub_q = np.array([model.jnt_qposadr[j] for j in sub if j >= 0], dtype=int)
-        self.sub_v = np.array([model.jnt_dofadr[j] for j in sub if j >= 0], dtype=int)
-        self.sub_ref = np.array([r for r, h in zip(sole_roll, has_sub, strict=True) if h])
-        self.ref_data.qpos[self.sub_q] = self.sub_ref
+        # inversion joints (when the model has them): the motion has none, their reference is 0
+        inv = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, f"inversion_{side}") for side in FEET]
+        self.inv_q = np.array([model.jnt_qposadr[j] for j in inv if j >= 0], dtype=int)
+        self.inv_v = np.array([model.jnt_dofadr[j] for j in inv if j >= 0], dtype=int)
         peaks = id_peaks(motion)
         lim = np.maximum(gains.torque_limit_scale * peaks, gains.torque_limit_floor * float(peaks.max()))
-        # actuator order; a subtalar joint (not a coordinate of the motion) gets its ankle's limit
+        # actuator order; an inversion joint (not a coordinate of the motion) gets its ankle's limit
         names = list(ch.coordinate_names[6:])
         self.act_is_coordinate = np.array([v in set(self.vadr) for v in self.act_v])
         joint_of_act = []
@@ -419,16 +446,20 @@ class Tracker:
         self.anchor = np.zeros(2)
         self.anchor_target = np.zeros(2)
         self.was_down = [True, True]
+        self.airborne = [False, False]
+        self.waited = [0.0, 0.0]
         self.owner_feet = [[i for i, c in enumerate(ch.contacts) if c.side == side] for side in FEET]
         self.treads = any((mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, i) or "").startswith("tread_")
                           for i in range(model.ngeom))
 
     def _reanchor(self, d: mujoco.MjData, qr: np.ndarray, active: np.ndarray) -> None:
-        """At a reference touchdown, move the reference horizontally so that its landing foot is
+        """When a foot is planted (the reference has it in stance and the simulated sole touches
+        the ground, whichever comes last), move the reference horizontally so that its foot is
         where the simulated foot is; blend the shift in over ``anchor_time``."""
         g = self.g
-        for f, (_gid, bid, _corners, _owner, centre) in enumerate(self.soles):
-            down = bool(active[self.owner_feet[f]].any())
+        for f, (gid, bid, _corners, _owner, centre) in enumerate(self.soles):
+            touching = any(gid in (d.contact[i].geom1, d.contact[i].geom2) for i in range(d.ncon))
+            down = bool(active[self.owner_feet[f]].any()) and touching
             if down and not self.was_down[f]:
                 rd = self.ref_data
                 rd.qpos[self.qadr] = qr
@@ -439,6 +470,30 @@ class Tracker:
             self.was_down[f] = down
         a = min(1.0, self.m.opt.timestep * g.control_period / g.anchor_time)
         self.anchor = self.anchor + a * (self.anchor_target - self.anchor)
+
+    def clock_rate(self, d: mujoco.MjData, t_ref: float) -> float:
+        """How fast the reference's clock runs for the next step: contact-synchronized, as in
+        data-driven tracking (the reference waits for a late touchdown and hurries to an early
+        one), at most ``sync_max`` s ahead of or behind real time per step."""
+        g = self.g
+        if not g.synchronize:
+            return 1.0
+        rate = 1.0
+        for f, (gid, *_rest) in enumerate(self.soles):
+            touching = any(gid in (d.contact[i].geom1, d.contact[i].geom2) for i in range(d.ncon))
+            sp = self.ref.swing_progress(t_ref, self.owner_feet[f])
+            if sp is not None and sp < 0.5 and not touching:
+                self.airborne[f] = True
+            if touching:
+                self.airborne[f] = False
+                if sp is not None and sp > 0.5:  # down before the reference: hurry to its touchdown
+                    rate = max(rate, g.sync_fast)
+            elif sp is None and self.airborne[f] and self.waited[f] < g.sync_max_wait:
+                rate = min(rate, g.sync_slow)  # the reference is down, the foot not yet: wait
+                self.waited[f] += self.m.opt.timestep * (1.0 - g.sync_slow)
+            if sp is not None and sp < 0.5:
+                self.waited[f] = 0.0
+        return rate
 
     def ground(self, d: mujoco.MjData, p: np.ndarray) -> float:
         return _ground_height(self.m, d, p) if self.treads else 0.0
@@ -511,13 +566,14 @@ class Tracker:
                             point_rows.append((J, jdq, v, *edge_ref[c - c % 2]))
             if not used:
                 swing.append((f, bid, centre))
-            elif g.sole_flat_weight > 0 and (len(self.sub_v) or (active[owner[0]] and active[owner[2]])):
-                # the sole lies flat on the ground: roll (and pitch, with heel and toe both down) to
-                # the ground's normal, no spin
+            elif g.sole_flat_weight > 0 and (len(self.inv_v) or (active[owner[0]] and active[owner[2]])):
+                # the sole lies flat on the ground: roll (and pitch, with heel and toe both on the
+                # ground) to the ground's normal, no spin
                 R = d.geom_xmat[gid].reshape(3, 3)
                 nrm = R[:, 2]
                 err = np.cross(nrm, np.array([0.0, 0.0, 1.0]))
-                if not (active[owner[0]] and active[owner[2]]):
+                both = active[owner[0]] and active[owner[2]]
+                if not both:
                     err = R[:, 0] * float(R[:, 0] @ err)  # roll only: the foot rocks on heel or toe
                 jp, jr = np.zeros((3, nv)), np.zeros((3, nv))
                 mujoco.mj_jac(m, d, jp, jr, d.geom_xpos[gid], bid)
@@ -525,7 +581,7 @@ class Tracker:
                 mujoco.mj_jacDot(m, d, jdp, jdr, d.geom_xpos[gid], bid)
                 w = jr @ d.qvel
                 wdes = np.zeros(3)
-                if not (active[owner[0]] and active[owner[2]]):
+                if not both:
                     jr_ref = np.zeros((3, nv))
                     mujoco.mj_jac(m, rd, None, jr_ref, rd.xpos[bid], bid)
                     wr = jr_ref @ rd.qvel
@@ -560,10 +616,10 @@ class Tracker:
         A = np.zeros((len(self.joint_v), nx))
         A[np.arange(len(self.joint_v)), self.joint_v] = 1.0
         task(A, acc_j, 1.0)
-        if len(self.sub_v):
-            A = np.zeros((len(self.sub_v), nx))
-            A[np.arange(len(self.sub_v)), self.sub_v] = 1.0
-            task(A, kpj * (self.sub_ref - d.qpos[self.sub_q]) - kdj * d.qvel[self.sub_v], g.subtalar_weight)
+        if len(self.inv_v):
+            A = np.zeros((len(self.inv_v), nx))
+            A[np.arange(len(self.inv_v)), self.inv_v] = 1.0
+            task(A, -kpj * d.qpos[self.inv_q] - kdj * d.qvel[self.inv_v], g.inversion_weight)
         kpr, kdr = np.full(6, g.root_freq**2), np.full(6, 2 * g.root_freq)
         # horizontal position: weak and saturated (foot placement keeps the balance; a large
         # position error would otherwise ask for accelerations no contact force can give)
@@ -593,7 +649,11 @@ class Tracker:
             mujoco.mj_jacDot(m, rd, jdr_, None, pr, bid)
             vr = jr_ @ rd.qvel
             ar = jr_ @ qacc_r + jdr_ @ rd.qvel
-            target = pr + np.array([dxy[0], dxy[1], 0.0])
+            lift = 0.0
+            sp = ref.swing_progress(t_ref, self.owner_feet[_f]) if g.swing_lift else None
+            if sp is not None:  # clearance: the reference's swing raised by up to swing_lift mid-swing
+                lift = g.swing_lift * math.sin(math.pi * sp)
+            target = pr + np.array([dxy[0], dxy[1], lift])
             A = np.zeros((3, nx))
             A[:, :nv] = J
             task(A, ar + kps * (target - p) + kds * (vr - v) - jdq, g.swing_weight)
@@ -684,10 +744,9 @@ def simulate(motion: Motion, cycles: int = 10, gains: Gains | None = None, *,
     gains = gains or Gains()
     ref = Reference(motion)
     t0 = mid_stance_time(motion)
-    xml, m, roll = performable_model(motion, cycles, t0, ref, gains.sole_half_width, gains.subtalar_mass)
+    xml, m, _ = performable_model(motion, cycles, t0, ref, gains.sole_half_width, gains.inversion)
     d = mujoco.MjData(m)
-    ctl = Tracker(motion, m, ref, gains, roll)
-    d.qpos[ctl.sub_q] = ctl.sub_ref
+    ctl = Tracker(motion, m, ref, gains)
     ch = motion.character
     qr, qdr, _ = ref.state(t0)
     d.qpos[ctl.qadr] = qr
@@ -718,6 +777,9 @@ def simulate(motion: Motion, cycles: int = 10, gains: Gains | None = None, *,
     sim_forces: list[np.ndarray] = []
     ref_forces: list[np.ndarray] = []
     com_s: list[np.ndarray] = []
+    anchor_s: list[np.ndarray] = []
+    tref_s: list[float] = []
+    t_ref = t0
     qref_s: list[np.ndarray] = []
     q_s: list[np.ndarray] = []
     t_s: list[float] = []
@@ -731,18 +793,20 @@ def simulate(motion: Motion, cycles: int = 10, gains: Gains | None = None, *,
     for s in range(steps):
         t = s * dt
         if s % gains.control_period == 0:
-            tau = ctl.control(d, t0 + t)
+            tau = ctl.control(d, t_ref)
         d.ctrl[:] = tau
         if s % every == 0:
             sim_forces.append(_foot_forces(m, d, sole_geoms))
             pred_forces.append(ctl.predicted.copy())
             ncorn.append(list(ctl.n_corners))
-            ref_forces.append(ref.wrench(t0 + t)[:, 3:])
-            qrr = ref.state(t0 + t)[0]
+            ref_forces.append(ref.wrench(t_ref)[:, 3:])
+            qrr = ref.state(t_ref)[0]
+            tref_s.append(t_ref)
             qref_s.append(qrr)
             q_s.append(d.qpos[ctl.qadr].copy())
             t_s.append(t)
             com_s.append(d.subtree_com[ctl.com_body].copy())
+            anchor_s.append(ctl.anchor.copy())
         mujoco.mj_step(m, d)
         time[s] = t + dt
         ctrl[s] = d.ctrl
@@ -750,7 +814,8 @@ def simulate(motion: Motion, cycles: int = 10, gains: Gains | None = None, *,
         mujoco.mj_forward(m, d)
         # a fall: pelvis sunk, or any non-foot body on the ground
         bad = None
-        ph = float(d.xpos[pelvis][2]) - float(ref.state(t0 + t + dt)[0][ROOT_Z] - qr[ROOT_Z]) - 0.0
+        t_ref += dt * ctl.clock_rate(d, t_ref)
+        ph = float(d.xpos[pelvis][2]) - float(ref.state(t_ref)[0][ROOT_Z] - qr[ROOT_Z])
         if ph < 0.6 * pelvis_h0:
             bad = f"pelvis height {ph:.3f} m (start {pelvis_h0:.3f} m)"
         for i in range(d.ncon):
@@ -772,6 +837,7 @@ def simulate(motion: Motion, cycles: int = 10, gains: Gains | None = None, *,
         "t": np.array(t_s), "q": np.array(q_s), "q_ref": np.array(qref_s),
         "foot_force": np.array(sim_forces), "foot_force_ref": np.array(ref_forces),
         "foot_force_qp": np.array(pred_forces), "stance_corners": np.array(ncorn), "com": np.array(com_s),
+        "anchor": np.array(anchor_s), "t_ref": np.array(tref_s),
     }
     res = SimulationResult(
         xml=xml, timestep=dt, qpos0=qpos0, qvel0=qvel0, time=time, ctrl=ctrl, qpos=qpos,
@@ -833,6 +899,7 @@ def _report(res: SimulationResult, motion: Motion, ref: Reference, ctl: Tracker)
         "fall": None if not res.fell else {"time_s": res.fall_time, "cycle": (res.fall_time or 0.0) / ref.period,
                                            "reason": res.fall_reason},
         "start_reference_time_s": res.t0,
+        "reference_clock_offset_s": (float(S["t_ref"][-1] - S["t"][-1] - res.t0) if len(S["t"]) else 0.0),
         "timestep_s": res.timestep,
         "control_period_s": res.timestep * ctl.g.control_period,
         "joint_tracking_rms_deg": float(np.sqrt(np.mean(joint_err**2))) if joint_err.size else float("nan"),

@@ -60,6 +60,42 @@ def replay_checks(ctx: Context) -> SectionResult:
     return SectionResult(checks, mjr)
 
 
-def validate(motion: Motion, tol: Tolerances = Tolerances()) -> dict[str, Any]:
-    """Our plausibility report with the MuJoCo replay section; ``plausible`` requires both."""
-    return report(motion, tol, include=("mujoco_replay",))
+#: gait cycles the ``simulation`` section performs, and the figures it holds a walk to
+SIMULATION_CYCLES = 10
+SIMULATION_LIMITS = {"joint_tracking_rms_deg": 5.0, "foot_force_rms_bw": 0.15, "peak_torque_ratio_max": 1.5}
+
+
+@register_check(section="simulation", verdict="plausible", optional=True, order=40)
+def simulation_checks(ctx: Context) -> SectionResult:
+    """The motion performed in MuJoCo with contacts on (``mjcf.simulate``) for
+    :data:`SIMULATION_CYCLES` cycles. Its checks are warnings: they never decide ``plausible``,
+    since a fall measures the tracking controller as much as the motion (docs/simulation.md)."""
+    from mjcf.simulate import SimulationError, simulate
+
+    try:
+        res = simulate(ctx.motion, SIMULATION_CYCLES)
+    except SimulationError as e:
+        return SectionResult((), {"error": str(e)}, checked=False, unchecked=None)
+    r = res.report
+    lim = SIMULATION_LIMITS
+    checks = (
+        Check.measure("cycles_walked", r["cycles_walked"], float(SIMULATION_CYCLES), "cycles",
+                      "gait cycles walked in MuJoCo forward simulation before a fall", warning=True, at_least=True),
+        Check.measure("joint_tracking_rms", r["joint_tracking_rms_deg"], lim["joint_tracking_rms_deg"], "deg",
+                      "RMS of the simulated joint angles less the motion's", warning=True),
+        Check.measure("foot_force_rms", r["foot_force_rms_bw"], lim["foot_force_rms_bw"], "BW",
+                      "RMS of the simulated foot forces less the stored ones", warning=True),
+        Check.measure("peak_torque_ratio", r["peak_torque_ratio_max"], lim["peak_torque_ratio_max"], "",
+                      "largest simulated joint torque peak over the motion's own inverse-dynamics peak", warning=True),
+    )
+    extra = {k: r[k] for k in ("cycles_requested", "cycle_duration_s", "fell", "fall", "drift_per_cycle",
+                               "root_height_rms_m", "realtime_factor")}
+    extra["controller"] = "balancing QP tracking controller, contacts on, unactuated root (mjcf.simulate)"
+    return SectionResult(checks, extra)
+
+
+def validate(motion: Motion, tol: Tolerances = Tolerances(), *, simulate: bool = False) -> dict[str, Any]:
+    """Our plausibility report with the MuJoCo replay section; ``plausible`` requires both.
+    ``simulate``: also the ``simulation`` section (the motion performed in MuJoCo forward
+    simulation; reported, never deciding ``plausible``)."""
+    return report(motion, tol, include=("mujoco_replay", "simulation") if simulate else ("mujoco_replay",))

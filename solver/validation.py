@@ -26,12 +26,18 @@ def _replays() -> tuple[EntryPoint, ...]:
     return tuple(sorted(entry_points(group=REPLAY_GROUP), key=lambda e: e.name))
 
 
-def validate(motion: Motion, tolerances: Tolerances = Tolerances()) -> dict[str, Any]:
+def validate(motion: Motion, tolerances: Tolerances = Tolerances(), *, simulate: bool = False) -> dict[str, Any]:
     """The validation report of ``motion``: our checks, extended by the installed replay (the
-    MuJoCo one when the project is installed; ``plausible`` then requires it too)."""
+    MuJoCo one when the project is installed; ``plausible`` then requires it too). ``simulate``:
+    the replay also performs the motion in forward simulation with contacts on (its
+    ``simulation`` section reports whether it walks; it does not decide ``plausible``)."""
     replays = _replays()
     if not replays:
+        if simulate:
+            raise RuntimeError("simulate=True needs the MuJoCo replay (the project installed: pip install -e .)")
         return report(motion, tolerances)
     if len(replays) > 1:
         raise RuntimeError(f"more than one replay installed in {REPLAY_GROUP}: {[e.name for e in replays]}")
+    if simulate:
+        return replays[0].load()(motion, tolerances, simulate=True)
     return replays[0].load()(motion, tolerances)
