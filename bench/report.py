@@ -91,6 +91,22 @@ def rig_export_table(res: dict) -> str:
     return "\n".join(rows)
 
 
+def simulation_table(res: dict) -> str:
+    rows = ["| motion | cycles walked (of requested) | fell (reason) | joint RMS (°) | foot force RMS (BW) "
+            "| peak τ / ID peak (max) | wall (s) | CPU (s) | real-time factor, CPU (wall) |",
+            "|---|---|---|---|---|---|---|---|---|"]
+    for name, r in res["motions"].items():
+        if "error" in r:
+            rows.append(f"| {name} | {r['error']} |  |  |  |  |  |  |  |")
+            continue
+        fell = f"yes ({r['fall_reason'] or '?'})" if r["fell"] else "no"
+        rows.append(f"| {name} | {r['cycles_walked']:.2f} ({r['cycles_requested']}) | {fell} "
+                    f"| {r['joint_tracking_rms_deg']:.1f} | {r['foot_force_rms_bw']:.2f} "
+                    f"| {r['peak_torque_ratio_max']:.2f} | {r['wall_s']:.1f} | {r['cpu_s']:.1f} "
+                    f"| {r['realtime_factor_cpu']:.2f} ({r['realtime_factor_wall']:.2f}) |")
+    return "\n".join(rows)
+
+
 def front_door_table(res: dict) -> str:
     rows = ["| docs/api.md's script (median, s) | `motionx tutor` + `motionx extrapolate --slope 10` (median, s) "
             "| ratio |", "|---|---|---|",
@@ -102,7 +118,8 @@ def front_door_table(res: dict) -> str:
 FILL = {"tutor": ("docs/spacetime.md", tutor_table), "continuation": ("docs/continuation.md", continuation_table),
         "compiled": ("docs/spacetime.md", compiled_table), "blas": ("docs/spacetime.md", blas_table),
         "front_door": ("docs/api.md", front_door_table),
-        "rig_export": ("docs/export.md", rig_export_table)}
+        "rig_export": ("docs/export.md", rig_export_table),
+        "simulation": ("docs/simulation.md", simulation_table)}
 
 
 def fill(sec: dict, only: list[str] | None = None) -> None:

@@ -87,7 +87,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(BodyLimitMiddleware, max_bytes=app_settings.max_body_bytes)
 
     # lazy: loaded when an app is made, not on import (importing service creates nothing)
-    from service.routes import axes, docs, health, jobs, libraries, motions, plots, web
+    from service.routes import axes, docs, health, jobs, libraries, motions, plots, simulations, web
 
     index = web.STATIC_DIR / "index.html"
     app.add_middleware(SecurityHeadersMiddleware, page_policy=page_csp(index.read_text() if index.is_file() else ""))
@@ -95,6 +95,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(axes.router)
     app.include_router(motions.router)
     app.include_router(jobs.router)
+    app.include_router(simulations.router)
     app.include_router(libraries.router)
     app.include_router(plots.router)
     app.include_router(docs.router)  # /docs: Swagger UI from local files

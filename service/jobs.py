@@ -249,11 +249,20 @@ def _run(db: Database, job_id: str, attempt: int, token: str, settings: Settings
 
     with db.read() as s:
         job = store.get_job(s, job_id=job_id, owner=None)
-        source = store.get_motion(s, motion_id=job.motion_id, owner=None)
-        spec, owner, created_at = dict(job.spec), job.owner, job.created_at
-        kind, source_id = source.kind, source.id
-        limits.check_source(kind=kind, frames=source.frames, fps=source.fps, coordinates=source.n)
-        motion = store.load_motion(source)
+        if job.kind == "simulation":  # a forward simulation of a stored motion (service.simulation)
+            sim = store.job_simulation(s, job_id=job_id)
+            sim_id = sim.id if sim is not None else ""
+        else:
+            sim_id = None
+            source = store.get_motion(s, motion_id=job.motion_id, owner=None)
+            spec, owner, created_at = dict(job.spec), job.owner, job.created_at
+            kind, source_id = source.kind, source.id
+            limits.check_source(kind=kind, frames=source.frames, fps=source.fps, coordinates=source.n)
+            motion = store.load_motion(source)
+    if sim_id is not None:
+        if not sim_id:
+            return "failed", "no simulation for this job", {}
+        return (*_simulate(db, sim_id, hb), {})
 
     t0 = time.monotonic()
     deadline = hb.deadline
@@ -318,7 +327,34 @@ def _run(db: Database, job_id: str, attempt: int, token: str, settings: Settings
     if status not in ("succeeded", "impasse", "canceled", "failed"):
         status, message = "failed", f"unexpected extrapolation status {result.status!r}: {result.message}"
     lam_reached = max(result.lam_reached, start[0]) if start else result.lam_reached
-    return status, message, dict(lam_reached=lam_reached, steps=len(result.steps) + offset, solves=result.solves)
+    steps = len(result.steps) + offset
+    cycles = int(spec.get("simulate_cycles") or 0)
+    if cycles and steps and status in ("succeeded", "impasse") and not should_cancel():
+        # the job's final motion, simulated in MuJoCo: its outcome is the simulation's, not the job's
+        with hb.write_lock, db.write() as s:
+            final = store.step_row(s, job_id=job_id, step=steps - 1)
+            sim_id = store.create_simulation(s, owner=owner, motion_id=final.id, job_id=job_id, cycles=cycles).id
+        sim_status, sim_message = _simulate(db, sim_id, hb)
+        message = f"{message}; simulation of the final motion {sim_status}: {sim_message}".lstrip("; ")
+    return status, message, dict(lam_reached=lam_reached, steps=steps, solves=result.solves)
+
+
+def _simulate(db: Database, simulation_id: str, hb: Heartbeat) -> tuple[str, str]:
+    """A stored motion simulated in MuJoCo (service.simulation.run_simulation): its (status, message)."""
+    from service.simulation import run_simulation  # lazy: MuJoCo loads in the job's process
+
+    try:
+        return run_simulation(db, simulation_id, write_lock=hb.write_lock)
+    except DBAPIError:
+        raise
+    except Exception as e:  # recorded as the simulation's failure (the traceback is in the log)
+        if isinstance(e, MemoryError):
+            raise
+        log.exception("simulation %s failed", simulation_id)
+        message = job_error_message(e, "simulating the motion")
+        with hb.write_lock, db.write() as s:
+            store.set_simulation_status(s, simulation_id=simulation_id, status="failed", message=message)
+        return "failed", message
 
 
 @dataclass(frozen=True)

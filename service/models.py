@@ -19,6 +19,7 @@ from solver.status import Status
 JOB_STATUSES = tuple(s.value for s in Status)  # one status type: solver.status
 TERMINAL = frozenset(s.value for s in STATUS_TERMINAL)
 MOTION_KINDS = ("capture", "motion", "tutor", "step")
+JOB_KINDS = ("extrapolate", "simulation")
 
 
 class Base(DeclarativeBase):
@@ -71,6 +72,7 @@ class JobRow(Base):
     id: Mapped[str] = mapped_column(String(40), primary_key=True)
     owner: Mapped[str] = mapped_column(String(40), index=True)
     motion_id: Mapped[str] = mapped_column(String(40), index=True)  # the source motion
+    kind: Mapped[str] = mapped_column(String(16), default="extrapolate", server_default="extrapolate")
     tutor_motion_id: Mapped[str | None] = mapped_column(String(40), nullable=True)
     spec: Mapped[dict[str, Any]] = mapped_column(JSON)
     status: Mapped[str] = mapped_column(String(16), default="queued")
@@ -153,3 +155,38 @@ class TutorClaimRow(Base):
     message: Mapped[str] = mapped_column(Text, default="")
     claimed_at: Mapped[float] = mapped_column(Float)
     ended_at: Mapped[float | None] = mapped_column(Float, nullable=True)
+
+
+class SimulationRow(Base):
+    """A forward simulation of a stored motion in MuJoCo (service.simulation): asked for over the
+    API (run by its own job of kind ``simulation``) or by an extrapolation job for its final
+    motion (``simulate_cycles``). ``status``: queued, running, succeeded (the report says whether
+    the character fell) or failed (``message``); the files are rows of ``simulation_files``."""
+
+    __tablename__ = "simulations"
+    __table_args__ = (Index("ix_simulations_motion_created", "motion_id", "created_at"),)
+
+    id: Mapped[str] = mapped_column(String(40), primary_key=True)
+    owner: Mapped[str] = mapped_column(String(40))
+    motion_id: Mapped[str] = mapped_column(String(40), ForeignKey("motions.id", ondelete="CASCADE"))
+    job_id: Mapped[str] = mapped_column(String(40), ForeignKey("jobs.id", ondelete="CASCADE"), index=True)
+    cycles: Mapped[int] = mapped_column(Integer)
+    status: Mapped[str] = mapped_column(String(16), default="queued")
+    message: Mapped[str] = mapped_column(Text, default="")
+    report: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
+    created_at: Mapped[float] = mapped_column(Float)
+    started_at: Mapped[float | None] = mapped_column(Float, nullable=True)
+    finished_at: Mapped[float | None] = mapped_column(Float, nullable=True)
+
+
+class SimulationFileRow(Base):
+    """One file of a simulation (service.simulation.FILES), stored as it was written."""
+
+    __tablename__ = "simulation_files"
+
+    simulation_id: Mapped[str] = mapped_column(String(40), ForeignKey("simulations.id", ondelete="CASCADE"),
+                                               primary_key=True)
+    name: Mapped[str] = mapped_column(String(40), primary_key=True)
+    media_type: Mapped[str] = mapped_column(String(100))
+    size: Mapped[int] = mapped_column(Integer)
+    data: Mapped[bytes] = mapped_column(LargeBinary, deferred=True)

@@ -7,6 +7,9 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, computed_field, create_model, model_validator
 
 from service.limits import MAX_TUTOR_FPS, MAX_TUTOR_FRAMES, MAX_TUTOR_S, MIN_TUTOR_FPS
+from service.simulation import DEFAULT_CYCLES as DEFAULT_SIM_CYCLES
+from service.simulation import MAX_CYCLES as MAX_SIM_CYCLES
+from service.simulation import MIN_CYCLES as MIN_SIM_CYCLES
 from solver import axes as registry
 from solver.continuation import StepControl
 from solver.status import Status
@@ -87,6 +90,32 @@ class ExtrapolateIn(Strict):
     target: TargetIn
     control: StepControlIn = Field(default_factory=StepControlIn)
     tutor: TutorIn = Field(default_factory=TutorIn)
+    simulate_cycles: int = Field(0, ge=0, le=MAX_SIM_CYCLES,
+                                 description="after the job, simulate its final motion in MuJoCo for this many gait "
+                                             "cycles (0: no simulation); the job's links then name the simulation")
+
+
+class SimulationIn(Strict):
+    cycles: int = Field(DEFAULT_SIM_CYCLES, ge=MIN_SIM_CYCLES, le=MAX_SIM_CYCLES,
+                        description="gait cycles to simulate (the simulation stops early when the character falls)")
+
+
+class SimulationOut(BaseModel):
+    id: str
+    motion_id: str
+    job_id: str
+    cycles: int
+    status: Literal["queued", "running", "succeeded", "failed", "canceled"]
+    terminal: bool
+    message: str
+    report: dict[str, Any] | None = Field(
+        None, description="when succeeded: report.json (cycles_walked, fell, fall, joint_tracking_rms_deg, "
+                          "foot_force_rms_bw, peak_torque_ratio_max, drift_per_cycle, realtime_factor, ...)")
+    files: dict[str, int] = Field(default_factory=dict, description="stored files and their sizes (bytes)")
+    created_at: str
+    started_at: str | None
+    finished_at: str | None
+    links: dict[str, str]
 
 
 class MotionOut(BaseModel):

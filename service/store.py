@@ -31,6 +31,8 @@ from service.models import (
     LibraryRow,
     MotionRow,
     ProgressRow,
+    SimulationFileRow,
+    SimulationRow,
     TutorClaimRow,
 )
 from solver.motion import Motion
@@ -145,9 +147,10 @@ def add_encoded(session: Session, *, owner: str, encoded: Any, name: str = "") -
     return row
 
 
-def get_motion(session: Session, *, motion_id: str, owner: str | None) -> MotionRow | None:
-    """The motion, if it exists and belongs to ``owner`` (None = any owner: internal use)."""
-    row = session.get(MotionRow, motion_id)
+def get_motion(session: Session, *, motion_id: str, owner: str | None, lock: bool = False) -> MotionRow | None:
+    """The motion, if it exists and belongs to ``owner`` (None = any owner: internal use);
+    ``lock``: its row locked for the transaction (``FOR UPDATE`` on PostgreSQL)."""
+    row = session.get(MotionRow, motion_id, with_for_update=lock or None)
     if row is None or (owner is not None and row.owner != owner):
         return None
     return row
@@ -357,12 +360,13 @@ def create_job(
     max_attempts: int,
     idempotency_key: str | None = None,
     request_hash: str = "",
+    kind: str = "extrapolate",
 ) -> JobRow:
     """Insert a queued job (and its idempotency record). A concurrent duplicate key makes
     the commit fail with IntegrityError; the caller then reads the winner."""
     t = now()
     job = JobRow(
-        id=new_id("j"), owner=owner, motion_id=motion_id, spec=spec, status="queued", message="",
+        id=new_id("j"), owner=owner, motion_id=motion_id, kind=kind, spec=spec, status="queued", message="",
         lam_reached=0.0, steps=0, solves=0, attempts=0, max_attempts=max_attempts, cancel_requested=False,
         runner=runner, created_at=t, updated_at=t,
     )
@@ -383,7 +387,8 @@ def get_job(session: Session, *, job_id: str, owner: str | None) -> JobRow | Non
 
 
 def list_jobs(session: Session, *, owner: str, offset: int = 0, limit: int = 50) -> tuple[list[JobRow], int]:
-    q = select(JobRow).where(JobRow.owner == owner)
+    """The owner's extrapolation jobs (a simulation's job is listed with its motion's simulation)."""
+    q = select(JobRow).where(JobRow.owner == owner, JobRow.kind == "extrapolate")
     total = session.scalar(select(func.count()).select_from(q.subquery())) or 0
     rows = list(session.scalars(q.order_by(JobRow.created_at, JobRow.id).offset(offset).limit(limit)))
     return rows, total
@@ -670,3 +675,80 @@ def request_library_cancel(session: Session, *, library: LibraryRow) -> None:
     library.cancel_requested = True
     for c in library.spec.get("cells", []):
         request_cancel(session, job_id=c["job_id"])
+
+
+# --- simulations ----------------------------------------------------------------------------
+
+
+def create_simulation(session: Session, *, owner: str, motion_id: str, job_id: str, cycles: int) -> SimulationRow:
+    row = SimulationRow(id=new_id("s"), owner=owner, motion_id=motion_id, job_id=job_id, cycles=cycles,
+                        status="queued", message="", report=None, created_at=now())
+    session.add(row)
+    session.flush()
+    return row
+
+
+def get_simulation(session: Session, *, simulation_id: str, owner: str | None) -> SimulationRow | None:
+    row = session.get(SimulationRow, simulation_id)
+    if row is None or (owner is not None and row.owner != owner):
+        return None
+    return row
+
+
+def latest_simulation(session: Session, *, motion_id: str, owner: str | None) -> SimulationRow | None:
+    """The motion's most recent simulation (None: never simulated)."""
+    q = select(SimulationRow).where(SimulationRow.motion_id == motion_id)
+    if owner is not None:
+        q = q.where(SimulationRow.owner == owner)
+    return session.scalar(q.order_by(SimulationRow.created_at.desc(), SimulationRow.id.desc()).limit(1))
+
+
+def job_simulation(session: Session, *, job_id: str) -> SimulationRow | None:
+    """The simulation a job runs or ran (a simulation job's, or an extrapolation job's final motion's)."""
+    return session.scalar(select(SimulationRow).where(SimulationRow.job_id == job_id)
+                          .order_by(SimulationRow.created_at.desc()).limit(1))
+
+
+def simulation_state(session: Session, *, simulation: SimulationRow) -> tuple[str, str]:
+    """(status, message) of a simulation: its own, unless it never finished and its job did (the
+    job's process died for good, was canceled or ran out of time): then the job's end."""
+    if simulation.status in ("succeeded", "failed"):
+        return simulation.status, simulation.message
+    job = session.get(JobRow, simulation.job_id)
+    if job is not None and job.status in TERMINAL and (job.kind == "simulation" or job.status != "succeeded"):
+        status = "failed" if job.status != "canceled" else "canceled"
+        return status, job.message or f"its job ended ({job.status}) before the simulation did"
+    return simulation.status, simulation.message
+
+
+def set_simulation_status(session: Session, *, simulation_id: str, status: str, message: str = "") -> None:
+    t = now()
+    values: dict[str, Any] = dict(status=status, message=message[:4000])
+    if status == "running":
+        values["started_at"] = t
+    else:
+        values["finished_at"] = t
+    session.execute(update(SimulationRow).where(SimulationRow.id == simulation_id).values(**values))
+
+
+def finish_simulation(session: Session, *, simulation_id: str, report: dict, files: dict[str, bytes],
+                      message: str) -> None:
+    """Store a simulation's report and files (replacing an earlier attempt's) and mark it succeeded."""
+    from service.simulation import FILES
+
+    session.execute(delete(SimulationFileRow).where(SimulationFileRow.simulation_id == simulation_id))
+    for name, data in files.items():
+        session.add(SimulationFileRow(simulation_id=simulation_id, name=name, media_type=FILES[name], size=len(data),
+                                      data=data))
+    session.execute(update(SimulationRow).where(SimulationRow.id == simulation_id)
+                    .values(status="succeeded", message=message[:4000], report=report, finished_at=now()))
+
+
+def simulation_files(session: Session, *, simulation_id: str) -> dict[str, int]:
+    """The names and sizes of a simulation's stored files."""
+    q = select(SimulationFileRow.name, SimulationFileRow.size).where(SimulationFileRow.simulation_id == simulation_id)
+    return {n: int(sz) for n, sz in session.execute(q)}
+
+
+def simulation_file(session: Session, *, simulation_id: str, name: str) -> SimulationFileRow | None:
+    return session.get(SimulationFileRow, (simulation_id, name))

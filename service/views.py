@@ -8,7 +8,7 @@ from datetime import UTC, datetime
 
 from sse_starlette import ServerSentEvent
 
-from service.models import TERMINAL, JobRow, MotionRow, ProgressRow
+from service.models import TERMINAL, JobRow, MotionRow, ProgressRow, SimulationRow
 
 #: how finely an answer reports a value: λ and the environment's values to 1e-9 (the solver's
 #: arithmetic leaves e.g. 0.05 + 0.1 = 0.15000000000000002), times in seconds to the millisecond
@@ -40,6 +40,7 @@ def motion_out(row: MotionRow) -> dict:
         "motion_file": f"/motions/{row.id}?format=motion",
         "validation": f"/motions/{row.id}/validation",
         "extrapolate": f"/motions/{row.id}/extrapolate",
+        "simulation": f"/motions/{row.id}/simulation",
     }
     if row.job_id:
         links["job"] = f"/jobs/{row.job_id}"
@@ -59,7 +60,7 @@ def progress_out(p: ProgressRow) -> dict:
                 accepted=p.accepted, status=p.status)
 
 
-def job_out(job: JobRow, points: list[ProgressRow]) -> dict:
+def job_out(job: JobRow, points: list[ProgressRow], simulation: SimulationRow | None = None) -> dict:
     links = {
         "self": f"/jobs/{job.id}",
         "motions": f"/jobs/{job.id}/motions",
@@ -69,6 +70,8 @@ def job_out(job: JobRow, points: list[ProgressRow]) -> dict:
     }
     if job.tutor_motion_id:
         links["tutor"] = f"/motions/{job.tutor_motion_id}"
+    if simulation is not None:  # the job's final motion simulated (ExtrapolateIn.simulate_cycles)
+        links["simulation"] = f"/motions/{simulation.motion_id}/simulation"
     spec = job.spec or {}
     return dict(
         id=job.id, status=job.status, terminal=job.status in TERMINAL, motion_id=job.motion_id,
@@ -79,6 +82,17 @@ def job_out(job: JobRow, points: list[ProgressRow]) -> dict:
         started_at=iso(job.started_at), finished_at=iso(job.finished_at),
         progress=[progress_out(p) for p in points], links=links,
     )
+
+
+def simulation_out(sim: SimulationRow, status: str, message: str, files: dict[str, int]) -> dict:
+    """A simulation (``status``/``message``: service.store.simulation_state) and its downloads."""
+    base = f"/motions/{sim.motion_id}/simulation"
+    links = {"self": base, "motion": f"/motions/{sim.motion_id}", "job": f"/jobs/{sim.job_id}"}
+    links.update({name: f"{base}/{name}" for name in files})
+    return dict(id=sim.id, motion_id=sim.motion_id, job_id=sim.job_id, cycles=sim.cycles, status=status,
+                terminal=status in ("succeeded", "failed", "canceled"), message=message,
+                report=sim.report if status == "succeeded" else None, files=files, created_at=iso(sim.created_at),
+                started_at=iso(sim.started_at), finished_at=iso(sim.finished_at), links=links)
 
 
 def sse_event(event: str, data: dict, ident: str | None = None) -> ServerSentEvent:

@@ -109,6 +109,13 @@ def validation(data: bytes) -> dict | None:
     return validation_report(_load(data))
 
 
+def simulation_check(data: bytes) -> str | None:
+    """Why a stored motion cannot be simulated (service.simulation.cannot_simulate), or None."""
+    from service.simulation import cannot_simulate  # lazy: runs in a compute process
+
+    return cannot_simulate(_load(data))
+
+
 def motion_plot(data: bytes, kind: str) -> bytes:
     # lazy: runs in a compute process; the API process does not load the solver
     from service.plots import MOTION_PLOTS, PlotError

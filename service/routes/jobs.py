@@ -36,7 +36,8 @@ def _job(db: Database, job_id: str, owner: str) -> dict:
         job = store.get_job(s, job_id=job_id, owner=owner)
         if job is None:
             raise not_found("job", job_id)
-        return job_out(job, store.progress(s, job_id=job_id, attempt=job.attempts))
+        return job_out(job, store.progress(s, job_id=job_id, attempt=job.attempts),
+                       store.job_simulation(s, job_id=job_id))
 
 
 def _accepted(out: dict, replayed: bool = False) -> JSONResponse:

@@ -192,6 +192,22 @@ def test_events_stream_until_the_end(client, tutor_id):
     assert [d["step"] for e, d in events if e == "motion"] == list(range(final["steps"]))
 
 
+def test_simulation_runs_on_a_celery_worker(client, tutor_id):
+    """A simulation (POST /motions/{id}/simulation) is a job the Celery worker runs; its report
+    and files are stored in PostgreSQL and served back."""
+    r = client.post(f"/motions/{tutor_id}/simulation", json={"cycles": 1})
+    assert r.status_code == 202, r.text
+    assert client.get(f"/jobs/{r.json()['job_id']}").json()["runner"] == "celery"
+    deadline = time.monotonic() + 180
+    while not (sim := client.get(f"/motions/{tutor_id}/simulation").json())["terminal"]:
+        assert time.monotonic() < deadline, sim
+        time.sleep(0.2)
+    assert sim["status"] == "succeeded", sim["message"]
+    assert sim["report"]["cycles_walked"] > 0.99 and sim["report"]["fell"] is False
+    glb = client.get(sim["links"]["simulated.glb"])
+    assert glb.status_code == 200 and glb.content[:4] == b"glTF" and len(glb.content) == sim["files"]["simulated.glb"]
+
+
 def test_cancel_running_job(stack, client, tutor_id):
     job = client.post(f"/motions/{tutor_id}/extrapolate", json=KILLABLE).json()
     wait_job(client, job["id"], timeout=60, until=_running_with_steps(2))

@@ -41,7 +41,7 @@ def _job(db, *, max_attempts=3, runner="celery", key=None, own=None):
 
 def test_migrations_reach_head_and_are_idempotent(db):
     upgrade(db.url)  # second run: nothing to do
-    assert current_revision(db.url) == "0003"
+    assert current_revision(db.url) == "0004"
     if db.is_sqlite:
         with db.read() as s:
             assert s.execute(text("PRAGMA journal_mode")).scalar() == "wal"

@@ -56,9 +56,14 @@ const state = {
   libraryCells: 0, // cells drawn in the grid
   libraryDone: 0,
   cellKey: null, // the cell whose clip is previewed
+  simulationStatus: null, // the selected motion's simulation: none | queued | running | succeeded | failed | canceled
+  simulationReport: null, // its report (report.json) once succeeded
+  simulationShown: false, // the simulated walk is in the 3D preview beside the motion
+  simulationLoaded: false, // the simulation's plot is shown
+  simulationError: null,
   errors: [],
 };
-window.motionx = { state, viewer: null, selectJob, selectMotion, selectLibrary, previewVariants };
+window.motionx = { state, viewer: null, selectJob, selectMotion, selectLibrary, previewVariants, simulate };
 
 const $ = (id) => document.getElementById(id);
 let apiKey = '';
@@ -74,6 +79,8 @@ const rigOf = new Map(); // motion id -> the preview variant that worked (source
 const canceling = new Set(); // ids of the jobs and libraries whose cancel the API accepted
 let previewLastOf = null; // a job started from the form: its last λ optimum is previewed when it ends
 let newWalk = null; // the form (newwalk.js)
+let previewDone = Promise.resolve(); // the selected motion's preview (the simulated walk is shown beside it)
+const SIMULATION_POLL_MS = 1000;
 
 // ---------------------------------------------------------------- helpers
 
@@ -699,7 +706,8 @@ async function selectMotion(id) {
   Object.assign(state, {
     motionId: id, previewReady: false, previewError: null, grfLoaded: false, grfError: null,
     residualsLoaded: false, residualsError: null, filmstripLoaded: false, filmstripError: null, validation: null,
-    previewRig: null, previewObjects: 0, downloadStatus: null,
+    previewRig: null, previewObjects: 0, downloadStatus: null, simulationStatus: null, simulationReport: null,
+    simulationShown: false, simulationLoaded: false, simulationError: null,
   });
   $('motion-panel').hidden = false;
   $('download-status').textContent = '';
@@ -718,8 +726,10 @@ async function selectMotion(id) {
       meta.job_id ? `job ${shortId(meta.job_id)}` : null].filter(Boolean).join(' · ');
   }
   const validation = loadValidation(id, token);
+  previewDone = loadPreview(id, token, validation);
   await Promise.all([
-    loadPreview(id, token, validation),
+    previewDone,
+    loadSimulation(id, token),
     loadImage('grf', `/motions/${id}/plots/grf.png`, token),
     loadImage('residuals', `/motions/${id}/plots/residuals.png`, token),
     loadImage('filmstrip', `/motions/${id}/plots/filmstrip.png`, token),
@@ -913,6 +923,135 @@ async function loadImage(name, path, token) {
   }
 }
 
+// ---------------------------------------------------------------- a motion's simulation in MuJoCo
+
+/** The selected motion's latest simulation (GET /motions/{id}/simulation), followed while it runs. */
+async function loadSimulation(id, token) {
+  renderSimulation(null);
+  let sim;
+  try {
+    sim = await api(`/motions/${id}/simulation`);
+  } catch (err) {
+    if (token !== motionToken) return;
+    if (err instanceof ApiError && err.status === 404) {
+      state.simulationStatus = 'none';
+      $('simulation-status').textContent = 'not simulated yet';
+      return;
+    }
+    state.simulationError = err.message;
+    $('simulation-status').textContent = `simulation: ${err.message}`;
+    return;
+  }
+  if (token === motionToken) await followSimulation(id, token, sim);
+}
+
+/** Starts a simulation of the selected motion (POST /motions/{id}/simulation) and follows it. */
+async function simulate(cycles) {
+  const id = state.motionId;
+  const token = motionToken;
+  if (!id) return;
+  $('simulation-start').disabled = true;
+  $('simulation-status').textContent = 'starting…';
+  state.simulationError = null;
+  try {
+    const sim = await api(`/motions/${id}/simulation`, { method: 'POST', json: { cycles } });
+    if (token === motionToken) await followSimulation(id, token, sim);
+  } catch (err) {
+    if (token !== motionToken) return;
+    state.simulationError = err.message;
+    state.simulationStatus = state.simulationStatus || 'none';
+    $('simulation-status').textContent = `not started: ${err.message}`;
+  } finally {
+    if (token === motionToken) $('simulation-start').disabled = ['queued', 'running'].includes(state.simulationStatus);
+  }
+}
+
+/** Polls a simulation until it ends (or another motion is selected), then shows what it produced. */
+async function followSimulation(id, token, sim) {
+  while (token === motionToken) {
+    renderSimulation(sim);
+    if (sim.terminal) break;
+    await sleep(SIMULATION_POLL_MS);
+    if (token !== motionToken) return;
+    try {
+      sim = await api(`/motions/${id}/simulation`);
+    } catch (err) {
+      noteError('simulation', err);
+      await sleep(SIMULATION_POLL_MS);
+    }
+  }
+  if (token !== motionToken || sim.status !== 'succeeded') return;
+  await Promise.all([
+    loadImage('simulation', sim.links['simulation.png'], token),
+    showSimulated(sim, token),
+  ]);
+}
+
+/** The simulated walk (simulated.glb) beside the motion in the 3D preview. */
+async function showSimulated(sim, token) {
+  try {
+    await previewDone;
+    if (token !== motionToken || !state.previewReady) return;
+    const [v, glb] = await Promise.all([viewer(), api(sim.links['simulated.glb'], { as: 'arrayBuffer' })]);
+    if (token !== motionToken) return;
+    const start = sim.report ? sim.report.start_reference_time_s : 0;
+    await v.showCompanion(glb, { start });
+    if (token !== motionToken) return;
+    state.simulationShown = true;
+    $('viewer-rig').textContent += ' · blue: simulated in MuJoCo';
+  } catch (err) {
+    if (token !== motionToken) return;
+    state.simulationError = err.message;
+    viewerMessage(`No simulated walk: ${err.message}`);
+  }
+}
+
+function renderSimulation(sim) {
+  state.simulationStatus = sim ? sim.status : null;
+  state.simulationReport = sim && sim.status === 'succeeded' ? sim.report : null;
+  const active = Boolean(sim) && !sim.terminal;
+  $('simulation-start').disabled = active;
+  const table = $('simulation-report');
+  const downloads = $('simulation-downloads');
+  if (!sim) {
+    $('simulation-status').textContent = '';
+    table.hidden = downloads.hidden = true;
+    $('simulation-img').hidden = $('simulation-message').hidden = true;
+    return;
+  }
+  const since = sim.started_at ? ` since ${clock(sim.started_at)}` : '';
+  $('simulation-status').textContent = {
+    queued: `queued (${sim.cycles} cycles)…`,
+    running: `simulating ${sim.cycles} cycles${since}…`,
+    succeeded: `done: ${sim.message}`,
+  }[sim.status] || `${sim.status}: ${sim.message}`;
+  const r = state.simulationReport;
+  table.hidden = !r;
+  downloads.hidden = !r;
+  if (!r) return;
+  const drift = (r.drift_per_cycle || []).at(-1);
+  const row = (label, value) => h('tr', {}, h('th', {}, label), h('td', { class: 'num' }, value));
+  table.replaceChildren(h('tbody', {},
+    row('cycles walked', `${fmt(r.cycles_walked)} of ${r.cycles_requested ?? sim.cycles}`),
+    row('fell', r.fell ? `yes, at ${fmt(r.fall && r.fall.time_s)} s (${(r.fall && r.fall.reason) || ''})` : 'no'),
+    row('joint tracking RMS (°)', fmt(r.joint_tracking_rms_deg)),
+    row('foot force RMS (body weight)', fmt(r.foot_force_rms_bw)),
+    row('peak torque / inverse dynamics (max)', fmt(r.peak_torque_ratio_max)),
+    row('drift after the last cycle (m)', drift ? fmt(drift.position_m) : '–'),
+    row('real-time factor (simulated s / wall s)', fmt(r.realtime_factor)),
+  ));
+  downloads.replaceChildren('Download: ', ...Object.keys(sim.files).map((name) => h('button', {
+    type: 'button',
+    onclick: async () => {
+      try {
+        saveBlob(await api(sim.links[name], { as: 'blob' }), `${sim.motion_id}.${name}`);
+      } catch (err) {
+        noteError('download', err);
+      }
+    },
+  }, name)), ' ');
+}
+
 /** A blob saved as a file (an <a download> on an object URL: the API wants the key, so no plain link). */
 function saveBlob(blob, name) {
   const a = h('a', { href: URL.createObjectURL(blob), download: name });
@@ -1020,6 +1159,11 @@ function start() {
     const v = await viewer();
     v.setPlaying(!v.playing);
     $('viewer-play').textContent = v.playing ? 'Pause' : 'Play';
+  });
+  $('simulation-form').addEventListener('submit', (e) => {
+    e.preventDefault();
+    const cycles = Number($('simulation-cycles').value);
+    simulate(cycles);
   });
   $('viewer-follow').addEventListener('change', async (e) => (await viewer()).setFollow(e.target.checked));
   new ResizeObserver(() => {

@@ -7,6 +7,8 @@ import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 
 /** The character's colour (one material for every segment, so it stands out from the ground). */
 export const CHARACTER_COLOR = 0xe07b39;
+/** The second character's colour (showCompanion: e.g. the motion simulated in MuJoCo). */
+export const COMPANION_COLOR = 0x3b7dd8;
 const BACKGROUND = 0xeef1f5;
 /** Where the camera looks from, relative to the character: front right, a little above (glTF: Y up, Z forward). */
 const VIEW_DIRECTION = new THREE.Vector3(-0.72, 0.22, 0.66).normalize();
@@ -64,6 +66,9 @@ export class Viewer {
     this.world.add(ground);
 
     this.material = new THREE.MeshStandardMaterial({ color: CHARACTER_COLOR, roughness: 0.6, metalness: 0 });
+    this.companionMaterial = new THREE.MeshStandardMaterial({ color: COMPANION_COLOR, roughness: 0.6, metalness: 0 });
+    this.companion = null; // {model, mixer, duration, start, time}: a second character beside the first
+    this.cycleShift = new THREE.Vector3(); // how far the first character's clip moves in one loop
     this.model = null;
     this.mixer = null;
     this.pelvis = null;
@@ -105,11 +110,13 @@ export class Viewer {
     this.mixer = new THREE.AnimationMixer(this.model);
     const clip = gltf.animations[0];
     if (clip) this.mixer.clipAction(clip).play();
-    this.mixer.update(0);
+    this.duration = clip ? clip.duration : 0;
+    this.pelvis = this.model.getObjectByName('pelvis') || this.firstBone(this.model) || this.model;
+    this.cycleShift = this.pelvisShift(this.mixer, this.pelvis, this.duration);
+    this.mixer.setTime(0);
     this.frameCamera();
     this.tilt(gravity);
 
-    this.pelvis = this.model.getObjectByName('pelvis') || this.firstBone(this.model) || this.model;
     this.world.updateMatrixWorld(true);
     this.pelvis.getWorldPosition(this.lastPelvis);
     this.world.localToWorld(this.controls.target);
@@ -155,7 +162,74 @@ export class Viewer {
     this.world.add(this.treads);
   }
 
+  /** Where the pelvis is at the clip's end minus where it is at its start, on the ground (world's frame). */
+  pelvisShift(mixer, pelvis, duration) {
+    const at = (t) => {
+      mixer.setTime(t);
+      this.world.updateMatrixWorld(true);
+      return this.world.worldToLocal(pelvis.getWorldPosition(new THREE.Vector3()));
+    };
+    const shift = at(duration).sub(at(0));
+    shift.y = 0;
+    return shift;
+  }
+
+  /**
+   * A second character beside the first (`glb`, e.g. the motion simulated in MuJoCo), `offset` m to
+   * its left and in another colour. The two play together: the second's clip from its start, the
+   * first's from its time `start` (s) on, looping cycle after cycle, each loop moved on by the
+   * distance its clip walks, so both walk side by side; both start again when the second's clip ends.
+   * Returns the second clip's duration and how many three.js objects it has.
+   */
+  async showCompanion(glb, { offset = 0.9, start = 0 } = {}) {
+    const gltf = await new GLTFLoader().parseAsync(glb, '');
+    this.clearCompanion();
+    const model = gltf.scene;
+    model.name = 'companion';
+    model.traverse((o) => {
+      if (o.isMesh) {
+        o.material = this.companionMaterial;
+        o.frustumCulled = false;
+      }
+    });
+    model.position.x = offset; // glTF x = motionx y: to the character's left
+    this.world.add(model);
+    const mixer = new THREE.AnimationMixer(model);
+    const clip = gltf.animations[0];
+    if (clip) mixer.clipAction(clip).play();
+    this.companion = { model, mixer, duration: clip ? clip.duration : 0, start: Math.max(0, start || 0), time: 0 };
+    this.pairAt(0);
+    await this.nextFrame();
+    let objects = 0;
+    model.traverse(() => { objects += 1; });
+    return { duration: this.companion.duration, objects };
+  }
+
+  /** Both characters at time `t` of the second's clip (showCompanion). */
+  pairAt(t) {
+    const c = this.companion;
+    c.time = t;
+    c.mixer.setTime(t);
+    if (!this.model || !this.mixer) return;
+    const d = this.duration;
+    const tr = c.start + t;
+    const loops = d > 0 ? Math.floor(tr / d) : 0;
+    this.mixer.setTime(d > 0 ? tr - loops * d : 0);
+    this.model.position.copy(this.cycleShift).multiplyScalar(loops);
+  }
+
+  clearCompanion() {
+    const c = this.companion;
+    this.companion = null;
+    if (this.model) this.model.position.set(0, 0, 0);
+    if (!c) return;
+    c.mixer.stopAllAction();
+    this.world.remove(c.model);
+    c.model.traverse((o) => o.geometry && o.geometry.dispose());
+  }
+
   clear() {
+    this.clearCompanion();
     this.drawTreads(null);
     if (!this.model) return;
     this.mixer.stopAllAction();
@@ -192,7 +266,12 @@ export class Viewer {
   frame() {
     this.timer.update();
     const dt = Math.min(this.timer.getDelta(), 0.1);
-    if (this.mixer && this.playing) this.mixer.update(dt);
+    if (this.companion && this.playing) {
+      const c = this.companion;
+      this.pairAt(c.duration > 0 ? (c.time + dt) % c.duration : 0);
+    } else if (this.mixer && this.playing) {
+      this.mixer.update(dt);
+    }
     if (this.pelvis && this.follow) {
       // move the camera with the character (the clip loops: it jumps back with it)
       this.world.updateMatrixWorld(true);
