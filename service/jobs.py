@@ -333,7 +333,10 @@ def _run(db: Database, job_id: str, attempt: int, token: str, settings: Settings
         # the job's final motion, simulated in MuJoCo: its outcome is the simulation's, not the job's
         with hb.write_lock, db.write() as s:
             final = store.step_row(s, job_id=job_id, step=steps - 1)
-            sim_id = store.create_simulation(s, owner=owner, motion_id=final.id, job_id=job_id, cycles=cycles).id
+            sim = store.job_simulation(s, job_id=job_id)  # an earlier attempt's (the step's id is stable)
+            if sim is None or sim.motion_id != final.id:
+                sim = store.create_simulation(s, owner=owner, motion_id=final.id, job_id=job_id, cycles=cycles)
+            sim_id = sim.id
         sim_status, sim_message = _simulate(db, sim_id, hb)
         message = f"{message}; simulation of the final motion {sim_status}: {sim_message}".lstrip("; ")
     return status, message, dict(lam_reached=lam_reached, steps=steps, solves=result.solves)
