@@ -216,7 +216,8 @@ def _mean_stance_roll(motion: Motion, model: mujoco.MjModel, qpos_index: np.ndar
     return out[0], out[1]
 
 
-def _treads(motion: Motion, ref: Reference, cycles: int, margin: float = 0.02) -> tuple[Tread, ...]:
+def _treads(motion: Motion, ref: Reference, cycles: int, model: mujoco.MjModel, qadr: np.ndarray,
+            margin: float = 0.02) -> tuple[Tread, ...]:
     """Stairs: one block per stance of the walk, its top at the stance's ground height, spanning
     the width of the walk. Each riser stands where the reference's swing foot clears it: going
     up, ``margin`` behind the heel of the stance on the higher tread (the swing foot rises onto it
@@ -225,10 +226,7 @@ def _treads(motion: Motion, ref: Reference, cycles: int, margin: float = 0.02) -
     if not env.step_height_m:
         return ()
     ch = motion.character
-    model = build_spec(ch).compile()
     data = mujoco.MjData(model)
-    ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, nm) for nm in ch.coordinate_names]
-    qadr = np.array([model.jnt_qposadr[i] for i in ids])
     B = ref.motion.foot_contact()
     P = ref.P
     # one heading for the flight of stairs: the cycle's displacement
@@ -360,8 +358,8 @@ def id_peaks(motion: Motion) -> np.ndarray:
     return np.max(np.abs(tau[6:]), axis=1)
 
 
-def performable_model(motion: Motion, cycles: int = 10, t0: float | None = None,
-                      ref: Reference | None = None, sole_half_width: float | None = None,
+def performable_model(motion: Motion, cycles: int = 10, ref: Reference | None = None,
+                      sole_half_width: float | None = None,
                       inversion: bool = True) -> tuple[str, mujoco.MjModel, tuple[float, float]]:
     """The model XML, the model compiled *from that XML* (so a replay from the file is what
     was simulated) and the soles' roll (rad, right and left) that lays them flat in stance."""
@@ -372,7 +370,7 @@ def performable_model(motion: Motion, cycles: int = 10, t0: float | None = None,
     ids = [mujoco.mj_name2id(base, mujoco.mjtObj.mjOBJ_JOINT, nm) for nm in ch.coordinate_names]
     qadr = np.array([base.jnt_qposadr[i] for i in ids])
     roll = _mean_stance_roll(motion, base, qadr)
-    treads = _treads(motion, ref, cycles)
+    treads = _treads(motion, ref, cycles, base, qadr)
     opts = ContactOptions(sole_roll=roll, friction=env.friction, treads=treads, floor=not treads,
                           sole_half_width=sole_half_width, inversion=inversion)
     spec = build_spec(ch, env.gravity, opts)
@@ -744,7 +742,7 @@ def simulate(motion: Motion, cycles: int = 10, gains: Gains | None = None, *,
     gains = gains or Gains()
     ref = Reference(motion)
     t0 = mid_stance_time(motion)
-    xml, m, _ = performable_model(motion, cycles, t0, ref, gains.sole_half_width, gains.inversion)
+    xml, m, _ = performable_model(motion, cycles, ref, gains.sole_half_width, gains.inversion)
     d = mujoco.MjData(m)
     ctl = Tracker(motion, m, ref, gains)
     ch = motion.character

@@ -21,3 +21,24 @@ def shared_data() -> Path:
     if not SHARED_DATA.is_dir():
         pytest.fail(f"walking data not found at {SHARED_DATA} (the repository's data/ folder, or $MOTIONX_DATA)")
     return SHARED_DATA
+
+
+@pytest.fixture(scope="session")
+def replay_rollout():
+    """Replay a written simulation with MuJoCo's own API only: from ``qpos0``/``qvel0``, one
+    ``mj_step`` per written ``ctrl``; returns the qpos after each step and the final time."""
+    import mujoco
+    import numpy as np
+
+    def replay(model, rollout) -> tuple:
+        d = mujoco.MjData(model)
+        d.qpos[:] = rollout["qpos0"]
+        d.qvel[:] = rollout["qvel0"]
+        qpos = np.empty_like(rollout["qpos"])
+        for k in range(len(rollout["time"])):
+            d.ctrl[:] = rollout["ctrl"][k]
+            mujoco.mj_step(model, d)
+            qpos[k] = d.qpos
+        return qpos, d.time
+
+    return replay

@@ -34,7 +34,7 @@ def simulated(tmp_path_factory):
     return tutor.motion, out, proc
 
 
-def test_replay_from_written_files_reproduces_rollout(simulated):
+def test_replay_from_written_files_reproduces_rollout(simulated, replay_rollout):
     _, out, proc = simulated
     assert (out / "model.xml").exists(), proc.stderr
     model = mujoco.MjModel.from_xml_path(str(out / "model.xml"))
@@ -42,16 +42,9 @@ def test_replay_from_written_files_reproduces_rollout(simulated):
     assert float(r["timestep"]) == pytest.approx(model.opt.timestep)
     assert r["ctrl"].shape == (len(r["time"]), model.nu)
     assert [model.actuator(i).name for i in range(model.nu)] == list(r["actuators"])
-    d = mujoco.MjData(model)
-    d.qpos[:] = r["qpos0"]
-    d.qvel[:] = r["qvel0"]
-    qpos = np.empty_like(r["qpos"])
-    for k in range(len(r["time"])):
-        d.ctrl[:] = r["ctrl"][k]
-        mujoco.mj_step(model, d)
-        qpos[k] = d.qpos
+    qpos, time_end = replay_rollout(model, r)
     np.testing.assert_allclose(qpos, r["qpos"], rtol=0, atol=1e-12)
-    np.testing.assert_allclose(r["time"][-1], d.time, atol=1e-12)
+    np.testing.assert_allclose(r["time"][-1], time_end, atol=1e-12)
 
 
 def test_model_is_performable(simulated):
@@ -95,7 +88,7 @@ def test_stairs_treads_hold_the_feet_and_clear_the_swing(simulated):
     assert res.status == "succeeded", res.message
     motion = res.steps[-1].motion
     ref = Reference(motion)
-    _, model, _ = performable_model(motion, 2, None, ref)
+    _, model, _ = performable_model(motion, 2, ref)
     treads = [i for i in range(model.ngeom) if model.geom(i).name.startswith("tread_")]
     assert len(treads) >= 6 and model.geom_contype[0] == 0  # treads instead of the floor
     ctl = Tracker(motion, model, ref, Gains())

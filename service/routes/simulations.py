@@ -82,18 +82,23 @@ async def start_simulation(motion_id: str, request: Request, owner: OwnerDep, db
     return JSONResponse(out, status_code=202, headers={"Location": out["links"]["self"]})
 
 
+def _latest(s, motion_id: str, owner: str, hint: str = ""):
+    """The motion's latest simulation, or a 404 (no such motion for this key, or never simulated)."""
+    if store.get_motion(s, motion_id=motion_id, owner=owner) is None:
+        raise not_found("motion", motion_id)
+    sim = store.latest_simulation(s, motion_id=motion_id, owner=owner)
+    if sim is None:
+        raise Problem(404, f"motion {motion_id} has not been simulated{hint}")
+    return sim
+
+
 @router.get("/motions/{motion_id}/simulation", response_model=SimulationOut,
             summary="the motion's latest simulation: status, and when it succeeded its report and downloads",
             responses={404: {"description": "no such motion for this key, or never simulated"}})
 def get_simulation(motion_id: str, owner: OwnerDep, db: DatabaseDep) -> dict:
     known_id("motion", motion_id)
     with db.read() as s:
-        if store.get_motion(s, motion_id=motion_id, owner=owner) is None:
-            raise not_found("motion", motion_id)
-        sim = store.latest_simulation(s, motion_id=motion_id, owner=owner)
-        if sim is None:
-            raise Problem(404, f"motion {motion_id} has not been simulated (POST to this path simulates it)")
-        return _answer(s, sim)
+        return _answer(s, _latest(s, motion_id, owner, " (POST to this path simulates it)"))
 
 
 @router.get("/motions/{motion_id}/simulation/{name}",
@@ -105,11 +110,7 @@ def get_simulation_file(motion_id: str, name: str, owner: OwnerDep, db: Database
     if name not in simulation.FILES:
         raise Problem(404, f"no simulation file {name[:80]!r}: one of " + ", ".join(simulation.FILES))
     with db.read() as s:
-        if store.get_motion(s, motion_id=motion_id, owner=owner) is None:
-            raise not_found("motion", motion_id)
-        sim = store.latest_simulation(s, motion_id=motion_id, owner=owner)
-        if sim is None:
-            raise Problem(404, f"motion {motion_id} has not been simulated")
+        sim = _latest(s, motion_id, owner)
         f = store.simulation_file(s, simulation_id=sim.id, name=name)
         if f is None:
             raise Problem(404, f"simulation {sim.id} has no {name} (yet: status {sim.status})")

@@ -327,3 +327,22 @@ def source_rig(motion: Motion, formats: tuple[str, ...], what: str):
         return Rig.from_dict(d)
     except RigError as e:
         raise ExportError(str(e)) from None
+
+
+def source_pose(motion: Motion, formats: tuple[str, ...], what: str):
+    """The motion's source rig (:func:`source_rig`) and the motion retargeted onto it
+    (:func:`solver.rig.retarget`: one cycle at the rig's frame rate); a rig that cannot take
+    the motion is an :class:`ExportError`."""
+    from solver.rig import RigError, retarget
+
+    rig = source_rig(motion, formats, what)
+    try:
+        return rig, retarget(motion, rig)
+    except RigError as e:
+        raise ExportError(str(e)) from None
+
+
+def check_decimals(decimals: object) -> None:
+    """Text exporters write 1 to 12 decimals."""
+    if isinstance(decimals, bool) or not isinstance(decimals, int) or not 1 <= decimals <= 12:
+        raise ExportError(f"decimals must be an integer in [1, 12], got {decimals!r}")

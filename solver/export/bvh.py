@@ -29,7 +29,7 @@ import warnings
 
 import numpy as np
 
-from solver.export import Y_UP, ExportError, _check_motion, change_axes, local_transforms
+from solver.export import Y_UP, ExportError, _check_motion, change_axes, check_decimals, local_transforms
 from solver.motion import Motion
 
 log = logging.getLogger(__name__)
@@ -56,8 +56,7 @@ def _check(units: object, rotation_order: object, decimals: object) -> None:
         raise ExportError(f"units must be one of {sorted(UNITS)}, got {units!r}")
     if rotation_order not in ORDERS:
         raise ExportError(f"rotation_order must be one of {list(ORDERS)}, got {rotation_order!r}")
-    if isinstance(decimals, bool) or not isinstance(decimals, int) or not 1 <= decimals <= 12:
-        raise ExportError(f"decimals must be an integer in [1, 12], got {decimals!r}")
+    check_decimals(decimals)
 
 
 def to_bvh(motion: Motion, *, units: str = "cm", rotation_order: str = "XZY", decimals: int = 6,
@@ -153,16 +152,10 @@ def source_bvh(motion: Motion, *, decimals: int = 6) -> str:
     """``motion`` on the skeleton of the BVH it came from: the input's hierarchy, joint names,
     offsets, channels (order and count), End Sites and units, one gait cycle at the input's
     frame rate (``solver.rig.retarget``)."""
-    from solver.export import source_rig
-    from solver.rig import RigError, retarget
+    from solver.export import source_pose
 
-    if isinstance(decimals, bool) or not isinstance(decimals, int) or not 1 <= decimals <= 12:
-        raise ExportError(f"decimals must be an integer in [1, 12], got {decimals!r}")
-    rig = source_rig(motion, ("bvh",), "rig=source needs a motion made from a BVH trial")
-    try:
-        pose = retarget(motion, rig)
-    except RigError as e:
-        raise ExportError(str(e)) from None
+    check_decimals(decimals)
+    rig, pose = source_pose(motion, ("bvh",), "rig=source needs a motion made from a BVH trial")
     fmt = f"{{:.{decimals}f}}"
     children: dict[int, list[int]] = {j: [] for j in range(rig.J)}
     for j, p in enumerate(rig.parents):

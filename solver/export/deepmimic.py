@@ -16,9 +16,9 @@ import json
 
 import numpy as np
 
-from solver.export import ExportError, _check_motion, source_rig
+from solver.export import ExportError, _check_motion, check_decimals, source_pose
 from solver.motion import Motion
-from solver.rig import RigError, matrices_to_quats, retarget
+from solver.rig import matrices_to_quats
 
 
 def to_deepmimic(motion: Motion, *, rig: str = "source", decimals: int = 6) -> str:
@@ -27,13 +27,8 @@ def to_deepmimic(motion: Motion, *, rig: str = "source", decimals: int = 6) -> s
     if rig != "source":
         raise ExportError(f"a DeepMimic motion is written on the source character only: rig must be 'source', "
                           f"got {rig!r}")
-    if isinstance(decimals, bool) or not isinstance(decimals, int) or not 1 <= decimals <= 12:
-        raise ExportError(f"decimals must be an integer in [1, 12], got {decimals!r}")
-    src_rig = source_rig(motion, ("deepmimic",), "format=deepmimic needs a motion made from a DeepMimic clip")
-    try:
-        pose = retarget(motion, src_rig)
-    except RigError as e:
-        raise ExportError(str(e)) from None
+    check_decimals(decimals)
+    src_rig, pose = source_pose(motion, ("deepmimic",), "format=deepmimic needs a motion made from a DeepMimic clip")
     types = list(src_rig.extra.get("types") or [])
     if len(types) != src_rig.J:
         raise ExportError("the motion's DeepMimic rig has no joint types")

@@ -25,6 +25,7 @@ import base64
 import json
 import logging
 import struct
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -138,13 +139,13 @@ def ellipsoid_mesh(center: np.ndarray, axis: np.ndarray, a: float,
     return verts_a, norms_a, tris_a
 
 
-def sole_mesh(bottom: np.ndarray, top: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A shoe-like convex hexahedron (flat-shaded: vertices (24, 3), normals, triangles (12, 3))
-    from its bottom and top faces, four corners each ordered (heel-right, heel-left,
-    toe-right, toe-left)."""
-    c = np.vstack([bottom, top])  # 0-3 bottom, 4-7 top
+def hexahedron(c: np.ndarray, faces: Sequence[tuple[int, int, int, int]] = (
+        (0, 1, 2, 3), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)),
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A convex hexahedron from its 8 corners and its 6 quadrilateral ``faces`` (corner indices;
+    by default 0-3 one face and 4-7 the opposite in the same order), flat-shaded: vertices
+    (24, 3), normals, triangles (12, 3), counter-clockwise seen from outside."""
     centre = c.mean(axis=0)
-    faces = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
     verts: list[np.ndarray] = []
     norms: list[np.ndarray] = []
     tris: list[tuple[int, int, int]] = []
@@ -158,6 +159,14 @@ def sole_mesh(bottom: np.ndarray, top: np.ndarray) -> tuple[np.ndarray, np.ndarr
         norms += [n / np.linalg.norm(n)] * 4
         tris += [(k, k + 1, k + 2), (k, k + 2, k + 3)]
     return np.array(verts), np.array(norms), np.array(tris)
+
+
+def sole_mesh(bottom: np.ndarray, top: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A shoe-like convex hexahedron (flat-shaded: vertices (24, 3), normals, triangles (12, 3))
+    from its bottom and top faces, four corners each ordered (heel-right, heel-left,
+    toe-right, toe-left)."""
+    return hexahedron(np.vstack([bottom, top]),  # 0-3 bottom, 4-7 top
+                      [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)])
 
 
 def foot_shape(character, side: str) -> tuple[np.ndarray, np.ndarray]:

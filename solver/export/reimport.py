@@ -33,7 +33,6 @@ import base64
 import json
 import math
 import re
-import struct
 from dataclasses import dataclass
 from typing import Any
 
@@ -285,38 +284,17 @@ def motion_from_clip(clip: dict | str | bytes, character: Character, *, rot_tol:
 
 # --- glTF 2.0 -----------------------------------------------------------------------------------
 
-_GLB_MAGIC, _GLB_JSON, _GLB_BIN = 0x46546C67, 0x4E4F534A, 0x004E4942
 _NCOMP = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
 _CTYPE = {5126: np.dtype("<f4"), 5121: np.dtype("u1"), 5123: np.dtype("<u2"), 5125: np.dtype("<u4")}
 
 
 def _parse_glb(data: bytes) -> tuple[dict, bytes | None]:
-    if len(data) < 20:
-        raise ReimportError("truncated GLB (shorter than its header)")
-    magic, version, length = struct.unpack_from("<III", data, 0)
-    if magic != _GLB_MAGIC:
-        raise ReimportError("not a GLB file (bad magic)")
-    if version != 2:
-        raise ReimportError(f"GLB version {version} is not supported (2 only)")
-    if length > len(data):
-        raise ReimportError(f"truncated GLB: header says {length} bytes, got {len(data)}")
-    doc, blob, off = None, None, 12
-    while off + 8 <= length:
-        clen, ctype = struct.unpack_from("<II", data, off)
-        chunk = data[off + 8: off + 8 + clen]
-        if len(chunk) != clen:
-            raise ReimportError("truncated GLB chunk")
-        if ctype == _GLB_JSON and doc is None:
-            try:
-                doc = json.loads(chunk.decode("utf-8"))
-            except (UnicodeDecodeError, ValueError) as e:
-                raise ReimportError(f"GLB JSON chunk is not JSON: {e}") from None
-        elif ctype == _GLB_BIN and blob is None:
-            blob = bytes(chunk)
-        off += 8 + clen + (-clen % 4)
-    if doc is None:
-        raise ReimportError("GLB without a JSON chunk")
-    return doc, blob
+    from solver.io.gltf import GltfError, split_glb
+
+    try:
+        return split_glb(data, "GLB")
+    except GltfError as e:
+        raise ReimportError(str(e)) from None
 
 
 def _buffer(doc: dict, i: int, blob: bytes | None) -> bytes:

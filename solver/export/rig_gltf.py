@@ -51,6 +51,7 @@ from solver.export.gltf import (
     _Buffer,
     _glb,
     ellipsoid_mesh,
+    hexahedron,
 )
 from solver.motion import Motion
 from solver.rig import RIG_FORMATS, Rig, RigError, RigPose, retarget
@@ -206,27 +207,7 @@ def _tapered_box(a: np.ndarray, b: np.ndarray, w0: float, w1: float) -> tuple[np
     corners = [(-1, -1), (1, -1), (1, 1), (-1, 1)]
     bottom = np.array([a + 0.5 * w0 * (x * v + y * w) for x, y in corners])
     top = np.array([b + 0.5 * w1 * (x * v + y * w) for x, y in corners])
-    return _hexahedron(np.vstack([bottom, top]))
-
-
-def _hexahedron(c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A convex hexahedron from its 8 corners (0-3 one face, 4-7 the opposite, in the same
-    order), flat-shaded, triangles counter-clockwise seen from outside."""
-    centre = c.mean(axis=0)
-    faces = [(0, 1, 2, 3), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)]
-    verts: list[np.ndarray] = []
-    norms: list[np.ndarray] = []
-    tris: list[tuple[int, int, int]] = []
-    for f in faces:
-        p = c[list(f)]
-        n = np.cross(p[1] - p[0], p[2] - p[0]) + np.cross(p[2] - p[0], p[3] - p[0])
-        if n @ (p.mean(axis=0) - centre) < 0:
-            p, n = p[::-1], -n
-        k = len(verts)
-        verts += list(p)
-        norms += [n / np.linalg.norm(n)] * 4
-        tris += [(k, k + 1, k + 2), (k, k + 2, k + 3)]
-    return np.array(verts), np.array(norms), np.array(tris)
+    return hexahedron(np.vstack([bottom, top]))
 
 
 def capsule_mesh(radius: float, height: float, rings: int = 6, sectors: int = 12
@@ -306,7 +287,7 @@ def _body_shape(body: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray, np.nda
         return None
     if shape == "box" and min(p) > 0:
         c = np.array([[x, y, z] for z in (-1, 1) for x, y in ((-1, -1), (1, -1), (1, 1), (-1, 1))]) * 0.5 * np.array(p)
-        V, N, T = _hexahedron(c)
+        V, N, T = hexahedron(c)
     elif shape == "sphere" and p[0] > 0:
         V, N, T = ellipsoid_mesh(np.zeros(3), np.array([0.0, 1.0, 0.0]), 0.5 * p[0], 0.5 * p[0])
     elif shape == "capsule" and p[0] > 0:

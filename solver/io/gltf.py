@@ -183,7 +183,9 @@ def _data_uri(uri: str, where: str, what: str) -> tuple[bytes, str]:
         raise GltfError(f"{where}: {what} has a malformed base64 data URI") from None
 
 
-def _split_glb(data: bytes, where: str) -> tuple[dict, bytes | None]:
+def split_glb(data: bytes, where: str) -> tuple[dict, bytes | None]:
+    """A GLB's JSON document and binary chunk (None when it has none); ``where`` starts the
+    messages of the GltfError it raises when the bytes are not a GLB 2.0."""
     if len(data) < 20:
         raise GltfError(f"{where}: truncated GLB (shorter than its header)")
     magic, version, length = struct.unpack_from("<III", data, 0)
@@ -229,7 +231,7 @@ def parse_gltf(data: bytes, where: str = "glTF") -> GltfAsset:
         raise GltfError(f"{where}: {len(data) / 2**20:.1f} MB; glTF characters of at most {MAX_BYTES // 2**20} MB "
                         "are accepted (every motion made from it carries the asset)")
     if data[:4] == struct.pack("<I", GLB_MAGIC):
-        doc, blob = _split_glb(data, where)
+        doc, blob = split_glb(data, where)
     else:
         doc, blob = _json(data, where), None
     if not isinstance(doc.get("buffers", []), list) or not isinstance(doc.get("bufferViews", []), list):

@@ -75,21 +75,14 @@ def test_simulation_report_and_files(api, tutor_id, simulated):
     assert sim["job_id"] not in [j["id"] for j in api.a.get("/jobs?limit=100").json()["items"]]
 
 
-def test_stored_rollout_replays_with_mujoco(api, simulated):
+def test_stored_rollout_replays_with_mujoco(api, simulated, replay_rollout):
     model = mujoco.MjModel.from_xml_string(api.a.get(simulated["links"]["model.xml"]).text)
     r = np.load(io.BytesIO(api.a.get(simulated["links"]["rollout.npz"]).content))
     assert float(r["timestep"]) == pytest.approx(model.opt.timestep)
     assert [model.actuator(i).name for i in range(model.nu)] == list(r["actuators"])
-    d = mujoco.MjData(model)
-    d.qpos[:] = r["qpos0"]
-    d.qvel[:] = r["qvel0"]
-    qpos = np.empty_like(r["qpos"])
-    for k in range(len(r["time"])):
-        d.ctrl[:] = r["ctrl"][k]
-        mujoco.mj_step(model, d)
-        qpos[k] = d.qpos
+    qpos, time_end = replay_rollout(model, r)
     np.testing.assert_allclose(qpos, r["qpos"], rtol=0, atol=1e-12)
-    assert d.time == pytest.approx(r["time"][-1], abs=1e-12)
+    assert time_end == pytest.approx(r["time"][-1], abs=1e-12)
 
 
 @pytest.mark.parametrize("cycles", [0, 101, 2.5, "3"])

@@ -306,29 +306,14 @@ def _segment_masses(body_mass: Mapping[str, float], seg_of: Mapping[str, str | N
     return seg_mass
 
 
-def opensim_track(
-    model: str | Path,
-    motion: str | Path,
-    *,
-    mass: float | None = None,
-    belt_speed: float | str | None = None,
-    grf: str | Path | None = None,
-    grf_xml: str | Path | None = None,
-    in_degrees: bool | None = None,
-    floor_height: float | None = None,
-    height: float | None = None,
-    ik_weights: Mapping[str, float] | None = None,
-    ik_reweight: int | None = None,
-) -> SkeletonTrack:
+def opensim_track(model: str | Path, motion: str | Path, **options: Any) -> SkeletonTrack:
     """Evaluate the OpenSim model along the motion and return landmarks + orientations (ours).
 
     ``motion``: coordinates (``.mot``/``.sto``), or marker trajectories (``.trc``) whose
     inverse kinematics OpenSim solves first (:func:`solver.io.opensim.ik.solve_ik`;
-    ``ik_weights``, ``ik_reweight``).
+    ``ik_weights``, ``ik_reweight``). ``options``: those of :func:`opensim_evaluation`.
     """
-    return opensim_evaluation(model, motion, mass=mass, belt_speed=belt_speed, grf=grf, grf_xml=grf_xml,
-                              in_degrees=in_degrees, floor_height=floor_height, height=height,
-                              ik_weights=ik_weights, ik_reweight=ik_reweight)[0]
+    return opensim_evaluation(model, motion, **options)[0]
 
 
 def opensim_evaluation(
