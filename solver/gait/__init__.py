@@ -6,9 +6,11 @@
     contacts_from_plates(measured, *, threshold=20.0, ...) -> (P, T) bool (solver.gait.contacts)
     gait_events(contacts, times) -> dict                                  (solver.gait.contacts)
     ensure_double_support(character, q, contacts) -> (contacts, changes)  (solver.gait.contacts)
+    tighten_contacts(character, q, contacts) -> (contacts, changes)       (solver.gait.contacts)
     extract_cycle(capture, fps=None, *, start=..., contacts=None, cycle=0)
         -> (Capture, contacts (P, T))                                     (solver.gait.cycles)
     unroll_loop(capture, repeats=2) -> Capture                            (solver.gait.cycles)
+    close_loop(q) -> q periodic over the cycle (the closure error spread)  (solver.gait.cycles)
 
     belt_speed(times, feet, *, stance=None) -> m/s                        (solver.gait.belt)
     unwrap_hinges(character, q) -> q with continuous hinge angles         (solver.gait.base)
@@ -19,13 +21,20 @@ Every failure is a :class:`GaitError`, an :class:`solver.errors.InputError`. The
 
 from solver.gait.base import GaitError, lowpass, resample, unwrap_hinges
 from solver.gait.belt import belt_speed
-from solver.gait.contacts import contacts_from_plates, detect_contacts, ensure_double_support, gait_events
-from solver.gait.cycles import LOOP_PERIOD_S, extract_cycle, unroll_loop
+from solver.gait.contacts import (
+    contacts_from_plates,
+    detect_contacts,
+    ensure_double_support,
+    gait_events,
+    tighten_contacts,
+)
+from solver.gait.cycles import LOOP_PERIOD_S, close_loop, extract_cycle, unroll_loop
 
 __all__ = [
     "LOOP_PERIOD_S",
     "GaitError",
     "belt_speed",
+    "close_loop",
     "contacts_from_plates",
     "detect_contacts",
     "ensure_double_support",
@@ -33,6 +42,7 @@ __all__ = [
     "gait_events",
     "lowpass",
     "resample",
+    "tighten_contacts",
     "unroll_loop",
     "unwrap_hinges",
 ]

@@ -49,8 +49,9 @@ def unwrap_hinges(character: Character, q: np.ndarray) -> np.ndarray:
     return q
 
 
-def resample(capture: Capture, fps: float) -> Capture:
-    """The capture sampled at ``fps`` from its first time to its last (cubic spline).
+def resample(capture: Capture, fps: float, *, start: float | None = None) -> Capture:
+    """The capture sampled at ``fps`` from its first time (or ``start``, a time within the
+    capture) to its last (cubic spline).
 
     Hinge angles are unwrapped first (continuous), so values at times common to both grids
     are preserved exactly. Contact schedules take the nearest sample; measured GRF is
@@ -63,10 +64,14 @@ def resample(capture: Capture, fps: float) -> Capture:
     t = capture.times
     if capture.T < 2:
         raise GaitError("resample: the capture has fewer than 2 frames")
-    n = int(np.floor((t[-1] - t[0]) * fps + 0.01)) + 1  # a last frame within 1 % of a step is kept
+    t_first = t[0] if start is None else float(start)
+    if not (t[0] - 1e-9 <= t_first <= t[-1]):
+        raise GaitError(f"resample: start {t_first} s is outside the capture ({t[0]:.3f} .. {t[-1]:.3f} s)")
+    n = int(np.floor((t[-1] - t_first) * fps + 0.01)) + 1  # a last frame within 1 % of a step is kept
     if n < 2:
-        raise GaitError(f"resample: {t[-1] - t[0]:.3f} s at {fps} fps gives fewer than 2 frames")
-    tn = t[0] + np.arange(n) / fps
+        raise GaitError(f"resample: {t[-1] - t_first:.3f} s at {fps} fps gives fewer than 2 frames")
+    tn = t_first + np.arange(n) / fps
+    tn = np.minimum(tn, t[-1])
     q = unwrap_hinges(capture.character, capture.q)
     qn = CubicSpline(t, q, axis=1)(tn) if capture.T >= 4 else np.stack([np.interp(tn, t, r) for r in q])
     contacts = None

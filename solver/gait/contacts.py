@@ -194,6 +194,54 @@ def gait_events(contacts: np.ndarray, times: np.ndarray) -> dict[str, list[float
     return out
 
 
+#: a scheduled contact point more than this above its stance level at the edge of its contact run
+#: is taken off the ground (m): see :func:`tighten_contacts`
+TIGHT_CONTACT_TOL = 0.010
+
+
+def tighten_contacts(character: Character, q: np.ndarray, contacts: np.ndarray, *,
+                     tol: float = TIGHT_CONTACT_TOL) -> tuple[np.ndarray, list[dict]]:
+    """A gait cycle's schedule (P, T, frames T−2, T−1 repeating frames 0, 1) whose contact points
+    are where the capture has them: a point scheduled on the ground at the start or the end of
+    its contact run while it stands more than ``tol`` above its stance level (the median of its
+    heights in contact) is taken off, run edge after run edge, unless it is the only point of
+    its foot on the ground at that frame (the foot is loaded: the plates or the kinematic
+    detection said so).
+
+    The detection (:func:`detect_contacts`) takes a point within 4 cm of its level and still: a
+    heel rising through 1–3 cm at heel-off, a toe still 3 cm up a frame after heel strike. An
+    optimizer that pins such a point to the ground has to bend the leg to reach it (the treadmill
+    walk's HalfBoy knee: 11° RMS from the capture). Returns the schedule and what was changed."""
+    A = np.array(contacts, dtype=bool, copy=True)
+    T = A.shape[1]
+    N = T - 2
+    if N < 4 or A.shape[0] != len(character.contacts):
+        return A, []
+    z = contact_points(character, q)[:, 2, :N]
+    side = [c.side for c in character.contacts]
+    changes: list[dict] = []
+    for i in range(A.shape[0]):
+        on = A[i, :N]
+        if not on.any() or on.all():
+            continue
+        high = z[i] - float(np.median(z[i][on])) > tol
+        mates = [j for j in range(A.shape[0]) if j != i and side[j] == side[i]]
+        changed = True
+        while changed:
+            changed = False
+            for t in range(N):
+                if not (A[i, t] and high[t]) or (A[i, (t - 1) % N] and A[i, (t + 1) % N]):
+                    continue
+                if not any(A[j, t] for j in mates):
+                    continue
+                A[i, t] = False
+                changed = True
+                changes.append({"point": character.contacts[i].name, "frame": t,
+                                "height_above_stance_m": float(z[i, t] - np.median(z[i][on]))})
+    A[:, N:] = A[:, :2]
+    return A, changes
+
+
 def ensure_double_support(character: Character, q: np.ndarray, contacts: np.ndarray, *,
                           height_tol: float = 0.03) -> tuple[np.ndarray, list[dict]]:
     """A gait cycle's schedule (P, T, frames T−2, T−1 repeating frames 0, 1) with at least one

@@ -85,6 +85,15 @@ def extract_cycle(
         raise GaitError("extract_cycle: start must be 'right_heel_strike', 'left_heel_strike', 'best_loop' "
                               f"or 'auto', not {start!r}")
     cap = resample(capture, fps) if fps is not None else capture
+    cyc, cc = _cycle_of(cap, start, contacts, cycle)
+    if fps is None or cap.source.get("loop") == "wrap":
+        return cyc, cc
+    return _exact_period(capture, cyc, float(fps), contacts)
+
+
+def _cycle_of(cap: Capture, start: str, contacts: np.ndarray | None, cycle: int) -> tuple[Capture, np.ndarray]:
+    """The cycle of :func:`extract_cycle` on the capture as sampled (its period a whole number of
+    frames)."""
     if contacts is None:
         contacts = cap.contacts  # e.g. from force plates (resampled with the capture); else detected below
     if cap.source.get("loop") == "wrap":
@@ -144,6 +153,82 @@ def _cycle_capture(cap: Capture, sl: slice, contacts: np.ndarray, cycle_info: di
     src["cycle"] = cycle_info
     return Capture(character=cap.character, q=cap.q[:, sl], times=cap.times[sl], frame=cap.frame, source=src,
                    contacts=contacts, measured=meas)
+
+
+#: the window (s) after the cycle's start and after its end one period later whose match
+#: decides the period (``_exact_period``), and the resolution of the search (frames)
+PERIOD_WINDOW_S = 0.25
+PERIOD_STEP_FRAMES = 0.05
+
+
+def _exact_period(capture: Capture, cyc: Capture, fps: float,
+                  contacts: np.ndarray | None) -> tuple[Capture, np.ndarray]:
+    """The cycle resampled so that its N frames span the capture's own period exactly.
+
+    A cycle cut at ``fps`` spans a whole number N of frames, so its period is off the subject's
+    by up to half a frame (33 ms at 15 frames/s, 3 % of a stride): its last frames are then a
+    phase ahead of or behind its first, and a periodic motion fitted to it jumps between them
+    (the overground walk's tutor: the knee 16° in one frame). The period P is found on the
+    capture at its own rate — the P within a frame of N / fps whose motion over
+    ``PERIOD_WINDOW_S`` after the cycle's start best matches the same window one period later
+    (normalized joint coordinates, root height, pitch and roll, as the best loop matches) — and
+    the capture is resampled at P / N from the cycle's start: the cycle keeps N frames at
+    N / P frames per second (the requested rate within half a frame per cycle), the subject's
+    own cadence and timing."""
+    from scipy.interpolate import CubicSpline  # lazy, as in resample
+
+    info = dict(cyc.source.get("cycle") or {})
+    T = cyc.T
+    N = T - 2
+    t0 = float(cyc.times[0])
+    t = capture.times
+    if capture.T < 4 or N < 4:
+        return cyc, cyc.contacts if cyc.contacts is not None else np.zeros((4, T), dtype=bool)
+    periodic = np.zeros(capture.character.n, dtype=bool)
+    periodic[6:] = True
+    periodic[[2, 4, 5]] = True
+    q = unwrap_hinges(capture.character, capture.q)[periodic]
+    spline = CubicSpline(t, q / np.maximum(np.std(q, axis=1, keepdims=True), 1e-3), axis=1)
+    half = 0.5 * min(PERIOD_WINDOW_S, 0.25 * N / fps)
+    p0 = N / fps
+    best_p, best_err = p0, None
+    reach = 2.0 if info.get("start") == "best_loop" else 1.0  # a loop's N came from two frames' match alone
+    for df in np.arange(-reach, reach + 1e-9, PERIOD_STEP_FRAMES):
+        p = p0 + df / fps
+        a, b = max(t0 - half, t[0]), min(t0 + half, t[-1] - p)  # the motion around the start, one period later
+        if b - a < 2.0 / fps:
+            continue
+        tau = np.linspace(a, b, 16)
+        err = float(np.mean((spline(tau) - spline(tau + p)) ** 2))
+        if best_err is None or err < best_err - 1e-12:
+            best_p, best_err = p, err
+    if best_err is None:
+        return cyc, cyc.contacts if cyc.contacts is not None else np.zeros((4, T), dtype=bool)
+    N = max(4, int(round(best_p * fps)))
+    T = N + 2
+    span = best_p * (N + 1) / N  # the cycle and its overlap frame
+    if t0 + span > t[-1] + 1e-9:
+        if info.get("start") != "best_loop" or t[-1] - span < t[0] - 1e-9:
+            return cyc, cyc.contacts if cyc.contacts is not None else np.zeros((4, T), dtype=bool)
+        t0 = float(t[-1] - span)  # a loop may start anywhere: earlier, so that a whole period fits
+        info["t_start"] = t0
+    fps_eff = N / best_p
+    grid = resample(capture, fps_eff, start=t0)
+    if grid.T < T:
+        return cyc, cyc.contacts if cyc.contacts is not None else np.zeros((4, T), dtype=bool)
+    if contacts is None and grid.contacts is None:
+        contacts = detect_contacts(grid.character, grid.q, grid.fps)
+    elif contacts is not None:  # a schedule given on the requested grid: nearest frame in time
+        given = resample(capture, fps)
+        idx = np.clip(np.rint((grid.times - given.times[0]) * fps).astype(int), 0, given.T - 1)
+        contacts = np.asarray(contacts, dtype=bool)[:, idx]
+    else:
+        contacts = grid.contacts
+    sl = slice(0, T)
+    cc = np.asarray(contacts, dtype=bool)[:, sl]
+    info.update({"period_s": float(best_p), "fps": float(fps_eff), "fps_requested": float(fps),
+                 "frames_per_cycle": int(N)})
+    return _cycle_capture(grid, sl, cc, info), cc
 
 
 #: plausible walking cycle durations (s) searched by the best-loop cycle
@@ -230,3 +315,27 @@ def _extract_loop_cycle(cap: Capture, start: str, contacts: np.ndarray | None) -
     out = Capture(character=cap.character, q=u.q[:, sl], times=u.times[sl], frame=cap.frame, source=src,
                   contacts=cc, measured=None)
     return out, cc
+
+
+def close_loop(q: np.ndarray, *, keep_yaw: bool = True) -> np.ndarray:
+    """A captured cycle (n, T: frames T−2, T−1 one period after frames 0, 1) made periodic by
+    spreading its loop closure error linearly over the cycle: every coordinate but the root's
+    horizontal translation (and its yaw when ``keep_yaw``: a curve turns by its heading change)
+    loses the ramp (t / N) (q[N] − q[0]), N = T − 2, so frame N equals frame 0.
+
+    A captured cycle does not close: the overground walk's knee is 5° off after one period and
+    its cycle starts in swing, where the knee turns fastest. A periodic motion fitted to it puts
+    the whole mismatch between the overlap frames and the next (the tutor's knee turned 16° in
+    one frame, 472°/s); the ramp spreads it as a drift of a degree or two, the figure a looping
+    clip's blending spreads (as motion-graph and game-engine loops do)."""
+    q = np.array(q, dtype=float, copy=True)
+    T = q.shape[1]
+    N = T - 2
+    if N < 2:
+        return q
+    ramp = np.arange(T) / N
+    for i in range(q.shape[0]):
+        if i in (0, 1) or (i == 3 and keep_yaw):
+            continue
+        q[i] -= ramp * (q[i, N] - q[i, 0])
+    return q
