@@ -164,9 +164,10 @@ def gait_reference(tutor: Motion) -> dict[str, Any]:
     captured walk's figures (recorded in the tutor) and the tutor's own."""
     ref = tutor.provenance.get("gait_reference")
     capture = ref.get("capture") if isinstance(ref, Mapping) else None
+    fit = {"fit": ref["fit"]} if isinstance(ref, Mapping) and isinstance(ref.get("fit"), Mapping) else {}
     if tutor.contacts is None or not has_two_point_feet(tutor.character):
-        return {"capture": capture, "tutor": None}
-    return {"capture": capture, "tutor": jsonable(motion_figures(tutor))}
+        return {"capture": capture, "tutor": None, **fit}
+    return {"capture": capture, "tutor": jsonable(motion_figures(tutor)), **fit}
 
 
 def _motion(tutor: Motion, lam: float, target: Target, env: Environment, values: Mapping[str, float],

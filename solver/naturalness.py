@@ -41,18 +41,25 @@ from solver.motion import FEET, Motion, foot_schedule_of
 
 @dataclass(frozen=True)
 class NaturalnessLimits:
-    """Limits of the naturalness checks (BW = body weight). Sources: ``SOURCES``."""
+    """Limits of the naturalness checks (BW = body weight). Sources: ``SOURCES``.
 
-    clearance_m: float = 0.005  # swing: heel, toe and sole at least this above the ground
-    moving_speed: float = 0.75  # m/s: a swing point faster than this is "moving" (not landing)
+    Each limit lies outside what people do by a margin an optimum has no reason to reach: the
+    optimizer costs each feature toward the capture's own figure (``solver.spacetime``), and its
+    hard bounds, safety nets only, lie beyond these limits or at the model's."""
+
+    clearance_m: float = 0.009  # mid-swing: heel, toe and sole at least this above the ground (people: 13 ± 4 mm)
+    moving_speed: float = 1.0  # m/s: a swing point faster than this is in mid-swing (not lifting off or landing)
     pitch_load: float = 0.5  # BW: a foot carrying more than this ...
-    pitch_deg: float = 40.0  # ... is pitched (heel up) at most this
-    limit_band_deg: float = 1.0  # a coordinate within this of its model limit is "at" it
+    pitch_deg: float = 40.0  # ... is pitched (heel up or toe up) at most this
+    limit_band_deg: float = 3.0  # a coordinate within this of its model limit is "at" it
     limit_frames: int = 1  # frames a coordinate may spend at a limit in a cycle
+    joint_speed_deg_s: float = 450.0  # a joint coordinate's change between two frames, per second
     crossover_m: float = 0.03  # a loaded foot at most this far on the far side of the pelvis
     crossover_load: float = 0.1  # BW: "loaded"
     shared_load: float = 0.1  # BW: both feet carry at least this at some frame of a change of support
     fore_aft: float = 0.35  # BW per foot on level ground
+    fore_aft_band: float = 0.03  # BW: a fore-aft force changes sign when it crosses ±this
+    fore_aft_changes: int = 1  # braking → propulsion: sign changes per stance, level ground
     lateral: float = 0.15  # BW per foot on level ground (warning)
     lean_tol_deg: float = 2.0  # slopes: trunk lean against gravity vs the tutor's
     level_deg: float = 1.0  # ground within this of level (gravity direction), and no stairs, is "level ground"
@@ -65,6 +72,10 @@ class NaturalnessLimits:
     peak_vertical: float = 1.5  # BW per foot on level ground (warning)
     push: float = -0.05  # warning: a loaded foot's horizontal force along foot → centre of mass ≥ this × f_z × leg
     hump: float = 0.03  # BW: a loading peak / push-off peak stands this above the mid-stance valley
+    #: the capture's plates show a mid-stance valley when its peaks stand this far above it (BW): the
+    #: motion's valley (``hump``) is then a failure, not a warning
+    plates_hump: float = 0.1
+    fit_marker_rms_mm: float = 20.0  # the capture's fit: marker RMS at most this (a broken fit is no reference)
 
 
 #: where each limit comes from. "This project's" marks a limit the literature does not give as a
@@ -72,16 +83,26 @@ class NaturalnessLimits:
 #: captures and force plates show.
 SOURCES = {
     "swing_clearance": "Winter 1992, Phys Ther 72:45 (minimum toe clearance in swing 1.29 cm, variability ~4 mm); "
-                       "Begg et al. 2007, Gait Posture 25:191 (minimum foot clearance of young and elderly walkers)",
+                       "Begg et al. 2007, Gait Posture 25:191 (minimum foot clearance of young and elderly walkers); "
+                       "9 mm is 13 mm less one standard deviation",
     "foot_pitch_under_load": "Perry & Burnfield, Gait Analysis (the heel rises in terminal stance, after mid-stance "
-                             "has carried the weight on a flat foot); 40° at 0.5 BW is this project's limit",
+                             "has carried the weight on a flat foot; at heel strike the foot is ~20° toe-up and "
+                             "lowers within 0.1 s as the load comes on); 40° either way at 0.5 BW is this "
+                             "project's limit",
     "joint_limits": "the model's own joint limits (walking does not hold a joint at the end of its range)",
+    "joint_speed": "Winter, Biomechanics and Motor Control of Human Movement (the fastest joint in walking, the knee "
+                   "at toe-off and the ankle at push-off, turns at ~300-400°/s); a joint flapping between frames "
+                   "is faster",
     "crossover": "Donelan, Kram & Kuo 2001, Proc R Soc B 268:1985 (preferred step width 0.13 leg lengths); "
                  "Taylor, Dabnichki & Strike 2005, Hum Mov Sci 24:558 (step turns keep a wide base of support)",
     "shared_load": "Perry & Burnfield; Kirtley, Clinical Gait Analysis (double support ~10-12 % of the cycle at "
                    "each change of support, both feet loaded)",
     "fore_aft_force": "Winter, Biomechanics and Motor Control of Human Movement (fore-aft peaks ~±0.2 BW at "
                       "natural speed); the shared trials' force plates: -0.22 to +0.28 BW",
+    "fore_aft_pattern": "Winter; Kirtley (level walking: each stance brakes, then propels, the force crossing zero "
+                        "once near mid-stance)",
+    "fit_quality": "AddBiomechanics (Werling et al. 2023: marker RMS under 2 cm); OpenSim's best practice (marker "
+                   "errors 1-2 cm): a capture fitted worse is no reference for a walk",
     "lateral_force": "Winter; Kirtley (mediolateral force ≲ 0.1 BW); the shared trials' force plates: ≤ 0.12 BW",
     "vertical_force_shape": "Kirtley (a loading peak ~20 % above body weight, a mid-stance valley below it); Keller "
                             "et al. 1996, Clin Biomech 11:253 (~1.2 BW peaks in walking)",
@@ -244,8 +265,9 @@ def _clearance(w: _Walk, lim: NaturalnessLimits) -> dict[str, Any]:
 
 
 def _foot_pitch(w: _Walk, lim: NaturalnessLimits) -> tuple[np.ndarray, dict[str, Any] | None]:
-    """(2, T) each foot's heel-up pitch (deg: the heel–toe line's elevation against the ground),
-    and the largest pitch of a foot carrying more than ``pitch_load`` BW (None without forces)."""
+    """(2, T) each foot's heel-up pitch (deg: the heel–toe line's elevation against the ground;
+    negative: toe up), and the largest pitch either way of a foot carrying more than
+    ``pitch_load`` BW (None without forces)."""
     pitch = np.zeros((2, w.T))
     for k, side in enumerate(FEET):
         heel, toe = (w.character.contacts.index(c) for c in heel_toe(w.character, side))
@@ -256,9 +278,11 @@ def _foot_pitch(w: _Walk, lim: NaturalnessLimits) -> tuple[np.ndarray, dict[str,
     sel = w.loaded(lim.pitch_load)[:, w.distinct]
     if not sel.any():
         return pitch, {"max_deg": None, "at": None}
-    pv = pitch[:, w.distinct]
+    pv = np.abs(pitch[:, w.distinct])
     k, t = np.argwhere(sel)[np.argmax(pv[sel])]
-    return pitch, {"max_deg": float(pv[k, t]), "at": {"foot": FEET[k], "frame": int(t), "load_bw": float(w.fz[k, t])}}
+    return pitch, {"max_deg": float(pv[k, t]), "at": {"foot": FEET[k], "frame": int(t), "load_bw": float(w.fz[k, t]),
+                                                      "pitch_deg": float(pitch[k, t]),
+                                                      "way": "heel up" if pitch[k, t] >= 0 else "toe up"}}
 
 
 #: a hinge whose model range is at most this is not judged (nor kept off) at its limits: its whole
@@ -296,23 +320,48 @@ def _joint_limits(w: _Walk, lim: NaturalnessLimits) -> dict[str, Any]:
     return {"frames": frames, "max_frames": frames[worst] if worst else 0, "worst": worst}
 
 
+def _joint_speed(w: _Walk) -> dict[str, Any]:
+    """The fastest change of a joint coordinate (hinges, the root's six excluded) between two
+    consecutive frames of the cycle, in degrees per second: a joint flapping between frames."""
+    kinds = np.array(w.character.dof_kinds)
+    hinge = kinds == "hinge"
+    hinge[:6] = False
+    if not hinge.any():
+        return {"max_deg_s": None, "worst": None}
+    dq = np.degrees(np.abs(np.diff(w.q[:, : w.N + 1], axis=1))) / w.dt  # (n, N): frame k -> k+1
+    dq[~hinge] = 0.0
+    i, t = np.unravel_index(int(np.argmax(dq)), dq.shape)
+    return {"max_deg_s": float(dq[i, t]), "worst": {"coordinate": w.character.coordinate_names[i], "frame": int(t)}}
+
+
 def _placement(w: _Walk, lim: NaturalnessLimits) -> dict[str, Any]:
     """Where the feet stand against the pelvis and the direction of travel: how far a loaded
-    foot stands on the far side of the pelvis, the step width at each touch-down, and a loaded
-    foot's heading against the pelvis's."""
+    foot stands on the far side of the pelvis — across the direction of travel and across the
+    pelvis's own heading (a turn taken in the pelvis puts the inner foot on the path line) —, the
+    step width at each touch-down, and a loaded foot's heading against the pelvis's."""
     centre = np.stack([w.contacts_xyz[w.foot_points(s)].mean(axis=0) for s in FEET])  # (2, 3, T)
-    lateral = np.einsum("kit,it->kt", centre - w.q[None, :3], w.left)  # + to the left of the pelvis
-    far = np.stack([lateral[0], -lateral[1]])[:, w.distinct]  # the right foot's far side is its left
     sel = w.loaded(lim.crossover_load)[:, w.distinct]
+    rots, _ = segment_frames(w.character, w.q)
+    yaw = np.arctan2(rots[0, 1, 0], rots[0, 0, 0])  # the pelvis's heading
+    pelvis_left = np.stack([-np.sin(yaw), np.cos(yaw), np.zeros(w.T)])
+
+    def far_side(left: np.ndarray) -> float | None:
+        lateral = np.einsum("kit,it->kt", centre - w.q[None, :3], left)  # + to the left of the pelvis
+        far = np.stack([lateral[0], -lateral[1]])[:, w.distinct]  # the right foot's far side is its left
+        return float(far[sel].max()) if sel.any() else None
+
     widths = [float(abs(np.dot(centre[k, :, a % w.N] - centre[1 - k, :, a % w.N], w.left[:, a % w.N])))
               for k in range(2) for a, _ in _runs(w.B[k, : w.N]) if w.B[1 - k, a % w.N]]
     heading = np.zeros((2, w.T))
     for k, side in enumerate(FEET):
         heel, toe = (w.character.contacts.index(c) for c in heel_toe(w.character, side))
         d = w.contacts_xyz[toe, :2] - w.contacts_xyz[heel, :2]
-        heading[k] = np.degrees(np.angle(np.exp(1j * (np.arctan2(d[1], d[0]) - w.q[3]))))
+        heading[k] = np.degrees(np.angle(np.exp(1j * (np.arctan2(d[1], d[0]) - yaw))))
+    path, pelvis = far_side(w.left), far_side(pelvis_left)
+    both = [v for v in (path, pelvis) if v is not None]
     return {
-        "crossover": {"max_far_side_m": float(far[sel].max()) if sel.any() else None},
+        "crossover": {"max_far_side_m": max(both) if both else None, "across_path_m": path,
+                      "across_pelvis_m": pelvis},
         "step_width_m": widths,
         "foot_heading_deg": {"max_abs_loaded": float(np.abs(heading[:, w.distinct][sel]).max()) if sel.any()
                              else None},
@@ -385,6 +434,20 @@ def _loads(w: _Walk, lim: NaturalnessLimits, mu: float) -> dict[str, Any]:
             mid = x[int(0.25 * n): max(int(0.25 * n) + 1, math.ceil(0.75 * n))]
             shapes.append({"foot": FEET[k], "frames": n, "loading_peak_bw": float(np.max(x[: max(2, int(0.45 * n))])),
                            "valley_bw": float(np.min(mid)), "push_off_peak_bw": float(np.max(x[int(0.55 * n):]))})
+    patterns = []
+    for k in range(2):
+        for a, b in _runs(w.B[k, :N]):
+            x = fa[k, [t % N for t in range(a, b)]]
+            if np.any(np.isnan(x)):
+                continue
+            state, changes = 0, 0  # −1 braking, +1 propelling: a change crosses the whole ±band
+            for v in x:
+                now = 1 if v > lim.fore_aft_band else -1 if v < -lim.fore_aft_band else 0
+                if now and state and now != state:
+                    changes += 1
+                state = now or state
+            patterns.append({"foot": FEET[k], "frames": int(b - a), "sign_changes": changes,
+                             "braking_bw": float(min(x.min(), 0.0)), "propulsion_bw": float(max(x.max(), 0.0))})
     loaded = w.loaded(lim.friction_load)[:, :N]
     with np.errstate(invalid="ignore", divide="ignore"):
         rcof = np.linalg.norm(F[:, :2], axis=1)[:, :N] / F[:, 2, :N]
@@ -398,6 +461,8 @@ def _loads(w: _Walk, lim: NaturalnessLimits, mu: float) -> dict[str, Any]:
                       "vertical_max": extreme(fz[:, :N], np.max)},
         "shared_load": {"changes": shares, "min_bw": min((float(c["shared_bw"]) for c in shares), default=None)},
         "vertical_force_shape": shapes,
+        "fore_aft_pattern": {"stances": patterns,
+                             "max_sign_changes": max((p["sign_changes"] for p in patterns), default=None)},
         "required_friction": {"max": float(np.nanmax(np.where(loaded, rcof, 0.0))), "mu": float(mu)},
         "push": {"min": float(np.nanmin(np.where(loaded, push, np.inf))) if loaded.any() else None},
     }
@@ -431,7 +496,8 @@ def gait_figures(character, q: np.ndarray, fps: float, contacts: np.ndarray, *, 
     pitch, under_load = _foot_pitch(w, lim)
     out: dict[str, Any] = {"frames": int(N), "fps": float(fps), "weight_N": W,
                            "swing_clearance": _clearance(w, lim), "foot_pitch_deg": pitch[:, :N].round(2).tolist(),
-                           "joints_at_limits": _joint_limits(w, lim), **_placement(w, lim), **_posture(w, cyclic)}
+                           "joints_at_limits": _joint_limits(w, lim), "joint_speed": _joint_speed(w),
+                           **_placement(w, lim), **_posture(w, cyclic)}
     if under_load is not None:
         out["foot_pitch_under_load"] = under_load
         out.update(_loads(w, lim, mu))
@@ -457,24 +523,36 @@ def checks_of(fig: Mapping[str, Any], *, reference: Mapping[str, Any] | None = N
     tut = (reference or {}).get("tutor")
     level = fig["tilt_deg"] <= lim.level_deg and not fig.get("stairs")
     checks: list[Check] = []
+    fit = (reference or {}).get("fit")
+    if isinstance(fit, Mapping) and fit.get("marker_rms_mm") is not None:
+        checks.append(Check.measure(
+            "fit_quality", fit["marker_rms_mm"], lim.fit_marker_rms_mm, "mm",
+            "RMS distance between the capture's markers and the fitted skeleton's (the capture this walk keeps)",
+            source=SOURCES["fit_quality"]))
     checks.append(Check.measure(
         "swing_clearance", _get(fig, "swing_clearance", "min_m"), lim.clearance_m, "m",
-        f"lowest heel, toe or sole point of a swing foot moving faster than {lim.moving_speed:g} m/s",
+        f"lowest heel, toe or sole corner of a swing foot moving faster than {lim.moving_speed:g} m/s (mid-swing)",
         source=SOURCES["swing_clearance"], at_least=True, capture=_get(cap, "swing_clearance", "min_m")))
     if "foot_pitch_under_load" in fig:
         checks.append(Check.measure(
             "foot_pitch_under_load", _get(fig, "foot_pitch_under_load", "max_deg"), lim.pitch_deg, "deg",
-            f"largest heel-up pitch of a foot carrying more than {lim.pitch_load:g} BW",
+            f"largest pitch, heel up or toe up, of a foot carrying more than {lim.pitch_load:g} BW",
             source=SOURCES["foot_pitch_under_load"], capture=_get(cap, "foot_pitch_under_load", "max_deg")))
     checks.append(Check.measure(
         "joint_limits", fig["joints_at_limits"]["max_frames"], lim.limit_frames, "frames",
         f"frames a coordinate spends within {lim.limit_band_deg:g}° of its model limit"
         + (f" (worst: {fig['joints_at_limits']['worst']})" if fig["joints_at_limits"]["worst"] else ""),
         source=SOURCES["joint_limits"], capture=_get(cap, "joints_at_limits", "max_frames")))
+    js = fig.get("joint_speed") or {}
+    checks.append(Check.measure(
+        "joint_speed", js.get("max_deg_s"), lim.joint_speed_deg_s, "deg/s",
+        "fastest change of a joint coordinate between two frames"
+        + (f" (worst: {js['worst']['coordinate']})" if js.get("worst") else ""),
+        source=SOURCES["joint_speed"], capture=_get(cap, "joint_speed", "max_deg_s")))
     checks.append(Check.measure(
         "crossover", _get(fig, "crossover", "max_far_side_m"), lim.crossover_m, "m",
-        "furthest a loaded foot stands on the far side of the pelvis, across the direction of travel",
-        source=SOURCES["crossover"], capture=_get(cap, "crossover", "max_far_side_m")))
+        "furthest a loaded foot stands on the far side of the pelvis, across the direction of travel and "
+        "across the pelvis's heading", source=SOURCES["crossover"], capture=_get(cap, "crossover", "max_far_side_m")))
     if "shared_load" in fig:
         checks.append(Check.measure(
             "shared_load", _get(fig, "shared_load", "min_bw"), lim.shared_load, "BW",
@@ -498,11 +576,18 @@ def checks_of(fig: Mapping[str, Any], *, reference: Mapping[str, Any] | None = N
                  for s in fig.get("vertical_force_shape") or []]
         cap_humps = [min(s["loading_peak_bw"], s["push_off_peak_bw"]) - s["valley_bw"]
                      for s in (_get(cap, "vertical_force_shape") or [])]
+        plates_valley = bool(_get(cap, "plates")) and bool(cap_humps) and min(cap_humps) >= lim.plates_hump
         checks.append(Check.measure(
             "vertical_force_shape", min(humps) if humps else None, lim.hump, "BW",
-            "smallest height of a stance's loading or push-off peak above its mid-stance valley, level ground",
-            source=SOURCES["vertical_force_shape"], warning=True, at_least=True,
+            "smallest height of a stance's loading or push-off peak above its mid-stance valley, level ground"
+            + (" (the capture's plates show the valley)" if plates_valley else ""),
+            source=SOURCES["vertical_force_shape"], warning=not plates_valley, at_least=True,
             capture=min(cap_humps) if cap_humps else None, applies=level))
+        checks.append(Check.measure(
+            "fore_aft_pattern", _get(fig, "fore_aft_pattern", "max_sign_changes"), lim.fore_aft_changes, "changes",
+            f"most sign changes of a foot's fore-aft force within one stance (crossing ±{lim.fore_aft_band:g} BW), "
+            "level ground", source=SOURCES["fore_aft_pattern"],
+            capture=_get(cap, "fore_aft_pattern", "max_sign_changes"), applies=level))
         rf = fig["required_friction"]
         cap_rf = _get(cap, "required_friction", "max")
         checks.append(Check.measure(
