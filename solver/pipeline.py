@@ -27,7 +27,7 @@ from solver.capture import Capture, GroundFrame
 from solver.character import FULL_SUPERFLUOUS, LOWER_SUPERFLUOUS, Character, merge_segments
 from solver.contact import estimate_contact_wrenches
 from solver.environment import STANDARD_GRAVITY, STANDARD_GRAVITY_VECTOR
-from solver.gait import ensure_double_support, extract_cycle
+from solver.gait import close_loop, ensure_double_support, extract_cycle, tighten_contacts
 from solver.io.fit import CONTACT_INSET
 from solver.jsonable import jsonable
 from solver.kinematics import contact_points, markers, segment_frames
@@ -42,6 +42,13 @@ log = logging.getLogger(__name__)
 
 SYNTHESIS = ("halfboy", "fullbody")
 UPPER_ROOT_SEGMENTS = ("abdomen",)  # merging it lumps trunk, head and arms into the pelvis
+
+
+#: the tutor's weights: the simplification and the correction track the capture's own joint
+#: angles and pelvis rotations (1° weighs like 3 mm of marker distance, as MocoTrack tracks the
+#: coordinates of its IK), where the extrapolation's weak prior (``Weights()``: 0.1 rad like 1 mm)
+#: only steadies what its guide's markers leave unobserved
+TUTOR_WEIGHTS = Weights(coordinates=300.0, root_rotation=300.0)
 
 
 class PipelineError(ValueError):
@@ -152,12 +159,40 @@ def tutor_rig(capture: Capture, cyc: Capture, syn: Character, q_sim: np.ndarray,
     return cal.to_dict(animation=False)
 
 
+#: superfluous coordinates the full body keeps when the capture uses them (``used_coordinates``):
+#: the tibia's coupled rotation of an OpenSim knee, the subtalar joint and the ankle's rotation, the
+#: elbow's carrying angle and the forearm's pronation. Knee ab/adduction and the toes stay locked
+#: (a capture that bends its knees sideways has a bad fit, not a gait to keep)
+KEEP_WHEN_USED = ("knee_rotation", "ankle_inversion", "ankle_rotation", "elbow_adduction", "elbow_rotation",
+                  "wrist_rotation")
+#: a coordinate is used when its range over the cycle, or its mean, exceeds this (degrees)
+USED_DEG = 4.0
+
+
+def used_coordinates(capture_character: Character, q: np.ndarray) -> tuple[str, ...]:
+    """The ``KEEP_WHEN_USED`` coordinates the capture moves or holds away from zero over its cycle
+    (``q``: the cycle, two overlap frames last): locked at 0 they would be made up for by their
+    neighbours (an OpenSim walk's subtalar locked: the hip's rotation 9° off the capture)."""
+    N = q.shape[1] - 2 if q.shape[1] > 4 else q.shape[1]
+    out = []
+    for i, name in enumerate(capture_character.coordinate_names):
+        if name.rsplit("_", 1)[0] not in KEEP_WHEN_USED:
+            continue
+        x = np.degrees(q[i, :N])
+        if np.ptp(x) > USED_DEG or abs(float(np.mean(x))) > USED_DEG:
+            out.append(name)
+    return tuple(out)
+
+
 def synthesis_character(capture_character: Character, kind: str,
-                        pose: Mapping[str, float] | None = None) -> tuple[Character, Character]:
+                        pose: Mapping[str, float] | None = None,
+                        keep: tuple[str, ...] = ()) -> tuple[Character, Character]:
     """(synthesis character, capture character it is simplified from), same segments/markers.
 
     For HalfBoy the upper body is merged into the pelvis in ``pose`` (e.g. the subject's
     mean posture over the cycle: a walker leaning forward keeps the trunk's mass forward).
+    The full body keeps the superfluous coordinates named in ``keep`` (``used_coordinates``:
+    the ones the capture uses).
     """
     names = {s.name for s in capture_character.segments}
     if kind == "halfboy":
@@ -171,7 +206,7 @@ def synthesis_character(capture_character: Character, kind: str,
     if kind == "fullbody":
         if "abdomen" not in names:
             raise PipelineError("a full-body tutor needs a whole-body capture (this one has no upper body)")
-        locked = [c for c in FULL_SUPERFLUOUS if c in capture_character.coordinate_names]
+        locked = [c for c in FULL_SUPERFLUOUS if c in capture_character.coordinate_names and c not in keep]
         return capture_character.reduce(locked, name="fullbody"), capture_character
     raise PipelineError(f"unknown synthesis character {kind!r}; use one of {SYNTHESIS}")
 
@@ -181,7 +216,7 @@ def _select(src: Character, q: np.ndarray, dst: Character) -> np.ndarray:
 
 
 def simplify(capture_character: Character, q_capture: np.ndarray, synthesis: Character, fps: float,
-             *, weights: Weights = Weights(), max_iter: int = 500,
+             *, weights: Weights = TUTOR_WEIGHTS, max_iter: int = 500,
              should_cancel: Callable[[], bool] | None = None) -> SolveResult:
     """docs/method.md (M5.15), thesis Table 5.2: the synthesis character's motion closest to the capture's markers
     (superfluous coordinates locked at 0 = removed), cyclic, no forces. ``should_cancel()`` is
@@ -196,7 +231,7 @@ def simplify(capture_character: Character, q_capture: np.ndarray, synthesis: Cha
 
 def correct(synthesis: Character, q_sim: np.ndarray, contacts: np.ndarray, fps: float, *,
             init_wrenches: np.ndarray | None, env: Environment = Environment(),
-            weights: Weights = Weights(), max_iter: int = 1000, heading_change: float | None = None,
+            weights: Weights = TUTOR_WEIGHTS, max_iter: int = 1000, heading_change: float | None = None,
             prior_q: np.ndarray | None = None, should_cancel: Callable[[], bool] | None = None) -> SolveResult:
     """Table 5.3: physically plausible motion closest to the simplified one (the tutor);
     ``prior_q``: the joint angles the coordinates prior keeps it near (default: the simplified's);
@@ -347,21 +382,42 @@ def prepare_cycle(capture: Capture, *, character: str = "halfboy", fps: float = 
     stats: dict[str, Any] = {}
     t = time.perf_counter()
     cyc, contacts = extract_cycle(capture, fps, start=start, cycle=cycle)
+    fps = float((cyc.source.get("cycle") or {}).get("fps") or fps)  # the subject's own period over the cycle's frames
     contacts = np.array(contacts, dtype=bool)
     contacts[:, -2:] = contacts[:, :2]  # the overlap frames repeat frames 1-2
     mean_pose = dict(zip(capture.character.coordinate_names, np.mean(cyc.q[:, :-2], axis=1)))
     levelled, soles = sole_calibration(capture.character, cyc.q, contacts)
     if soles:
         stats["sole_calibration"] = soles
-    syn, cap_char = synthesis_character(levelled, character, pose=mean_pose)
+    keep = used_coordinates(capture.character, cyc.q) if character == "fullbody" else ()
+    if keep:
+        stats["kept_coordinates"] = list(keep)
+    syn, cap_char = synthesis_character(levelled, character, pose=mean_pose, keep=keep)
     stats["cycle_s"] = time.perf_counter() - t
     q_cap = _select(levelled, cyc.q, cap_char)
     q_cap, shift = contact_plane_calibration(cap_char, q_cap, contacts)
     stats["contact_plane_shift_mm"] = 1e3 * shift
+    contacts, lifted = tighten_contacts(cap_char, q_cap, contacts)
+    if lifted:
+        stats["contacts_lifted"] = lifted
     contacts, shared = ensure_double_support(cap_char, q_cap, contacts)
     if shared:
         stats["double_support_added"] = shared
     return PreparedCycle(cyc, contacts, syn, cap_char, q_cap, fps, stats)
+
+
+def fit_figures(capture: Capture) -> dict[str, Any] | None:
+    """The capture's skeleton fit as the tutor's gait reference records it (its marker RMS, mm, is
+    the naturalness check ``fit_quality``): the fit's verdict when the importer gave one, else its
+    landmark RMS; None when the capture was not fitted (a motion file)."""
+    fit = capture.source.get("fit")
+    if not isinstance(fit, Mapping):
+        return None
+    verdict = fit.get("verdict")
+    if isinstance(verdict, Mapping) and verdict.get("marker_rms_mm") is not None:
+        return dict(verdict)
+    rms = (fit.get("landmark_error_mm") or {}).get("rms") if isinstance(fit.get("landmark_error_mm"), Mapping) else None
+    return None if rms is None else {"marker_rms_mm": float(rms)}
 
 
 def _source_provenance(capture: Capture, cyc: Capture) -> dict[str, Any]:
@@ -374,13 +430,20 @@ def _simplified(prep: PreparedCycle, q: np.ndarray, source: Mapping[str, Any]) -
         "step": "simplify", "source": source, "lambda": None}))
 
 
+def closed_cycle(q_capture: np.ndarray) -> np.ndarray:
+    """The captured cycle the tutor tracks: periodic, its closure error spread over the cycle
+    (``solver.gait.close_loop``); the yaw's drift too on a straight walk (``STRAIGHT_WALK_DEG``)."""
+    turning = abs(math.degrees(float(q_capture[3, -2] - q_capture[3, 0]))) >= STRAIGHT_WALK_DEG
+    return close_loop(q_capture, keep_yaw=turning)
+
+
 def simplified_motion(source: Capture | Motion, *, character: str = "halfboy", fps: float = 15.0, cycle: int = 0,
-                      start: str = "auto", weights: Weights = Weights()) -> Motion:
+                      start: str = "auto", weights: Weights = TUTOR_WEIGHTS) -> Motion:
     """The simplified cycle alone (step "simplify": the capture's cycle fitted by the synthesis
     character, kinematics only, no forces), as ``make_tutor`` makes it before the correction."""
     capture = motion_capture(source) if isinstance(source, Motion) else source
     prep = prepare_cycle(capture, character=character, fps=fps, cycle=cycle, start=start)
-    simp = simplify(prep.capture_character, prep.q, prep.synthesis, fps, weights=weights)
+    simp = simplify(prep.capture_character, closed_cycle(prep.q), prep.synthesis, prep.fps, weights=weights)
     if not simp.success:
         raise PipelineError(f"simplification did not converge ({simp.status})")
     return _simplified(prep, simp.q, _source_provenance(capture, prep.cycle))
@@ -394,7 +457,7 @@ def make_tutor(
     cycle: int = 0,
     start: str = "auto",
     max_iter: int = 1000,
-    weights: Weights = Weights(),
+    weights: Weights = TUTOR_WEIGHTS,
     should_cancel: Callable[[], bool] | None = None,
 ) -> TutorResult:
     """import → cycle → simplify → estimate → correct. ``source`` is a Capture, or a motion of
@@ -417,10 +480,12 @@ def make_tutor(
         return stop
     prep = prepare_cycle(capture, character=character, fps=fps, cycle=cycle, start=start)
     stats.update(prep.stats)
+    fps = prep.fps  # the requested rate, adjusted so that the cycle's frames span the subject's period
     cyc, contacts, syn, cap_char, q_cap = prep.cycle, prep.contacts, prep.synthesis, prep.capture_character, prep.q
 
     t = time.perf_counter()
-    simp = simplify(cap_char, q_cap, syn, fps, weights=weights, should_cancel=should_cancel)
+    q_loop = closed_cycle(q_cap)  # what the tutor tracks: the captured cycle, its closure error spread
+    simp = simplify(cap_char, q_loop, syn, fps, weights=weights, should_cancel=should_cancel)
     stats["simplify"] = {"status": simp.status, "iterations": simp.iterations, "time_s": time.perf_counter() - t,
                          "marker_rms_mm": 1e3 * simp.marker_rms}
     if stop := canceled(stats, "simplification", simp):
@@ -447,7 +512,7 @@ def make_tutor(
     stats["heading_change_deg"] = {"capture": math.degrees(float(q_cap[3, -2] - q_cap[3, 0])),
                                    "simplified": math.degrees(float(q_sim[3, -2] - q_sim[3, 0])),
                                    "tutor": math.degrees(dpsi)}
-    q_joints = _select(cap_char, q_cap, syn)  # the capture's own angles: what the tutor keeps of its details
+    q_joints = _select(cap_char, q_loop, syn)  # the capture's own angles: what the tutor keeps of its details
     res = correct(syn, q_sim, contacts, fps, init_wrenches=w0, env=env, max_iter=max_iter, heading_change=dpsi,
                   weights=weights, prior_q=q_joints, should_cancel=should_cancel)
     attempts.append({"init": "estimated wrenches", "status": res.status, "iterations": res.iterations,
@@ -483,6 +548,7 @@ def make_tutor(
     # tutor's joints moved from the capture's, and its ground reactions against the plates
     stats["joint_rms_to_capture_deg"] = joint_rms_deg(syn, res.q, cap_char, q_cap)
     stats["joint_rms_simplified_to_capture_deg"] = joint_rms_deg(syn, q_sim, cap_char, q_cap)
+    stats["joint_rms_to_closed_cycle_deg"] = joint_rms_deg(syn, res.q, cap_char, q_loop)
     assert res.wrenches is not None  # a dynamic solve
     plates = against_plates(res.wrenches[:, 3:], cyc.measured, res.q, syn.total_mass * STANDARD_GRAVITY)
     if plates:
@@ -499,7 +565,8 @@ def make_tutor(
             "solver": {"name": "ipopt", "status": res.status, "iterations": res.iterations,
                        "time_s": res.wall_time},
             "pipeline": stats,
-            "gait_reference": {"capture": capture_figures(cap_char, q_cap, fps, contacts, cyc.measured)},
+            "gait_reference": {"capture": capture_figures(cap_char, q_cap, fps, contacts, cyc.measured),
+                               **({"fit": fit} if (fit := fit_figures(capture)) else {})},
             **({"rig": rig} if (rig := tutor_rig(capture, cyc, syn, q_sim, fps, stats)) is not None else {}),
         }),
     )
