@@ -42,6 +42,12 @@ What it does:
    limits are widened (5° margin) where the data exceed them, and the widening recorded.
 6. ``capture.source["fit"]``: landmark error (mm) overall and per landmark, orientation
    error (deg) per segment, widened limits, timings.
+7. **Quality** (:mod:`solver.io.fit_quality`): the track's markers registered on the fitted
+   skeleton (marker RMS overall, per marker, per segment), the anatomy's plausibility figures and
+   the verdict ``source["fit"]["verdict"]``. ``fit_tolerance_mm`` is the marker RMS limit (default
+   :data:`~solver.io.fit_quality.FIT_LIMIT_MM`, 20 mm); a verdict that is not ok raises
+   :class:`PoorFitError` for a track with markers (``accept_poor_fit=None``), never
+   (``True``: a warning) or always (``False``).
 """
 
 from __future__ import annotations

@@ -12,9 +12,10 @@ marker error, the anatomy's plausibility, and the verdict.
 * **Anatomy** (``anatomy``): what a fit with markers in the wrong place shows even when the RMS
   looks fine, because a marker set consistently wrong is registered consistently: knee
   hyperextension (most negative knee flexion), the range of knee ab/adduction (a knee whose
-  flexion axis is wrong bends sideways), hip rotation, and the heading of each foot in stance
-  against the walking path (the pelvis' travel, averaged over a second; its facing when it
-  travels less than 0.3 m/s).
+  flexion axis is wrong bends sideways), hip, knee and ankle rotation (a segment turned about its
+  long axis), the heading of each foot in stance against the walking path (the pelvis' travel,
+  averaged over a second; its facing when it travels less than 0.3 m/s), the pelvis' tilt from
+  upright and the left/right difference of segment lengths.
 * **Verdict** (``verdict``): ``ok`` when the marker RMS is within ``limit_mm`` (default
   :data:`FIT_LIMIT_MM`, AddBiomechanics' and OpenSim's 2 cm) and no anatomical figure is past its
   limit; ``problems`` says what is not. The fit refuses a capture whose verdict is not ok
@@ -22,7 +23,9 @@ marker error, the anatomy's plausibility, and the verdict.
 
 Limits (module constants, docs/import.md): :data:`FIT_LIMIT_MM` 20 mm marker RMS;
 :data:`KNEE_HYPEREXTENSION_LIMIT_DEG` 10°; :data:`KNEE_ADDUCTION_RANGE_LIMIT_DEG` 30°;
-:data:`HIP_ROTATION_LIMIT_DEG` 50°; :data:`FOOT_HEADING_LIMIT_DEG` 40°.
+:data:`HIP_ROTATION_LIMIT_DEG` 50°; :data:`AXIAL_ROTATION_LIMIT_DEG` 75° (knee, ankle);
+:data:`FOOT_HEADING_LIMIT_DEG` 40°; :data:`PELVIS_TILT_LIMIT_DEG` 45°;
+:data:`LENGTH_ASYMMETRY_LIMIT_PCT` 10 % (thigh, shank), 25 % (foot).
 """
 
 from __future__ import annotations
