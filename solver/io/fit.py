@@ -452,7 +452,8 @@ def _judge(report: dict, ch, q: np.ndarray, times: np.ndarray, track: SkeletonTr
         msg += ". Markers on what does not fit: " + ", ".join(f"{r}={lbl}" for lbl, r in blame.items())
     refuse = bool(track.markers) if accept is None else not accept
     if not refuse:
-        log.warning("%s (imported as asked: its tutors are never natural)", msg)
+        log.warning("%s (imported %s: the verdict says not ok, so its tutors are never natural)", msg,
+                    "as asked" if accept else "anyway: the source has no markers")
         return
     raise PoorFitError(
         msg + ". A marker in the wrong role (swapped sides, lateral for medial, a mislabelled or misplaced marker) "
