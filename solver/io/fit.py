@@ -42,6 +42,12 @@ What it does:
    limits are widened (5° margin) where the data exceed them, and the widening recorded.
 6. ``capture.source["fit"]``: landmark error (mm) overall and per landmark, orientation
    error (deg) per segment, widened limits, timings.
+7. **Quality** (:mod:`solver.io.fit_quality`): the track's markers registered on the fitted
+   skeleton (marker RMS overall, per marker, per segment), the anatomy's plausibility figures and
+   the verdict ``source["fit"]["verdict"]``. ``fit_tolerance_mm`` is the marker RMS limit (default
+   :data:`~solver.io.fit_quality.FIT_LIMIT_MM`, 20 mm); a verdict that is not ok raises
+   :class:`PoorFitError` for a track with markers (``accept_poor_fit=None``), never
+   (``True``: a warning) or always (``False``).
 """
 
 from __future__ import annotations
@@ -49,6 +55,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
@@ -67,16 +74,24 @@ from solver.character import (
 )
 from solver.errors import InputError
 from solver.io.fit_ik import _solve_ik, _widen_limits, decompose_hinges
+from solver.io.fit_quality import FIT_LIMIT_MM, anatomy, marker_figures, verdict
 from solver.io.track import LOWER_LANDMARKS, UPPER_LANDMARKS, SkeletonTrack
 
 log = logging.getLogger(__name__)
 
-__all__ = ["SEGMENT_LANDMARKS", "FitError", "decompose_hinges", "fit_track"]
+__all__ = ["FIT_LIMIT_MM", "SEGMENT_LANDMARKS", "FitError", "PoorFitError", "decompose_hinges", "fit_track"]
 
 
 class FitError(InputError):
     """The track cannot be fitted (missing data, unknown mass, ...); the message says why
     (``parameter`` names the argument that would fix it, e.g. "mass")."""
+
+
+class PoorFitError(FitError):
+    """The fit is not to be trusted: its marker RMS exceeds the limit (``fit_tolerance_mm``,
+    default :data:`~solver.io.fit_quality.FIT_LIMIT_MM`) or its anatomy is implausible (knees
+    bending sideways or hyperextended, hips rotated, feet off the path). The message names the
+    problems and the markers on the segments concerned."""
 
 
 SIDES = ("r", "l")
@@ -302,10 +317,13 @@ def _masses(track: SkeletonTrack, segs: list[str], lower_topology: bool) -> tupl
 
 
 def fit_track(
-    track: SkeletonTrack, *, lower_only: bool | None = None, orientation_weight: float = 0.05
+    track: SkeletonTrack, *, lower_only: bool | None = None, orientation_weight: float = 0.05,
+    fit_tolerance_mm: float = FIT_LIMIT_MM, accept_poor_fit: bool | None = None,
 ) -> Capture:
     """Build the subject's capture skeleton and solve IK for every frame (see module doc)."""
     t_start = time.perf_counter()
+    if not (isinstance(fit_tolerance_mm, (int, float)) and fit_tolerance_mm > 0):
+        raise FitError(f"fit_tolerance_mm must be a positive number of mm, got {fit_tolerance_mm!r}")
     times, lm, ori = _check_track(track)
     T = times.size
     has_upper = track.has_upper_body
@@ -383,6 +401,7 @@ def fit_track(
         "ik_ms_per_frame": round(1e3 * solve_s / T, 3),
         "ik_setup_s": round(t_done - t_ik - solve_s, 4),
     })
+    _judge(report, ch, q, times, track, attach, fit_tolerance_mm, accept_poor_fit)
     source = dict(track.source or {})
     source.pop("segment_inertias", None)
     source["fit"] = report
@@ -394,6 +413,53 @@ def fit_track(
         raise FitError(f"track.contacts must be (4, T={T}) (heel_r, toe_r, heel_l, toe_l), got {contacts_sched.shape}")
     return Capture(character=ch, q=q, times=times, frame=track.frame, source=source,
                    contacts=contacts_sched, measured=track.measured)
+
+
+def _judge(report: dict, ch, q: np.ndarray, times: np.ndarray, track: SkeletonTrack, attach: dict,
+           limit_mm: float, accept: bool | None) -> None:
+    """The fit's figures and verdict into ``report`` (:mod:`solver.io.fit_quality`); a
+    :class:`PoorFitError` when the verdict is not ok — by default for a track with markers, whose
+    fit is ours to vouch for (``accept``: True never, False always)."""
+    figures = marker_figures(ch, q, track.markers)
+    anat = anatomy(ch, q, times)
+    ik = dict((track.source or {}).get("ik") or {})
+    rms, on = None, "no markers in the source: anatomy only"
+    if figures:
+        on = "the file's markers, registered on the fitted skeleton"
+        report.update(figures)
+    else:
+        if ik.get("marker_error_mm"):
+            rms, on = round(float(ik["marker_error_mm"]["rms"]), 2), "OpenSim inverse kinematics of the model's markers"
+        per_lm = report["per_landmark_mm"]
+        by_seg: dict[str, list[float]] = {}
+        for name, (seg, _) in attach.items():
+            if name in per_lm:
+                by_seg.setdefault(seg, []).append(per_lm[name]["rms"])
+        report["marker_rms_mm"] = rms
+        report["per_segment_mm"] = {k: round(float(np.sqrt(np.mean(np.square(v)))), 2)
+                                    for k, v in sorted(by_seg.items())}
+        report["per_segment_from"] = "landmarks"
+    report["anatomy"] = anat
+    v = verdict(figures, anat, limit_mm=float(limit_mm), marker_rms_mm=rms, measured_on=on, markers=track.markers)
+    blame = v.pop("blame")
+    report["verdict"] = v
+    if v["ok"]:
+        return
+    src = track.source or {}
+    name = Path(str(src["path"])).name if src.get("path") else f"the {src.get('format') or 'input'} trial"
+    msg = f"{name}: the fit cannot be trusted: " + "; ".join(v["problems"])
+    if blame:
+        msg += ". Markers on what does not fit: " + ", ".join(f"{r}={lbl}" for lbl, r in blame.items())
+    refuse = bool(track.markers) if accept is None else not accept
+    if not refuse:
+        log.warning("%s (imported %s: the verdict says not ok, so its tutors are never natural)", msg,
+                    "as asked" if accept else "anyway: the source has no markers")
+        return
+    raise PoorFitError(
+        msg + ". A marker in the wrong role (swapped sides, lateral for medial, a mislabelled or misplaced marker) "
+        "does this: check those markers and map them (docs/c3d.md); accept_poor_fit=True imports the trial anyway "
+        "(its tutors are then never natural), fit_tolerance_mm= raises the marker RMS limit",
+        parameter="markers" if track.markers else None)
 
 
 def _geometry(ref, segs, lm, F, origin, height, full_geometry):

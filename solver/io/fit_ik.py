@@ -150,7 +150,8 @@ def _solve_ik(ch, times, lm, F, origin, ori, attach, w_ori):
     for i, (name, _, _) in enumerate(att):
         e = np.linalg.norm(pts_all[i] - lm[name], axis=0) * 1e3
         e = e[np.isfinite(e)]
-        per[name] = {"mean": round(float(e.mean()), 2), "max": round(float(e.max()), 2)}
+        per[name] = {"mean": round(float(e.mean()), 2), "max": round(float(e.max()), 2),
+                     "rms": round(float(np.sqrt(np.mean(e**2))), 2)}
         all_err.append(e)
     cat = np.concatenate(all_err)
 

@@ -2,8 +2,9 @@
 
 :func:`describe` (JSON-ready): the subject mass used and where it comes from, the mass the
 force plates imply (:mod:`solver.io.mass`) and a warning when the two differ by more than
-5 %, the marker fit error (OpenSim inverse kinematics of a ``.trc``) and the landmark fit
-error of our capture skeleton, and the contact schedule as stance intervals per foot (s).
+5 %, the marker fit error (OpenSim inverse kinematics of a ``.trc``; a C3D trial's own markers
+registered on the fitted skeleton), the fit's verdict (``solver.io.fit_quality``) and the landmark
+fit error of our capture skeleton, and the contact schedule as stance intervals per foot (s).
 ``motionx grf``, ``motionx tutor`` and the upload response print it.
 """
 
@@ -106,6 +107,11 @@ def describe(capture: Any, *, contacts: np.ndarray | None = None, contacts_from:
         out["marker_fit"] = "OpenSim inverse kinematics of " + str(src["ik"].get("trc", "the .trc")).rsplit("/", 1)[-1]
     elif src.get("marker_error_mm") is not None:
         out["marker_fit_error_mm"] = _round(src.get("marker_error_mm"), 1)
+    elif fit.get("marker_error_mm") is not None:  # C3D: the file's markers on the fitted skeleton
+        out["marker_fit_error_mm"] = _round(fit["marker_error_mm"], 1)
+        out["marker_fit"] = "the file's markers registered on the fitted skeleton"
+    if fit.get("verdict") is not None:
+        out["fit_verdict"] = dict(fit["verdict"])
     if fit.get("landmark_error_mm") is not None:
         out["landmark_fit_error_mm"] = _round(fit["landmark_error_mm"], 2)
     if src.get("ignored_columns"):

@@ -14,6 +14,10 @@ Landmark names (a reader provides what its source has; lower body is required):
     (and _l), lumbar, neck (base of the head), head_top, sternum, shoulder_r, elbow_r,
     wrist_r, hand_r (and _l)
 
+Markers (optional, readers of marker data: C3D) are the file's own markers, each with the
+segment it sits on (:class:`TrackMarker`); the fit registers them on the fitted skeleton and
+reports how closely it follows them (``solver.io.fit_quality``).
+
 Segment orientations (optional) use our segment axes (x forward, y left, z up when the
 subject stands in the neutral pose), keyed by our segment names: pelvis, thigh_r, shank_r,
 foot_r, toes_r, abdomen, thorax, head, clavicle_r, upper_arm_r, forearm_r, hand_r, ...
@@ -38,6 +42,17 @@ UPPER_LANDMARKS = ("lumbar", "neck", "head_top", "sternum") + tuple(
 
 
 @dataclass(frozen=True, eq=False)
+class TrackMarker:
+    """One of the file's markers: the segment it sits on (our segment name), its trajectory (3, T)
+    in our world frame (metres, NaN where it is not seen) and the role it plays (``"LKNE"``; empty
+    for a marker no role names)."""
+
+    segment: str
+    xyz: np.ndarray
+    role: str = ""
+
+
+@dataclass(frozen=True, eq=False)
 class SkeletonTrack:
     times: np.ndarray  # (T,) s
     landmarks: Mapping[str, np.ndarray]  # name -> (3, T), our world frame, metres
@@ -49,6 +64,7 @@ class SkeletonTrack:
     measured: MeasuredGRF | None = None
     contacts: np.ndarray | None = None  # (4, T) heel_r, toe_r, heel_l, toe_l when plates tell
     source: Mapping[str, Any] = field(default_factory=dict)
+    markers: Mapping[str, TrackMarker] = field(default_factory=dict)  # file label -> marker
 
     def __post_init__(self) -> None:
         t = np.asarray(self.times, dtype=float)
@@ -59,6 +75,9 @@ class SkeletonTrack:
         for name, r in self.orientations.items():
             if np.asarray(r).shape != (3, 3, T):
                 raise ValueError(f"orientation {name!r} must be (3, 3, T={T}), got {np.asarray(r).shape}")
+        for name, m in self.markers.items():
+            if np.asarray(m.xyz).shape != (3, T):
+                raise ValueError(f"marker {name!r} must be (3, T={T}), got {np.asarray(m.xyz).shape}")
         missing = [n for n in LOWER_LANDMARKS if n not in self.landmarks]
         if missing:
             raise ValueError(f"track lacks lower-body landmarks {missing}")

@@ -33,6 +33,21 @@ def _chord(delta: float, joint: np.ndarray, wand: np.ndarray, lateral: np.ndarra
     return lateral + along * wh + across * e
 
 
+#: largest angle (deg) between a wand's offset from the segment (proximal centre -> lateral marker)
+#: and the body's lateral direction for PiG's chord: a wand that stands forward (some Helen Hayes
+#: exports put it on the front of the thigh) would put the joint centre behind the joint
+WAND_MAX_TURN_DEG = 45.0
+
+
+def _wand_turn(wand: np.ndarray, proximal: np.ndarray, lateral: np.ndarray, outward: np.ndarray) -> float:
+    """Median angle (deg) between the wand's offset from the line proximal -> lateral marker and
+    the outward (lateral) direction, both ⟂ that line."""
+    axis = _unit(lateral - proximal)
+    off = _unit(_perp(wand - proximal, axis))
+    out = _unit(_perp(outward, axis))
+    return float(np.degrees(np.arccos(np.clip(np.nanmedian(np.sum(off * out, axis=0)), -1.0, 1.0))))
+
+
 def _medial_shift(lateral: np.ndarray, axis_to: np.ndarray, medial_dir: np.ndarray, delta: float) -> np.ndarray:
     """Without a wand or medial marker: shift medially, orthogonal to the segment axis."""
     seg = _unit(axis_to - lateral)
@@ -46,6 +61,7 @@ class _Built:
     notes: list[str]
     markers_used: dict[str, str]
     upper_body: dict[str, str]  # part -> "markers" or how it was modelled
+    marker_xyz: dict[str, np.ndarray]  # label of each marker used -> (3, T) in our frame (short gaps filled)
 
 
 def _landmarks(mk: _Markers, R: np.ndarray, floor: float, sp: SubjectParams, height_est: float,
@@ -128,7 +144,11 @@ def _landmarks(mk: _Markers, R: np.ndarray, floor: float, sp: SubjectParams, hei
                 notes.append(f"{S} {what} width estimated {width:.3f} m ({frac} H)")
             delta = width / 2 + mr
             if wand is not None:
-                return _chord(delta, proximal, wand, lateral)
+                turn = _wand_turn(wand, proximal, lateral, -medial_dir)
+                if turn <= WAND_MAX_TURN_DEG:
+                    return _chord(delta, proximal, wand, lateral)
+                notes.append(f"{S}{wand_role} not used for the {what} centre: it stands {turn:.0f}° from lateral "
+                             f"(more than {WAND_MAX_TURN_DEG:g}°; the chord would put the centre behind the {what})")
             return _medial_shift(lateral, proximal, medial_dir, delta)
 
         knee = centre(kne, "KNM", "THI", sp.knee_width[s], 0.065, hip, "knee")
@@ -162,7 +182,7 @@ def _landmarks(mk: _Markers, R: np.ndarray, floor: float, sp: SubjectParams, hei
         if modelled:
             notes.append("upper body " + "; ".join(modelled))
             log.info("%s: upper body %s", name, "; ".join(modelled))
-    return _Built(lm, ori, notes, used, how)
+    return _Built(lm, ori, notes, used, how, {lbl: filled[lbl] for lbl in used.values()})
 
 
 def _back_of_pelvis(marker: Callable[..., np.ndarray | None], mk: _Markers) -> np.ndarray:

@@ -48,13 +48,13 @@ _ROLE_LIST = (
           "KNEELATERAL", "LATEPI")),
     Role("KNM", True, "medial femoral epicondyle (knee)",
          ("KNM", "KNEM", "MKNE", "KNI", "MEK", "FME", "MFE", "MFC", "MEPI", "KNEEMED", "MEDKNEE", "KNEEMEDIAL",
-          "MEDEPI")),
+          "MEDEPI", "KNEIN", "KNEEIN")),
     Role("TRO", True, "greater trochanter", ("TRO", "FTC", "GTR", "TROC", "GT", "TROCH")),
-    Role("TIB", True, "tibia wand (lateral shank)", ("TIB", "TIBL", "TBL", "TI", "SHANK", "TIBW")),
+    Role("TIB", True, "tibia wand (lateral shank)", ("TIB", "TIBL", "TBL", "TI", "SHANK", "TIBW", "SHA")),
     Role("ANK", True, "lateral malleolus (ankle)",
          ("ANK", "ANKL", "LMAL", "LM", "FAL", "LMA", "LATMAL", "ANKLELAT", "ANKLAT", "MALL")),
     Role("MED", True, "medial malleolus (ankle)",
-         ("MED", "MMAL", "MM", "TAM", "MMA", "MEDMAL", "ANKLEMED", "ANKMED", "ANM", "ANKM")),
+         ("MED", "MMAL", "MM", "TAM", "MMA", "MEDMAL", "ANKLEMED", "ANKMED", "ANM", "ANKM", "ANKIN", "ANKLEIN")),
     # foot
     Role("HEE", True, "calcaneus (heel)", ("HEE", "HEEL", "CAL", "FCC", "HEL", "CALC")),
     Role("TOE", True, "2nd metatarsal head (toe)", ("TOE", "MT2", "FM2", "SMH", "TOES", "MET2")),
@@ -79,6 +79,34 @@ _ROLE_LIST = (
 )
 #: role name -> :class:`Role`
 ROLES: dict[str, Role] = {r.name: r for r in _ROLE_LIST}
+
+#: role -> the segment its marker sits on (sided roles: ``_r`` / ``_l`` appended); what the fit
+#: registers each marker on (``solver.io.fit_quality``)
+ROLE_SEGMENT: dict[str, str] = {
+    "ASI": "pelvis", "PSI": "pelvis", "SACR": "pelvis",
+    "THI": "thigh", "KNE": "thigh", "KNM": "thigh", "TRO": "thigh",
+    "TIB": "shank", "ANK": "shank", "MED": "shank",
+    "HEE": "foot", "TOE": "foot", "MT1": "foot", "MT5": "foot",
+    "C7": "thorax", "T10": "thorax", "CLAV": "thorax", "STRN": "thorax",
+    "FHD": "head", "BHD": "head", "SHO": "clavicle",
+    "ELB": "upper_arm", "ELM": "upper_arm", "WRA": "forearm", "WRB": "forearm", "FIN": "hand", "FI5": "hand",
+}
+
+#: lateral role -> its medial partner: two markers of the file under one lateral label (a
+#: four-character export: ``RKNE`` twice) are the pair, told apart by their distance from the
+#: pelvis' mid-plane
+MEDIAL_PARTNER = {"KNE": "KNM", "ANK": "MED", "ELB": "ELM"}
+_CENTRAL_SEGMENTS = ("pelvis", "thorax", "head")
+
+
+def role_segment(key: str) -> str:
+    """The segment of a role key (``"LKNE"`` -> ``"thigh_l"``, ``"C7"`` -> ``"thorax"``)."""
+    parsed = _parse_key(key)
+    if parsed is None:
+        raise C3DError(f"unknown role {key!r}")
+    role, side = parsed
+    base = ROLE_SEGMENT[role]
+    return f"{base}_{side.lower()}" if side and base not in _CENTRAL_SEGMENTS else base
 
 #: roles every trial needs (sided ones on both sides); TOE may be MT1 + MT5, PSI may be SACR
 REQUIRED = ("ASI", "KNE", "ANK", "HEE")
@@ -111,6 +139,16 @@ MARKER_SETS: tuple[MarkerSet, ...] = (
                      "{s}FCC", "{s}FM1", "{s}FM2", "{s}FM5", "{s}HDF", "{s}HDB", "{s}SAJ", "{s}HLE", "{s}HME",
                      "{s}RSP", "{s}UHE", "{s}USP", "{s}HM2", "{s}HM5") + ("CV7", "TV8", "TV10", "SJN", "SNJ",
                                                                           "SXS", "PX")),
+    MarkerSet("Clusters + anatomical (OpenSim / Stanford)",
+              "thigh and shank clusters with femoral condyles and malleoli on both sides (opensim-core's "
+              "walking C3D trials)",
+              _sided("{s}ASI", "{s}PSI", "{s}LFC", "{s}MFC", "{s}LMAL", "{s}MMAL", "{s}CAL", "{s}MT1", "{s}MT2",
+                     "{s}TH1", "{s}TH2", "{s}TH3", "{s}TB1", "{s}TB2", "{s}TB3", "{s}FHD", "{s}BHD")
+              + ("C7", "T10", "CLAV", "STRN")),
+    MarkerSet("Davis (BTS SMART / Elite)", "Davis et al. 1991 as BTS writes it: wands (bars), lateral markers, "
+              "5th metatarsal head; no heel marker",
+              _sided("{s}ASI", "{s}ASIS", "{s}THI", "{s}THIGH", "{s}BAR1", "{s}BAR2", "{s}KNE1", "{s}KNE2",
+                     "{s}KNEE1", "{s}KNEE2", "{s}MALL", "{s}MET", "{s}SHOULD") + ("SACR", "SACRUM", "C7")),
 )
 
 _SEP = re.compile(r"[\s_.\-]+")
@@ -213,6 +251,17 @@ def parse_mapping(spec: str | Path | Mapping[str, str] | None) -> dict[str, str]
     return out
 
 
+def _unique_labels(labels: Sequence[str]) -> tuple[str, ...]:
+    """The labels, the second and later uses of one made ``LABEL#2``, ``LABEL#3``, ..."""
+    seen: dict[str, int] = {}
+    out = []
+    for lbl in labels:
+        n = seen.get(lbl, 0) + 1
+        seen[lbl] = n
+        out.append(lbl if n == 1 else f"{lbl}#{n}")
+    return tuple(out)
+
+
 def _parse_key(key: str) -> tuple[str, str | None] | None:
     if key in ROLES and not ROLES[key].sided:
         return key, None
@@ -226,11 +275,12 @@ class _Markers:
 
     def __init__(self, raw: _Raw, mapping: Mapping[str, str] | None = None) -> None:
         self.name = raw.path.name
-        self.labels = raw.labels
-        self._index: dict[str, int] = {}
-        for i, lbl in enumerate(raw.labels):
-            self._index.setdefault(lbl, i)
+        # a label the file uses twice or more: the later markers are LABEL#2, LABEL#3, ...
+        self.labels = _unique_labels(raw.labels)
+        self._index: dict[str, int] = {lbl: i for i, lbl in enumerate(self.labels)}
         self._pts = raw.points
+        self.notes: list[str] = []
+        self._auto: dict[tuple[str, str | None], str] = {}
         self._seen = {lbl: bool(np.isfinite(raw.points[:, i]).any()) for lbl, i in self._index.items()}
         self.marker_set = detect_marker_set(raw.labels)
         self.mapping: dict[tuple[str, str | None], str] = {}
@@ -242,19 +292,51 @@ class _Markers:
                 lbl = _clean_label(lbl)
                 if lbl not in self._index:
                     raise C3DError(f"{self.name}: marker mapping {key}={lbl}: no marker {lbl!r} in the file "
-                                   f"(labels: {', '.join(raw.labels)})")
+                                   f"(labels: {', '.join(self.labels)})")
             self.mapping[role_side] = lbl
         # label readings, once
         self._by_reading: dict[tuple[str | None, str], str] = {}
-        for lbl in raw.labels:
+        for lbl in self.labels:
             for rd in _readings(lbl):
                 self._by_reading.setdefault(rd, lbl)
+        self._split_duplicates()
+
+    def _split_duplicates(self) -> None:
+        """Two markers under one lateral label (``RKNE`` and ``RKNE#2``: exports that cut labels
+        to four characters write the medial marker under the lateral one's name) are the lateral
+        and medial pair: the one nearer the pelvis' mid-plane (through mid-ASIS, normal along
+        RASI -> LASI) is medial."""
+        asis = [self.find("ASI", s) for s in ("R", "L")]
+        if not all(asis):
+            return
+        ra, la = (self.get(a) for a in asis if a)
+        normal = la - ra
+        with np.errstate(invalid="ignore", divide="ignore"):  # frames where an ASIS is not seen: NaN
+            normal = normal / np.linalg.norm(normal, axis=0)
+        mid = 0.5 * (la + ra)
+        for role, partner in MEDIAL_PARTNER.items():
+            for side in ("R", "L"):
+                if any(k in self.mapping for k in ((role, side), (partner, side))) or self.find(partner, side):
+                    continue
+                first = self.find(role, side)
+                twin = f"{first}#2"
+                if first is None or not self._seen.get(twin):
+                    continue
+                d = [float(np.nanmedian(np.abs(np.sum((self.get(x) - mid) * normal, axis=0))))
+                     for x in (first, twin)]
+                lateral, medial = (first, twin) if d[0] >= d[1] else (twin, first)
+                self._auto[(role, side)], self._auto[(partner, side)] = lateral, medial
+                self.notes.append(f"two markers labelled {first}: {lateral} ({max(d) * 1e3:.0f} mm from the pelvis' "
+                                  f"mid-plane) taken as {side}{role}, {medial} ({min(d) * 1e3:.0f} mm) as "
+                                  f"{side}{partner}")
 
     def find(self, role: str, side: str | None = None) -> str | None:
         side = side.upper() if side else None
         if (role, side) in self.mapping:
             lbl = self.mapping[(role, side)]
             return lbl if lbl and self._seen.get(lbl) else None
+        if (role, side) in self._auto:
+            return self._auto[(role, side)]
         r = ROLES[role]
         for core in r.names:
             found = self._by_reading.get((side if r.sided else None, core))

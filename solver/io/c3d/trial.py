@@ -14,13 +14,13 @@ from solver.capture import Capture, GroundFrame
 from solver.io.c3d.axes import _axes_text, _detect_axes
 from solver.io.c3d.events import _feet_and_plates
 from solver.io.c3d.landmarks import _height_estimate, _landmarks
-from solver.io.c3d.markers import _Markers, parse_mapping, required_markers
+from solver.io.c3d.markers import _Markers, parse_mapping, required_markers, role_segment
 from solver.io.c3d.plates import PlateSignal, _plate_signals, _plate_specs
 from solver.io.c3d.reader import FEET, C3DError, G, _mid, _param, _read_raw, _strings, _subject_params, fill_gaps
 from solver.io.fit import fit_track
 from solver.io.mass import implied_mass, mass_warning
 from solver.io.readers import one_file
-from solver.io.track import SkeletonTrack
+from solver.io.track import SkeletonTrack, TrackMarker
 
 log = logging.getLogger("solver.io.c3d")
 
@@ -98,7 +98,7 @@ def read_c3d_trial(path: str | Path, *, mass: float | None = None, require_plate
         "point_rate": raw.point_rate, "analog_rate": raw.analog_rate, "point_unit_m": raw.unit_m,
         "frames_kept": (first, last), "axes": axes_info, "floor_m": floor, "markers": built.markers_used,
         "marker_set": mk.marker_set, "upper_body": built.upper_body,
-        "notes": built.notes, "height_estimate_m": height_est,
+        "notes": mk.notes + built.notes, "height_estimate_m": height_est,
         "manufacturer": _strings(_param(raw.params, "MANUFACTURER", "COMPANY"))[:1],
     }
     measured = contacts = None
@@ -152,6 +152,8 @@ def read_c3d_trial(path: str | Path, *, mass: float | None = None, require_plate
     track = SkeletonTrack(
         times=times, landmarks=lm, orientations=built.orientations, frame=frame, mass=m,
         height=sp.height, measured=measured, contacts=contacts, source=source,
+        markers={lbl: TrackMarker(role_segment(key), built.marker_xyz[lbl], key)
+                 for key, lbl in built.markers_used.items()},
     )
     return C3DTrial(track=track, plates=plates)
 
