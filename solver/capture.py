@@ -121,6 +121,11 @@ class Capture:
     #: the input's own skeleton and its animation at ``times`` (:class:`solver.rig.Rig`), when it
     #: has one (BVH, skinned glTF, DeepMimic): what results are written back onto
     rig: Any = None
+    #: a gait cycle cut from a longer trial: (n, W) the captured frames just before its first and
+    #: (n, W) just after its last, at its rate (``solver.gait.extract_cycle``): what closes its loop
+    #: (``solver.gait.close_loop``)
+    lead_in: np.ndarray | None = None
+    lead_out: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         q = np.asarray(self.q, dtype=float)
@@ -135,6 +140,13 @@ class Capture:
         object.__setattr__(self, "times", _frozen(t))
         if self.contacts is not None:
             object.__setattr__(self, "contacts", _frozen(self.contacts, dtype=bool))
+        for name in ("lead_in", "lead_out"):
+            lead = getattr(self, name)
+            if lead is not None:
+                lead = np.asarray(lead, dtype=float)
+                if lead.ndim != 2 or lead.shape[0] != self.character.n:
+                    raise ValueError(f"capture {name} must be (n={self.character.n}, W), got {lead.shape}")
+                object.__setattr__(self, name, _frozen(lead))
         object.__setattr__(self, "source", dict(self.source))
 
     @property

@@ -30,7 +30,7 @@ from solver.environment import STANDARD_GRAVITY, STANDARD_GRAVITY_VECTOR
 from solver.gait import close_loop, ensure_double_support, extract_cycle, tighten_contacts
 from solver.io.fit import CONTACT_INSET
 from solver.jsonable import jsonable
-from solver.kinematics import contact_points, markers, segment_frames
+from solver.kinematics import centre_of_mass, contact_points, markers, segment_frames
 from solver.motion import Motion, foot_schedule_of
 from solver.naturalness import against_plates, capture_figures, joint_rms_deg
 from solver.plausibility import report
@@ -46,9 +46,11 @@ UPPER_ROOT_SEGMENTS = ("abdomen",)  # merging it lumps trunk, head and arms into
 
 #: the tutor's weights: the simplification and the correction track the capture's own joint
 #: angles and pelvis rotations (1° weighs like 3 mm of marker distance, as MocoTrack tracks the
-#: coordinates of its IK), where the extrapolation's weak prior (``Weights()``: 0.1 rad like 1 mm)
-#: only steadies what its guide's markers leave unobserved
-TUTOR_WEIGHTS = Weights(coordinates=300.0, root_rotation=300.0)
+#: coordinates of its IK) and its whole-body centre of mass (1 cm like 3 cm of marker distance: the
+#: ground reactions are its acceleration, and the capture's match the plates within ~0.05 BW), where
+#: the extrapolation's weak prior (``Weights()``: 0.1 rad like 1 mm) only steadies what its guide's
+#: markers leave unobserved
+TUTOR_WEIGHTS = Weights(coordinates=300.0, root_rotation=300.0, com_track=10.0)
 
 
 class PipelineError(ValueError):
@@ -217,7 +219,7 @@ def _select(src: Character, q: np.ndarray, dst: Character) -> np.ndarray:
 
 def simplify(capture_character: Character, q_capture: np.ndarray, synthesis: Character, fps: float,
              *, weights: Weights = TUTOR_WEIGHTS, max_iter: int = 500,
-             should_cancel: Callable[[], bool] | None = None) -> SolveResult:
+             should_cancel: Callable[[], bool] | None = None, com: np.ndarray | None = None) -> SolveResult:
     """docs/method.md (M5.15), thesis Table 5.2: the synthesis character's motion closest to the capture's markers
     (superfluous coordinates locked at 0 = removed), cyclic, no forces. ``should_cancel()`` is
     polled at every IPOPT iteration (true: the solve ends with ``User_Requested_Stop``)."""
@@ -226,20 +228,22 @@ def simplify(capture_character: Character, q_capture: np.ndarray, synthesis: Cha
     gm = markers(capture_character, q_capture).reshape(-1, T)
     init = _select(capture_character, q_capture, synthesis)
     return problem.solve(None, guide_markers=gm, init_q=init, weights=weights, max_iter=max_iter,
-                         should_stop=should_cancel)
+                         should_stop=should_cancel, guide_com=com)
 
 
 def correct(synthesis: Character, q_sim: np.ndarray, contacts: np.ndarray, fps: float, *,
             init_wrenches: np.ndarray | None, env: Environment = Environment(),
             weights: Weights = TUTOR_WEIGHTS, max_iter: int = 1000, heading_change: float | None = None,
-            prior_q: np.ndarray | None = None, should_cancel: Callable[[], bool] | None = None) -> SolveResult:
+            prior_q: np.ndarray | None = None, should_cancel: Callable[[], bool] | None = None,
+            com: np.ndarray | None = None) -> SolveResult:
     """Table 5.3: physically plausible motion closest to the simplified one (the tutor);
     ``prior_q``: the joint angles the coordinates prior keeps it near (default: the simplified's);
+    ``com``: the centre of mass ``Weights.com_track`` keeps it near (default: the simplified's);
     ``should_cancel()``: polled at every IPOPT iteration, as in :func:`simplify`."""
     problem = problem_for(synthesis, q_sim.shape[1], fps, contacts)
     return problem.solve(q_sim, init_q=q_sim, init_wrenches=init_wrenches, env=env, weights=weights,
                          max_iter=max_iter, heading_change=heading_change, prior_q=prior_q,
-                         should_stop=should_cancel)
+                         should_stop=should_cancel, guide_com=com)
 
 
 def heading_change_to_impose(q_capture: np.ndarray, q_simplified: np.ndarray) -> float:
@@ -430,11 +434,33 @@ def _simplified(prep: PreparedCycle, q: np.ndarray, source: Mapping[str, Any]) -
         "step": "simplify", "source": source, "lambda": None}))
 
 
-def closed_cycle(q_capture: np.ndarray) -> np.ndarray:
-    """The captured cycle the tutor tracks: periodic, its closure error spread over the cycle
-    (``solver.gait.close_loop``); the yaw's drift too on a straight walk (``STRAIGHT_WALK_DEG``)."""
-    turning = abs(math.degrees(float(q_capture[3, -2] - q_capture[3, 0]))) >= STRAIGHT_WALK_DEG
-    return close_loop(q_capture, keep_yaw=turning)
+def closed_cycle(prep: PreparedCycle, character: Character | None = None) -> np.ndarray:
+    """The captured cycle the tutor tracks, on ``character`` (default: the capture skeleton the
+    synthesis character is reduced from; ``prep.cycle.character``: every segment): periodic, its
+    seam blended into the captured motion around it (``solver.gait.close_loop``), lowered with the
+    contact plane; the yaw's drift removed on a straight walk (``STRAIGHT_WALK_DEG``)."""
+    ch = prep.capture_character if character is None else character
+    full = prep.cycle.character
+    shift = float(prep.stats.get("contact_plane_shift_mm", 0.0)) / 1e3
+
+    def on(q: np.ndarray | None) -> np.ndarray | None:
+        if q is None:
+            return None
+        out = np.array(q if ch is full else _select(full, q, ch), dtype=float)
+        out[2] -= shift
+        return out
+
+    q = on(prep.cycle.q)
+    assert q is not None
+    turning = abs(math.degrees(float(q[3, -2] - q[3, 0]))) >= STRAIGHT_WALK_DEG
+    return close_loop(q, keep_yaw=turning, lead_in=on(prep.cycle.lead_in), lead_out=on(prep.cycle.lead_out))
+
+
+def capture_com(prep: PreparedCycle) -> np.ndarray:
+    """(3, T) the captured subject's whole-body centre of mass over the closed cycle, on the capture
+    skeleton with every segment (HalfBoy's trunk, head and arms where the subject had them),
+    lowered with the contact plane: what the tutor's ``Weights.com_track`` keeps."""
+    return centre_of_mass(prep.cycle.character, closed_cycle(prep, prep.cycle.character))
 
 
 def simplified_motion(source: Capture | Motion, *, character: str = "halfboy", fps: float = 15.0, cycle: int = 0,
@@ -443,7 +469,8 @@ def simplified_motion(source: Capture | Motion, *, character: str = "halfboy", f
     character, kinematics only, no forces), as ``make_tutor`` makes it before the correction."""
     capture = motion_capture(source) if isinstance(source, Motion) else source
     prep = prepare_cycle(capture, character=character, fps=fps, cycle=cycle, start=start)
-    simp = simplify(prep.capture_character, closed_cycle(prep.q), prep.synthesis, prep.fps, weights=weights)
+    simp = simplify(prep.capture_character, closed_cycle(prep), prep.synthesis, prep.fps, weights=weights,
+                    com=capture_com(prep))
     if not simp.success:
         raise PipelineError(f"simplification did not converge ({simp.status})")
     return _simplified(prep, simp.q, _source_provenance(capture, prep.cycle))
@@ -484,8 +511,9 @@ def make_tutor(
     cyc, contacts, syn, cap_char, q_cap = prep.cycle, prep.contacts, prep.synthesis, prep.capture_character, prep.q
 
     t = time.perf_counter()
-    q_loop = closed_cycle(q_cap)  # what the tutor tracks: the captured cycle, its closure error spread
-    simp = simplify(cap_char, q_loop, syn, fps, weights=weights, should_cancel=should_cancel)
+    q_loop = closed_cycle(prep)  # what the tutor tracks: the captured cycle, its seam closed
+    com = capture_com(prep)
+    simp = simplify(cap_char, q_loop, syn, fps, weights=weights, should_cancel=should_cancel, com=com)
     stats["simplify"] = {"status": simp.status, "iterations": simp.iterations, "time_s": time.perf_counter() - t,
                          "marker_rms_mm": 1e3 * simp.marker_rms}
     if stop := canceled(stats, "simplification", simp):
@@ -514,7 +542,7 @@ def make_tutor(
                                    "tutor": math.degrees(dpsi)}
     q_joints = _select(cap_char, q_loop, syn)  # the capture's own angles: what the tutor keeps of its details
     res = correct(syn, q_sim, contacts, fps, init_wrenches=w0, env=env, max_iter=max_iter, heading_change=dpsi,
-                  weights=weights, prior_q=q_joints, should_cancel=should_cancel)
+                  weights=weights, prior_q=q_joints, should_cancel=should_cancel, com=com)
     attempts.append({"init": "estimated wrenches", "status": res.status, "iterations": res.iterations,
                      "time_s": res.wall_time})
     if not res.success:
@@ -522,7 +550,8 @@ def make_tutor(
         if stop := canceled(stats, "correction", res):  # no second attempt
             return stop
         res2 = correct(syn, q_sim, contacts, fps, init_wrenches=None, env=env, max_iter=max_iter,
-                       heading_change=dpsi, weights=weights, prior_q=q_joints, should_cancel=should_cancel)
+                       heading_change=dpsi, weights=weights, prior_q=q_joints, should_cancel=should_cancel,
+                       com=com)
         attempts.append({"init": "zero wrenches", "status": res2.status, "iterations": res2.iterations,
                          "time_s": res2.wall_time})
         res = res2 if res2.success else res

@@ -159,6 +159,9 @@ def _cycle_capture(cap: Capture, sl: slice, contacts: np.ndarray, cycle_info: di
 #: decides the period (``_exact_period``), and the resolution of the search (frames)
 PERIOD_WINDOW_S = 0.25
 PERIOD_STEP_FRAMES = 0.05
+#: the captured motion (s) kept before and after a cycle (``Capture.lead_in``, ``lead_out``) and the
+#: window over which ``close_loop`` blends it in
+LEAD_S = 0.2
 
 
 def _exact_period(capture: Capture, cyc: Capture, fps: float,
@@ -213,8 +216,10 @@ def _exact_period(capture: Capture, cyc: Capture, fps: float,
         t0 = float(t[-1] - span)  # a loop may start anywhere: earlier, so that a whole period fits
         info["t_start"] = t0
     fps_eff = N / best_p
-    grid = resample(capture, fps_eff, start=t0)
-    if grid.T < T:
+    dt = best_p / N
+    k = int(min(round(LEAD_S * fps_eff), np.floor((t0 - t[0]) / dt + 1e-9)))  # frames before the start
+    grid = resample(capture, fps_eff, start=t0 - k * dt)
+    if k + T > grid.T:
         return cyc, cyc.contacts if cyc.contacts is not None else np.zeros((4, T), dtype=bool)
     if contacts is None and grid.contacts is None:
         contacts = detect_contacts(grid.character, grid.q, grid.fps)
@@ -224,11 +229,15 @@ def _exact_period(capture: Capture, cyc: Capture, fps: float,
         contacts = np.asarray(contacts, dtype=bool)[:, idx]
     else:
         contacts = grid.contacts
-    sl = slice(0, T)
+    sl = slice(k, k + T)
     cc = np.asarray(contacts, dtype=bool)[:, sl]
     info.update({"period_s": float(best_p), "fps": float(fps_eff), "fps_requested": float(fps),
                  "frames_per_cycle": int(N)})
-    return _cycle_capture(grid, sl, cc, info), cc
+    q_grid = unwrap_hinges(grid.character, grid.q)
+    lead_out = q_grid[:, k + T: k + T + int(round(LEAD_S * fps_eff))]
+    out = _cycle_capture(grid, sl, cc, info).evolve(lead_in=q_grid[:, :k] if k else None,
+                                                      lead_out=lead_out if lead_out.shape[1] else None)
+    return out, cc
 
 
 #: plausible walking cycle durations (s) searched by the best-loop cycle
@@ -317,25 +326,50 @@ def _extract_loop_cycle(cap: Capture, start: str, contacts: np.ndarray | None) -
     return out, cc
 
 
-def close_loop(q: np.ndarray, *, keep_yaw: bool = True) -> np.ndarray:
-    """A captured cycle (n, T: frames T−2, T−1 one period after frames 0, 1) made periodic by
-    spreading its loop closure error linearly over the cycle: every coordinate but the root's
-    horizontal translation (and its yaw when ``keep_yaw``: a curve turns by its heading change)
-    loses the ramp (t / N) (q[N] − q[0]), N = T − 2, so frame N equals frame 0.
+def close_loop(q: np.ndarray, *, keep_yaw: bool = True, lead_in: np.ndarray | None = None,
+               lead_out: np.ndarray | None = None) -> np.ndarray:
+    """A captured cycle (n, T: frames T−2, T−1 one period after frames 0, 1) made periodic.
 
-    A captured cycle does not close: the overground walk's knee is 5° off after one period and
-    its cycle starts in swing, where the knee turns fastest. A periodic motion fitted to it puts
-    the whole mismatch between the overlap frames and the next (the tutor's knee turned 16° in
-    one frame, 472°/s); the ramp spreads it as a drift of a degree or two, the figure a looping
-    clip's blending spreads (as motion-graph and game-engine loops do)."""
+    A captured cycle does not close: its second stride is not its first (the overground walk's
+    knee is 2° and 4°/frame off one period later, in swing where it turns fastest). A periodic
+    motion fitted to it puts the whole mismatch between the overlap frames and the next (the
+    tutor's knee turned 16° in one frame). As a game engine blends a loop, the cycle's last
+    frames are crossfaded (smoothstep over ``LEAD_S``) into the motion that led into its first
+    (``lead_in``, the captured frames before it): frames T−2, T−1 become frames 0, 1 and the
+    seam is the subject's own motion. Without a lead-in its first frames are crossfaded from the
+    motion that followed its last (``lead_out``); without either, the closure error is spread
+    as a ramp over the cycle. The root's horizontal translation is left as it is, and its yaw
+    when ``keep_yaw`` (a curve turns by its heading change; a straight walk's yaw drift goes)."""
     q = np.array(q, dtype=float, copy=True)
     T = q.shape[1]
     N = T - 2
     if N < 2:
         return q
+    rows = [i for i in range(q.shape[0]) if i not in (0, 1) and not (i == 3 and keep_yaw)]
+    W_in = 0 if lead_in is None else min(int(lead_in.shape[1]), N - 2)
+    W_out = 0 if lead_out is None else min(int(lead_out.shape[1]) + 2, N - 2)
+    if W_in >= 2:  # the last frames blend into the lead-in, shifted one period on
+        assert lead_in is not None
+        for t in range(N - W_in, T):
+            j = t - N  # the frame relative to frame 0 one period on
+            src = lead_in[rows, lead_in.shape[1] + j] if j < 0 else q[rows, j]
+            s = float(np.clip((t - (N - W_in)) / W_in, 0.0, 1.0))
+            w = s * s * (3 - 2 * s)
+            if j >= 0:
+                q[rows, t] = src
+                continue
+            q[rows, t] = (1 - w) * q[rows, t] + w * src
+        return q
+    if W_out >= 3:  # the first frames blend from the lead-out, shifted one period back
+        assert lead_out is not None
+        ext = np.concatenate([q[rows, N:], lead_out[rows]], axis=1)  # frames N, N+1, N+2, ...
+        for t in range(W_out):
+            s = float(np.clip(t / (W_out - 1), 0.0, 1.0))
+            w = 1 - s * s * (3 - 2 * s)
+            q[rows, t] = w * ext[:, t] + (1 - w) * q[rows, t]
+        q[rows, N:] = q[rows, :2]
+        return q
     ramp = np.arange(T) / N
-    for i in range(q.shape[0]):
-        if i in (0, 1) or (i == 3 and keep_yaw):
-            continue
+    for i in rows:
         q[i] -= ramp * (q[i, N] - q[i, 0])
     return q
