@@ -29,12 +29,13 @@ from solver.spacetime import compiled
 from solver.spacetime.derivatives import jacobian, lagrangian_hessian
 from solver.spacetime.types import STANDARD_GRAVITY, Naturalness, Realism
 
-FOOT_ROWS = 15  # per foot: friction cone, 6 CoP half-spaces, 2 torsion, 2 free-moment cap, pitch under load,
-#   push toward the centre of mass, fore-aft force cap (2)
+FOOT_ROWS = 16  # per foot: friction cone, 6 CoP half-spaces, 2 torsion, 2 free-moment cap, pitch under load (heel
+#   up, toe up), push toward the centre of mass, fore-aft force cap (2)
 SOLE_CORNERS = 4  # per foot: the drawn sole's corners (heel and toe ends, both edges)
 CONE_EPS = 1e-4  # smoothing of the friction cone's norm (scaled force units)
 #: the weight slots (``types.WEIGHT_SLOTS`` names) a frame's cost takes, in its ``wts`` input's order
-FRAME_COST_WEIGHTS = ("direction", "singularity", "coordinates", "root_rotation", "joint_range")
+FRAME_COST_WEIGHTS = ("direction", "singularity", "coordinates", "root_rotation", "joint_range", "com_track")
+CROSS_ROWS = 4  # per frame: each foot's far side of the pelvis across the direction of travel, then across its heading
 
 
 def rz(turn, v):
@@ -50,7 +51,7 @@ class FrameFunctions:
     VARS: ClassVar[dict[str, tuple[int, int]]] = {
         "cost": (1, 1), "acc": (3, 3), "z": (1, 1), "sole": (1, 1), "slip": (2, 2), "feet": (2, 2), "seg": (6, 4),
         "c2": (5, 5), "jerk": (4, 4), "wrate": (2, 2), "frate": (2, 2), "smooth": (3, 3), "wcom": (1, 1),
-        "cross": (1, 1), "lean": (1, 1)}
+        "cross": (1, 1), "lean": (1, 1), "clr": (1, 1)}
 
     def __init__(self, character: Character, realism: Realism = Realism(),
                  naturalness: Naturalness = Naturalness()) -> None:
@@ -82,8 +83,14 @@ class FrameFunctions:
         w = {name: wts[i] for i, name in enumerate(FRAME_COST_WEIGHTS)}
         gq = ca.SX.sym("gq", n)
         lo_, hi_ = ca.SX.sym("lo", n), ca.SX.sym("hi", n)
+        gc = ca.SX.sym("gc", 3)  # the whole-body centre of mass to track (the capture's)
+        com_expr = ca.SX.zeros(3)
+        for sg in ch.segments:
+            if sg.mass > 0:
+                com_expr += float(sg.mass) * ca.vertcat(*point_world(pose, *model.point_on_body(sg.name, sg.com)))
+        com_expr /= float(sum(sg.mass for sg in ch.segments))
         cost = (w["direction"] * ca.sumsqr(mk - gm) + w["coordinates"] * ca.sumsqr(q[6:] - gq[6:])
-                + w["root_rotation"] * ca.sumsqr(q[3:6] - gq[3:6]))
+                + w["root_rotation"] * ca.sumsqr(q[3:6] - gq[3:6]) + w["com_track"] * ca.sumsqr(com_expr - gc))
         if n > 6:  # the joint-range prior (bounds per coordinate: ``Layout.joint_range``)
             cost += w["joint_range"] * sum(ca.fmax(0, q[i] - hi_[i]) ** 2 + ca.fmax(0, lo_[i] - q[i]) ** 2
                                            for i in range(6, n))
@@ -91,7 +98,8 @@ class FrameFunctions:
         if sing:
             cost += w["singularity"] * sum((1 - ca.cos(2 * q[i])) / 2 for i in sing)
         self.n_sing = len(sing)
-        self.cost = ca.Function("cost", [q, gm, gq, wts, lo_, hi_], [cost])
+        self.cost = ca.Function("cost", [q, gm, gq, wts, lo_, hi_, gc], [cost])
+        self.com = ca.Function("com", [q], [com_expr])
         self.marker_cost = ca.Function("marker_cost", [q, gm], [ca.sumsqr(mk - gm)])
         # kinematic fit: squared second difference of the rotations over three frames (rad)
         qm_, qp_, ws_ = ca.SX.sym("qm", n), ca.SX.sym("qp", n), ca.SX.sym("ws")
@@ -112,7 +120,8 @@ class FrameFunctions:
         if self.has_contacts:
             out.update({"z": self.z, "sole": self.sole, "slip": self.slip, "feet": self.feet, "seg": self.seg,
                         "c2": self.c2, "jerk": self.jerk, "wrate": self.wrate, "frate": self.frate,
-                        "smooth": self.smooth, "wcom": self.wcom, "cross": self.cross, "lean": self.lean})
+                        "smooth": self.smooth, "wcom": self.wcom, "cross": self.cross, "lean": self.lean,
+                        "clr": self.clr})
         return out
 
     # --- contact rows ---------------------------------------------------------------------
@@ -143,14 +152,24 @@ class FrameFunctions:
                     b, pb = model.point_on_body(c.segment, np.asarray(c.position) + np.array([0.0, sgn * half_w, 0.0]))
                     corners.append(point_world(pose, b, pb)[2] - gnd[self.heel_of[side]])
         self.sole = ca.Function("sole", [q, gnd], [ca.vertcat(*corners)])
+        # [naturalness] a swinging foot's sole clears the ground by the walker's own margin: each corner
+        # below its foot's target height (a per-frame parameter: the mid-swing target where the foot moves,
+        # none elsewhere) pays quadratically (scaled: per 1 cm)
+        target, wclr = ca.SX.sym("target", 2), ca.SX.sym("wclr")
+        deficit = [ca.fmax(0, target[k_] - corners[SOLE_CORNERS * k_ + r]) / 0.01
+                   for k_ in range(2) for r in range(SOLE_CORNERS)]
+        self.clr = ca.Function("clr", [q, gnd, target, wclr], [wclr * ca.sumsqr(ca.vertcat(*deficit))])
         # [naturalness] how far each foot (the mean of its contact points) stands on the far side of
         # the pelvis across the direction of travel (a per-frame parameter): right foot, left foot
+        # (rows 0-1), then across the pelvis's own heading (its yaw: rows 2-3; a turn taken in the
+        # pelvis puts the inner foot on the path line)
         th = ca.SX.sym("path")
-        left = ca.vertcat(-ca.sin(th), ca.cos(th))
         far = []
-        for sgn, side in ((1.0, "right"), (-1.0, "left")):
-            c = (pts[self.heel_of[side]][:2] + pts[self.toe_of[side]][:2]) / 2
-            far.append(sgn * ca.dot(c - q[:2], left))
+        for heading in (th, q[3]):
+            left = ca.vertcat(-ca.sin(heading), ca.cos(heading))
+            for sgn, side in ((1.0, "right"), (-1.0, "left")):
+                c = (pts[self.heel_of[side]][:2] + pts[self.toe_of[side]][:2]) / 2
+                far.append(sgn * ca.dot(c - q[:2], left))
         self.cross = ca.Function("cross", [q, th], [ca.vertcat(*far)])
         # [naturalness] the trunk's lean against gravity in the sagittal plane of the direction of
         # travel (sine; + forward), and its prior toward a target per frame (the guide's)
@@ -229,6 +248,7 @@ class FrameFunctions:
             sin_p = (ph[2] - pt[2]) / d0
             nt = self.naturalness
             rows.append(nt.pitch_coefficient * g_ratio - fs[2] * (sin_p - math.sin(math.radians(nt.pitch_free_deg))))
+            rows.append(nt.pitch_coefficient * g_ratio - fs[2] * (-sin_p - math.sin(math.radians(nt.pitch_free_deg))))
             # [naturalness] the ground pushes the body: the foot's horizontal force does not point away
             # from the centre of mass (a parameter), beyond push_margin × f_z × leg (in double support
             # the feet would otherwise squeeze the ground between them)

@@ -207,12 +207,15 @@ class Layout:
                    h: float | None = None, ground: np.ndarray | None = None, rise: float = 0.0,
                    joint_range: np.ndarray | None = None, path: np.ndarray | None = None,
                    lean: np.ndarray | None = None, fore_aft_cap: float = 1e3,
-                   g_ratio: float = 1.0) -> np.ndarray:
+                   g_ratio: float = 1.0, guide_com: np.ndarray | None = None,
+                   clearance: np.ndarray | None = None) -> np.ndarray:
         """The parameter vector (``P_LAYOUT`` order); ``h``: frame interval (s), default 1/fps;
         ``joint_range`` (2, n) the joint-range prior's bounds (default: none); ``path`` (T,) the
         direction of travel per frame (rad); ``lean`` (T,) the trunk's target lean (sine);
         ``fore_aft_cap`` each foot's fore-aft force bound (scaled); ``g_ratio`` the environment's
-        gravity over the standard (the loads the naturalness rows allow are in its body weights)."""
+        gravity over the standard (the loads the naturalness rows allow are in its body weights);
+        ``guide_com`` (3, T) the centre of mass to track; ``clearance`` (2, T) each foot's sole
+        clearance target (m)."""
         nT = self.T
         K = max(len(self.eom_frames), 1)
         hv = float(self.dt if h is None else h)
@@ -229,6 +232,8 @@ class Layout:
             "com_moment": weights.com_moment / K,
             "joint_range": weights.joint_range / (max(self.n - 6, 1) * nT),  # (0.1 rad)² beyond the range = 1
             "trunk_lean": weights.trunk_lean / nT,
+            "com_track": weights.com_track / (nT * MARKER_SCALE**2),
+            "clearance": weights.clearance * hv * 15.0,  # per corner-frame at 15 frames/s
         }
         wts = [scaled[name] for name in WEIGHT_SLOTS]
         return np.concatenate([
@@ -243,7 +248,32 @@ class Layout:
             np.zeros(nT) if path is None else np.asarray(path, dtype=float),
             np.zeros(nT) if lean is None else np.asarray(lean, dtype=float),
             [float(fore_aft_cap), float(g_ratio)],
+            (np.zeros((3, nT)) if guide_com is None else np.asarray(guide_com, dtype=float)).ravel(order="F"),
+            (np.zeros((2, nT)) if clearance is None else np.asarray(clearance, dtype=float)).ravel(order="F"),
         ])
+
+    def clearance_targets(self, q: np.ndarray, h: float, ground: np.ndarray) -> np.ndarray:
+        """(2, T) each foot's sole clearance target (m) per frame (``Naturalness.clearance_target_m``):
+        in swing, scaled by how fast the foot's sole moves in ``q`` (its fastest corner, central
+        differences at frame interval ``h``) between ``Naturalness.clearance_speed``; none in contact
+        (−1)."""
+        from solver.naturalness import sole_corners
+
+        nat = self.ff.naturalness
+        out = np.full((2, self.T), -1.0)
+        if not self.ff.has_contacts:
+            return out
+        corners = sole_corners(self.character, np.asarray(q, dtype=float))  # (2, 4, 3, T)
+        xy = corners[:, :, :2, :]
+        v = np.zeros((2, 4, self.T))
+        v[..., 1:-1] = np.linalg.norm(xy[..., 2:] - xy[..., :-2], axis=2) / (2 * h)
+        v[..., 0], v[..., -1] = v[..., -2] if self.T > 2 else 0.0, v[..., 1] if self.T > 2 else 0.0
+        speed = v.max(axis=1)
+        lo, hi = nat.clearance_speed
+        ramp = np.clip((speed - lo) / max(hi - lo, 1e-9), 0.0, 1.0)
+        B = self.foot_contact()
+        out = np.where(B, -1.0, nat.clearance_target_m * ramp)
+        return out
 
     def fore_aft_cap(self, env: Environment) -> float:
         """Each foot's fore-aft force bound (scaled by the standard body weight): on level ground
@@ -267,7 +297,8 @@ class Layout:
         joint coordinate stays out of the last ``Naturalness.limit_band_deg`` of its model range;
         a non-sagittal one (ab/adduction, axial rotation, bending: not a hinge about the segment's
         lateral axis) also within the guide's own range over its frames widened by
-        ``Naturalness.joint_range_margin_deg``. Root coordinates: none."""
+        ``Naturalness.joint_range_margin_deg``; the guide's own range is never penalized (a capture
+        near a limit is tracked). Root coordinates: none."""
         nat = self.ff.naturalness
         m, b = np.radians(nat.joint_range_margin_deg), np.radians(nat.limit_band_deg)
         g = np.asarray(guide_q, dtype=float)
@@ -278,6 +309,8 @@ class Layout:
             axis = np.asarray(d.axis, dtype=float)
             if i >= 6 and d.kind == "hinge" and abs(axis[1]) < 0.9 * np.linalg.norm(axis):
                 lo[i], hi[i] = max(lo[i], g[i].min() - m), min(hi[i], g[i].max() + m)
+            if i >= 6:  # the band near a limit starts where the guide's own range ends
+                lo[i], hi[i] = min(lo[i], g[i].min()), max(hi[i], g[i].max())
             if lo[i] > hi[i]:
                 lo[i] = hi[i] = 0.5 * (lo[i] + hi[i])
         lo[:6], hi[:6] = -1e3, 1e3

@@ -44,7 +44,7 @@ from solver.motion import FEET
 from solver.naturalness import path_heading
 from solver.spacetime.callback import STOP, STOP_CALLBACK
 from solver.spacetime.derivatives import Term, assemble
-from solver.spacetime.frame import FOOT_ROWS, FRAME_COST_WEIGHTS, SOLE_CORNERS, frame_functions
+from solver.spacetime.frame import CROSS_ROWS, FOOT_ROWS, FRAME_COST_WEIGHTS, SOLE_CORNERS, frame_functions
 from solver.spacetime.layout import Layout
 from solver.spacetime.types import (
     DEFAULT_IPOPT,
@@ -70,9 +70,10 @@ YAW = 3
 #: "range": per coordinate, the joint-range prior's lower then upper bound; "path": per frame, the
 #: direction of travel (rad) the feet's crossover is measured across
 #: "lean": per frame, the trunk's target lean against gravity (sine); "loads": a foot's fore-aft force
-#: bound (scaled: body weights of standard gravity) and the environment's gravity over the standard
+#: bound (scaled: body weights of standard gravity) and the environment's gravity over the standard;
+#: "gcom": per frame, the centre of mass to track; "clear": per foot and frame, the sole's clearance target
 P_LAYOUT = ("gm", "gq", "g", "mu", "wts", "ref", "anchor", "dpsi", "com", "h", "ground", "rise", "range", "path",
-            "lean", "loads")
+            "lean", "loads", "gcom", "clear")
 
 
 def _heading(vx, vy, psi):
@@ -162,7 +163,7 @@ class SpacetimeProblem(Layout):
         nm3 = 3 * ff.n_markers
         sizes = {"gm": nm3 * Tn, "gq": n * Tn, "g": 3, "mu": 1, "wts": len(WEIGHT_SLOTS), "ref": 6 * Tn,
                  "anchor": 3 * Tn, "dpsi": 1, "com": 3 * Tn, "h": 1, "ground": max(ff.P, 1) * Tn, "rise": 1,
-                 "range": 2 * n, "path": Tn, "lean": Tn, "loads": 2}
+                 "range": 2 * n, "path": Tn, "lean": Tn, "loads": 2, "gcom": 3 * Tn, "clear": 2 * Tn}
         self._p_layout, off = {}, 0
         for name in P_LAYOUT:
             self._p_layout[name] = (off, sizes[name])
@@ -193,8 +194,10 @@ class SpacetimeProblem(Layout):
         cw = ca.repmat(ca.vertcat(*(wts[name] for name in FRAME_COST_WEIGHTS)), 1, Tn)
         rng = par("range")
         self._PATH, self._LEAN, self._LOADS = par("path"), par("lean"), par("loads")
-        self._cost(Term("cost", ff.cost, 1, qi, [GM, GQ, cw, ca.repmat(rng[:n], 1, Tn), ca.repmat(rng[n:], 1, Tn)],
+        self._cost(Term("cost", ff.cost, 1, qi, [GM, GQ, cw, ca.repmat(rng[:n], 1, Tn), ca.repmat(rng[n:], 1, Tn),
+                                                 par("gcom", (3, Tn))],
                         derivatives=ff.derivatives["cost"], cost=True))
+        self._CLEAR = par("clear", (2, Tn))
         self._cyclic_root(x, dpsi)
         if dynamics:
             self._dynamic_terms(x, grav, mu, wts, dpsi, REF, ANCHOR)
@@ -296,8 +299,11 @@ class SpacetimeProblem(Layout):
                for r in range(SOLE_CORNERS)]
         self._rows(Term("sole", ff.sole, 1, qi[:, frames], [self._GROUND[:, frames]], derivatives=D["sole"]), sel,
                    ff.naturalness.clearance_m, math.inf, "clearance")
+        self._cost(Term("clr", ff.clr, 1, qi[:, frames], [self._GROUND[:, frames], self._CLEAR[:, frames],
+                                                          ca.repmat(wts["clearance"], 1, len(frames))],
+                        derivatives=D["clr"], cost=True))
         # [naturalness] a foot in contact does not cross to the far side of the pelvis
-        sel = [(c, k_) for c, t in enumerate(frames) for k_ in range(2) if B[k_, t]]
+        sel = [(c, r) for c, t in enumerate(frames) for r in range(CROSS_ROWS) if B[r % 2, t]]
         self._rows(Term("cross", ff.cross, 1, qi[:, frames], [self._PATH[frames].T], derivatives=D["cross"]), sel,
                    -math.inf, ff.naturalness.crossover_m, "crossover")
         # no slip, no spin between consecutive frames
@@ -408,13 +414,15 @@ class SpacetimeProblem(Layout):
         should_stop: Any = None,
         frame_interval: float | None = None,
         prior_q: np.ndarray | None = None,
+        guide_com: np.ndarray | None = None,
     ) -> SolveResult:
         """Solve at the given parameters. ``heading_change`` Δψ (rad): yaw[T−2] − yaw[0] of the
         optimum (default: the initial motion's). ``should_stop()`` is polled at every iteration
         (IPOPT stops with ``User_Requested_Stop``). ``frame_interval``: the spline's frame
         interval h (s), default 1/fps (the speed axis changes it; the frame count is fixed).
         ``prior_q``: the coordinates the joint and root-rotation priors pull toward (default: the
-        guide's; the tutor's correction: the capture's own joint angles)."""
+        guide's; the tutor's correction: the capture's own joint angles). ``guide_com`` (3, T): the
+        centre of mass ``Weights.com_track`` pulls toward (default: the guide's)."""
         h = self.dt if frame_interval is None else float(frame_interval)
         if not (math.isfinite(h) and h > 0):
             raise ValueError(f"the frame interval must be a positive number of seconds, got {frame_interval!r}")
@@ -459,7 +467,9 @@ class SpacetimeProblem(Layout):
                             ground=self.contact_ground(feet_ground), rise=rise, joint_range=self.joint_range(gq),
                             path=path, lean=self.trunk_lean(gq, env.gravity, path) if self.ff.has_contacts else None,
                             fore_aft_cap=self.fore_aft_cap(env),
-                            g_ratio=float(np.linalg.norm(env.gravity)) / STANDARD_GRAVITY)
+                            g_ratio=float(np.linalg.norm(env.gravity)) / STANDARD_GRAVITY,
+                            guide_com=self.com_points(gq) if guide_com is None else np.asarray(guide_com, dtype=float),
+                            clearance=self.clearance_targets(q0, h, feet_ground) if self.dynamics else None)
         lbg, ubg = self.constraint_bounds(h)
         parts = [self.pack_q(q0)]
         if self.dynamics:

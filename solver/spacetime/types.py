@@ -41,8 +41,9 @@ class Weights:
     coordinates: float = 1.0
     #: [realism] squared change of each foot's (scaled) wrench per 1/15 s (the change between
     #: frames × (1/15 s) / h, so the same at any frame rate), averaged over the cycle: the
-    #: double-support split and the free moment may not flip from frame to frame
-    wrench_rate: float = 1.0
+    #: double-support split and the free moment may not flip from frame to frame, and a stance brakes
+    #: then propels (at 1, HalfBoy's fore-aft force changed sign three times per stance)
+    wrench_rate: float = 10.0
     #: [realism] squared jerk of the rotations (the spline's third derivative × (1/15 s)³, rad),
     #: averaged over the cycle: no frame-to-frame zig-zag of a coordinate that the markers hardly
     #: see. The time scale is fixed (``layout.RATE_TIME``), so the same motion costs the same at
@@ -78,6 +79,16 @@ class Weights:
     #: weighs like ~1 cm of marker distance. On a slope the guide is the tutor turned with gravity,
     #: so the walker keeps its posture against gravity instead of leaning with the ground
     trunk_lean: float = 1000.0
+    #: [fidelity] squared distance of the whole-body centre of mass from the capture's, per (1 cm)² and
+    #: frame (the tutor only: ``pipeline.TUTOR_WEIGHTS``). The ground reactions are the centre of mass's
+    #: acceleration: a character whose mass is distributed otherwise than the subject's (HalfBoy's
+    #: trunk, head and arms welded to the pelvis) keeps the subject's forces by keeping its centre of mass
+    com_track: float = 0.0
+    #: [naturalness] squared clearance deficit of a moving swing foot's sole corners below the
+    #: walker's mid-swing clearance (``Naturalness.clearance_target_m``), per (1 cm)² and corner-frame at
+    #: 15 frames/s: 5 mm short at one corner of one frame weighs like 2.5 mm of marker distance over the
+    #: whole cycle
+    clearance: float = 1.0
 
 
 #: the NLP's weight slots: the fields of :class:`Weights`, in the order of the parameter vector's
@@ -114,7 +125,6 @@ def _naturalness_bounds(lim: NaturalnessLimits) -> dict[str, float]:
     """The bounds that keep an optimum's gait human, inside the naturalness checks' limits
     (``solver.naturalness``)."""
     return {
-        "clearance_m": inside(lim.clearance_m, -0.001),  # 6 mm (check: 5 mm)
         "pitch_deg": lim.pitch_deg,
         "pitch_load": inside(lim.pitch_load, 0.05),  # 0.45 BW at 40° (check: 0.5 BW)
         "shared_load": inside(lim.shared_load, -0.02),  # 0.12 BW (check: 0.1 BW)
@@ -122,7 +132,6 @@ def _naturalness_bounds(lim: NaturalnessLimits) -> dict[str, float]:
         "fore_aft": inside(lim.fore_aft, 0.03),  # 0.32 BW (check: 0.35 BW)
         "level_deg": lim.level_deg,
         "crossover_m": inside(lim.crossover_m, 0.01),  # 2 cm (check: 3 cm)
-        "limit_margin_deg": inside(lim.limit_band_deg, -1.0),  # 2° inside the limits (check: a 1° band)
     }
 
 
@@ -161,8 +170,14 @@ class Naturalness:
     :meth:`from_limits` of the checks' default limits."""
 
     #: a swinging foot's sole (its four corners, the plane through its heel and toe contact
-    #: points) stays this far above the ground (check: 5 mm; walking clears ~1-2 cm)
-    clearance_m: float = _NATURALNESS["clearance_m"]
+    #: points) stays this far above the ground: a safety net (the check: 9 mm in mid-swing; the
+    #: cost ``Weights.clearance`` keeps a moving foot near ``clearance_target_m``)
+    clearance_m: float = 0.003
+    #: the mid-swing clearance a moving swing foot's sole is costed toward (people: 13 ± 4 mm, Winter
+    #: 1992): full from ``clearance_speed[1]`` m/s of the foot in the start iterate, none below
+    #: ``clearance_speed[0]``, linear between
+    clearance_target_m: float = 0.015
+    clearance_speed: tuple[float, float] = (0.5, 1.0)
     #: heel-up pitch of a loaded foot: below ``pitch_free_deg`` any load; above it the load is at
     #: most ``pitch_load`` × (sin p_max − sin p_free) / (sin p − sin p_free) BW, p_max = ``pitch_deg``
     #: — ``pitch_load`` at 40° (check: a foot over 0.5 BW pitched at most 40°), ~0.85 BW at 30°,
@@ -190,13 +205,13 @@ class Naturalness:
     crossover_m: float = _NATURALNESS["crossover_m"]
     #: the joint-range prior (``Weights.joint_range``) acts beyond the guide's own range of each
     #: non-sagittal joint coordinate (ab/adduction, axial rotation, bending) widened by this, and on
-    #: every joint coordinate within ``limit_band_deg`` of its model limit (check: a joint within
-    #: 1° of its limit for more than one frame)
+    #: every joint coordinate within ``limit_band_deg`` of its model limit where the guide does not go
+    #: (check: a joint within 3° of its limit for more than one frame)
     joint_range_margin_deg: float = 10.0
-    limit_band_deg: float = 5.0
-    #: the NLP's joint bounds lie this far inside the model's limits (check: a joint within 1° of
-    #: its limit for more than one frame)
-    limit_margin_deg: float = _NATURALNESS["limit_margin_deg"]
+    limit_band_deg: float = 8.0
+    #: the NLP's joint bounds lie this far inside the model's limits: a safety net, the prior keeps
+    #: joints out of the band
+    limit_margin_deg: float = 0.0
 
     @classmethod
     def from_limits(cls, lim: NaturalnessLimits, **changes: float) -> Naturalness:
