@@ -51,7 +51,7 @@ class FrameFunctions:
     VARS: ClassVar[dict[str, tuple[int, int]]] = {
         "cost": (1, 1), "acc": (3, 3), "z": (1, 1), "sole": (1, 1), "slip": (2, 2), "feet": (2, 2), "seg": (6, 4),
         "c2": (5, 5), "jerk": (4, 4), "wrate": (2, 2), "frate": (2, 2), "smooth": (3, 3), "wcom": (1, 1),
-        "cross": (1, 1), "lean": (1, 1), "clr": (1, 1)}
+        "cross": (1, 1), "lean": (1, 1), "clr": (1, 1), "ftrack": (1, 1)}
 
     def __init__(self, character: Character, realism: Realism = Realism(),
                  naturalness: Naturalness = Naturalness()) -> None:
@@ -121,7 +121,7 @@ class FrameFunctions:
             out.update({"z": self.z, "sole": self.sole, "slip": self.slip, "feet": self.feet, "seg": self.seg,
                         "c2": self.c2, "jerk": self.jerk, "wrate": self.wrate, "frate": self.frate,
                         "smooth": self.smooth, "wcom": self.wcom, "cross": self.cross, "lean": self.lean,
-                        "clr": self.clr})
+                        "clr": self.clr, "ftrack": self.ftrack})
         return out
 
     # --- contact rows ---------------------------------------------------------------------
@@ -347,6 +347,11 @@ class FrameFunctions:
             lever = (ra[3 * k : 3 * k + 3] - com_k) / self.length_scale
             mc += ca.sumsqr(wa[6 * k : 6 * k + 3] + ca.cross(lever, wa[6 * k + 3 : 6 * k + 6]))
         self.wcom = ca.Function("wcom", [wa, ra, com_k, wcw], [wcw * mc])
+
+        # [fidelity] the total ground force toward a target (scaled: body weights): the capture's
+        # whole-body centre of mass times its acceleration (the tutor), the guide's (an extrapolation)
+        ftarget, wft = ca.SX.sym("ftarget", 3), ca.SX.sym("wft")
+        self.ftrack = ca.Function("ftrack", [wa, ftarget, wft], [wft * ca.sumsqr(wa[3:6] + wa[9:12] - ftarget)])
 
         # second difference over three frames of the total ground force and of its moment about
         # the centre of mass (per-frame parameter): whole-body Newton–Euler from positions sees

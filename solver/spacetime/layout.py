@@ -208,14 +208,14 @@ class Layout:
                    joint_range: np.ndarray | None = None, path: np.ndarray | None = None,
                    lean: np.ndarray | None = None, fore_aft_cap: float = 1e3,
                    g_ratio: float = 1.0, guide_com: np.ndarray | None = None,
-                   clearance: np.ndarray | None = None) -> np.ndarray:
+                   clearance: np.ndarray | None = None, guide_force: np.ndarray | None = None) -> np.ndarray:
         """The parameter vector (``P_LAYOUT`` order); ``h``: frame interval (s), default 1/fps;
         ``joint_range`` (2, n) the joint-range prior's bounds (default: none); ``path`` (T,) the
         direction of travel per frame (rad); ``lean`` (T,) the trunk's target lean (sine);
         ``fore_aft_cap`` each foot's fore-aft force bound (scaled); ``g_ratio`` the environment's
         gravity over the standard (the loads the naturalness rows allow are in its body weights);
         ``guide_com`` (3, T) the centre of mass to track; ``clearance`` (2, T) each foot's sole
-        clearance target (m)."""
+        clearance target (m); ``guide_force`` (3, T) the total ground force to track (scaled)."""
         nT = self.T
         K = max(len(self.eom_frames), 1)
         hv = float(self.dt if h is None else h)
@@ -234,6 +234,7 @@ class Layout:
             "trunk_lean": weights.trunk_lean / nT,
             "com_track": weights.com_track / (nT * MARKER_SCALE**2),
             "clearance": weights.clearance * hv * 15.0,  # per corner-frame at 15 frames/s
+            "force_track": weights.force_track / K,
         }
         wts = [scaled[name] for name in WEIGHT_SLOTS]
         return np.concatenate([
@@ -250,7 +251,20 @@ class Layout:
             [float(fore_aft_cap), float(g_ratio)],
             (np.zeros((3, nT)) if guide_com is None else np.asarray(guide_com, dtype=float)).ravel(order="F"),
             (np.zeros((2, nT)) if clearance is None else np.asarray(clearance, dtype=float)).ravel(order="F"),
+            (np.zeros((3, nT)) if guide_force is None else np.asarray(guide_force, dtype=float)).ravel(order="F"),
         ])
+
+    def force_targets(self, com: np.ndarray, h: float, gravity) -> np.ndarray:
+        """(3, T) the total ground force (scaled: body weights of standard gravity) that moves the
+        centre of mass ``com`` (3, T) in ``gravity``: m (a − g) with a by central second differences
+        at frame interval ``h`` (frames 1 … T−2, the equations of motion's; 0 elsewhere)."""
+        c = np.asarray(com, dtype=float)
+        out = np.zeros((3, self.T))
+        if self.T < 3:
+            return out
+        a = (c[:, :-2] - 2 * c[:, 1:-1] + c[:, 2:]) / (h * h)
+        out[:, 1:-1] = (a - np.asarray(gravity, dtype=float).reshape(3, 1)) / STANDARD_GRAVITY
+        return out
 
     def clearance_targets(self, q: np.ndarray, h: float, ground: np.ndarray) -> np.ndarray:
         """(2, T) each foot's sole clearance target (m) per frame (``Naturalness.clearance_target_m``):

@@ -71,9 +71,10 @@ YAW = 3
 #: direction of travel (rad) the feet's crossover is measured across
 #: "lean": per frame, the trunk's target lean against gravity (sine); "loads": a foot's fore-aft force
 #: bound (scaled: body weights of standard gravity) and the environment's gravity over the standard;
-#: "gcom": per frame, the centre of mass to track; "clear": per foot and frame, the sole's clearance target
+#: "gcom": per frame, the centre of mass to track; "clear": per foot and frame, the sole's clearance target;
+#: "gforce": per frame, the total ground force to track (body weights of standard gravity)
 P_LAYOUT = ("gm", "gq", "g", "mu", "wts", "ref", "anchor", "dpsi", "com", "h", "ground", "rise", "range", "path",
-            "lean", "loads", "gcom", "clear")
+            "lean", "loads", "gcom", "clear", "gforce")
 
 
 def _heading(vx, vy, psi):
@@ -163,7 +164,7 @@ class SpacetimeProblem(Layout):
         nm3 = 3 * ff.n_markers
         sizes = {"gm": nm3 * Tn, "gq": n * Tn, "g": 3, "mu": 1, "wts": len(WEIGHT_SLOTS), "ref": 6 * Tn,
                  "anchor": 3 * Tn, "dpsi": 1, "com": 3 * Tn, "h": 1, "ground": max(ff.P, 1) * Tn, "rise": 1,
-                 "range": 2 * n, "path": Tn, "lean": Tn, "loads": 2, "gcom": 3 * Tn, "clear": 2 * Tn}
+                 "range": 2 * n, "path": Tn, "lean": Tn, "loads": 2, "gcom": 3 * Tn, "clear": 2 * Tn, "gforce": 3 * Tn}
         self._p_layout, off = {}, 0
         for name in P_LAYOUT:
             self._p_layout[name] = (off, sizes[name])
@@ -198,6 +199,7 @@ class SpacetimeProblem(Layout):
                                                  par("gcom", (3, Tn))],
                         derivatives=ff.derivatives["cost"], cost=True))
         self._CLEAR = par("clear", (2, Tn))
+        self._GFORCE = par("gforce", (3, Tn))
         self._cyclic_root(x, dpsi)
         if dynamics:
             self._dynamic_terms(x, grav, mu, wts, dpsi, REF, ANCHOR)
@@ -386,6 +388,9 @@ class SpacetimeProblem(Layout):
                         derivatives=D["lean"], cost=True))
         self._cost(Term("wcom", ff.wcom, 1, W, [REF[:, E], self._COM[:, E], ca.repmat(wts["com_moment"], 1, len(E))],
                         derivatives=D["wcom"], cost=True))
+        GF = self._GFORCE
+        self._cost(Term("ftrack", ff.ftrack, 1, W, [GF[:, E], ca.repmat(wts["force_track"], 1, len(E))],
+                        derivatives=D["ftrack"], cost=True))
         self._cost(Term("jerk", ff.jerk, 4, np.vstack([qi[:, K], vi[:, K], qi[:, kp], vi[:, kp]]),
                         [ca.repmat(h, 1, len(K)), ca.repmat(wts["jerk"], 1, len(K))], derivatives=D["jerk"], cost=True))
 
@@ -422,7 +427,8 @@ class SpacetimeProblem(Layout):
         interval h (s), default 1/fps (the speed axis changes it; the frame count is fixed).
         ``prior_q``: the coordinates the joint and root-rotation priors pull toward (default: the
         guide's; the tutor's correction: the capture's own joint angles). ``guide_com`` (3, T): the
-        centre of mass ``Weights.com_track`` pulls toward (default: the guide's)."""
+        centre of mass ``Weights.com_track`` pulls toward (default: the guide's), whose acceleration is
+        also the total ground force ``Weights.force_track`` pulls toward."""
         h = self.dt if frame_interval is None else float(frame_interval)
         if not (math.isfinite(h) and h > 0):
             raise ValueError(f"the frame interval must be a positive number of seconds, got {frame_interval!r}")
@@ -460,6 +466,7 @@ class SpacetimeProblem(Layout):
         path = path_heading(q0, self.T - 2)
         anchor = self.anchor_points(q0)
         prior = gq if prior_q is None else np.asarray(prior_q, dtype=float)
+        com_target = self.com_points(gq) if guide_com is None else np.asarray(guide_com, dtype=float)
         if prior.shape != (self.n, self.T) or not np.all(np.isfinite(prior)):
             raise ValueError(f"prior_q must be finite with shape ({self.n}, {self.T})")
         p = self.parameters(guide_markers, prior, env, weights, ref, anchor, dpsi,
@@ -468,8 +475,9 @@ class SpacetimeProblem(Layout):
                             path=path, lean=self.trunk_lean(gq, env.gravity, path) if self.ff.has_contacts else None,
                             fore_aft_cap=self.fore_aft_cap(env),
                             g_ratio=float(np.linalg.norm(env.gravity)) / STANDARD_GRAVITY,
-                            guide_com=self.com_points(gq) if guide_com is None else np.asarray(guide_com, dtype=float),
-                            clearance=self.clearance_targets(q0, h, feet_ground) if self.dynamics else None)
+                            guide_com=com_target,
+                            clearance=self.clearance_targets(q0, h, feet_ground) if self.dynamics else None,
+                            guide_force=self.force_targets(com_target, h, env.gravity))
         lbg, ubg = self.constraint_bounds(h)
         parts = [self.pack_q(q0)]
         if self.dynamics:

@@ -84,6 +84,13 @@ class Weights:
     #: acceleration: a character whose mass is distributed otherwise than the subject's (HalfBoy's
     #: trunk, head and arms welded to the pelvis) keeps the subject's forces by keeping its centre of mass
     com_track: float = 0.0
+    #: [fidelity] squared difference of the total ground force from the acceleration of the guide's centre
+    #: of mass (scaled: body weights; the tutor: the capture's, whose kinematic forces match the plates
+    #: within ~0.05 BW), averaged over the cycle: the force's shape — loading peak, valley, push-off, one
+    #: braking → propulsion change per stance — is the walker's own, 0.05 BW off weighing like 1.6 cm of
+    #: marker distance (at 100, HalfBoy's extrapolations to speed ×1.2 and a 90° curve still braked twice
+    #: per stance)
+    force_track: float = 1000.0
     #: [naturalness] squared clearance deficit of a moving swing foot's sole corners below the
     #: walker's mid-swing clearance (``Naturalness.clearance_target_m``), per (1 cm)² and corner-frame at
     #: 15 frames/s: 5 mm short at one corner of one frame weighs like 2.5 mm of marker distance over the
