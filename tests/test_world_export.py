@@ -44,7 +44,6 @@ TARGETS = {"up10": {"slope_deg": 10.0}, "down10": {"slope_deg": -10.0}, "stairs"
            "curve90": {"curve_deg": 90.0}}
 #: feet on the ground (m) and a slope's rise against travel × tan(slope) (relative)
 FEET_TOL_M, RISE_TOL = 0.01, 0.10
-MEASURED: dict[str, dict[str, float]] = {}
 
 
 @pytest.fixture(scope="module")
@@ -170,6 +169,10 @@ def rise_check(name: str, motion: Motion, root: np.ndarray, up: np.ndarray) -> t
     return rise, expected
 
 
+def _off(rise: float, expected: float) -> str:
+    return f"{100 * (rise / expected - 1):+.2f} %" if expected else f"{rise * 1e3:+.2f} mm"
+
+
 def _assert_rise(name: str, rise: float, expected: float) -> None:
     if expected:
         assert abs(rise - expected) <= RISE_TOL * abs(expected), (name, rise, expected)
@@ -200,9 +203,8 @@ def test_glb_walks_on_the_ground_it_carries(walks, name):
     assert not np.isnan(errs).any(), f"{name}: {np.isnan(errs).sum()} contact points off the ground mesh"
     worst = float(np.max(np.abs(errs)))
     rise, expected = rise_check(name, motion, W[0][:, :3, 3], up)
-    MEASURED.setdefault(name, {}).update(glb_feet_mm=worst * 1e3, glb_rise_m=rise, expected_rise_m=expected)
-    print(f"{name} GLB: feet on the ground ≤ {worst * 1e3:.2f} mm over {len(errs)} stance points; root rise "
-          f"{rise:.4f} m, expected {expected:.4f} m")
+    print(f"{name} GLB: feet on the ground ≤ {worst * 1e6:.1f} µm over {len(errs)} stance points; root rise "
+          f"{rise:.4f} m, expected {expected:.4f} m ({_off(rise, expected)})")
     assert worst <= FEET_TOL_M
     _assert_rise(name, rise, expected)
     if name == "curve90":  # the path is kept: gravity is already down, the file's root is the motion's
@@ -231,8 +233,8 @@ def test_bvh_walks_on_the_ground_of_its_sidecar(walks, name, tmp_path):
     assert not np.isnan(errs).any(), f"{name}: contact points on no tread"
     worst = float(np.max(np.abs(errs)))
     rise, expected = rise_check(name, motion, P[:, 0] / 100.0, np.array([0.0, 1.0, 0.0]))
-    MEASURED.setdefault(name, {}).update(bvh_feet_mm=worst * 1e3, bvh_rise_m=rise)
-    print(f"{name} BVH: feet on the ground ≤ {worst * 1e3:.2f} mm; root rise {rise:.4f} m, expected {expected:.4f} m")
+    print(f"{name} BVH: feet on the ground ≤ {worst * 1e6:.1f} µm; root rise {rise:.4f} m, expected {expected:.4f} m "
+          f"({_off(rise, expected)})")
     assert worst <= FEET_TOL_M
     _assert_rise(name, rise, expected)
 
@@ -249,7 +251,7 @@ def test_reimported_glb_stands_on_the_clips_ground_and_world_ground_is_the_solve
                                                                                     "plane")
         cp = np.asarray(K.contact_points(ch, back.q))
         worst = max(abs(description_distance(clip["ground"], cp[i, :, t])) for i, t in stance_points(motion))
-        print(f"{name}: re-imported GLB's contact points on the clip's ground ≤ {worst * 1e3:.3f} mm")
+        print(f"{name}: re-imported GLB's contact points on the clip's ground ≤ {worst * 1e6:.1f} µm")
         assert worst <= FEET_TOL_M
         # the solver's frame, as before worlds existed
         level = RI.motion_from_file(export_motion(motion, "glb", world="ground"), ch)
@@ -336,10 +338,8 @@ def test_source_rig_glb_and_bvh_climb_their_ground(walks, name, tmp_path):
     rise = float(d @ up_in)
     expected = (np.linalg.norm(d - rise * up_in) * math.tan(math.radians(10.0)) if name == "up10"
                 else game.rise(motion))
-    MEASURED.setdefault(name, {}).update(rig_glb_ankle_mm=err_glb * 1e3, rig_bvh_ankle_mm=err_bvh * 1e3,
-                                         rig_rise_m=rise)
-    print(f"{name} on the CMU skeleton: ankle height above the ground vs the motion's, GLB ≤ {err_glb * 1e3:.2f} mm, "
-          f"BVH ≤ {err_bvh * 1e3:.2f} mm; root rise {rise:.4f} m, expected {expected:.4f} m")
+    print(f"{name} on the CMU skeleton: ankle height above the ground vs the motion's, GLB ≤ {err_glb * 1e6:.1f} µm, "
+          f"BVH ≤ {err_bvh * 1e6:.1f} µm; root rise {rise:.4f} m, expected {expected:.4f} m ({_off(rise, expected)})")
     assert err_glb <= FEET_TOL_M and err_bvh <= FEET_TOL_M
     _assert_rise(name, rise, expected)
     assert extras["world"] == "gravity"

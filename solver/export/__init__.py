@@ -13,6 +13,10 @@ Formats (see ``docs/export.md``):
   (:func:`solver.export.opensim.to_opensim`; :func:`solver.export.opensim.write_opensim` writes
   the folder).
 
+Every exporter writes the motion in a *world* (``world="gravity"``, the default: gravity points
+down, so a slope walk climbs its ramp; ``"ground"``: the solver's frame) with the ground it walks
+on beside it (:mod:`solver.export.world`).
+
 The JSON clip and the glTF animations carry the game-ready data of :mod:`solver.export.game`
 (loop points, root motion, foot contacts, cycle metadata); ``gltf``/``glb`` with ``loop=True``
 animate one cycle, and :func:`solver.export.gltf.to_library_glb` writes a motion library.

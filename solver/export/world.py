@@ -270,7 +270,8 @@ class Ground:
             "point": pts(np.zeros(3)),
             "width": _values(np.array(2.0 * self.half_width * scale), decimals),
             "outline": pts(self.outline()),
-            "mesh": "the GLB's node 'ground': the top of the ground (every tread's) and, on stairs, the risers",
+            "mesh": "the GLB's node 'ground' (a library's: 'ground <animation>'): the top of the ground (every "
+                    "tread's) and, on stairs, the risers",
         }
         if self.kind == "stairs":
             out["riser"] = _values(np.array(self.riser * scale), decimals)
