@@ -82,9 +82,11 @@ def export(data: bytes, fmt: str, options: dict[str, Any]) -> tuple[bytes, str]:
     return (out.encode("utf-8") if isinstance(out, str) else out), mt
 
 
-def library_glb(items: list[tuple[str, bytes]], extras: dict, rig: str = "character") -> tuple[bytes, str]:
+def library_glb(items: list[tuple[str, bytes]], extras: dict, rig: str = "character",
+                world: str = "gravity") -> tuple[bytes, str]:
     """One GLB of a library: (animation name, stored motion) per cell (solver.export.gltf), on the
-    motions' own character or (``rig="source"``) on the input's (solver.export.rig_gltf)."""
+    motions' own character or (``rig="source"``) on the input's (solver.export.rig_gltf), in
+    ``world`` (solver.export.world) with each cell's ground."""
     from solver.export import ExportError  # lazy: runs in a compute process; the API process does not load the solver
     from solver.export.gltf import to_library_glb
     from solver.export.rig_gltf import rig_glb_library
@@ -92,8 +94,8 @@ def library_glb(items: list[tuple[str, bytes]], extras: dict, rig: str = "charac
     try:
         clips = [(k, _load(d)) for k, d in items]
         if rig == "source":
-            return rig_glb_library(clips), "model/gltf-binary"
-        return to_library_glb(clips, extras=extras), "model/gltf-binary"
+            return rig_glb_library(clips, world=world), "model/gltf-binary"
+        return to_library_glb(clips, extras=extras, world=world), "model/gltf-binary"
     except ExportError as e:
         raise WorkError(422, str(e)[:1000]) from None
 

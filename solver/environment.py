@@ -123,6 +123,24 @@ def stair_heights(foot_contact: np.ndarray, riser: float) -> np.ndarray:
     return H
 
 
+def stances(foot_contact: np.ndarray) -> list[tuple[int, int, int]]:
+    """(foot index, first frame, last frame) of every run of frames a foot is on the ground, in
+    the clip's own frames (not wrapped around the cycle), foot by foot."""
+    B = np.asarray(foot_contact, dtype=bool)
+    out = []
+    for f in range(B.shape[0]):
+        t = 0
+        while t < B.shape[1]:
+            if not B[f, t]:
+                t += 1
+                continue
+            a = t
+            while t < B.shape[1] and B[f, t]:
+                t += 1
+            out.append((f, a, t - 1))
+    return out
+
+
 def stair_rise(foot_contact: np.ndarray, riser: float) -> float:
     """Height gained over one cycle on stairs: (stances per cycle) × riser."""
     B = np.asarray(foot_contact, dtype=bool)

@@ -6,7 +6,7 @@ that front ends enumerate them without importing numpy or a reader).
   functions live: one that sorts a trial's files into the load function's arguments by their
   suffixes and content, and the load function itself (both imported when a trial calls for them);
 - :data:`EXPORTERS`: the motion exporters (``solver.export.export_motion``), each with its
-  function and media type.
+  function and media type; :data:`EXPORT_WORLDS`: the worlds they write in.
 
 The command line, the upload route and the export route enumerate these (suffixes accepted,
 ``--format`` choices, the ``format`` query parameter, response media types): a new reader or
@@ -127,6 +127,14 @@ EXPORTERS: MappingProxyType[str, Exporter] = MappingProxyType({e.name: e for e i
              "the motion on its OpenSim trial's model: coordinates and GRF .mot, ExternalLoads, the model, an "
              "inverse-dynamics setup and its residuals (a folder; zipped over HTTP)", folder=True),
 )})
+
+
+#: the worlds a motion is exported in (``solver.export.world``; every exporter's ``world`` option):
+#: name -> meaning, the default first
+EXPORT_WORLDS: MappingProxyType[str, str] = MappingProxyType({
+    "gravity": "the default: gravity points down, a slope walk climbs its ramp, stairs rise",
+    "ground": "the solver's frame: level ground, a slope as tilted gravity",
+})
 
 
 def export_media_types() -> tuple[str, ...]:

@@ -34,7 +34,7 @@ from typing import Any
 
 from solver import axes as registry
 from solver.continuation import StepControl, Target, extrapolate
-from solver.export import game
+from solver.export import DEFAULT_WORLD, game
 from solver.status import Status, combined
 
 #: the grid axes, in the order of names and manifests (the registry's, solver.axes)
@@ -290,13 +290,15 @@ class LibraryResult:
             "files": {"glb": "library.glb" if any(r.motion is not None for r in self.cells) else None},
         }
 
-    def save(self, folder: str | Path, tutor_file: str | None = None) -> Path:
+    def save(self, folder: str | Path, tutor_file: str | None = None, world: str = DEFAULT_WORLD) -> Path:
         """Write ``manifest.json``, ``library.glb`` (one animation per cell with a clip) and each
         cell's ``CELL.motion.json`` and ``CELL.clip.json`` (and, for a walk from a BVH or a
         DeepMimic clip, the cell on the input's own skeleton: ``CELL.rig.bvh`` /
         ``CELL.deepmimic.txt``; and for any input with a rig, ``library.rig.glb``: the input's
         own character with one animation per cell) into ``folder`` (created when missing;
-        earlier files of these names are replaced)."""
+        earlier files of these names are replaced). The exports are in ``world``
+        (:mod:`solver.export.world`: by default gravity points down and each cell stands on its
+        own ground — a slope cell on its ramp —, drawn in the GLBs and described in the clips)."""
         from solver.export import export_motion
         from solver.export.clip import to_clip_json
         from solver.export.gltf import to_library_glb
@@ -313,18 +315,20 @@ class LibraryResult:
         for r in self.cells:
             if r.motion is not None:
                 r.motion.save(out / f"{r.cell.key}.motion.json")
-                (out / f"{r.cell.key}.clip.json").write_text(to_clip_json(r.motion))
+                (out / f"{r.cell.key}.clip.json").write_text(to_clip_json(r.motion, world=world))
                 rig = r.motion.provenance.get("rig")
                 if isinstance(rig, Mapping) and rig.get("format") in RIG_FILES:
                     fmt, kind = RIG_FILES[rig["format"]]
-                    (out / f"{r.cell.key}.{kind}").write_text(str(export_motion(r.motion, fmt, rig="source")))
+                    (out / f"{r.cell.key}.{kind}").write_text(str(export_motion(r.motion, fmt, rig="source",
+                                                                                world=world)))
                 clips.append((r.cell.key, r.motion))
         if clips:
             (out / "library.glb").write_bytes(to_library_glb(clips, extras={**manifest["grid"],
-                                                                            "manifest": "manifest.json"}))
+                                                                            "manifest": "manifest.json"},
+                                                             world=world))
             rig = clips[0][1].provenance.get("rig")
             if isinstance(rig, Mapping) and rig.get("format") in RIG_FORMATS:
-                (out / "library.rig.glb").write_bytes(rig_glb_library(clips))
+                (out / "library.rig.glb").write_bytes(rig_glb_library(clips, world=world))
         (out / "manifest.json").write_text(json.dumps(manifest, indent=1, allow_nan=False))
         return out
 

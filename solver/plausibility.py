@@ -18,7 +18,7 @@ import numpy as np
 import solver.naturalness  # noqa: F401  (registers the naturalness section)
 from solver.checks import Check, Context, sections
 from solver.dynamics import rnea
-from solver.environment import body_weight, environment_of, ground_of
+from solver.environment import body_weight, environment_of, ground_of, stances
 from solver.kinematics import contact_points, segment_frames, standing_leg_length
 from solver.motion import FEET, Motion
 from solver.realism import RealismLimits
@@ -146,19 +146,11 @@ def _terrain(motion: Motion) -> dict:
     B, G = motion.foot_contact(), ground_of(motion)
     cp = contact_points(motion.character, motion.q)
     treads = []
-    for k, side in enumerate(FEET):
+    for k, a, b in stances(B):
+        side = FEET[k]
         idx = [j for j, c in enumerate(motion.character.contacts) if c.side == side]
-        t = 0
-        while t < motion.T:
-            if not B[k, t]:
-                t += 1
-                continue
-            a = t
-            while t < motion.T and B[k, t]:
-                t += 1
-            xy = cp[idx, :2, a:t].mean(axis=(0, 2))
-            treads.append({"foot": side, "frames": [a, t - 1],
-                           "center": [float(xy[0]), float(xy[1]), float(G[k, a])]})
+        xy = cp[idx, :2, a:b + 1].mean(axis=(0, 2))
+        treads.append({"foot": side, "frames": [a, b], "center": [float(xy[0]), float(xy[1]), float(G[k, a])]})
     return {"step_height_m": float(step), "treads": treads}
 
 

@@ -368,7 +368,9 @@ def test_gltf_animation_reproduces_forward_kinematics(case, kind):
     np.testing.assert_allclose(np.einsum("sij,sjk->sik", rest, ibm), np.broadcast_to(np.eye(4), (S, 4, 4)), atol=1e-6)
     # meshes: every skinned vertex lies, at every frame, on its segment's ellipsoid — a foot's, on a corner
     # of its shoe (its sole through the heel and toe contact points); a welded toes segment has none
-    mesh_nodes = [n for n in g.nodes[S:] if n.mesh is not None]
+    mesh_nodes = [n for n in g.nodes[S:] if n.mesh is not None and n.name != "ground"]
+    (ground,) = [n for n in g.nodes if n.name == "ground"]  # the ground beside the walk: not skinned
+    assert ground.skin is None and ground.mesh is not None and g.meshes[ground.mesh].name == "ground"
     feet = {f.segment: f.side for f in ch.feet}
     welded = {s.name for s in ch.segments if s.parent in feet and not s.dofs}
     drawn = [s for s in ch.segments if ((s.length > 0 and s.radius > 0) or s.name in feet) and s.name not in welded]

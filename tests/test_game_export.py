@@ -157,8 +157,12 @@ def _three(path: Path, *times: str) -> dict:
     return json.loads(r.stdout)
 
 
-def _yaw_quat(yaw: float) -> np.ndarray:  # about glTF's up axis (+y), (x, y, z, w)
-    return np.array([0.0, math.sin(yaw / 2), 0.0, math.cos(yaw / 2)])
+def _turn(axis: np.ndarray, angle: float) -> tuple[np.ndarray, np.ndarray]:
+    """The rotation by ``angle`` about the unit ``axis``: its matrix and quaternion (x, y, z, w)."""
+    from scipy.spatial.transform import Rotation
+
+    r = Rotation.from_rotvec(np.asarray(axis, dtype=float) / np.linalg.norm(axis) * angle)
+    return r.as_matrix(), r.as_quat()
 
 
 def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -170,7 +174,9 @@ def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def assert_loops_in_three(anim_poses: list[dict], extras: list[dict], names: list[str]) -> float:
     """Each animation's last pose (t = duration) is its first pose (t = 0) under the loop transform
-    of its extras, as three.js's AnimationMixer evaluates them; returns the worst error (m or rad)."""
+    of its extras (a turn about its axis — the ground's normal: +y, or a ramp's normal in the
+    gravity world — through the motion root, and a translation), as three.js's AnimationMixer
+    evaluates them; returns the worst error (m or rad)."""
     worst = 0.0
     assert [a["name"] for a in anim_poses] == names
     for a, ex in zip(anim_poses, extras):
@@ -181,9 +187,9 @@ def assert_loops_in_three(anim_poses: list[dict], extras: list[dict], names: lis
         m0, mP = np.array(rm["translation"][0]), np.array(rm["translation"][P])
         dyaw = rm["yaw"][P] - rm["yaw"][0]
         assert dyaw == pytest.approx(math.radians(ex["loop"]["transform"]["yaw_deg"]), abs=1e-6)
-        c, s = math.cos(dyaw), math.sin(dyaw)
-        R = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])  # about +y
-        qy = _yaw_quat(dyaw)
+        axis = np.array(ex["loop"]["transform"]["axis"])
+        assert np.allclose(axis, rm["up"]) and np.linalg.norm(axis) == pytest.approx(1.0)
+        R, qy = _turn(axis, dyaw)
         for bone, b0 in first.items():
             p = R @ (np.array(b0["position"]) - m0) + mP
             d = np.linalg.norm(p - np.array(last[bone]["position"]))

@@ -282,15 +282,18 @@ def test_embedded_gltf_reads_as_the_glb(shared_data, tmp_path):
 
 def _source_kept(src_bytes: bytes, out_bytes: bytes) -> None:
     """The source's meshes, skins, materials, textures, images, samplers, scenes, node names and
-    rest TRS in the written file (data compared through pygltflib)."""
+    rest TRS in the written file (data compared through pygltflib); after them only the ground
+    beside the walk (a node ``ground`` at the scene root, its mesh and its material)."""
     s, o = pygltflib.GLTF2.load_from_bytes(src_bytes), pygltflib.GLTF2.load_from_bytes(out_bytes)
     sb, ob = s.binary_blob(), o.binary_blob()
-    assert len(o.nodes) == len(s.nodes)
+    assert len(o.nodes) == len(s.nodes) + 1 and o.nodes[-1].name == "ground"
     for a, b in zip(s.nodes, o.nodes):
         assert (a.name, a.children, a.mesh, a.skin) == (b.name, b.children, b.mesh, b.skin)
         assert (a.translation, a.rotation, a.scale, a.matrix) == (b.translation, b.rotation, b.scale, b.matrix)
-    assert [sc.nodes for sc in o.scenes] == [sc.nodes for sc in s.scenes] and o.scene == s.scene
-    assert len(o.meshes) == len(s.meshes) == 1
+    assert [sc.nodes for sc in o.scenes] == [sc.nodes + ([len(s.nodes)] if k == (s.scene or 0) else [])
+                                             for k, sc in enumerate(s.scenes)] and o.scene == s.scene
+    assert len(o.meshes) == len(s.meshes) + 1 == 2 and o.meshes[-1].name == "ground"
+    assert [m.name for m in o.materials] == [m.name for m in s.materials] + ["ground"]
     for ma, mb in zip(s.meshes, o.meshes):
         assert ma.name == mb.name and len(ma.primitives) == len(mb.primitives)
         for pa, pb in zip(ma.primitives, mb.primitives):
@@ -304,7 +307,7 @@ def _source_kept(src_bytes: bytes, out_bytes: bytes) -> None:
         assert (ka.joints, ka.skeleton, ka.name) == (kb.joints, kb.skeleton, kb.name)
         assert np.array_equal(_accessor(s, sb, ka.inverseBindMatrices), _accessor(o, ob, kb.inverseBindMatrices))
     for key in ("materials", "textures", "samplers"):
-        assert json.loads(o.to_json())[key] == json.loads(s.to_json())[key], key
+        assert json.loads(o.to_json())[key][:len(getattr(s, key))] == json.loads(s.to_json())[key], key
     for ia, ib in zip(s.images, o.images):
         va, vb = s.bufferViews[ia.bufferView], o.bufferViews[ib.bufferView]
         assert ia.mimeType == ib.mimeType and ia.name == ib.name
@@ -316,7 +319,8 @@ def test_walks_come_out_on_the_input_character(runs, shared_data, name, tmp_path
     _, motions = runs
     motion = motions[name]
     t0 = time.perf_counter()
-    data = solver.export_motion(motion, "gltf", rig="source")
+    data = solver.export_motion(motion, "gltf", rig="source", world="ground")  # the solver's frame, as retarget's
+    # (the default world, gravity down, is checked by tests/test_world_export.py)
     elapsed = time.perf_counter() - t0
     path = tmp_path / f"{name}.glb"
     path.write_bytes(data)
@@ -373,14 +377,14 @@ def test_walks_come_out_on_the_input_character(runs, shared_data, name, tmp_path
 def test_library_glb_has_one_animation_per_motion(runs, tmp_path):
     _, motions = runs
     items = list(motions.items())
-    data = rig_glb_library(items)
+    data = rig_glb_library(items, world="ground")
     path = tmp_path / "library.glb"
     path.write_bytes(data)
     report = khronos_report(path)
     assert report["errors"] == 0 and report["warnings"] == 0, report["messages"]
     g = pygltflib.GLTF2.load_from_bytes(data)
     assert [a.name for a in g.animations] == list(motions)
-    assert len(g.meshes) == 1 and len(g.skins) == 1
+    assert [m.name for m in g.meshes] == ["Body", *(f"ground {n}" for n in motions)] and len(g.skins) == 1
     for k, (name, motion) in enumerate(items):
         g, times, W = glb_fk(data, animation=k)
         rig = Rig.from_dict(motion.provenance["rig"])
@@ -417,7 +421,7 @@ def test_bvh_and_deepmimic_rigs_come_out_as_their_own_skeletons(shared_data, tmp
         if fmt == "deepmimic":  # one shape per body, in the BodyDefs' colours
             bodies = rig.extra["body_defs"]
             colours = {(b["ColorR"], b["ColorG"], b["ColorB"], b["ColorA"]) for b in bodies.values()}
-            assert len(g.materials) == len(colours)
+            assert len(g.materials) == len(colours) + 1 and g.materials[-1].name == "ground"
             joints = set()
             blob = g.binary_blob()
             for p in g.meshes[0].primitives:

@@ -84,8 +84,8 @@ def _same_hierarchy(out, src):
 def test_walks_come_out_on_the_input_rig(runs, name, tmp_path):
     path, motions = runs
     motion = motions[name]
-    text = solver.export_motion(motion, "bvh", rig="source")
-    src, out = read_bvh(path), parse_bvh(text)
+    text = solver.export_motion(motion, "bvh", rig="source", world="ground")  # the solver's frame, as retarget's
+    src, out = read_bvh(path), parse_bvh(text)  # (the default world, gravity down: tests/test_world_export.py)
     _same_hierarchy(out, src)
     rig = Rig.from_dict(motion.provenance["rig"])
     pose = retarget(motion, rig)

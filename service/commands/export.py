@@ -1,5 +1,6 @@
 """``motionx export``: write a motion file as a JSON clip, glTF 2.0 (.glb, or .gltf with
-``--embedded``) or BVH."""
+``--embedded``) or BVH (with the ground's description beside it, ``FILE.ground.json``), in the
+world ``--world`` names."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import sys
 from pathlib import Path
 
 from service.cli import CliError, add_command, load_motion
-from solver.formats import EXPORTERS
+from solver.formats import EXPORT_WORLDS, EXPORTERS
 
 CHOICES = tuple(EXPORTERS)  # the exporters' registry (solver.formats)
 
@@ -45,6 +46,10 @@ def cmd_export(args: argparse.Namespace) -> int:
         if args.out == "-":
             raise CliError("--out - (stdout) is only for text formats; give a .glb file name "
                            "(or --embedded for the .gltf JSON)")
+    if args.world is not None:
+        if EXPORTERS[fmt].folder:
+            raise CliError(f"--world does not apply to --format {fmt} (it writes the trial's own ground)")
+        options["world"] = args.world
     if args.generic_model:
         if fmt != "opensim":
             raise CliError("--generic-model applies to --format opensim only")
@@ -71,10 +76,30 @@ def cmd_export(args: argparse.Namespace) -> int:
             out.write_text(data)
     except OSError as e:
         raise CliError(f"cannot write {out}: {e.strerror or e}") from None
-    print(json.dumps({"out": str(out), "format": args.format, "media_type": media_type(fmt, **options),
-                      "frames": motion.T, "fps": motion.fps,
-                      "character": motion.character.name, "bytes": out.stat().st_size}))
+    line = {"out": str(out), "format": args.format, "media_type": media_type(fmt, **options),
+            "frames": motion.T, "fps": motion.fps, "character": motion.character.name, "bytes": out.stat().st_size}
+    if fmt == "bvh":
+        line["ground"] = str(_write_ground(motion, out, options))
+    print(json.dumps(line))
     return 0
+
+
+def _write_ground(motion, out: Path, options: dict) -> Path:
+    """BVH has no meshes: the ground's description (solver.export.world.ground_json) in the BVH's
+    own axes and unit, as ``FILE.ground.json`` beside it."""
+    from solver.export import ExportError
+    from solver.export.world import ground_json
+
+    path = out.with_suffix(".ground.json")
+    keys = ("world", "rig", "units")
+    try:
+        text = ground_json(motion, **{k: options[k] for k in keys if k in options})
+        path.write_text(text)
+    except ExportError as e:
+        raise CliError(str(e)) from None
+    except OSError as e:
+        raise CliError(f"cannot write {path}: {e.strerror or e}") from None
+    return path
 
 
 def _write_folder(data: bytes, out: Path, fmt: str, motion) -> int:
@@ -101,7 +126,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 Write a motion file for other tools: a compact JSON clip (schema solver/export/clip.schema.json),
 glTF 2.0 binary .glb (skinned ellipsoids + animation, Y-up, metres; --embedded for a .gltf
 JSON) or BVH (Y-up, cm by default), or, with --rig source, on the input's own skeleton (BVH, skinned
-glTF, DeepMimic motion). solver.export.reimport reads the JSON clip, glTF and BVH back.""")
+glTF, DeepMimic motion). The walk is written where gravity points down (--world gravity, the
+default: a slope walk climbs a ramp, stairs rise, a curve keeps its path) with its ground beside
+it (the GLB's "ground" node, the clip's "ground", FILE.ground.json beside a BVH); --world ground
+keeps the solver's frame (level ground, a slope as tilted gravity). solver.export.reimport
+reads the JSON clip, glTF and BVH back.""")
     s.add_argument("motion", metavar="MOTION.json", help="motion file v1 (JSON), e.g. a tutor or a λ optimum")
     s.add_argument("--format", required=True, choices=CHOICES,
                    help="json: motionx clip; gltf (alias glb): binary glTF 2.0 (.glb); bvh; opensim: a folder on "
@@ -121,4 +150,8 @@ glTF, DeepMimic motion). solver.export.reimport reads the JSON clip, glTF and BV
                         "motion was made from: its hierarchy, names, offsets, channels; the joints the motion's "
                         "character locked carry the capture's own values at the same gait phase); character "
                         "(default): on the motion's own skeleton")
+    s.add_argument("--world", choices=tuple(EXPORT_WORLDS), default=None,
+                   help="gravity (default): gravity points down and the ground is as the walk found it (a slope "
+                        "walk climbs its ramp: root and feet rise by travel × tan(slope)); ground: the solver's "
+                        "own frame (level ground, a slope as tilted gravity)")
     s.set_defaults(func=cmd_export)

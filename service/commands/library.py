@@ -15,6 +15,7 @@ from tqdm import tqdm
 from service.cli import CliError, add_command, cancel_on_signals, finite_list, load_motion
 from service.config import enable_native_code, get_settings
 from solver import axes as registry
+from solver.formats import EXPORT_WORLDS
 
 
 class _Bar:
@@ -94,7 +95,7 @@ def _library(args: argparse.Namespace, cancel: cancel_on_signals) -> int:
                                  should_cancel=cancel)
     finally:
         bar.close()
-    result.save(out, tutor_file=str(args.tutor))
+    result.save(out, tutor_file=str(args.tutor), world=args.world)
     manifest = json.loads((out / "manifest.json").read_text())
     wall = result.wall_time_s
     s = manifest["summary"]
@@ -137,4 +138,8 @@ IPOPT iteration, writes the cells reached so far and the manifest (status cancel
     s.add_argument("--max-solves", type=int, default=400, metavar="N", help="most NLP solves per cell")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.add_argument("--json", action="store_true", help="print the manifest's summary as JSON")
+    s.add_argument("--world", choices=tuple(EXPORT_WORLDS), default=next(iter(EXPORT_WORLDS)),
+                   help="the world of the written clips and GLBs (as motionx export --world): gravity (default: "
+                        "gravity down, each cell on its own ground, a slope cell on its ramp) or ground (the "
+                        "solver's level ground)")
     s.set_defaults(func=cmd_library)

@@ -21,6 +21,11 @@ from service.problems import Problem, known_id, not_found
 from service.schemas import LibraryIn, LibraryOut, LibraryPage
 from service.views import sse_event
 from service.work import Compute
+from solver.formats import EXPORT_WORLDS
+
+#: the worlds a library GLB is written in (solver.formats, the default first)
+ExportWorld = Literal[tuple(EXPORT_WORLDS)]  # type: ignore[valid-type]
+DEFAULT_WORLD = next(iter(EXPORT_WORLDS))
 
 router = APIRouter(tags=["libraries"])
 
@@ -143,7 +148,11 @@ def get_manifest(library_id: str, owner: OwnerDep, db: DatabaseDep) -> dict:
 async def get_library_glb(library_id: str, request: Request, owner: OwnerDep, db: DatabaseDep,
                           rig: Literal["character", "source"] = Query(
                               "character", description="source: on the input's own character (a BVH, skinned "
-                                                       "glTF or DeepMimic input), one animation per cell")
+                                                       "glTF or DeepMimic input), one animation per cell"),
+                          world: ExportWorld = Query(
+                              DEFAULT_WORLD, description="; ".join(f"{k}: {v}" for k, v in EXPORT_WORLDS.items())
+                              + " (docs/export.md, 'The world and the ground'); each cell's ground is a node "
+                                "'ground <cell>'")
                           ) -> Response:
     known_id("library", library_id)
 
@@ -163,8 +172,8 @@ async def get_library_glb(library_id: str, request: Request, owner: OwnerDep, db
     if not items:
         raise Problem(409, f"library {library_id} has no cell with a motion yet")
     compute: Compute = request.app.state.compute
-    key = ("library.glb", tuple((k, sha) for k, sha, _ in items), repr(grid), rig)
-    body, mt = await compute.cached(key, work.library_glb, [(k, d) for k, _, d in items], grid, rig,
+    key = ("library.glb", tuple((k, sha) for k, sha, _ in items), repr(grid), rig, world)
+    body, mt = await compute.cached(key, work.library_glb, [(k, d) for k, _, d in items], grid, rig, world,
                                     what="the library GLB")
     return Response(body, media_type=mt)
 

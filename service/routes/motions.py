@@ -207,7 +207,11 @@ def _option(k: str, v: str) -> Any:
             "(format=motion)",
     description="Other query parameters are the exporter's options (docs/export.md), e.g. `y_up=true`, "
                 "`decimals=3` (json), `units=m` (bvh), `meshes=false` (gltf, glb), `binary=false` (gltf: "
-                "the .gltf JSON with its buffer embedded, model/gltf+json, instead of the binary .glb). "
+                "the .gltf JSON with its buffer embedded, model/gltf+json, instead of the binary .glb), "
+                "`rig=source` (bvh, gltf, glb: on the input's own skeleton), `world=gravity` (the default of "
+                "json, gltf, glb, bvh and deepmimic: gravity points down and the walk stands on its ground, a slope "
+                "walk on its ramp; the GLB holds the ground as a node 'ground', the clip as 'ground') or "
+                "`world=ground` (the solver's frame: level ground, a slope as tilted gravity). "
                 "An option the exporter does not know, or a value it refuses, gets 422. Exports are computed "
                 "in the server's compute processes and cached by content.",
     responses={200: {"content": {mt: {} for mt in ("application/json", *export_media_types())}},

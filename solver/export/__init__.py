@@ -13,6 +13,10 @@ Formats (see ``docs/export.md``):
   (:func:`solver.export.opensim.to_opensim`; :func:`solver.export.opensim.write_opensim` writes
   the folder).
 
+Every exporter writes the motion in a *world* (``world="gravity"``, the default: gravity points
+down, so a slope walk climbs its ramp; ``"ground"``: the solver's frame) with the ground it walks
+on beside it (:mod:`solver.export.world`).
+
 The JSON clip and the glTF animations carry the game-ready data of :mod:`solver.export.game`
 (loop points, root motion, foot contacts, cycle metadata); ``gltf``/``glb`` with ``loop=True``
 animate one cycle, and :func:`solver.export.gltf.to_library_glb` writes a motion library.
@@ -38,10 +42,11 @@ import numpy as np
 
 from solver import spatial as sp
 from solver.character import Character
-from solver.formats import EXPORTERS
+from solver.formats import EXPORT_WORLDS, EXPORTERS
 from solver.motion import Motion
 
 __all__ = [
+    "DEFAULT_WORLD",
     "FORMATS",
     "Y_UP",
     "ExportError",
@@ -61,6 +66,8 @@ Y_UP = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
 Y_UP.setflags(write=False)
 
 AXES_Z_UP = {"up": "+z", "forward": "+x", "left": "+y", "handedness": "right"}
+#: the world every exporter writes in unless told otherwise (``solver.export.world``)
+DEFAULT_WORLD = next(iter(EXPORT_WORLDS))
 AXES_Y_UP = {"up": "+y", "forward": "+z", "left": "+x", "handedness": "right"}
 
 
@@ -196,11 +203,12 @@ def continuous_quaternions(quat: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class GroundReaction:
-    """Per foot (right, left) and frame, in our world frame (Z up).
+    """Per foot (right, left) and frame, in the motion's ground frame (Z up).
 
     ``force`` (2, T, 3) N; ``loaded`` (2, T) bool (vertical force above the threshold);
-    ``cop`` (2, T, 3) the centre of pressure on the ground z = 0 (NaN when unloaded);
-    ``free_moment`` (2, T) N·m, the vertical moment about the CoP (NaN when unloaded).
+    ``cop`` (2, T, 3) the centre of pressure on the ground under the foot (z = 0, or the
+    tread's height on stairs; NaN when unloaded); ``free_moment`` (2, T) N·m, the vertical
+    moment about the CoP (NaN when unloaded).
     """
 
     force: np.ndarray
@@ -213,12 +221,15 @@ class GroundReaction:
 def ground_reactions(motion: Motion, min_load: float | None = None) -> GroundReaction:
     """Decompose each foot's wrench (moment about the world origin; force) on the ground.
 
-    The centre of pressure is the point p = (x, y, 0) about which the moment's horizontal
-    components vanish: m - p × f has zero x and y components, so x = -m_y / f_z and
-    y = m_x / f_z; the free moment is the remaining vertical component
-    m_z - (x f_y - y f_x). A foot is *loaded* when f_z > ``min_load`` (N; default 1 % of
-    the character's weight); CoP and free moment are defined only then.
+    The centre of pressure is the point p = (x, y, h) on the ground under the foot (h = 0, or
+    the tread's height on stairs: ``solver.environment.ground_of``) about which the moment's
+    horizontal components vanish: m - p × f has zero x and y components, so
+    x = (h f_x - m_y) / f_z and y = (m_x + h f_y) / f_z; the free moment is the remaining
+    vertical component m_z - (x f_y - y f_x). A foot is *loaded* when f_z > ``min_load`` (N;
+    default 1 % of the character's weight); CoP and free moment are defined only then.
     """
+    from solver.environment import ground_of
+
     _check_motion(motion)
     if motion.wrenches is None:
         raise ExportError("the motion has no contact wrenches")
@@ -227,12 +238,13 @@ def ground_reactions(motion: Motion, min_load: float | None = None) -> GroundRea
         raise ExportError(f"min_load must be a positive finite force (N), got {min_load!r}")
     w = np.transpose(motion.wrenches, (0, 2, 1))  # (2, T, 6)
     m, f = w[..., :3], w[..., 3:]
+    h = ground_of(motion)  # (2, T)
     loaded = f[..., 2] > threshold
     fz = np.where(loaded, f[..., 2], 1.0)
-    x = -m[..., 1] / fz
-    y = m[..., 0] / fz
+    x = (h * f[..., 0] - m[..., 1]) / fz
+    y = (m[..., 0] + h * f[..., 1]) / fz
     free = m[..., 2] - (x * f[..., 1] - y * f[..., 0])
-    cop = np.stack([x, y, np.zeros_like(x)], axis=-1)
+    cop = np.stack([x, y, h], axis=-1)
     cop[~loaded] = np.nan
     free[~loaded] = np.nan
     return GroundReaction(force=f.copy(), cop=cop, free_moment=free, loaded=loaded, threshold=threshold)
@@ -329,15 +341,18 @@ def source_rig(motion: Motion, formats: tuple[str, ...], what: str):
         raise ExportError(str(e)) from None
 
 
-def source_pose(motion: Motion, formats: tuple[str, ...], what: str):
+def source_pose(motion: Motion, formats: tuple[str, ...], what: str, world: str = DEFAULT_WORLD):
     """The motion's source rig (:func:`source_rig`) and the motion retargeted onto it
-    (:func:`solver.rig.retarget`: one cycle at the rig's frame rate); a rig that cannot take
-    the motion is an :class:`ExportError`."""
+    (:func:`solver.rig.retarget`: one cycle at the rig's frame rate), its root placed in
+    ``world`` (:func:`solver.export.world.world_rig_pose`); a rig that cannot take the motion
+    is an :class:`ExportError`."""
+    from solver.export.world import check_world, world_rig_pose
     from solver.rig import RigError, retarget
 
+    check_world(world)
     rig = source_rig(motion, formats, what)
     try:
-        return rig, retarget(motion, rig)
+        return rig, world_rig_pose(motion, world, rig, retarget(motion, rig))
     except RigError as e:
         raise ExportError(str(e)) from None
 

@@ -12,7 +12,11 @@ angles in degrees, made continuous in time (each angle is unwrapped, which leave
 rotation unchanged). Leaf segments get an ``End Site`` at their bone tip (marker).
 
 Axes: Y up, converted like glTF (x_bvh = y, y_bvh = z, z_bvh = x: X left, Y up,
-Z forward). Units: centimetres (default) or metres. ``Frame Time`` = 1 / fps.
+Z forward). Units: centimetres (default) or metres. ``Frame Time`` = 1 / fps. The motion is
+written in a world (``world="gravity"``, the default: gravity points down, a slope walk climbs
+its ramp; ``"ground"``: the solver's level ground under tilted gravity): the root's channels
+carry it (:mod:`solver.export.world`). BVH has no meshes: the ground's description is
+:func:`solver.export.world.ground_json` (the command line writes it beside the file).
 
 The default order "XZY" follows our joints: with the Y-up axes a hip, knee, ankle,
 spine, shoulder, elbow or wrist sequence (flexion about our y, then ab/adduction about
@@ -29,7 +33,8 @@ import warnings
 
 import numpy as np
 
-from solver.export import Y_UP, ExportError, _check_motion, change_axes, check_decimals, local_transforms
+from solver.export import Y_UP, ExportError, _check_motion, change_axes, check_decimals
+from solver.export.world import DEFAULT_WORLD, check_world, world_transforms
 from solver.motion import Motion
 
 log = logging.getLogger(__name__)
@@ -60,13 +65,15 @@ def _check(units: object, rotation_order: object, decimals: object) -> None:
 
 
 def to_bvh(motion: Motion, *, units: str = "cm", rotation_order: str = "XZY", decimals: int = 6,
-           rig: str = "character") -> str:
-    """BVH text of ``motion`` (Y up; ``units`` "cm" or "m"; ``decimals`` per number).
+           rig: str = "character", world: str = DEFAULT_WORLD) -> str:
+    """BVH text of ``motion`` (Y up; ``units`` "cm" or "m"; ``decimals`` per number) in ``world``
+    ("gravity": gravity down, a slope's ramp climbed; "ground": the solver's level ground).
     ``rig="source"``: on the skeleton of the BVH the motion came from (:func:`source_bvh`;
     ``units`` and ``rotation_order`` are then the source's)."""
     _check_motion(motion)
+    check_world(world)
     if rig == "source":
-        return source_bvh(motion, decimals=decimals)
+        return source_bvh(motion, decimals=decimals, world=world)
     if rig != "character":
         raise ExportError(f"rig must be 'character' (the motion's own skeleton) or 'source' (the input's), got {rig!r}")
     _check(units, rotation_order, decimals)
@@ -84,7 +91,7 @@ def to_bvh(motion: Motion, *, units: str = "cm", rotation_order: str = "XZY", de
         if s.parent is not None:
             children[s.parent].append(i)
 
-    lt = local_transforms(ch, motion.q)
+    lt = world_transforms(motion, world)
     rot, pos = change_axes(lt.rot, lt.pos, True)
     euler = np.degrees(np.unwrap(euler_angles(rot, rotation_order), axis=1))  # (S, T, 3)
     offsets = np.array([s.offset for s in segs]) @ Y_UP.T * scale
@@ -148,14 +155,14 @@ def _channel_values(R: np.ndarray, axes: str) -> np.ndarray:
     return np.degrees(np.unwrap(ang, axis=0))
 
 
-def source_bvh(motion: Motion, *, decimals: int = 6) -> str:
+def source_bvh(motion: Motion, *, decimals: int = 6, world: str = DEFAULT_WORLD) -> str:
     """``motion`` on the skeleton of the BVH it came from: the input's hierarchy, joint names,
     offsets, channels (order and count), End Sites and units, one gait cycle at the input's
-    frame rate (``solver.rig.retarget``)."""
+    frame rate (``solver.rig.retarget``), its root in ``world``."""
     from solver.export import source_pose
 
     check_decimals(decimals)
-    rig, pose = source_pose(motion, ("bvh",), "rig=source needs a motion made from a BVH trial")
+    rig, pose = source_pose(motion, ("bvh",), "rig=source needs a motion made from a BVH trial", world)
     fmt = f"{{:.{decimals}f}}"
     children: dict[int, list[int]] = {j: [] for j in range(rig.J)}
     for j, p in enumerate(rig.parents):

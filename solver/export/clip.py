@@ -4,9 +4,10 @@ Layout (schema ``clip.schema.json`` beside this file, documented in ``docs/expor
 skeleton (segments with parent, rest offset and rest rotation), per frame the local
 rotation quaternion (x, y, z, w) of every segment and the root translation, optional
 world positions of markers and contact points, per-frame foot contact flags and ground
-reaction per foot (force, centre of pressure, free moment), and the game-ready data
-(``game``: loop points, root motion, foot contacts, cycle metadata; :mod:`solver.export.game`).
-Our Z-up axes by default, or glTF-style Y-up (``y_up=True``).
+reaction per foot (force, centre of pressure, free moment), the game-ready data
+(``game``: loop points, root motion, foot contacts, cycle metadata; :mod:`solver.export.game`),
+the world it is written in and the ground the walk stands on there (``world``, ``ground``:
+:mod:`solver.export.world`). Our Z-up axes by default, or glTF-style Y-up (``y_up=True``).
 """
 
 from __future__ import annotations
@@ -30,9 +31,9 @@ from solver.export import (
     continuous_quaternions,
     game,
     ground_reactions,
-    local_transforms,
     matrix_to_quaternion,
 )
+from solver.export.world import DEFAULT_WORLD, ground_of_motion, world_of, world_transforms
 from solver.motion import FEET, Motion
 
 log = logging.getLogger(__name__)
@@ -71,6 +72,7 @@ def to_clip(
     points: bool = False,
     decimals: int | None = 6,
     min_load: float | None = None,
+    world: str = DEFAULT_WORLD,
 ) -> dict:
     """The clip as a JSON-ready dict.
 
@@ -78,15 +80,18 @@ def to_clip(
     ours (x forward, y left, z up). ``points``: include world positions of the segment-tip
     markers and the contact points. ``decimals``: round numbers to this many decimals
     (None: full precision). ``min_load``: vertical force (N) above which a foot counts as
-    loaded for its centre of pressure (default 1 % of body weight).
+    loaded for its centre of pressure (default 1 % of body weight). ``world``: "gravity" (gravity
+    down, the ground as the walk found it: a slope's ramp) or "ground" (the solver's ground
+    frame: level ground, tilted gravity); see :mod:`solver.export.world`.
     """
     _check_motion(motion)
     _check_options(decimals, min_load)
+    w = world_of(motion, world)
     if not isinstance(y_up, bool) or not isinstance(points, bool):
         raise ExportError("y_up and points must be booleans")
     ch = motion.character
     segs = ch.segments
-    lt = local_transforms(ch, motion.q)
+    lt = world_transforms(motion, w)
     rot, pos = change_axes(lt.rot, lt.pos, y_up)
     quat = continuous_quaternions(matrix_to_quaternion(rot))  # (S, T, 4)
     rest_rot, rest_off = change_axes(
@@ -130,7 +135,7 @@ def to_clip(
         names = [name for name, _ in kinematics.marker_points(ch)]
         mk = np.asarray(kinematics.markers(ch, motion.q))  # (M, 3, T)
         cp = np.asarray(kinematics.contact_points(ch, motion.q)) if ch.contacts else np.zeros((0, 3, motion.T))
-        allp = np.concatenate([mk, cp], axis=0).transpose(2, 0, 1)  # (T, P, 3)
+        allp = w.points(np.concatenate([mk, cp], axis=0).transpose(2, 0, 1))  # (T, P, 3)
         if y_up:
             allp = allp @ Y_UP.T
         clip["points"] = {
@@ -145,12 +150,12 @@ def to_clip(
         }
     if motion.wrenches is not None:
         gr = ground_reactions(motion, min_load)
-        force, cop = gr.force, gr.cop
+        force, cop = w.points(gr.force), w.points(gr.cop)
         if y_up:
             force, cop = force @ Y_UP.T, cop @ Y_UP.T
         clip["ground_reaction"] = {
             "load_threshold": float(f"{gr.threshold:.9g}"),
-            "free_moment_axis": "up",
+            "free_moment_axis": "up" if w.identity else "ground_normal",
             **{
                 foot: {
                     "force": _rounded(force[i], decimals),
@@ -162,7 +167,10 @@ def to_clip(
         }
 
     if game.has_free_root(motion):
-        clip["game"] = game.game_json(motion, axes=Y_UP if y_up else None, decimals=decimals)
+        clip["game"] = game.game_json(motion, axes=Y_UP if y_up else None, decimals=decimals, world=w)
+    A = Y_UP if y_up else np.eye(3)
+    clip["world"] = w.to_json(A, decimals)
+    clip["ground"] = ground_of_motion(motion, w).to_json(A, 1.0, decimals)
     log.debug("clip of %s: %d frames, %d segments", ch.name, motion.T, len(segs))
     return clip
 
@@ -174,10 +182,11 @@ def to_clip_json(
     points: bool = False,
     decimals: int | None = 6,
     min_load: float | None = None,
+    world: str = DEFAULT_WORLD,
 ) -> str:
     """The clip as compact JSON text (see :func:`to_clip` for the options)."""
     return json.dumps(
-        to_clip(motion, y_up=y_up, points=points, decimals=decimals, min_load=min_load),
+        to_clip(motion, y_up=y_up, points=points, decimals=decimals, min_load=min_load, world=world),
         allow_nan=False,
         separators=(",", ":"),
     )

@@ -7,7 +7,9 @@ nothing for a fixed one]``, DeepMimic axes (Y up), metres. One gait cycle at the
 frame rate, written as ``"Loop": "wrap"`` (the last frame is the phase of the first), so it
 goes straight into DeepMimic-style imitation learning with the same character file. The
 motion's character drives the joints it has; the others carry the capture's values at the
-same gait phase (``solver.rig.retarget``).
+same gait phase (``solver.rig.retarget``). The root is placed in the export's world
+(``world="gravity"``, the default: gravity down, a slope walk climbs its ramp — DeepMimic's own
+scene has a level floor: give it the ramp, or export ``world="ground"`` and tilt its gravity).
 """
 
 from __future__ import annotations
@@ -16,19 +18,21 @@ import json
 
 import numpy as np
 
-from solver.export import ExportError, _check_motion, check_decimals, source_pose
+from solver.export import DEFAULT_WORLD, ExportError, _check_motion, check_decimals, source_pose
 from solver.motion import Motion
 from solver.rig import matrices_to_quats
 
 
-def to_deepmimic(motion: Motion, *, rig: str = "source", decimals: int = 6) -> str:
-    """The DeepMimic motion file (JSON text) of ``motion`` on its source DeepMimic character."""
+def to_deepmimic(motion: Motion, *, rig: str = "source", decimals: int = 6, world: str = DEFAULT_WORLD) -> str:
+    """The DeepMimic motion file (JSON text) of ``motion`` on its source DeepMimic character, in
+    ``world`` (:mod:`solver.export.world`)."""
     _check_motion(motion)
     if rig != "source":
         raise ExportError(f"a DeepMimic motion is written on the source character only: rig must be 'source', "
                           f"got {rig!r}")
     check_decimals(decimals)
-    src_rig, pose = source_pose(motion, ("deepmimic",), "format=deepmimic needs a motion made from a DeepMimic clip")
+    src_rig, pose = source_pose(motion, ("deepmimic",), "format=deepmimic needs a motion made from a DeepMimic clip",
+                                world)
     types = list(src_rig.extra.get("types") or [])
     if len(types) != src_rig.J:
         raise ExportError("the motion's DeepMimic rig has no joint types")

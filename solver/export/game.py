@@ -4,20 +4,24 @@ Shared by the JSON clip (``clip["game"]``) and the glTF exports (``animation.ext
 documented in ``docs/export.md`` ("Game-ready data").
 
 **Root motion.** The *motion root* is a ground-level frame M_t per frame: origin at the
-root segment's horizontal position (x_t, y_t, 0), heading ψ_t about the up axis. The
+root segment's horizontal position (x_t, y_t, h_t), heading ψ_t about the up axis (h_t = 0, or
+on stairs the cycle's rise spread evenly over the cycle, h_t = rise · t / P). The
 heading turns at the cycle's constant rate, ψ_t = ψ_0 + Δψ · t / P, from the root's yaw at
 frame 0 (ψ_0) to its yaw one cycle later (ψ_0 + Δψ, frame P), so a curved walk's motion root
 turns smoothly while the pelvis keeps its own yaw oscillation. The *in-place* animation is
 the pose relative to M_t: world = M_t ∘ in-place. Only the root segment differs between the
 two (every other segment's transform is local to its parent): the in-place root sits at
-(0, 0, z_t) with rotation R_z(yaw_t − ψ_t) · (the rest of its rotation).
+(0, 0, z_t − h_t) with rotation R_z(yaw_t − ψ_t) · (the rest of its rotation). In an export's
+world (:mod:`solver.export.world`: a slope's ground frame turned so that gravity points down)
+the motion root is that world's rotation W times M_t: its yaw turns about the ground's normal
+(``up``) and ``tilt`` is W.
 
 **Loop.** A cyclic motion of the spacetime solver has T = P + 2 frames: frames P and P + 1
 repeat frames 0 and 1 (joints, root height, pitch, roll) and the root's horizontal velocity
 and yaw rate are periodic in the walker's heading frame. The loop is frames 0 … P (P frames
 of duration, the last key equal to the first under the loop transform L = M_P ∘ M_0⁻¹: a
-planar rotation by Δψ and a translation). ``closure`` measures it: the largest distance
-between a segment origin at frame P and L applied to it at frame 0, and the largest
+planar rotation by Δψ and a translation, raised by the cycle's rise on stairs). ``closure``
+measures it: the largest distance between a segment origin at frame P and L applied to it at frame 0, and the largest
 difference of the in-place coordinates (joints, root height, pitch, roll). A motion whose
 closure exceeds :data:`LOOP_TOLERANCE_M` / :data:`LOOP_TOLERANCE_RAD` is reported as not
 looping (``loop.seamless`` false) — e.g. a raw capture.
@@ -43,7 +47,7 @@ from typing import Any
 import numpy as np
 
 from solver import kinematics
-from solver.environment import STANDARD_GRAVITY_VECTOR, environment_of
+from solver.environment import STANDARD_GRAVITY_VECTOR, environment_of, stair_rise
 from solver.motion import FEET, Motion
 
 #: a loop closes when the segment origins at frame P match the loop transform of frame 0 within
@@ -74,32 +78,42 @@ def loop_frames(motion: Motion) -> int:
     return T - 2 if cyclic else T - 1
 
 
-def motion_root(motion: Motion, P: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(xy (T, 2), heading ψ (T,)) of the motion root, in our axes (Z up)."""
+def rise(motion: Motion) -> float:
+    """Height the walk gains over one cycle in its ground frame: the stairs' (stances × riser), else 0."""
+    step = environment_of(motion).step_height_m
+    if not step or motion.contacts is None or loop_frames(motion) != motion.T - 2:
+        return 0.0
+    return stair_rise(motion.foot_contact(), step)
+
+
+def motion_root(motion: Motion, P: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(xy (T, 2), heading ψ (T,), height h (T,)) of the motion root, in the ground frame (Z up)."""
     if not has_free_root(motion):
         raise ValueError(f"root motion needs the free root {ROOT_NAMES}, got {motion.coordinate_names[:6]}")
     P = loop_frames(motion) if P is None else P
     q = motion.q
     xy = q[[ROOT_X, ROOT_Y]].T.copy()
     yaw0, dpsi = float(q[ROOT_YAW, 0]), float(q[ROOT_YAW, P] - q[ROOT_YAW, 0])
-    psi = yaw0 + dpsi * np.arange(motion.T) / P
-    return xy, psi
+    phase = np.arange(motion.T) / P
+    return xy, yaw0 + dpsi * phase, rise(motion) * phase
 
 
-def planar(psi: float, xy: np.ndarray) -> np.ndarray:
-    """The 4x4 homogeneous transform of a planar pose (rotation ψ about z, translation xy)."""
+def planar(psi: float, xy: np.ndarray, height: float = 0.0) -> np.ndarray:
+    """The 4x4 homogeneous transform of a planar pose (rotation ψ about z, translation xy),
+    raised by ``height``."""
     c, s = math.cos(psi), math.sin(psi)
     m = np.eye(4)
     m[:2, :2] = [[c, -s], [s, c]]
     m[:2, 3] = xy
+    m[2, 3] = height
     return m
 
 
 def loop_transform(motion: Motion, P: int | None = None) -> np.ndarray:
-    """L = M_P ∘ M_0⁻¹ (4x4, our axes): maps the world pose at frame 0 onto the one at frame P."""
+    """L = M_P ∘ M_0⁻¹ (4x4, the ground frame): maps the world pose at frame 0 onto the one at frame P."""
     P = loop_frames(motion) if P is None else P
-    xy, psi = motion_root(motion, P)
-    return planar(psi[P], xy[P]) @ np.linalg.inv(planar(psi[0], xy[0]))
+    xy, psi, h = motion_root(motion, P)
+    return planar(psi[P], xy[P], h[P]) @ np.linalg.inv(planar(psi[0], xy[0], h[0]))
 
 
 def closure(motion: Motion, P: int | None = None) -> dict[str, float]:
@@ -109,7 +123,8 @@ def closure(motion: Motion, P: int | None = None) -> dict[str, float]:
     _, pos = kinematics.segment_frames(motion.character, motion.q)  # (S, 3, T)
     p0 = np.c_[pos[:, :, 0], np.ones(len(pos))] @ L.T
     dist = float(np.max(np.linalg.norm(p0[:, :3] - pos[:, :, P], axis=1)))
-    q = motion.q
+    q = np.array(motion.q)
+    q[ROOT_Z] -= motion_root(motion, P)[2]  # in place
     rows = [i for i in range(motion.n) if i not in (ROOT_X, ROOT_Y, ROOT_YAW)]
     coord = float(np.max(np.abs(q[rows, P] - q[rows, 0]))) if rows else 0.0
     return {"position_m": dist, "coordinates": coord}
@@ -141,14 +156,20 @@ def _events(planted: np.ndarray, pos: np.ndarray, P: int) -> list[dict]:
     return out
 
 
-def game_data(motion: Motion, *, axes: np.ndarray | None = None, frames: int | None = None) -> dict[str, Any]:
+def game_data(motion: Motion, *, axes: np.ndarray | None = None, frames: int | None = None,
+              world: Any = None) -> dict[str, Any]:
     """The game-ready data as plain Python values (numpy arrays for per-frame series); vectors
-    are expressed with ``axes`` (3x3: e.g. ``solver.export.Y_UP``; default ours). ``frames``:
+    are expressed with ``axes`` (3x3: e.g. ``solver.export.Y_UP``; default ours) in ``world``
+    (a :class:`solver.export.world.World`; default the motion's own ground frame). ``frames``:
     keep the per-frame series of the first ``frames`` frames only (an animation of one cycle)."""
-    A = np.eye(3) if axes is None else np.asarray(axes, dtype=float)
+    from solver.export import matrix_to_quaternion
+
+    F = np.eye(3) if axes is None else np.asarray(axes, dtype=float)  # our axes -> the file's
+    W = np.eye(3) if world is None else np.asarray(world.rotation, dtype=float)  # ground frame -> world
+    A = F @ W  # points and vectors of the ground frame -> the file
     T, fps = motion.T, float(motion.fps)
     P = loop_frames(motion)
-    xy, psi = motion_root(motion, P)
+    xy, psi, h = motion_root(motion, P)
     dur = P / fps
     cl = closure(motion, P)
     seamless = cl["position_m"] <= LOOP_TOLERANCE_M and cl["coordinates"] <= LOOP_TOLERANCE_RAD
@@ -157,21 +178,25 @@ def game_data(motion: Motion, *, axes: np.ndarray | None = None, frames: int | N
     arc = chord if abs(dpsi) < 1e-9 else chord * (dpsi / 2.0) / math.sin(dpsi / 2.0)
     env = environment_of(motion).to_dict()
     g = env["gravity"]
-    root_pos = np.c_[xy, np.zeros(T)] @ A.T
+    root_pos = np.c_[xy, h] @ A.T
     q = motion.q
     in_place_yaw = q[ROOT_YAW] - psi
+    up = A @ np.array([0.0, 0.0, 1.0])
     out: dict[str, Any] = {
         "loop": {
             "start_frame": 0, "end_frame": P, "frames": P, "duration": dur, "seamless": bool(seamless),
             "closure_m": cl["position_m"], "closure_coordinates": cl["coordinates"],
-            "transform": {"translation": (np.r_[xy[P] - xy[0], 0.0] @ A.T), "yaw_deg": math.degrees(dpsi)},
+            "transform": {"translation": root_pos[P] - root_pos[0], "yaw_deg": math.degrees(dpsi), "axis": up},
         },
         "root_motion": {
-            "definition": "world = motion_root(translation, yaw about up) ∘ in_place; yaw at the cycle's "
-                          "constant turn rate",
+            "definition": "world = motion_root ∘ in_place; the motion root at translation, turned by yaw about up "
+                          "(the ground's normal) at the cycle's constant turn rate, after tilt (the ground's "
+                          "rotation in this world: none unless a slope is exported with gravity down)",
             "translation": root_pos,
             "yaw": psi,
-            "in_place_root_translation": np.c_[np.zeros((T, 2)), q[ROOT_Z]] @ A.T,
+            "up": up,
+            "tilt": matrix_to_quaternion(F @ W @ F.T),
+            "in_place_root_translation": np.c_[np.zeros((T, 2)), q[ROOT_Z] - h] @ F.T,
             "in_place_root_yaw": in_place_yaw,
         },
         "cycle": {
@@ -232,6 +257,6 @@ def _plain(x: Any, decimals: int | None) -> Any:
 
 
 def game_json(motion: Motion, *, axes: np.ndarray | None = None, decimals: int | None = 6,
-              frames: int | None = None) -> dict[str, Any]:
+              frames: int | None = None, world: Any = None) -> dict[str, Any]:
     """:func:`game_data` as JSON-ready values (NaN rows -> null, numbers rounded)."""
-    return _plain(game_data(motion, axes=axes, frames=frames), decimals)
+    return _plain(game_data(motion, axes=axes, frames=frames, world=world), decimals)

@@ -11,7 +11,13 @@ with an embedded base64 buffer: ``to_gltf(motion, binary=False)``).
   root that uses the skin;
 - one animation: a rotation channel per segment that has hinges and a translation
   channel for the root (and any segment with slides), sampled at the motion's fps,
-  LINEAR interpolation.
+  LINEAR interpolation;
+- with the meshes, the ground the walk stands on (:mod:`solver.export.world`): a node
+  ``ground`` at the scene root holding its mesh (a strip along the path, a ramp on a slope,
+  treads and risers on stairs), its description in the node's ``extras``.
+
+The motion is written in a *world* (``world="gravity"``, the default: gravity points down and
+a slope is a ramp; ``"ground"``: the solver's frame, level ground and tilted gravity).
 
 Axes: glTF is Y up, +Z forward, +X left, metres. The *data* are converted (no extra
 root node): every vector v becomes ``Y_UP @ v`` and every rotation R ``Y_UP R Y_UPᵀ``,
@@ -40,9 +46,9 @@ from solver.export import (
     change_axes,
     continuous_quaternions,
     game,
-    local_transforms,
     matrix_to_quaternion,
 )
+from solver.export.world import DEFAULT_WORLD, Ground, check_world, ground_of_motion, world_of, world_transforms
 from solver.motion import Motion
 from solver.naturalness import heel_toe
 
@@ -187,19 +193,20 @@ def foot_shape(character, side: str) -> tuple[np.ndarray, np.ndarray]:
     return np.array(bottom), np.array(top)
 
 
-def _animation(buf: _Buffer, motion: Motion, name: str, *, loop: bool = False) -> dict:
-    """One animation of ``motion`` (frames 0 … P, one cycle, with ``loop``; else every frame),
-    with the game-ready data (:mod:`solver.export.game`, Y up) in its ``extras``."""
+def _animation(buf: _Buffer, motion: Motion, name: str, *, loop: bool = False, world: str = DEFAULT_WORLD) -> dict:
+    """One animation of ``motion`` (frames 0 … P, one cycle, with ``loop``; else every frame) in
+    ``world``, with the game-ready data (:mod:`solver.export.game`, Y up) and the world in its
+    ``extras``."""
 
-    ch = motion.character
-    S = len(ch.segments)
+    S = len(motion.character.segments)
+    w = world_of(motion, world)
     extras: dict[str, Any] = {}
     frames = motion.T
     if game.has_free_root(motion):
         if loop:
             frames = game.loop_frames(motion) + 1
-        extras = game.game_json(motion, axes=Y_UP, frames=frames)
-    lt = local_transforms(ch, motion.q[:, :frames])
+        extras = game.game_json(motion, axes=Y_UP, frames=frames, world=w)
+    lt = world_transforms(motion, w, frames)
     rot, pos = change_axes(lt.rot, lt.pos, True)
     quat = continuous_quaternions(matrix_to_quaternion(rot))  # (S, T, 4)
     times = np.arange(frames, dtype=float) / float(motion.fps)
@@ -218,8 +225,45 @@ def _animation(buf: _Buffer, motion: Motion, name: str, *, loop: bool = False) -
     anim: dict[str, Any] = {"name": name, "samplers": samplers, "channels": channels}
     if extras:
         extras["frames_in_animation"] = frames
-        anim["extras"] = extras
+    extras["world"] = w.to_json(Y_UP)
+    anim["extras"] = extras
     return anim
+
+
+#: the ground's material: matt grey-blue, seen from both sides
+GROUND_MATERIAL = {"name": "ground", "doubleSided": True,
+                   "pbrMetallicRoughness": {"baseColorFactor": [0.56, 0.62, 0.68, 1.0], "metallicFactor": 0.0,
+                                            "roughnessFactor": 0.95}}
+
+
+def ground_nodes(buf: _Buffer, grounds: Sequence[tuple[str, Ground]], to_scene: np.ndarray, material: int,
+                 meshes: list[dict], nodes: list[dict]) -> int:
+    """Append the ground's meshes and nodes; returns the node to put at the scene root: ``ground``
+    holding the one ground's mesh, or (several, e.g. a library's cells) ``ground`` with one child
+    ``ground <name>`` per ground. ``to_scene`` (4x4): our world (metres) -> the scene, a rotation
+    and a uniform scale. Each ground node's ``extras`` hold its description in the scene."""
+    M = np.asarray(to_scene, dtype=float)
+    scale = float(np.cbrt(np.linalg.det(M[:3, :3])))
+    Rs = M[:3, :3] / scale
+    kids: list[int] = []
+    for name, ground in grounds:
+        V, N, F = ground.mesh()
+        V = V @ M[:3, :3].T + M[:3, 3]
+        N = N @ Rs.T
+        prim = {"attributes": {"POSITION": buf.add(V, FLOAT, "VEC3", ARRAY_BUFFER, minmax=True),
+                               "NORMAL": buf.add(N, FLOAT, "VEC3", ARRAY_BUFFER)},
+                "indices": buf.add(F.reshape(-1), UNSIGNED_SHORT if len(V) < 65536 else UNSIGNED_INT, "SCALAR",
+                                   ELEMENT_ARRAY_BUFFER, minmax=True),
+                "material": material, "mode": TRIANGLES}
+        meshes.append({"name": "ground" if len(grounds) == 1 else f"ground {name}", "primitives": [prim]})
+        desc = ground.to_json(Rs, scale, origin=M[:3, 3])
+        nodes.append({"name": "ground" if len(grounds) == 1 else f"ground {name}", "mesh": len(meshes) - 1,
+                      "extras": {"ground": desc, "world": ground.world.name, "animation": name}})
+        kids.append(len(nodes) - 1)
+    if len(kids) == 1:
+        return kids[0]
+    nodes.append({"name": "ground", "children": kids})
+    return len(nodes) - 1
 
 
 def _check_flag(name: str, value: Any) -> None:
@@ -228,12 +272,14 @@ def _check_flag(name: str, value: Any) -> None:
 
 
 def _document(motion: Motion, meshes: bool, loop: bool = False,
-              clips: list[tuple[str, Motion]] | None = None) -> tuple[dict, bytes]:
+              clips: list[tuple[str, Motion]] | None = None, world: str = DEFAULT_WORLD) -> tuple[dict, bytes]:
     """The glTF document and its buffer: the skeleton of ``motion`` and its animation, or (with
-    ``clips``) one named animation per (name, motion), all of ``motion``'s character."""
+    ``clips``) one named animation per (name, motion), all of ``motion``'s character, in
+    ``world``; with ``meshes`` the ground of each beside them."""
     _check_motion(motion)
     _check_flag("meshes", meshes)
     _check_flag("loop", loop)
+    check_world(world)
     ch = motion.character
     segs = ch.segments
     S, T = len(segs), motion.T
@@ -308,10 +354,13 @@ def _document(motion: Motion, meshes: bool, loop: bool = False,
             nodes.append({"name": f"{s.name}_mesh", "mesh": len(mesh_list) - 1, "skin": 0})
             scene_nodes.append(len(nodes) - 1)
 
-    if clips is None:
-        animations = [_animation(buf, motion, str(motion.provenance.get("step", "motion")), loop=loop)]
-    else:
-        animations = [_animation(buf, m, name, loop=loop) for name, m in clips]
+    items = [(str(motion.provenance.get("step", "motion")), motion)] if clips is None else clips
+    animations = [_animation(buf, m, name, loop=loop, world=world) for name, m in items]
+    if meshes:
+        to_scene = np.eye(4)
+        to_scene[:3, :3] = Y_UP
+        scene_nodes.append(ground_nodes(buf, [(name, ground_of_motion(m, world)) for name, m in items], to_scene,
+                                        1, mesh_list, nodes))
 
     while len(buf.data) % 4:
         buf.data.append(0)
@@ -326,6 +375,7 @@ def _document(motion: Motion, meshes: bool, loop: bool = False,
                 "axes": dict(AXES_Y_UP),
                 "source_axes": dict(AXES_Z_UP),
                 "axis_conversion": "data converted: (x, y, z)_gltf = (y, z, x)_motionx",
+                "world": world,
             },
         },
         "scene": 0,
@@ -344,7 +394,8 @@ def _document(motion: Motion, meshes: bool, loop: bool = False,
                 "name": "segment",
                 "pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.8, 0.8, 1.0], "metallicFactor": 0.0,
                                          "roughnessFactor": 0.8},
-            }
+            },
+            GROUND_MATERIAL,
         ]
     log.debug("glTF of %s: %d nodes, %d meshes, %d animations, %d bytes", ch.name, len(nodes), len(mesh_list),
               len(animations), len(buf.data))
@@ -371,50 +422,57 @@ def _source(rig: Any) -> bool:
     return rig == "source"
 
 
-def to_glb(motion: Motion, *, meshes: bool = True, loop: bool = False, rig: str = "character") -> bytes:
+def to_glb(motion: Motion, *, meshes: bool = True, loop: bool = False, rig: str = "character",
+           world: str = DEFAULT_WORLD) -> bytes:
     """Binary glTF (.glb): JSON chunk and BIN chunk. ``meshes``: include the segment ellipsoids.
     ``loop``: the animation is one cycle, frames 0 … P (its last key repeats the first under
     the loop transform: ``extras.loop``), instead of every frame. ``rig="source"``: on the
     input's own character or skeleton, one gait cycle (:func:`solver.export.rig_gltf.rig_glb`:
     the skinned glTF input with its meshes, skin and materials; a BVH or DeepMimic input's
-    skeleton with bone shapes when ``meshes``)."""
+    skeleton with bone shapes when ``meshes``). ``world``: "gravity" (gravity down, the ground as
+    the walk found it: a slope's ramp) or "ground" (the solver's level ground, tilted gravity);
+    with ``meshes`` the ground is drawn beside the walk (node ``ground``)."""
     _check_flag("loop", loop)
+    check_world(world)
     if _source(rig):
         from solver.export.rig_gltf import rig_glb
 
-        return rig_glb(motion, meshes=meshes)
-    return _glb(*_document(motion, meshes, loop))
+        return rig_glb(motion, meshes=meshes, world=world)
+    return _glb(*_document(motion, meshes, loop, world=world))
 
 
-def to_gltf_embedded(motion: Motion, *, meshes: bool = True, loop: bool = False, rig: str = "character") -> str:
-    """glTF JSON (.gltf) with the buffer embedded as a base64 data URI (``rig`` as :func:`to_glb`)."""
+def to_gltf_embedded(motion: Motion, *, meshes: bool = True, loop: bool = False, rig: str = "character",
+                     world: str = DEFAULT_WORLD) -> str:
+    """glTF JSON (.gltf) with the buffer embedded as a base64 data URI (``rig``, ``world`` as :func:`to_glb`)."""
     _check_flag("loop", loop)
+    check_world(world)
     if _source(rig):
         from solver.export.rig_gltf import rig_gltf_embedded
 
-        return rig_gltf_embedded(motion, meshes=meshes)
-    doc, data = _document(motion, meshes, loop)
+        return rig_gltf_embedded(motion, meshes=meshes, world=world)
+    doc, data = _document(motion, meshes, loop, world=world)
     doc["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64.b64encode(data).decode("ascii")
     return json.dumps(doc, allow_nan=False, separators=(",", ":"))
 
 
 def to_gltf(motion: Motion, *, meshes: bool = True, binary: bool = True, loop: bool = False,
-            rig: str = "character") -> bytes | str:
+            rig: str = "character", world: str = DEFAULT_WORLD) -> bytes | str:
     """glTF 2.0 of ``motion``: the binary ``.glb`` (bytes, the default, as :func:`to_glb`), or
     with ``binary=False`` the ``.gltf`` JSON text with its buffer embedded (:func:`to_gltf_embedded`);
-    ``rig="source"``: on the input's own character or skeleton."""
+    ``rig="source"``: on the input's own character or skeleton; ``world`` as :func:`to_glb`."""
     if not isinstance(binary, bool):
         raise ExportError(f"binary must be a boolean, got {binary!r}")
     if binary:
-        return to_glb(motion, meshes=meshes, loop=loop, rig=rig)
-    return to_gltf_embedded(motion, meshes=meshes, loop=loop, rig=rig)
+        return to_glb(motion, meshes=meshes, loop=loop, rig=rig, world=world)
+    return to_gltf_embedded(motion, meshes=meshes, loop=loop, rig=rig, world=world)
 
 
 def to_library_glb(clips: list[tuple[str, Motion]], *, extras: dict | None = None, meshes: bool = True,
-                   loop: bool = True) -> bytes:
+                   loop: bool = True, world: str = DEFAULT_WORLD) -> bytes:
     """One GLB for a motion library: the skeleton (and meshes) once, one named animation per
     (name, motion) — one cycle each with ``loop`` — and ``extras`` (e.g. the grid) in the
-    asset's extras under ``library``. Every motion must be of the same character."""
+    asset's extras under ``library``; with ``meshes`` each clip's ground (node ``ground`` with
+    a child ``ground <name>`` per clip). Every motion must be of the same character."""
     if not clips:
         raise ExportError("a library GLB needs at least one clip")
     names = [n for n, _ in clips]
@@ -426,7 +484,7 @@ def to_library_glb(clips: list[tuple[str, Motion]], *, extras: dict | None = Non
         if m.character.coordinate_names != first.character.coordinate_names or \
                 [s.name for s in m.character.segments] != [s.name for s in first.character.segments]:
             raise ExportError(f"clip {name!r} is of another character than {names[0]!r}")
-    doc, data = _document(first, meshes, loop, clips=clips)
+    doc, data = _document(first, meshes, loop, clips=clips, world=world)
     if extras is not None:
         doc["asset"]["extras"]["library"] = extras
     return _glb(doc, data)

@@ -2,9 +2,9 @@
 
 Public API::
 
-    rig_glb(motion, *, meshes=True) -> bytes                       # one animation: the motion
-    rig_glb_library(items, *, meshes=True) -> bytes                # one animation per (name, motion)
-    rig_gltf_embedded(motion, *, meshes=True) -> str               # the .gltf JSON, buffer embedded
+    rig_glb(motion, *, meshes=True, world="gravity") -> bytes         # one animation: the motion
+    rig_glb_library(items, *, meshes=True, world="gravity") -> bytes  # one animation per (name, motion)
+    rig_gltf_embedded(motion, *, meshes=True, world="gravity") -> str # the .gltf JSON, buffer embedded
 
 The motion is put on its source rig by :func:`solver.rig.retarget` (one gait cycle at the rig's
 frame rate, feet planted by the leg IK) and written as one animation: per joint node a
@@ -25,6 +25,10 @@ target and the frame rate.
   metres, the walk along +Z); with ``meshes``, one skinned mesh: per joint a tapered box from
   the joint to each child and End Site (BVH), or the character's own ``BodyDefs`` shapes
   (DeepMimic: box, sphere, capsule, cylinder at their attach frames, in their colours).
+
+The root is placed in the export's world (``world``, :mod:`solver.export.world`: by default
+gravity points down and a slope walk climbs its ramp), and with ``meshes`` the ground the walk
+stands on is a node ``ground`` at the scene root (one child per animation in a library).
 """
 
 from __future__ import annotations
@@ -38,12 +42,13 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from solver.export import Y_UP, ExportError, _check_motion, continuous_quaternions
+from solver.export import DEFAULT_WORLD, Y_UP, ExportError, _check_motion, continuous_quaternions
 from solver.export import source_rig as _source_rig
 from solver.export.gltf import (
     ARRAY_BUFFER,
     ELEMENT_ARRAY_BUFFER,
     FLOAT,
+    GROUND_MATERIAL,
     TRIANGLES,
     UNSIGNED_BYTE,
     UNSIGNED_INT,
@@ -51,8 +56,10 @@ from solver.export.gltf import (
     _Buffer,
     _glb,
     ellipsoid_mesh,
+    ground_nodes,
     hexahedron,
 )
+from solver.export.world import check_world, ground_of_motion, world_rig_pose
 from solver.motion import Motion
 from solver.rig import RIG_FORMATS, Rig, RigError, RigPose, retarget
 
@@ -93,7 +100,7 @@ def _quats(local: np.ndarray) -> np.ndarray:
     return q / np.linalg.norm(q, axis=-1, keepdims=True)
 
 
-def _poses(items: Sequence[tuple[str, Motion]]) -> tuple[Rig, list[tuple[str, Motion, RigPose]]]:
+def _poses(items: Sequence[tuple[str, Motion]], world: str) -> tuple[Rig, list[tuple[str, Motion, RigPose]]]:
     if not items:
         raise ExportError("a rig GLB needs at least one motion")
     names = [n for n, _ in items]
@@ -108,7 +115,7 @@ def _poses(items: Sequence[tuple[str, Motion]]) -> tuple[Rig, list[tuple[str, Mo
             raise ExportError(f"{name!r} is on another source rig than {names[0]!r}: one GLB holds one character")
         rigs.append(rig)
         try:
-            out.append((name, m, retarget(m, rig)))
+            out.append((name, m, world_rig_pose(m, world, rig, retarget(m, rig))))
         except RigError as e:
             raise ExportError(f"{name}: {e}") from None
     return rigs[0], out
@@ -165,8 +172,9 @@ def _animation(buf: _Buffer, name: str, motion: Motion, rig: Rig, pose: RigPose,
 
 # --- a skinned glTF input -------------------------------------------------------------------------
 
-def _source_document(rig: Rig, poses: list[tuple[str, Motion, RigPose]]) -> tuple[dict, bytes]:
-    from solver.io.gltf import GltfError, node_trs, parse_gltf
+def _source_document(rig: Rig, poses: list[tuple[str, Motion, RigPose]], meshes: bool,
+                     world: str) -> tuple[dict, bytes]:
+    from solver.io.gltf import GltfError, _matrix, node_parents, node_trs, parse_gltf
 
     try:
         asset = parse_gltf(base64.b64decode(str(rig.extra["asset"])), "the source glTF")
@@ -189,10 +197,42 @@ def _source_document(rig: Rig, poses: list[tuple[str, Motion, RigPose]]) -> tupl
     buf = _Buffer(data=bytearray(asset.bin), views=doc.setdefault("bufferViews", []),
                   accessors=doc.setdefault("accessors", []))
     doc["animations"] = [_animation(buf, name, m, rig, pose, nodes, rest, to_node) for name, m, pose in poses]
+    if meshes:  # the ground, in the scene: the nodes above the skeleton (at rest) after the input's frame
+        above = np.eye(4)
+        parent = node_parents(doc, "the source glTF")
+        p = parent[nodes[0]]
+        while p >= 0:
+            above = _matrix(*node_trs(doc["nodes"][p], "the source glTF", p)) @ above
+            p = parent[p]
+        _add_ground(doc, buf, poses, above @ _input_matrix(poses[0][1]), world)
     while len(buf.data) % 4:
         buf.data.append(0)
     doc["buffers"] = [{"byteLength": len(buf.data)}]
     return doc, bytes(buf.data)
+
+
+def _input_matrix(motion: Motion) -> np.ndarray:
+    """(4x4) our world (metres) -> the input's axes and units (the motion's ``GroundFrame``; a
+    moving frame, a treadmill's, at time 0)."""
+    from solver.capture import GroundFrame
+
+    frame = GroundFrame.from_dict(motion.provenance.get("frame"))
+    m = np.eye(4)
+    m[:3, :3] = frame.R / frame.unit_m
+    m[:3, 3] = frame.offset / frame.unit_m
+    return m
+
+
+def _add_ground(doc: dict[str, Any], buf: _Buffer, poses: list[tuple[str, Motion, RigPose]], to_scene: np.ndarray,
+                world: str) -> None:
+    """The motions' ground (``solver.export.gltf.ground_nodes``) at the root of the document's scene."""
+    materials = doc.setdefault("materials", [])
+    materials.append(dict(GROUND_MATERIAL))
+    meshes = doc.setdefault("meshes", [])
+    grounds = [(name, ground_of_motion(m, world)) for name, m, _ in poses]
+    node = ground_nodes(buf, grounds, to_scene, len(materials) - 1, meshes, doc["nodes"])
+    scenes = doc.setdefault("scenes", [{"nodes": []}])
+    scenes[int(doc.get("scene", 0))].setdefault("nodes", []).append(node)
 
 
 # --- a BVH or DeepMimic input: the rig's own skeleton ---------------------------------------------
@@ -301,7 +341,7 @@ def _body_shape(body: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray, np.nda
 
 
 def _skeleton_document(rig: Rig, poses: list[tuple[str, Motion, RigPose]], meshes: bool,
-                       frame: Any) -> tuple[dict, bytes]:
+                       frame: Any, in_world: str) -> tuple[dict, bytes]:
     J = rig.J
     buf = _Buffer()
     children: dict[int, list[int]] = {j: [] for j in range(J)}
@@ -352,6 +392,10 @@ def _skeleton_document(rig: Rig, poses: list[tuple[str, Motion, RigPose]], meshe
     doc["scenes"] = [{"name": "rig", "nodes": scene_nodes}]
     to_node = np.ones(J)
     doc["animations"] = [_animation(buf, name, m, rig, pose, joint_node, rest, to_node) for name, m, pose in poses]
+    if meshes:  # the "rig" node maps the input onto Y_UP · our world
+        to_scene = np.eye(4)
+        to_scene[:3, :3] = Y_UP
+        _add_ground(doc, buf, poses, to_scene, in_world)
     while len(buf.data) % 4:
         buf.data.append(0)
     doc.update(buffers=[{"byteLength": len(buf.data)}], bufferViews=buf.views, accessors=buf.accessors)
@@ -418,37 +462,38 @@ def _skeleton_primitives(rig: Rig, world: np.ndarray, children: Mapping[int, lis
 
 # --- the front ------------------------------------------------------------------------------------
 
-def _document(items: Sequence[tuple[str, Motion]], meshes: bool) -> tuple[dict, bytes]:
+def _document(items: Sequence[tuple[str, Motion]], meshes: bool, world: str) -> tuple[dict, bytes]:
     if not isinstance(meshes, bool):
         raise ExportError(f"meshes must be a boolean, got {meshes!r}")
-    rig, poses = _poses(items)
+    check_world(world)
+    rig, poses = _poses(items, world)
     if rig.format == "gltf":
-        return _source_document(rig, poses)
+        return _source_document(rig, poses, meshes, world)
     from solver.capture import GroundFrame
 
     frame = GroundFrame.from_dict(poses[0][1].provenance.get("frame"))
-    return _skeleton_document(rig, poses, meshes, frame)
+    return _skeleton_document(rig, poses, meshes, frame, world)
 
 
-def rig_glb(motion: Motion, *, meshes: bool = True) -> bytes:
+def rig_glb(motion: Motion, *, meshes: bool = True, world: str = DEFAULT_WORLD) -> bytes:
     """GLB of ``motion`` on its source rig (see the module doc): the input glTF character with
     the motion as its one animation, or the BVH / DeepMimic skeleton (``meshes``: with its bone
-    shapes) animated."""
+    shapes) animated; in ``world``, with its ground when ``meshes``."""
     _check_motion(motion)
-    return _glb(*_document([(animation_name(motion), motion)], meshes))
+    return _glb(*_document([(animation_name(motion), motion)], meshes, world))
 
 
-def rig_glb_library(items: Sequence[tuple[str, Motion]], *, meshes: bool = True) -> bytes:
+def rig_glb_library(items: Sequence[tuple[str, Motion]], *, meshes: bool = True, world: str = DEFAULT_WORLD) -> bytes:
     """One GLB of the source character with one animation per (name, motion) — e.g. a library's
     λ optima, one per cell. Every motion must come from the same input rig."""
     if isinstance(items, (str, bytes)) or not isinstance(items, Sequence):
         raise ExportError("items must be a sequence of (name, motion) pairs")
-    return _glb(*_document(list(items), meshes))
+    return _glb(*_document(list(items), meshes, world))
 
 
-def rig_gltf_embedded(motion: Motion, *, meshes: bool = True) -> str:
+def rig_gltf_embedded(motion: Motion, *, meshes: bool = True, world: str = DEFAULT_WORLD) -> str:
     """The ``.gltf`` JSON of :func:`rig_glb` with its buffer embedded as a base64 data URI."""
     _check_motion(motion)
-    doc, data = _document([(animation_name(motion), motion)], meshes)
+    doc, data = _document([(animation_name(motion), motion)], meshes, world)
     doc["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64.b64encode(data).decode("ascii")
     return json.dumps(doc, allow_nan=False, separators=(",", ":"), ensure_ascii=False)

@@ -127,6 +127,35 @@ def test_gltf_is_the_binary_glb_and_reimports_to_the_uploaded_motion(api):
     assert_problem(api.a.get(f"/motions/{mid}", params={"format": "gltf", "binary": "maybe"}), 422, "binary")
 
 
+def test_world_option_puts_a_slope_walk_on_its_ramp(api):
+    """A motion made under gravity tilted by 10° (a +10° slope) downloads climbing its ramp (the
+    default world, gravity down: the root turned by R_y(−10°) about the origin), or with
+    ``world=ground`` in the solver's frame, as uploaded; an unknown world is a 422 naming both."""
+    import numpy as np
+
+    from solver.export.reimport import motion_from_bvh, motion_from_gltf
+
+    m = halfboy_motion(seed=11)
+    a = math.radians(10.0)
+    env = {"gravity": [-9.81 * math.sin(a), 0.0, -9.81 * math.cos(a)], "friction": 1.0}
+    m = m.evolve(provenance={**m.provenance, "environment": env})
+    mid = upload(api.a, m.to_dict()).json()["id"]
+    level = motion_from_gltf(api.a.get(f"/motions/{mid}", params={"format": "glb", "world": "ground"}).content,
+                             m.character)
+    assert abs(level.q - m.q).max() < 1e-5
+    R = np.array([[math.cos(a), 0.0, -math.sin(a)], [0.0, 1.0, 0.0], [math.sin(a), 0.0, math.cos(a)]])
+    for fmt, read in (("glb", motion_from_gltf), ("bvh", motion_from_bvh)):
+        r = api.a.get(f"/motions/{mid}", params={"format": fmt})
+        ramp = read(r.content if fmt == "glb" else r.text, m.character)
+        np.testing.assert_allclose(ramp.q[:3], R @ m.q[:3], atol=1e-5)  # the root (x, y, z) on the ramp
+    clip = api.a.get(f"/motions/{mid}").json()
+    assert clip["world"]["name"] == "gravity" and clip["world"]["gravity"] == pytest.approx([0.0, 0.0, -9.81])
+    assert clip["ground"]["normal"] == pytest.approx([-math.sin(a), 0.0, math.cos(a)], abs=1e-6)
+    assert api.a.get(f"/motions/{mid}", params={"world": "ground"}).json()["world"]["name"] == "ground"
+    assert_problem(api.a.get(f"/motions/{mid}", params={"format": "bvh", "world": "level"}), 422, "'gravity'",
+                   "'ground'", "level")
+
+
 # --- bad uploads: a clear 422 naming the problem, nothing stored --------------------------
 
 

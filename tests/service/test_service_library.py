@@ -127,6 +127,17 @@ def test_manifest_and_library_glb(lib_api, grid_library, tmp_path):
     assert turn["slope5_curve20"] - turn["slope5_curve-20"] > 20.0
     r = lib_api.a.get(lib["links"]["glb"])
     assert r.status_code == 200 and r.headers["content-type"] == "model/gltf-binary"
+    # in the gravity world by default, each cell's ground beside it; world=ground keeps the solver's frame
+    doc = json.loads(r.content[20:20 + int.from_bytes(r.content[12:16], "little")])
+    assert doc["asset"]["extras"]["world"] == "gravity"
+    assert sorted(n["name"] for n in doc["nodes"] if n["name"].startswith("ground ")) == sorted(
+        f"ground {c['key']}" for c in lib["cells"])
+    flat = lib_api.a.get(lib["links"]["glb"], params={"world": "ground"})
+    assert flat.status_code == 200 and flat.content != r.content
+    assert json.loads(flat.content[20:20 + int.from_bytes(flat.content[12:16], "little")])["asset"]["extras"][
+        "world"] == "ground"
+    bad = lib_api.a.get(lib["links"]["glb"], params={"world": "level"})
+    assert bad.status_code == 422 and "gravity" in bad.text
     if NODE is None or not THREE.is_dir():
         pytest.skip("node and three.js are needed to load the GLB")
     path = tmp_path / "library.glb"

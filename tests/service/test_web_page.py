@@ -246,8 +246,9 @@ def test_page_shows_progress_and_renders_the_character(api, browser, tutor_id):
 
 
 def test_page_draws_the_stairs_treads_under_a_stairs_motion(api, browser, tutor_id):
-    """A stairs optimum (terrain axis) is previewed standing on its treads: one box per stance
-    of the plausibility report, its top at the tread's height (motionx z = glTF y)."""
+    """A stairs optimum (terrain axis) is previewed standing on its treads: the GLB's own ground
+    (node "ground": a tread per stance and the risers between them), its levels the heights of
+    the plausibility report's treads (motionx z = glTF y), the world not tilted."""
     if not THREE_DIR.is_dir():
         _missing("three.js is not installed: run `npm ci` in service/web")
     r = api.a.post(f"/motions/{tutor_id}/extrapolate",
@@ -264,12 +265,16 @@ def test_page_draws_the_stairs_treads_under_a_stairs_motion(api, browser, tutor_
         page.locator("#job-motions button").last.click()
         wait_js(page, "(s => s.previewReady && s.validation)(window.motionx.state)", timeout=60)
         treads = _state(page)["validation"]["environment"]["treads"]
-        drawn = page.evaluate("(() => { const t = window.motionx.viewer.treads; return t ? t.children.map("
-                              "b => { b.geometry.computeBoundingBox(); const bb = b.geometry.boundingBox;"
-                              " return b.position.y + bb.max.y; }) : null; })()")
-        assert drawn is not None and len(drawn) == len(treads) >= 3, (drawn, treads)
-        assert sorted(drawn) == pytest.approx(sorted(t["center"][2] for t in treads), abs=1e-6)
-        assert max(drawn) - min(drawn) == pytest.approx(0.1 * (len({round(t["center"][2], 6) for t in treads}) - 1))
+        drawn = page.evaluate("(() => { const g = window.motionx.viewer.ground; if (!g) return null; const ys = "
+                              "new Set(); g.traverse(o => { if (o.isMesh) { const p = o.geometry.attributes.position;"
+                              " for (let i = 0; i < p.count; i += 1) ys.add(Math.round(p.getY(i) * 1e4) / 1e4); } });"
+                              " return [...ys].sort((a, b) => a - b); })()")
+        heights = sorted({round(t["center"][2], 4) for t in treads})
+        assert drawn is not None and len(heights) >= 3, (drawn, treads)
+        assert drawn == pytest.approx(heights, abs=2e-4)  # every level is a tread's top (float32)
+        assert max(drawn) - min(drawn) == pytest.approx(0.1 * (len(heights) - 1), abs=2e-4)
+        assert page.evaluate("window.motionx.viewer.world.quaternion.w") == 1.0  # the file is in its world
+        assert page.evaluate("window.motionx.viewer.treads") is None  # no boxes of the page's own
         assert not errors, errors
     finally:
         context.close()

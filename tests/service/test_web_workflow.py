@@ -20,6 +20,7 @@ on this 2-core machine, most of it the job's tutor.
 from __future__ import annotations
 
 import json
+import math
 import struct
 
 import numpy as np
@@ -129,6 +130,11 @@ def test_upload_start_follow_preview_download_and_cancel(api, page, shared_data)
     rig_glb = _glb(api.a.get(f"/motions/{optima[-1]['id']}", params={"format": "glb", "rig": "source"}).content)
     assert s["previewObjects"] >= len(rig_glb["nodes"]) > 0
     assert page.text_content("#viewer-rig") == "on the input's own rig"
+    # a 5° slope is tilted once: the GLB walks up its ramp (its node "ground") in an untilted world
+    tilt = page.evaluate("(v => [v.world.quaternion.w, v.groundNormal.y, v.ground ? v.ground.name : null])"
+                         "(window.motionx.viewer)")
+    assert tilt[0] == 1.0 and tilt[2] == "ground", tilt
+    assert math.degrees(math.acos(tilt[1])) == pytest.approx(5.0, abs=1e-3), tilt
     viewer(page, "v.setPlaying(false)")
     shown = _pixels(page.locator("#viewer-canvas").screenshot())
     viewer(page, "v.setPlaying(true)")

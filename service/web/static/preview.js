@@ -1,4 +1,4 @@
-// The 3D preview: a motion's glTF (GLB) played by an AnimationMixer on a ground grid.
+// The 3D preview: a motion's glTF (GLB) played by an AnimationMixer on its ground and a grid.
 // Imported dynamically by app.js, so the page still works when three.js is not installed.
 
 import * as THREE from 'three';
@@ -10,6 +10,8 @@ export const CHARACTER_COLOR = 0xe07b39;
 /** The second character's colour (showCompanion: e.g. the motion simulated in MuJoCo). */
 export const COMPANION_COLOR = 0x3b7dd8;
 const BACKGROUND = 0xeef1f5;
+/** The colour of the motion's own ground (its GLB's "ground" node), a little darker than the grid. */
+const GROUND_COLOR = 0xb4bdc7;
 /** Where the camera looks from, relative to the character: front right, a little above (glTF: Y up, Z forward). */
 const VIEW_DIRECTION = new THREE.Vector3(-0.72, 0.22, 0.66).normalize();
 
@@ -55,15 +57,20 @@ export class Viewer {
     sun.position.set(-3, 6, 4);
     this.scene.add(sun);
 
-    // the ground, tilted so that the motion's gravity points down (a slope looks like one)
+    // the world: the motion's GLB carries its ground (a node "ground": a ramp, treads, a path) in a
+    // world where gravity points down; a GLB without one is in the solver's frame and the world is
+    // tilted so that the motion's gravity points down (a slope looks like one)
     this.world = new THREE.Group();
     this.scene.add(this.world);
-    const ground = new THREE.Mesh(
+    this.grid = new THREE.Mesh(
       new THREE.PlaneGeometry(GROUND_SIZE, GROUND_SIZE),
       new THREE.MeshStandardMaterial({ map: gridTexture(this.renderer), roughness: 1 }),
     );
-    ground.rotation.x = -Math.PI / 2;
-    this.world.add(ground);
+    this.grid.rotation.x = -Math.PI / 2;
+    this.world.add(this.grid);
+    this.groundMaterial = new THREE.MeshStandardMaterial({ color: GROUND_COLOR, roughness: 0.95, side: THREE.DoubleSide });
+    this.ground = null; // the motion's own ground, from its GLB
+    this.groundNormal = new THREE.Vector3(0, 1, 0); // its normal (the world's up without one)
 
     this.material = new THREE.MeshStandardMaterial({ color: CHARACTER_COLOR, roughness: 0.6, metalness: 0 });
     this.companionMaterial = new THREE.MeshStandardMaterial({ color: COMPANION_COLOR, roughness: 0.6, metalness: 0 });
@@ -99,6 +106,10 @@ export class Viewer {
     const gltf = await new GLTFLoader().parseAsync(glb, '');
     this.clear();
     this.model = gltf.scene;
+    let objects = 0;
+    this.model.traverse(() => { objects += 1; });
+    const ground = this.model.getObjectByName('ground');
+    if (ground) this.placeGround(ground); // a GLB in its world: drawn as it is, nothing tilted
     this.model.traverse((o) => {
       if (o.isMesh) {
         o.material = this.material;
@@ -106,7 +117,7 @@ export class Viewer {
       }
     });
     this.world.add(this.model);
-    this.drawTreads(treads);
+    if (!ground) this.drawTreads(treads);
     this.mixer = new THREE.AnimationMixer(this.model);
     const clip = gltf.animations[0];
     if (clip) this.mixer.clipAction(clip).play();
@@ -115,7 +126,7 @@ export class Viewer {
     this.cycleShift = this.pelvisShift(this.mixer, this.pelvis, this.duration);
     this.mixer.setTime(0);
     this.frameCamera();
-    this.tilt(gravity);
+    this.tilt(ground ? undefined : gravity);
 
     this.world.updateMatrixWorld(true);
     this.pelvis.getWorldPosition(this.lastPelvis);
@@ -123,9 +134,32 @@ export class Viewer {
     this.world.localToWorld(this.camera.position);
     this.controls.update();
     await this.nextFrame();
-    let objects = 0;
-    this.model.traverse(() => { objects += 1; });
     return { duration: clip ? clip.duration : 0, name: clip ? clip.name : '', objects };
+  }
+
+  /**
+   * The motion's own ground (its GLB's node "ground", at the scene's root): drawn in the ground's
+   * colour beside the character, and the grid laid in its plane just under its lowest point (under
+   * the lowest tread of stairs), so the grid neither cuts a ramp nor hides a stair going down.
+   */
+  placeGround(ground) {
+    ground.removeFromParent(); // out of the character: the camera frames the character alone
+    ground.traverse((o) => {
+      if (o.isMesh) o.material = this.groundMaterial;
+    });
+    this.world.add(ground);
+    this.ground = ground;
+    const desc = (ground.userData && ground.userData.ground) || {};
+    const n = Array.isArray(desc.normal) ? new THREE.Vector3(...desc.normal).normalize() : new THREE.Vector3(0, 1, 0);
+    this.groundNormal.copy(n);
+    let lowest = Infinity;
+    const v = new THREE.Vector3();
+    ground.traverse((o) => {
+      const pos = o.isMesh ? o.geometry.attributes.position : null;
+      for (let i = 0; pos && i < pos.count; i += 1) lowest = Math.min(lowest, v.fromBufferAttribute(pos, i).dot(n));
+    });
+    this.grid.quaternion.setFromUnitVectors(new THREE.Vector3(0, 0, 1), n); // the plane's normal is its +Z
+    this.grid.position.copy(n).multiplyScalar((Number.isFinite(lowest) ? lowest : 0) - 0.005);
   }
 
   /** Points the camera at the character's first pose (in the untilted world's frame). */
@@ -162,7 +196,7 @@ export class Viewer {
     this.world.add(this.treads);
   }
 
-  /** Where the pelvis is at the clip's end minus where it is at its start, on the ground (world's frame). */
+  /** Where the pelvis is at the clip's end minus where it is at its start, along the ground (world's frame). */
   pelvisShift(mixer, pelvis, duration) {
     const at = (t) => {
       mixer.setTime(t);
@@ -170,8 +204,7 @@ export class Viewer {
       return this.world.worldToLocal(pelvis.getWorldPosition(new THREE.Vector3()));
     };
     const shift = at(duration).sub(at(0));
-    shift.y = 0;
-    return shift;
+    return shift.addScaledVector(this.groundNormal, -shift.dot(this.groundNormal)); // up a ramp, not off it
   }
 
   /**
@@ -186,6 +219,8 @@ export class Viewer {
     this.clearCompanion();
     const model = gltf.scene;
     model.name = 'companion';
+    const ownGround = model.getObjectByName('ground');
+    if (ownGround) ownGround.removeFromParent(); // it walks beside the first character, on its ground
     model.traverse((o) => {
       if (o.isMesh) {
         o.material = this.companionMaterial;
@@ -231,6 +266,14 @@ export class Viewer {
   clear() {
     this.clearCompanion();
     this.drawTreads(null);
+    if (this.ground) {
+      this.world.remove(this.ground);
+      this.ground.traverse((o) => o.geometry && o.geometry.dispose());
+      this.ground = null;
+    }
+    this.groundNormal.set(0, 1, 0);
+    this.grid.quaternion.setFromAxisAngle(new THREE.Vector3(1, 0, 0), -Math.PI / 2);
+    this.grid.position.set(0, 0, 0);
     if (!this.model) return;
     this.mixer.stopAllAction();
     this.world.remove(this.model);
