@@ -19,7 +19,8 @@ from solver.pipeline import capture_motion, make_tutor
 
 def run() -> dict:
     d = data_dir() / "deepmimic_humanoid3d_walk"
-    res = make_tutor(capture_motion(load_trial([d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt"])))
+    res = make_tutor(capture_motion(load_trial([d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt"])),
+                     character="halfboy", fps=15.0)
     assert res.status == "succeeded", res.message
     tutor = res.motion
     target = Target(slope_deg=4.0, friction=0.7)

@@ -43,7 +43,7 @@ def _locked_rms_deg(motion, src) -> float:
 def run() -> dict:
     path = data_dir() / "mixamo_style_walk" / "walk.bvh"
     src = read_bvh(path)
-    tutor = solver.make_tutor(solver.load_trial([path], mass=70.0)).motion
+    tutor = solver.make_tutor(solver.load_trial([path], mass=70.0), character="halfboy", fps=15.0).motion
     motions = {"tutor": tutor,
                "slope 10°": solver.extrapolate(tutor, solver.Target(slope_deg=10)).steps[-1].motion,
                "curve 90°": solver.extrapolate(tutor, solver.Target(curve_deg=90)).steps[-1].motion}

@@ -52,7 +52,8 @@ def tutor_motion_json() -> str:
     from solver.pipeline import capture_motion, make_tutor
 
     d = data_dir() / "deepmimic_humanoid3d_walk"
-    res = make_tutor(capture_motion(load_trial([d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt"])))
+    res = make_tutor(capture_motion(load_trial([d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt"])),
+                     character="halfboy", fps=15.0)
     if res.status != "succeeded":
         raise RuntimeError(f"tutor failed: {res.message}")
     return res.motion.to_json()

@@ -11,9 +11,10 @@ database also answers to ``DATABASE_URL`` and the broker to ``REDIS_URL``.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from functools import lru_cache
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 from pydantic import AliasChoices, Field, field_validator, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
@@ -86,7 +87,9 @@ class Settings(BaseSettings):
         60.0, ge=0, description="at most one re-dispatch of a running job per this interval"
     )
     validate_steps: bool = Field(True, description="store the plausibility report (MuJoCo replay) of every λ optimum")
-    default_character: str = "halfboy"
+    default_character: Literal["halfboy", "fullbody"] = Field(
+        "fullbody", description="the synthesis character of a tutor a request does not name (solver.pipeline."
+        "DEFAULT_CHARACTER: the full body keeps the subject's gait; halfboy is the thesis's, faster)")
     compiled_derivatives: bool = Field(
         True, description="compile each character's NLP derivative functions to machine code (a C compiler, "
         "cached under compiled_dir; 1.3-1.6x faster HalfBoy solves after a one-off compile per character)")
@@ -96,7 +99,16 @@ class Settings(BaseSettings):
     optimized_blas: bool = Field(
         True, description="run IPOPT's linear solver (MUMPS) on scipy-openblas32's kernels for this CPU instead of "
         "CasADi's generic OpenBLAS (each IPOPT iteration 1.3-1.8x faster; needs a C compiler once)")
-    default_tutor_fps: float = Field(15.0, ge=5, le=30)
+    default_tutor_fps: float | None = Field(
+        None, ge=5, le=30, description="the frame rate of a tutor a request does not give (default: 30 frames/s "
+        "for the full body, 15 for HalfBoy: solver.pipeline.DEFAULT_FPS)")
+
+    def tutor_of(self, tutor: Mapping[str, Any] | None) -> tuple[str, float]:
+        """(character, fps) of a request's tutor options, the service's defaults filling what it omits."""
+        opts = tutor or {}
+        character = opts.get("character") or self.default_character
+        fps = opts.get("fps") or self.default_tutor_fps or (30.0 if character == "fullbody" else 15.0)
+        return str(character), float(fps)
 
     # --- the API's compute processes (uploads, exports, reports, plots) --------------------
     compute_workers: int = Field(1, ge=0, le=64, description="compute processes of the API (0: its threads, "

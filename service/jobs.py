@@ -278,9 +278,7 @@ def _run(db: Database, job_id: str, attempt: int, token: str, settings: Settings
         hb.solves = seq["solves"]
 
     if kind == "capture":
-        tutor_opts = spec.get("tutor") or {}
-        character = tutor_opts.get("character", settings.default_character)
-        fps = float(tutor_opts.get("fps", settings.default_tutor_fps))
+        character, fps = settings.tutor_of(spec.get("tutor"))
         made = _tutor(db, job_id=job_id, token=token, created_at=created_at, owner=owner, parent_id=source_id,
                       tutor_key=f"{character}@{fps:g}", capture=motion, character=character, fps=fps, hb=hb,
                       t0=t0, record=record, settings=settings)

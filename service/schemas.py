@@ -80,10 +80,15 @@ class StepControlIn(Strict):
 class TutorIn(Strict):
     """How the tutor is made when the source motion is a raw capture."""
 
-    character: Literal["halfboy", "fullbody"] = "halfboy"
-    fps: float = Field(15.0, ge=MIN_TUTOR_FPS, le=MAX_TUTOR_FPS,
-                       description="frame rate of the tutor (one gait cycle of at most "
-                                   f"{MAX_TUTOR_FRAMES} frames and {MAX_TUTOR_S:g} s)")
+    character: Literal["fullbody", "halfboy"] | None = Field(
+        None, description="synthesis character (default: the service's, the full body unless its "
+                          "MOTIONX_DEFAULT_CHARACTER says otherwise): fullbody keeps the subject's gait, halfboy is "
+                          "the thesis's (legs, with the trunk, head and arms welded to the pelvis), faster")
+    fps: float | None = Field(None, ge=MIN_TUTOR_FPS, le=MAX_TUTOR_FPS,
+                              description="frame rate of the tutor (one gait cycle of at most "
+                                          f"{MAX_TUTOR_FRAMES} frames and {MAX_TUTOR_S:g} s; default: 30 for the full "
+                                          "body, 15 for HalfBoy), adjusted so that the cycle's frames span the "
+                                          "subject's own period")
 
 
 class ExtrapolateIn(Strict):

@@ -41,16 +41,38 @@ from solver.status import Status
 log = logging.getLogger(__name__)
 
 SYNTHESIS = ("halfboy", "fullbody")
+#: the character and frame rate a tutor is made with by default, on evidence (docs/naturalness.md,
+#: "The default character"): on the OpenSim walks the full body at 30 frames/s keeps the capture's joints
+#: within 0.7-1.6° RMS where HalfBoy, whose trunk, head and arms are welded to its pelvis, moves them
+#: 5-11°; HalfBoy stays the thesis's character, at 15 frames/s by default
+DEFAULT_CHARACTER = "fullbody"
+DEFAULT_FPS = {"fullbody": 30.0, "halfboy": 15.0}
+
+
+def default_fps(character: str) -> float:
+    """The frame rate a tutor of ``character`` is made at unless asked (``DEFAULT_FPS``)."""
+    return DEFAULT_FPS.get(character, 15.0)
 UPPER_ROOT_SEGMENTS = ("abdomen",)  # merging it lumps trunk, head and arms into the pelvis
 
 
 #: the tutor's weights: the simplification and the correction track the capture's own joint
 #: angles and pelvis rotations (1° weighs like 3 mm of marker distance, as MocoTrack tracks the
-#: coordinates of its IK) and its whole-body centre of mass (1 cm like 3 cm of marker distance: the
-#: ground reactions are its acceleration, and the capture's match the plates within ~0.05 BW), where
-#: the extrapolation's weak prior (``Weights()``: 0.1 rad like 1 mm) only steadies what its guide's
-#: markers leave unobserved
+#: coordinates of its IK), the motion of its whole-body centre of mass (1 cm like 3 cm of marker
+#: distance) and the ground force that moves it (``Weights.force_track``: the capture's kinematic
+#: forces match the plates within ~0.05 BW), where the extrapolation's weak prior (``Weights()``:
+#: 0.1 rad like 1 mm) only steadies what its guide's markers leave unobserved
 TUTOR_WEIGHTS = Weights(coordinates=300.0, root_rotation=300.0, com_track=10.0)
+#: per synthesis character: HalfBoy, whose trunk, head and arms are welded to its pelvis, cannot keep
+#: both the subject's joints and the subject's centre of mass: it keeps the joints and the force's
+#: shape (one braking → propulsion change per stance) but not the centre of mass's path, which made it
+#: crouch (stance knee 14-24° where the overground capture has -2-17°)
+TUTOR_WEIGHTS_OF = {"fullbody": TUTOR_WEIGHTS,
+                    "halfboy": Weights(coordinates=300.0, root_rotation=300.0, com_track=0.0, force_track=300.0)}
+
+
+def tutor_weights(character: str) -> Weights:
+    """The tutor's cost weights for a synthesis character (``TUTOR_WEIGHTS_OF``)."""
+    return TUTOR_WEIGHTS_OF.get(character, TUTOR_WEIGHTS)
 
 
 class PipelineError(ValueError):
@@ -377,10 +399,12 @@ class PreparedCycle:
     stats: Mapping[str, Any]
 
 
-def prepare_cycle(capture: Capture, *, character: str = "halfboy", fps: float = 15.0, cycle: int = 0,
+def prepare_cycle(capture: Capture, *, character: str = DEFAULT_CHARACTER, fps: float | None = None, cycle: int = 0,
                   start: str = "auto") -> PreparedCycle:
     """cycle → soles levelled → synthesis character → contact plane → double support: what the
-    simplification starts from."""
+    simplification starts from (``fps``: default ``default_fps(character)``)."""
+    if fps is None:
+        fps = default_fps(character)
     if not (math.isfinite(fps) and fps > 0):
         raise PipelineError(f"fps must be positive, got {fps}")
     stats: dict[str, Any] = {}
@@ -459,16 +483,24 @@ def closed_cycle(prep: PreparedCycle, character: Character | None = None) -> np.
 def capture_com(prep: PreparedCycle) -> np.ndarray:
     """(3, T) the captured subject's whole-body centre of mass over the closed cycle, on the capture
     skeleton with every segment (HalfBoy's trunk, head and arms where the subject had them),
-    lowered with the contact plane: what the tutor's ``Weights.com_track`` keeps."""
-    return centre_of_mass(prep.cycle.character, closed_cycle(prep, prep.cycle.character))
+    lowered with the contact plane, less its mean offset from the synthesis character's centre of
+    mass at the capture's own angles: what the tutor's ``Weights.com_track`` keeps, and whose
+    acceleration ``Weights.force_track`` keeps. The motion of the subject's centre of mass, not its
+    place in a body built otherwise: HalfBoy, its trunk, head and arms welded to the pelvis in the
+    mean posture, holds its centre of mass a little off the subject's, and crouched to put it there."""
+    full = centre_of_mass(prep.cycle.character, closed_cycle(prep, prep.cycle.character))
+    syn = centre_of_mass(prep.synthesis, _select(prep.capture_character, closed_cycle(prep), prep.synthesis))
+    N = full.shape[1] - 2
+    return full - np.mean(full[:, :N] - syn[:, :N], axis=1, keepdims=True)
 
 
-def simplified_motion(source: Capture | Motion, *, character: str = "halfboy", fps: float = 15.0, cycle: int = 0,
-                      start: str = "auto", weights: Weights = TUTOR_WEIGHTS) -> Motion:
+def simplified_motion(source: Capture | Motion, *, character: str = DEFAULT_CHARACTER, fps: float | None = None,
+                      cycle: int = 0, start: str = "auto", weights: Weights | None = None) -> Motion:
     """The simplified cycle alone (step "simplify": the capture's cycle fitted by the synthesis
     character, kinematics only, no forces), as ``make_tutor`` makes it before the correction."""
     capture = motion_capture(source) if isinstance(source, Motion) else source
     prep = prepare_cycle(capture, character=character, fps=fps, cycle=cycle, start=start)
+    weights = tutor_weights(character) if weights is None else weights
     simp = simplify(prep.capture_character, closed_cycle(prep), prep.synthesis, prep.fps, weights=weights,
                     com=capture_com(prep))
     if not simp.success:
@@ -479,16 +511,19 @@ def simplified_motion(source: Capture | Motion, *, character: str = "halfboy", f
 def make_tutor(
     source: Capture | Motion,
     *,
-    character: str = "halfboy",
-    fps: float = 15.0,
+    character: str = DEFAULT_CHARACTER,
+    fps: float | None = None,
     cycle: int = 0,
     start: str = "auto",
     max_iter: int = 1000,
-    weights: Weights = TUTOR_WEIGHTS,
+    weights: Weights | None = None,
     should_cancel: Callable[[], bool] | None = None,
 ) -> TutorResult:
     """import → cycle → simplify → estimate → correct. ``source`` is a Capture, or a motion of
-    step "capture" (e.g. stored by the service); ``weights``: the correction's cost weights.
+    step "capture" (e.g. stored by the service); ``character`` and ``fps``: by default the full
+    body at 30 frames/s (``DEFAULT_CHARACTER``, ``default_fps``; the fps is then adjusted so that
+    the cycle's frames span the subject's own period); ``weights``: the cost weights of the
+    simplification and the correction (default: ``tutor_weights(character)``).
     ``should_cancel()`` is polled between the phases and at every IPOPT iteration: once true, the
     running solve stops at its next iteration and the result is "canceled" (no retry)."""
     native.ensure()
@@ -502,6 +537,7 @@ def make_tutor(
         return TutorResult(Status.CANCELED, None, f"canceled {when} the {phase}", jsonable(stats))
 
     capture = motion_capture(source) if isinstance(source, Motion) else source
+    weights = tutor_weights(character) if weights is None else weights
     stats: dict[str, Any] = {}
     if stop := canceled(stats, "simplification"):
         return stop

@@ -12,6 +12,9 @@ os.environ.setdefault("MOTIONX_COMPILED_DERIVATIVES", "0")
 # MUMPS on the optimized BLAS, as in jobs and the CLI (the product's default; CasADi's own OpenBLAS is
 # tested in tests/test_blas.py's child processes): bound before this process first loads IPOPT
 os.environ.setdefault("MOTIONX_OPTIMIZED_BLAS", "1")
+# the services the tests start make HalfBoy tutors unless a request names the character (seconds, where the
+# product's default full body takes a minute on two shared cores); tests/test_defaults.py checks the product's
+os.environ.setdefault("MOTIONX_DEFAULT_CHARACTER", "halfboy")
 enable_native_code(Settings())
 SHARED_DATA = data_dir()  # the repository's data/ (or $MOTIONX_DATA)
 

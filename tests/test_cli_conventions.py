@@ -93,7 +93,8 @@ def test_every_command_is_described_and_every_option_has_help_with_its_default()
     assert "(default: 400)" in helps["extrapolate"]
     assert "(default: 100)" in helps["check-dynamics"] and "(default: 0)" in helps["check-dynamics"]
     assert "default: $MOTIONX_HOST or 127.0.0.1" in helps["serve"] and "8000" in helps["serve"]
-    assert "--fps {15,30}" in helps["tutor"] and "choices: 15, 30; default: 15" in helps["tutor"]
+    assert "--fps {15,30}" in helps["tutor"] and "default: 30 for fullbody, 15 for halfboy" in helps["tutor"]
+    assert "default: fullbody" in helps["tutor"]
 
 
 #: the commands that import a trial (from files, or by uploading them to the service)

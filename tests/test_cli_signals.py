@@ -97,7 +97,8 @@ def trial(shared_data) -> list[Path]:
 @pytest.fixture(scope="module")
 def tutor_file(trial, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("tutor") / "tutor.json"
-    r = subprocess.run([_exe(), "tutor", *map(str, trial), "--fps", "15", "--out", str(out)], capture_output=True,
+    r = subprocess.run([_exe(), "tutor", *map(str, trial), "--character", "halfboy", "--fps", "15", "--out", str(out)],
+                       capture_output=True,
                        text=True, timeout=TIMEOUT)
     assert r.returncode == 0, r.stderr + r.stdout
     return out
@@ -121,7 +122,7 @@ def test_a_signal_while_the_tutor_is_solved_cancels_it(trial, tmp_path, sig):
     """The signal comes once the tutor says it is solving: IPOPT stops at its next iteration,
     the result is "canceled" (not "failed", no second attempt), nothing is written."""
     out = tmp_path / "t.json"
-    run = Run("tutor", *trial, "--fps", "15", "--out", out, "--json")
+    run = Run("tutor", *trial, "--character", "halfboy", "--fps", "15", "--out", out, "--json")
     run.line(r"^motionx tutor: solving")
     info = _canceled_tutor(*run.signal(sig), sig, out)
     attempts = (info["stats"].get("correct") or {}).get("attempts") or []
@@ -137,7 +138,7 @@ def test_a_signal_before_the_tutor_is_solved_cancels_it_too(trial, tmp_path):
     """SIGTERM as soon as the command handles it, while the trial is imported: the same clean
     end (143, "canceled", nothing written), no traceback."""
     out = tmp_path / "t.json"
-    run = Run("tutor", *trial, "--fps", "15", "--out", out, "--json")
+    run = Run("tutor", *trial, "--character", "halfboy", "--fps", "15", "--out", out, "--json")
     run.handler_installed()
     _canceled_tutor(*run.signal("SIGTERM"), "SIGTERM", out)
 
@@ -154,14 +155,15 @@ def test_make_tutor_stops_at_the_next_iteration_once_canceled(trial):
         calls.append(1)
         return len(calls) > 3  # polled at every IPOPT iteration
 
-    res = make_tutor(load_trial(trial), fps=15.0, should_cancel=cancel)
+    res = make_tutor(load_trial(trial), fps=15.0, should_cancel=cancel, character="halfboy")
     assert res.status == "canceled" and res.motion is None, res.message
     assert res.message == "canceled during the simplification"
     simp = res.stats["simplify"]
     assert simp["status"] == "User_Requested_Stop" and simp["iterations"] <= 4, simp
     assert "correct" not in res.stats
     # never canceled: the same call makes the tutor
-    assert make_tutor(load_trial(trial), fps=15.0, should_cancel=lambda: False).status == "succeeded"
+    assert make_tutor(load_trial(trial), character="halfboy", fps=15.0,
+                      should_cancel=lambda: False).status == "succeeded"
 
 
 # --- library ----------------------------------------------------------------------------------------

@@ -43,7 +43,7 @@ def trials(shared_data):
     out = {}
     for name, (files, opts) in TRIALS.items():
         cap = load_trial([shared_data / f for f in files], **opts)
-        res = make_tutor(cap)
+        res = make_tutor(cap, character="halfboy", fps=15.0)
         assert res.status == "succeeded", res.message
         out[name] = (cap, res.motion)
     return out
@@ -207,7 +207,8 @@ def test_a_motion_of_another_source_is_written_on_the_generic_model_scaled_to_it
     """A DeepMimic tutor: refused on its (absent) OpenSim model, written on gait2354 scaled to
     its character with the character's masses; OpenSim's inverse dynamics balances it."""
     d = shared_data / "deepmimic_humanoid3d_walk"
-    res = make_tutor(load_trial([d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt"]))
+    res = make_tutor(load_trial([d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt"]),
+                     character="halfboy", fps=15.0)
     assert res.status == "succeeded", res.message
     tutor = res.motion
     with pytest.raises(OpenSimExportError, match="model='generic'"):

@@ -36,7 +36,8 @@ def tutor(shared_data) -> Motion:
     from solver.pipeline import capture_motion, make_tutor
 
     d = shared_data / "deepmimic_humanoid3d_walk"
-    res = make_tutor(capture_motion(load_trial([d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt"])))
+    res = make_tutor(capture_motion(load_trial([d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt"])),
+                     character="halfboy", fps=15.0)
     assert res.status == "succeeded", res.message
     return res.motion
 

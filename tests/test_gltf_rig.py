@@ -50,7 +50,7 @@ def runs(shared_data):
     """The glTF character's tutor, its 10° slope and 90° curve optima (λ = 1)."""
     t0 = time.perf_counter()
     capture = solver.load_trial([shared_data / TRIAL], mass=MASS)
-    tutor = solver.make_tutor(capture)
+    tutor = solver.make_tutor(capture, character="halfboy", fps=15.0)
     assert tutor.status == "succeeded", tutor.message
     t1 = time.perf_counter()
     slope = solver.extrapolate(tutor.motion, solver.Target(slope_deg=10))
@@ -404,7 +404,7 @@ def test_bvh_and_deepmimic_rigs_come_out_as_their_own_skeletons(shared_data, tmp
              "deepmimic": ([dm / "humanoid3d_walk.txt", dm / "humanoid3d_character.txt"], {})}
     for fmt, (files, kw) in cases.items():
         t0 = time.perf_counter()
-        tutor = solver.make_tutor(solver.load_trial(files, **kw))
+        tutor = solver.make_tutor(solver.load_trial(files, **kw), character="halfboy", fps=15.0)
         assert tutor.status == "succeeded", tutor.message
         motion = tutor.motion
         data = solver.export_motion(motion, "glb", rig="source")

@@ -183,7 +183,8 @@ def tutor(shared_data):
     from solver.pipeline import make_tutor
 
     d = shared_data / "deepmimic_humanoid3d_walk"
-    res = make_tutor(load_trial([d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt"]), fps=FPS)
+    res = make_tutor(load_trial([d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt"]), fps=FPS,
+                     character="halfboy")
     assert res.status == "succeeded", res.message
     return res
 

@@ -35,7 +35,7 @@ def runs(shared_data):
     """tutor, 10° slope (λ = 1), 90° curve (λ = 1) and a 3 × 3 library of the rig's walk."""
     path = shared_data / RIG_TRIAL
     capture = solver.load_trial([path], mass=MASS)
-    tutor = solver.make_tutor(capture)
+    tutor = solver.make_tutor(capture, character="halfboy", fps=15.0)
     assert tutor.status == "succeeded", tutor.message
     slope = solver.extrapolate(tutor.motion, solver.Target(slope_deg=10))
     curve = solver.extrapolate(tutor.motion, solver.Target(curve_deg=90))
@@ -199,7 +199,7 @@ def test_deepmimic_motion_on_its_own_character(shared_data, tmp_path):
     ankles stay where the tutor's feet are."""
     folder = shared_data / "deepmimic_humanoid3d_walk"
     files = [folder / "humanoid3d_walk.txt", folder / "humanoid3d_character.txt"]
-    tutor = solver.make_tutor(solver.load_trial(files)).motion
+    tutor = solver.make_tutor(solver.load_trial(files), character="halfboy", fps=15.0).motion
     text = solver.export_motion(tutor, "deepmimic")
     d = json.loads(text)
     assert d["Loop"] == "wrap" and len(d["Frames"][0]) == 44 and d["Frames"][-1][0] == 0.0
@@ -227,7 +227,7 @@ def test_source_rig_export_refuses_what_it_cannot_do(runs, shared_data):
 def test_a_z_up_metre_rig_comes_out_on_itself(shared_data):
     """Unreal-style names, metres, Z up, a static root above the pelvis: the tutor on that rig."""
     path = shared_data / "mixamo_style_walk" / "walk_unreal_style.bvh"
-    tutor = solver.make_tutor(solver.load_trial([path], mass=MASS, up="z")).motion
+    tutor = solver.make_tutor(solver.load_trial([path], mass=MASS, up="z"), character="halfboy", fps=15.0).motion
     text = solver.export_motion(tutor, "bvh", rig="source")
     _same_hierarchy(parse_bvh(text), read_bvh(path))
     rig = Rig.from_dict(tutor.provenance["rig"])

@@ -49,7 +49,7 @@ FEET_TOL_M, RISE_TOL = 0.01, 0.10
 @pytest.fixture(scope="module")
 def walks(shared_data) -> dict[str, Motion]:
     t0 = time.perf_counter()
-    tutor = solver.make_tutor(solver.load_trial([shared_data / TRIAL], mass=70.0))
+    tutor = solver.make_tutor(solver.load_trial([shared_data / TRIAL], mass=70.0), character="halfboy", fps=15.0)
     assert tutor.status == "succeeded", tutor.message
     out = {"tutor": tutor.motion}
     t1 = time.perf_counter()

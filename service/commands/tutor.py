@@ -335,9 +335,14 @@ or SIGTERM stops the solve at its next IPOPT iteration, writes nothing and exits
     s.add_argument("inputs", nargs="+", metavar="INPUT",
                    help="trial files: MODEL.osim COORDS.mot [GRF.mot X.xml] | FILE.c3d | FILE.bvh | "
                         "DeepMimic CLIP.txt CHARACTER.txt")
-    s.add_argument("--character", choices=["halfboy", "fullbody"], default="halfboy",
-                   help="synthesis character: halfboy (16 coordinates, legs + lumped trunk) or fullbody (43)")
-    s.add_argument("--fps", type=float, choices=[15.0, 30.0], default=15.0, help="frames per second of the tutor")
+    # the default: solver.pipeline.DEFAULT_CHARACTER (not imported here: the command line starts without CasADi)
+    s.add_argument("--character", choices=["halfboy", "fullbody"], default="fullbody",
+                   help="synthesis character: fullbody (the whole skeleton: 43 coordinates and those the capture "
+                        "uses of its ankles, knees and forearms; the faithful one) or halfboy (the thesis's: 16 "
+                        "coordinates, legs + trunk, head and arms welded to the pelvis)")
+    s.add_argument("--fps", type=float, choices=[15.0, 30.0], default=None,
+                   help="frames per second of the tutor (default: 30 for fullbody, 15 for halfboy; adjusted so that "
+                        "the cycle's frames span the subject's own period)")
     s.add_argument("--out", required=True, metavar="TUTOR.json", help="motion file v2 (JSON) to write")
     s.add_argument("--cycle", type=int, default=0, metavar="N", help="which complete gait cycle to use (0 = first)")
     s.add_argument("--start", default="auto", choices=["auto", "right_heel_strike", "left_heel_strike", "best_loop"],
