@@ -60,6 +60,7 @@ class NaturalnessLimits:
     fore_aft: float = 0.35  # BW per foot on level ground
     fore_aft_band: float = 0.03  # BW: a fore-aft force changes sign when it crosses ±this
     fore_aft_changes: int = 1  # braking → propulsion: sign changes per stance, level ground
+    fore_aft_load: float = 0.1  # BW: a foot carrying less neither brakes nor propels (heel strike, toe-off)
     lateral: float = 0.15  # BW per foot on level ground (warning)
     lean_tol_deg: float = 2.0  # slopes: trunk lean against gravity vs the tutor's
     level_deg: float = 1.0  # ground within this of level (gravity direction), and no stairs, is "level ground"
@@ -437,9 +438,11 @@ def _loads(w: _Walk, lim: NaturalnessLimits, mu: float) -> dict[str, Any]:
     patterns = []
     for k in range(2):
         for a, b in _runs(w.B[k, :N]):
-            x = fa[k, [t % N for t in range(a, b)]]
+            frames = [t % N for t in range(a, b)]
+            x = fa[k, frames]
             if np.any(np.isnan(x)):
                 continue
+            x = np.where(fz[k, frames] > lim.fore_aft_load, x, 0.0)  # a foot barely touching neither brakes nor propels
             state, changes = 0, 0  # −1 braking, +1 propelling: a change crosses the whole ±band
             for v in x:
                 now = 1 if v > lim.fore_aft_band else -1 if v < -lim.fore_aft_band else 0
@@ -585,8 +588,8 @@ def checks_of(fig: Mapping[str, Any], *, reference: Mapping[str, Any] | None = N
             capture=min(cap_humps) if cap_humps else None, applies=level))
         checks.append(Check.measure(
             "fore_aft_pattern", _get(fig, "fore_aft_pattern", "max_sign_changes"), lim.fore_aft_changes, "changes",
-            f"most sign changes of a foot's fore-aft force within one stance (crossing ±{lim.fore_aft_band:g} BW), "
-            "level ground", source=SOURCES["fore_aft_pattern"],
+            f"most sign changes of a foot's fore-aft force within one stance (crossing ±{lim.fore_aft_band:g} BW "
+            f"while the foot carries over {lim.fore_aft_load:g} BW), level ground", source=SOURCES["fore_aft_pattern"],
             capture=_get(cap, "fore_aft_pattern", "max_sign_changes"), applies=level))
         rf = fig["required_friction"]
         cap_rf = _get(cap, "required_friction", "max")

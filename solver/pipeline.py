@@ -27,7 +27,8 @@ from solver.capture import Capture, GroundFrame
 from solver.character import FULL_SUPERFLUOUS, LOWER_SUPERFLUOUS, Character, merge_segments
 from solver.contact import estimate_contact_wrenches
 from solver.environment import STANDARD_GRAVITY, STANDARD_GRAVITY_VECTOR
-from solver.gait import close_loop, ensure_double_support, extract_cycle, tighten_contacts
+from solver.gait import close_loop, ensure_double_support, extract_cycle, periodic_lowpass, tighten_contacts
+from solver.gait.cycles import LEAD_S
 from solver.io.fit import CONTACT_INSET
 from solver.jsonable import jsonable
 from solver.kinematics import centre_of_mass, contact_points, markers, segment_frames
@@ -461,8 +462,9 @@ def _simplified(prep: PreparedCycle, q: np.ndarray, source: Mapping[str, Any]) -
 def closed_cycle(prep: PreparedCycle, character: Character | None = None) -> np.ndarray:
     """The captured cycle the tutor tracks, on ``character`` (default: the capture skeleton the
     synthesis character is reduced from; ``prep.cycle.character``: every segment): periodic, its
-    seam blended into the captured motion around it (``solver.gait.close_loop``), lowered with the
-    contact plane; the yaw's drift removed on a straight walk (``STRAIGHT_WALK_DEG``)."""
+    seam blended into the captured motion around it (``solver.gait.close_loop``), low-passed as a
+    periodic signal at 6-10 Hz (``solver.gait.periodic_lowpass``: the capture's noise and glitches),
+    lowered with the contact plane; the yaw's drift removed on a straight walk (``STRAIGHT_WALK_DEG``)."""
     ch = prep.capture_character if character is None else character
     full = prep.cycle.character
     shift = float(prep.stats.get("contact_plane_shift_mm", 0.0)) / 1e3
@@ -477,7 +479,12 @@ def closed_cycle(prep: PreparedCycle, character: Character | None = None) -> np.
     q = on(prep.cycle.q)
     assert q is not None
     turning = abs(math.degrees(float(q[3, -2] - q[3, 0]))) >= STRAIGHT_WALK_DEG
-    return close_loop(q, keep_yaw=turning, lead_in=on(prep.cycle.lead_in), lead_out=on(prep.cycle.lead_out))
+    lead_in = on(prep.cycle.lead_in)
+    if (prep.cycle.source.get("cycle") or {}).get("loop"):  # a looping clip: what leads into its first frame
+        N = q.shape[1] - 2                                 # is its own last frames
+        lead_in = q[:, max(0, N - int(round(LEAD_S * prep.fps))):N]
+    closed = close_loop(q, keep_yaw=turning, lead_in=lead_in, lead_out=on(prep.cycle.lead_out))
+    return periodic_lowpass(closed, prep.fps)
 
 
 def capture_com(prep: PreparedCycle) -> np.ndarray:

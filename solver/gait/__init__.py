@@ -10,7 +10,8 @@
     extract_cycle(capture, fps=None, *, start=..., contacts=None, cycle=0)
         -> (Capture, contacts (P, T))                                     (solver.gait.cycles)
     unroll_loop(capture, repeats=2) -> Capture                            (solver.gait.cycles)
-    close_loop(q) -> q periodic over the cycle (the closure error spread)  (solver.gait.cycles)
+    close_loop(q) -> q periodic over the cycle (its seam blended)          (solver.gait.cycles)
+    periodic_lowpass(q, fps) -> a closed cycle low-passed as a periodic signal (solver.gait.cycles)
 
     belt_speed(times, feet, *, stance=None) -> m/s                        (solver.gait.belt)
     unwrap_hinges(character, q) -> q with continuous hinge angles         (solver.gait.base)
@@ -28,7 +29,7 @@ from solver.gait.contacts import (
     gait_events,
     tighten_contacts,
 )
-from solver.gait.cycles import LOOP_PERIOD_S, close_loop, extract_cycle, unroll_loop
+from solver.gait.cycles import LOOP_PERIOD_S, close_loop, extract_cycle, periodic_lowpass, unroll_loop
 
 __all__ = [
     "LOOP_PERIOD_S",
@@ -41,6 +42,7 @@ __all__ = [
     "extract_cycle",
     "gait_events",
     "lowpass",
+    "periodic_lowpass",
     "resample",
     "tighten_contacts",
     "unroll_loop",

@@ -235,6 +235,7 @@ class Layout:
             "com_track": weights.com_track / (nT * MARKER_SCALE**2),
             "clearance": weights.clearance * hv * 15.0,  # per corner-frame at 15 frames/s
             "force_track": weights.force_track / K,
+            "joint_speed": weights.joint_speed / (max(self.n - 6, 1) * nT),
         }
         wts = [scaled[name] for name in WEIGHT_SLOTS]
         return np.concatenate([

@@ -91,6 +91,11 @@ class Weights:
     #: marker distance (at 100, HalfBoy's extrapolations to speed ×1.2 and a 90° curve still braked twice
     #: per stance)
     force_track: float = 1000.0
+    #: [naturalness] squared excess of a joint coordinate's knot velocity over
+    #: ``Naturalness.joint_speed_deg_s`` (rad/s), per coordinate and frame: 50°/s too fast at one
+    #: joint and frame weighs like 5° off its angle there (a swing knee asked to clear the ground turned
+    #: 468°/s between two frames where the capture's turned 363°/s)
+    joint_speed: float = 10.0
     #: [naturalness] squared clearance deficit of a moving swing foot's sole corners below the
     #: walker's mid-swing clearance (``Naturalness.clearance_target_m``), per (1 cm)² and corner-frame at
     #: 15 frames/s: 5 mm short at one corner of one frame weighs like 2.5 mm of marker distance over the
@@ -219,6 +224,9 @@ class Naturalness:
     #: the NLP's joint bounds lie this far inside the model's limits: a safety net, the prior keeps
     #: joints out of the band
     limit_margin_deg: float = 0.0
+    #: the knot velocity beyond which a joint coordinate pays (``Weights.joint_speed``; Winter: the swing
+    #: knee, the fastest joint of a walk, peaks near 400°/s; check: 450°/s between frames)
+    joint_speed_deg_s: float = 400.0
 
     @classmethod
     def from_limits(cls, lim: NaturalnessLimits, **changes: float) -> Naturalness:
