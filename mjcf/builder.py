@@ -86,19 +86,11 @@ def sole_corners(character: Character, side: str, roll: float,
     """The foot segment and the 4 bottom corners of the sole (segment frame; rows: heel +w,
     heel −w, toe +w, toe −w) turned by ``roll`` (rad) about the heel-toe line: the heel and toe
     contact points are the midpoints of the sole's back and front bottom edges."""
-    pts = character.contact_points(side)
-    if len(pts) != 2:
-        raise ValueError(f"a sole needs the foot's two contact points (heel, toe), {side} foot has {len(pts)}")
-    heel, toe = sorted(pts, key=lambda c: float(c.position[0]))
-    if heel.segment != toe.segment:
-        raise ValueError(f"{side} heel and toe contact points are on different segments")
-    half_w = float(character.foot(side).half[1]) if half_width is None else float(half_width)
-    h, t = heel.position, toe.position
-    ax = (t - h) / np.linalg.norm(t - h)
-    y0 = np.cross([0.0, 0.0, 1.0], ax)
-    y0 /= np.linalg.norm(y0)
-    y = y0 * np.cos(roll) + np.cross(ax, y0) * np.sin(roll)  # y0 turned about the heel-toe line
-    return heel.segment, np.array([h + half_w * y, h - half_w * y, t + half_w * y, t - half_w * y])
+    try:
+        sole = character.sole(side)  # the optimizer's, the checks' and the exports' sole
+    except ValueError as e:
+        raise ValueError(f"a sole needs the foot's two contact points (heel, toe) on one segment: {e}") from None
+    return sole.segment, sole.corners(roll, half_width)
 
 
 def _sole_box(character: Character, side: str, roll: float, thickness: float,

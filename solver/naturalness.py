@@ -128,15 +128,14 @@ CORNERS = ("heel-right", "heel-left", "toe-right", "toe-left")
 
 
 def sole_corners(character, q: np.ndarray) -> np.ndarray:
-    """(2, 4, 3, T) the corners of each foot's drawn sole: the rectangle through its heel and toe
-    contact points (the plane the foot stands on), as wide as its foot box; feet (right, left),
-    corners (heel-right, heel-left, toe-right, toe-left) in the foot's axes."""
+    """(2, 4, 3, T) the corners of each foot's sole (``Character.sole``): the rectangle through its
+    heel and toe contact points (the plane the foot stands on), as wide as its foot box; feet (right,
+    left), corners (heel-right, heel-left, toe-right, toe-left) in the foot's axes."""
     pts = []
     for side in FEET:
-        w = float(character.foot(side).half[1])
-        for c in heel_toe(character, side):
-            for sgn in (-1.0, 1.0):
-                pts.append((c.segment, np.asarray(c.position) + np.array([0.0, sgn * w, 0.0])))
+        sole = character.sole(side)
+        c = sole.corners()  # heel +w, heel −w, toe +w, toe −w
+        pts += [(sole.segment, c[k]) for k in (1, 0, 3, 2)]  # right edge first
     out = np.asarray(points_world(character, q, pts))  # (8, 3[, T])
     return out.reshape((2, 4) + out.shape[1:])
 
@@ -148,11 +147,9 @@ def has_two_point_feet(character) -> bool:
 
 
 def heel_toe(character, side: str) -> tuple:
-    """The (heel, toe) contact points of a foot: its rearmost and foremost (segment x)."""
-    pts = [c for c in character.contacts if c.side == side]
-    if len(pts) != 2:
-        raise ValueError(f"the {side} foot needs exactly two contact points (heel, toe)")
-    return tuple(sorted(pts, key=lambda c: float(c.position[0])))
+    """The (heel, toe) contact points of a foot (``Character.sole``: by name)."""
+    sole = character.sole(side)
+    return sole.heel, sole.toe
 
 
 def trunk_axis(character) -> tuple[str, np.ndarray]:
@@ -722,14 +719,15 @@ def against_plates(forces: np.ndarray, measured, q: np.ndarray, weight: float) -
     return out or None
 
 
-def joint_rms_deg(character, q: np.ndarray, capture_character, q_capture: np.ndarray) -> dict[str, Any]:
+def joint_rms_deg(character, q: np.ndarray, capture_character, q_capture: np.ndarray,
+                  exclude: tuple[str, ...] = ()) -> dict[str, Any]:
     """RMS difference (deg) over the cycle between a motion's joint angles and the capture's own,
     per coordinate the two share (hinges, root excluded) and overall; the pelvis's three rotations
-    apart."""
+    apart; ``exclude``: coordinates the capture did not measure (still arms given a swing)."""
     N = q.shape[1] - 2
     per: dict[str, float] = {}
     for i, name in enumerate(character.coordinate_names):
-        if i < 3 or name not in capture_character.coordinate_names:
+        if i < 3 or name not in capture_character.coordinate_names or name in exclude:
             continue
         d = q[i, :N] - q_capture[capture_character.coordinate_names.index(name), :N]
         per[name] = float(np.degrees(np.sqrt(np.mean(d ** 2))))

@@ -28,6 +28,7 @@ from solver.character import FULL_SUPERFLUOUS, LOWER_SUPERFLUOUS, Character, mer
 from solver.contact import estimate_contact_wrenches
 from solver.environment import STANDARD_GRAVITY, STANDARD_GRAVITY_VECTOR
 from solver.gait import close_loop, ensure_double_support, extract_cycle, periodic_lowpass, tighten_contacts
+from solver.gait.arms import arm_swing, arms_still
 from solver.gait.cycles import LEAD_S
 from solver.io.fit import CONTACT_INSET
 from solver.jsonable import jsonable
@@ -419,6 +420,8 @@ def prepare_cycle(capture: Capture, *, character: str = DEFAULT_CHARACTER, fps: 
     if soles:
         stats["sole_calibration"] = soles
     keep = used_coordinates(capture.character, cyc.q) if character == "fullbody" else ()
+    if character == "fullbody" and arms_still(capture.character.coordinate_names, cyc.q):
+        stats["arm_swing"] = arm_swing(capture.character.coordinate_names, cyc.q)[1]
     if keep:
         stats["kept_coordinates"] = list(keep)
     syn, cap_char = synthesis_character(levelled, character, pose=mean_pose, keep=keep)
@@ -484,6 +487,7 @@ def closed_cycle(prep: PreparedCycle, character: Character | None = None) -> np.
         N = q.shape[1] - 2                                 # is its own last frames
         lead_in = q[:, max(0, N - int(round(LEAD_S * prep.fps))):N]
     closed = close_loop(q, keep_yaw=turning, lead_in=lead_in, lead_out=on(prep.cycle.lead_out))
+    closed, _ = arm_swing(ch.coordinate_names, closed)  # still arms (a model or marker set without them) swing
     return periodic_lowpass(closed, prep.fps)
 
 
@@ -618,9 +622,12 @@ def make_tutor(
     stats["marker_distance_to_simplified_mm"] = 1e3 * res.marker_rms
     # the capture's own gait features (naturalness checks are judged against them too), how far the
     # tutor's joints moved from the capture's, and its ground reactions against the plates
-    stats["joint_rms_to_capture_deg"] = joint_rms_deg(syn, res.q, cap_char, q_cap)
-    stats["joint_rms_simplified_to_capture_deg"] = joint_rms_deg(syn, q_sim, cap_char, q_cap)
-    stats["joint_rms_to_closed_cycle_deg"] = joint_rms_deg(syn, res.q, cap_char, q_loop)
+    # (still arms given a swing are not the capture's: left out)
+    swung = tuple(c for c in cap_char.coordinate_names if c.startswith(("shoulder_", "elbow_"))) \
+        if stats.get("arm_swing") else ()
+    stats["joint_rms_to_capture_deg"] = joint_rms_deg(syn, res.q, cap_char, q_cap, swung)
+    stats["joint_rms_simplified_to_capture_deg"] = joint_rms_deg(syn, q_sim, cap_char, q_cap, swung)
+    stats["joint_rms_to_closed_cycle_deg"] = joint_rms_deg(syn, res.q, cap_char, q_loop, swung)
     assert res.wrenches is not None  # a dynamic solve
     plates = against_plates(res.wrenches[:, 3:], cyc.measured, res.q, syn.total_mass * STANDARD_GRAVITY)
     if plates:

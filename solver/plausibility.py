@@ -107,7 +107,7 @@ def report(motion: Motion, tol: Tolerances = Tolerances(), realism: RealismLimit
                                      at_least=True),
                        Check.measure("air_wrench", kin["max_wrench_in_air"], f_tol, "N", "wrench of a foot in the air"),
                        Check.measure("cop", kin["cop_outside_mm"], tol.cop_mm, "mm",
-                                     "centre of pressure outside the foot")]
+                                     "centre of pressure outside the sole (heel to toe, as wide as the foot)")]
     else:
         problems.append("no contact schedule")
         checks.append(Check("contacts", None, 0.0, "", "the motion stores its contact schedule", False))
@@ -186,6 +186,7 @@ def _contact_checks(motion: Motion, mu: float, weight: float) -> dict:
     for k, side in enumerate(FEET):
         foot = ch.foot(side)
         si = seg_index[foot.segment]
+        sole_centre, sole_half = ch.sole_box(side)  # the centre of pressure stays on the sole
         for t in range(1, T - 1):
             n0, f = W[k, :3, t], W[k, 3:, t]
             if not B[k, t]:
@@ -197,8 +198,8 @@ def _contact_checks(motion: Motion, mu: float, weight: float) -> dict:
                 zg = feet_ground[k, t]  # the CoP on the ground plane under the foot
                 u = np.array([(zg * f[0] - n0[1]) / f[2], (n0[0] + zg * f[1]) / f[2], zg])
                 cops[k, :, t] = u
-                local = rots[si, :, :, t].T @ (u - poss[si, :, t]) - foot.center
-                cop_out = max(cop_out, float(np.max(np.abs(local) - foot.half)))
+                local = rots[si, :, :, t].T @ (u - poss[si, :, t]) - sole_centre
+                cop_out = max(cop_out, float(np.max(np.abs(local) - sole_half)))
     return {
         **out,
         "friction_cone_excess_N": max(excess, 0.0),

@@ -184,6 +184,36 @@ class FootBox:
 
 
 @dataclass(frozen=True, eq=False)
+class Sole:
+    """The foot a character stands on: the rectangle whose back and front edges have the heel and
+    toe contact points as midpoints, as wide as the foot box (``half_width``). The optimizer keeps
+    the centre of pressure inside it and its corners clear of the ground in swing, the checks read
+    it, the exports draw it and MuJoCo simulates it (``Character.sole``)."""
+
+    side: str
+    segment: str
+    heel: ContactPoint
+    toe: ContactPoint
+    half_width: float
+
+    @property
+    def length(self) -> float:
+        return float(np.linalg.norm(np.asarray(self.toe.position) - np.asarray(self.heel.position)))
+
+    def corners(self, roll: float = 0.0, half_width: float | None = None) -> np.ndarray:
+        """(4, 3) the sole's corners in its segment's frame, rows heel +w, heel −w, toe +w, toe −w
+        (+w: the foot's left, across the heel–toe line in the segment's horizontal plane), turned by
+        ``roll`` (rad) about the heel–toe line."""
+        w = self.half_width if half_width is None else float(half_width)
+        h, t = np.asarray(self.heel.position, dtype=float), np.asarray(self.toe.position, dtype=float)
+        ax = (t - h) / np.linalg.norm(t - h)
+        y0 = np.cross([0.0, 0.0, 1.0], ax)
+        y0 /= np.linalg.norm(y0)
+        y = y0 * math.cos(roll) + np.cross(ax, y0) * math.sin(roll)
+        return np.array([h + w * y, h - w * y, t + w * y, t - w * y])
+
+
+@dataclass(frozen=True, eq=False)
 class Character:
     """An immutable character. Build with :func:`build_character` or a reference constructor."""
 
@@ -278,6 +308,33 @@ class Character:
             if f.side == side:
                 return f
         raise CharacterError(f"character {self.name!r} has no {side} foot box")
+
+    def sole(self, side: str) -> Sole:
+        """The ``side`` foot's sole (:class:`Sole`): its heel and toe contact points, by name
+        (``heel_*``, ``toe_*``; else the rearmost and foremost of its two), on one segment, as wide
+        as its foot box."""
+        pts = self.contact_points(side)
+        if len(pts) != 2:
+            raise CharacterError(f"the {side} foot needs exactly two contact points (heel, toe), "
+                                 f"character {self.name!r} has {len(pts)}")
+        named = {c.name.split("_")[0]: c for c in pts}
+        if set(named) == {"heel", "toe"}:
+            heel, toe = named["heel"], named["toe"]
+        else:
+            heel, toe = sorted(pts, key=lambda c: float(c.position[0]))
+        if heel.segment != toe.segment:
+            raise CharacterError(f"the {side} heel and toe contact points are on different segments")
+        return Sole(side, heel.segment, heel, toe, float(self.foot(side).half[1]))
+
+    def sole_box(self, side: str) -> tuple[np.ndarray, np.ndarray]:
+        """(centre, half extents) in the foot segment's axes of the box the centre of pressure stays
+        in: the sole (heel to toe, as wide as the foot box) and the foot box's height (a foot not flat
+        on the ground presses on the part of its sole there)."""
+        sole, box = self.sole(side), self.foot(side)
+        h, t = np.asarray(sole.heel.position, dtype=float), np.asarray(sole.toe.position, dtype=float)
+        centre = np.array([0.5 * (h[0] + t[0]), 0.5 * (h[1] + t[1]), float(box.center[2])])
+        half = np.array([0.5 * abs(t[0] - h[0]), sole.half_width, float(box.half[2])])
+        return centre, half
 
     def contact_points(self, side: str | None = None) -> tuple[ContactPoint, ...]:
         return tuple(c for c in self.contacts if side is None or c.side == side)

@@ -148,16 +148,15 @@ class FrameFunctions:
         self._rest_points = np.asarray(self.kin(np.zeros(ch.n))[1]).reshape(-1, 3)  # contact points at q = 0
         gnd = ca.SX.sym("ground", self.P)
         self.z = ca.Function("z", [q, gnd], [ca.vertcat(*[p[2] for p in pts]) - gnd])  # height above the ground
-        # the drawn sole's corners (solver.naturalness.sole_corners): heights above the ground under
-        # each foot (its heel point's), SOLE_CORNERS rows per foot
+        # the sole's corners (``Character.sole``, in ``solver.naturalness.sole_corners``' order: heel −w,
+        # heel +w, toe −w, toe +w): heights above the ground under each foot (its heel point's),
+        # SOLE_CORNERS rows per foot
         corners = []
         for side in FEET:
-            half_w = float(ch.foot(side).half[1])
-            for j in (self.heel_of[side], self.toe_of[side]):
-                c = ch.contacts[j]
-                for sgn in (-1.0, 1.0):
-                    b, pb = model.point_on_body(c.segment, np.asarray(c.position) + np.array([0.0, sgn * half_w, 0.0]))
-                    corners.append(point_world(pose, b, pb)[2] - gnd[self.heel_of[side]])
+            sole = ch.sole(side)
+            for corner in sole.corners()[[1, 0, 3, 2]]:
+                b, pb = model.point_on_body(sole.segment, corner)
+                corners.append(point_world(pose, b, pb)[2] - gnd[self.heel_of[side]])
         self.sole = ca.Function("sole", [q, gnd], [ca.vertcat(*corners)])
         # [naturalness] a swinging foot's sole clears the ground by the walker's own margin: each corner
         # below its foot's target height (a per-frame parameter: the mid-swing target where the foot moves,
@@ -223,9 +222,12 @@ class FrameFunctions:
         rows = []
         for k, side in enumerate(FEET):
             foot = ch.foot(side)
+            # the centre of pressure within the sole (``Character.sole``: heel to toe, as wide as the foot
+            # box; the box's height, for a foot not flat), the foot MuJoCo simulates and the exports draw
+            box_center, half = ch.sole_box(side)
             body = model.seg_body[foot.segment]
             rot_box = model.seg_rot[foot.segment]
-            center = model.seg_pos[foot.segment] + rot_box @ foot.center
+            center = model.seg_pos[foot.segment] + rot_box @ box_center
             r_box = sp.matmul(pose.rot[body], sp.const_mat(rot_box))
             R = ca.vertcat(*[ca.horzcat(*r_box[i]) for i in range(3)])
             pc = ca.vertcat(*point_world(pose, body, center))
@@ -239,8 +241,8 @@ class FrameFunctions:
             fu = ca.vertcat(fz * ref[3 * k] - nmom[1], fz * ref[3 * k + 1] + nmom[0], fz * ref[3 * k + 2])
             local = ca.mtimes(R.T, fu - fz * pc) / self.weight_scale
             for kk in range(3):
-                rows.append(foot.half[kk] * fs[2] - local[kk])
-                rows.append(foot.half[kk] * fs[2] + local[kk])
+                rows.append(half[kk] * fs[2] - local[kk])
+                rows.append(half[kk] * fs[2] + local[kk])
             # free moment at the CoP times f_z: τ f_z = n·f (moment about a ground point), scaled by W·M
             nf = ca.dot(ns, fs)
             rho = rl.torsion_radius_fraction * 2 * float(np.max(foot.half[:2]))
