@@ -55,3 +55,14 @@ def shared_trials() -> dict[str, tuple[list[Path], dict]]:
         "deepmimic_walk": (trials()["deepmimic_walk"], {}),
         "cmu_straight": ([d / "cmu16_bvh" / "16_15_walk.bvh"], {"mass": 60.0}),
     }
+
+
+def other_labs() -> dict[str, tuple[list[Path], dict]]:
+    """Public walks from other labs and marker sets than ``shared_trials`` (issue: true to the subject),
+    each in data/ with its origin and licence: a Motion Analysis Helen Hayes set with medial markers, a
+    Vicon Nexus cluster set (opensim-core's walking5), with the masses their plates imply."""
+    d = data_dir()
+    return {
+        "c3d_motion_analysis": ([d / "c3d_motion_analysis_helen_hayes" / "Gait.c3d"], {"mass": 64.4}),
+        "c3d_opensim_walking5": ([d / "c3d_opensim_walking5" / "walking5.c3d"], {"mass": 56.1}),
+    }

@@ -51,7 +51,7 @@ class FrameFunctions:
     VARS: ClassVar[dict[str, tuple[int, int]]] = {
         "cost": (1, 1), "acc": (3, 3), "z": (1, 1), "sole": (1, 1), "slip": (2, 2), "feet": (2, 2), "seg": (6, 4),
         "c2": (5, 5), "jerk": (4, 4), "wrate": (2, 2), "frate": (2, 2), "smooth": (3, 3), "wcom": (1, 1),
-        "cross": (1, 1), "lean": (1, 1), "clr": (1, 1), "ftrack": (1, 1), "jspeed": (1, 1)}
+        "cross": (1, 1), "lean": (1, 1), "clr": (1, 1), "ftrack": (1, 1), "jspeed": (1, 1), "width": (1, 1)}
 
     def __init__(self, character: Character, realism: Realism = Realism(),
                  naturalness: Naturalness = Naturalness()) -> None:
@@ -128,7 +128,7 @@ class FrameFunctions:
             out.update({"z": self.z, "sole": self.sole, "slip": self.slip, "feet": self.feet, "seg": self.seg,
                         "c2": self.c2, "jerk": self.jerk, "wrate": self.wrate, "frate": self.frate,
                         "smooth": self.smooth, "wcom": self.wcom, "cross": self.cross, "lean": self.lean,
-                        "clr": self.clr, "ftrack": self.ftrack, "jspeed": self.jspeed})
+                        "clr": self.clr, "ftrack": self.ftrack, "jspeed": self.jspeed, "width": self.width})
         return out
 
     # --- contact rows ---------------------------------------------------------------------
@@ -177,6 +177,13 @@ class FrameFunctions:
                 c = (pts[self.heel_of[side]][:2] + pts[self.toe_of[side]][:2]) / 2
                 far.append(sgn * ca.dot(c - q[:2], left))
         self.cross = ca.Function("cross", [q, th], [ca.vertcat(*far)])
+        # [naturalness] each foot in contact where the walker puts it: its far-side distance across the
+        # direction of travel (rows 0-1 above) toward a per-frame target (the guide's; masked where the
+        # foot is off the ground), per 1 cm: the step width is the walker's own, a turn is not taken by
+        # bringing the inner foot onto the path line
+        wtarget, wmask, wwd = ca.SX.sym("wtarget", 2), ca.SX.sym("wmask", 2), ca.SX.sym("wwd")
+        self.width = ca.Function("width", [q, th, wtarget, wmask, wwd],
+                                 [wwd * sum(wmask[k_] * ((far[k_] - wtarget[k_]) / 0.01) ** 2 for k_ in range(2))])
         # [naturalness] the trunk's lean against gravity in the sagittal plane of the direction of
         # travel (sine; + forward), and its prior toward a target per frame (the guide's)
         seg, trunk_local = trunk_axis(ch)

@@ -208,7 +208,8 @@ class Layout:
                    joint_range: np.ndarray | None = None, path: np.ndarray | None = None,
                    lean: np.ndarray | None = None, fore_aft_cap: float = 1e3,
                    g_ratio: float = 1.0, guide_com: np.ndarray | None = None,
-                   clearance: np.ndarray | None = None, guide_force: np.ndarray | None = None) -> np.ndarray:
+                   clearance: np.ndarray | None = None, guide_force: np.ndarray | None = None,
+                   width: np.ndarray | None = None) -> np.ndarray:
         """The parameter vector (``P_LAYOUT`` order); ``h``: frame interval (s), default 1/fps;
         ``joint_range`` (2, n) the joint-range prior's bounds (default: none); ``path`` (T,) the
         direction of travel per frame (rad); ``lean`` (T,) the trunk's target lean (sine);
@@ -236,6 +237,7 @@ class Layout:
             "clearance": weights.clearance * hv * 15.0,  # per corner-frame at 15 frames/s
             "force_track": weights.force_track / K,
             "joint_speed": weights.joint_speed / (max(self.n - 6, 1) * nT),
+            "step_width": weights.step_width / (2 * nT),
         }
         wts = [scaled[name] for name in WEIGHT_SLOTS]
         return np.concatenate([
@@ -253,7 +255,15 @@ class Layout:
             (np.zeros((3, nT)) if guide_com is None else np.asarray(guide_com, dtype=float)).ravel(order="F"),
             (np.zeros((2, nT)) if clearance is None else np.asarray(clearance, dtype=float)).ravel(order="F"),
             (np.zeros((3, nT)) if guide_force is None else np.asarray(guide_force, dtype=float)).ravel(order="F"),
+            (np.zeros((4, nT)) if width is None else np.asarray(width, dtype=float)).ravel(order="F"),
         ])
+
+    def width_targets(self, q: np.ndarray, path: np.ndarray) -> np.ndarray:
+        """(4, T) each foot's far-side distance across the direction of travel ``path`` in the motion
+        ``q`` (the guide's: the step width the optimum keeps), then 1 where the foot is on the ground."""
+        f = self.ff.cross.map(self.T)
+        far = np.asarray(f(np.asarray(q, dtype=float), np.asarray(path, dtype=float).reshape(1, -1)))[:2]
+        return np.vstack([far, self.foot_contact().astype(float)])
 
     def force_targets(self, com: np.ndarray, h: float, gravity) -> np.ndarray:
         """(3, T) the total ground force (scaled: body weights of standard gravity) that moves the

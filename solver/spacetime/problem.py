@@ -72,9 +72,10 @@ YAW = 3
 #: "lean": per frame, the trunk's target lean against gravity (sine); "loads": a foot's fore-aft force
 #: bound (scaled: body weights of standard gravity) and the environment's gravity over the standard;
 #: "gcom": per frame, the centre of mass to track; "clear": per foot and frame, the sole's clearance target;
-#: "gforce": per frame, the total ground force to track (body weights of standard gravity)
+#: "gforce": per frame, the total ground force to track (body weights of standard gravity); "width": per frame,
+#: each foot's far-side distance across the direction of travel to keep, then a mask (1: the foot is down)
 P_LAYOUT = ("gm", "gq", "g", "mu", "wts", "ref", "anchor", "dpsi", "com", "h", "ground", "rise", "range", "path",
-            "lean", "loads", "gcom", "clear", "gforce")
+            "lean", "loads", "gcom", "clear", "gforce", "width")
 
 
 def _heading(vx, vy, psi):
@@ -164,7 +165,8 @@ class SpacetimeProblem(Layout):
         nm3 = 3 * ff.n_markers
         sizes = {"gm": nm3 * Tn, "gq": n * Tn, "g": 3, "mu": 1, "wts": len(WEIGHT_SLOTS), "ref": 6 * Tn,
                  "anchor": 3 * Tn, "dpsi": 1, "com": 3 * Tn, "h": 1, "ground": max(ff.P, 1) * Tn, "rise": 1,
-                 "range": 2 * n, "path": Tn, "lean": Tn, "loads": 2, "gcom": 3 * Tn, "clear": 2 * Tn, "gforce": 3 * Tn}
+                 "range": 2 * n, "path": Tn, "lean": Tn, "loads": 2, "gcom": 3 * Tn, "clear": 2 * Tn, "gforce": 3 * Tn,
+                 "width": 4 * Tn}
         self._p_layout, off = {}, 0
         for name in P_LAYOUT:
             self._p_layout[name] = (off, sizes[name])
@@ -200,6 +202,7 @@ class SpacetimeProblem(Layout):
                         derivatives=ff.derivatives["cost"], cost=True))
         self._CLEAR = par("clear", (2, Tn))
         self._GFORCE = par("gforce", (3, Tn))
+        self._WIDTH = par("width", (4, Tn))
         self._cyclic_root(x, dpsi)
         if dynamics:
             self._dynamic_terms(x, grav, mu, wts, dpsi, REF, ANCHOR)
@@ -308,6 +311,10 @@ class SpacetimeProblem(Layout):
         sel = [(c, r) for c, t in enumerate(frames) for r in range(CROSS_ROWS) if B[r % 2, t]]
         self._rows(Term("cross", ff.cross, 1, qi[:, frames], [self._PATH[frames].T], derivatives=D["cross"]), sel,
                    -math.inf, ff.naturalness.crossover_m, "crossover")
+        self._cost(Term("width", ff.width, 1, qi[:, frames], [self._PATH[frames].T, self._WIDTH[:2, frames],
+                                                              self._WIDTH[2:, frames],
+                                                              ca.repmat(wts["step_width"], 1, len(frames))],
+                        derivatives=D["width"], cost=True))
         # no slip, no spin between consecutive frames
         pairs = frames
         sel, lo, hi = [], [], []
@@ -479,7 +486,9 @@ class SpacetimeProblem(Layout):
                             g_ratio=float(np.linalg.norm(env.gravity)) / STANDARD_GRAVITY,
                             guide_com=com_target,
                             clearance=self.clearance_targets(q0, h, feet_ground) if self.dynamics else None,
-                            guide_force=self.force_targets(com_target, h, env.gravity))
+                            guide_force=self.force_targets(com_target, h, env.gravity),
+                            width=(self.width_targets(gq, path_heading(gq, self.T - 2))
+                                   if self.dynamics and self.ff.has_contacts else None))
         lbg, ubg = self.constraint_bounds(h)
         parts = [self.pack_q(q0)]
         if self.dynamics:

@@ -96,6 +96,10 @@ class Weights:
     #: joint and frame weighs like 5° off its angle there (a swing knee asked to clear the ground turned
     #: 468°/s between two frames where the capture's turned 363°/s)
     joint_speed: float = 10.0
+    #: [naturalness] squared difference of each foot's distance from the pelvis across the direction of
+    #: travel from the guide's while it is on the ground (per 1 cm, averaged): a walker keeps its step width;
+    #: a curve is not turned by bringing the inner foot onto the path line (the crossover bound's edge)
+    step_width: float = 1.0
     #: [naturalness] squared clearance deficit of a moving swing foot's sole corners below the
     #: walker's mid-swing clearance (``Naturalness.clearance_target_m``), per (1 cm)² and corner-frame at
     #: 15 frames/s: 5 mm short at one corner of one frame weighs like 2.5 mm of marker distance over the
