@@ -1,8 +1,10 @@
-"""The filmstrips of docs/naturalness.md: on two shared trials, the captured cycle, its tutor and
-the λ = 1 optima of slope ±20°, curve 90° and stairs up 0.10 m, each drawn by
-``service.plots.filmstrip_png`` (the same figure as ``motionx plot --kind filmstrip``).
+"""The filmstrips of docs/naturalness.md: on two shared trials, the captured cycle, its tutor (the
+default character, or ``--character``) and the λ = 1 optima of slope ±20°, curve 90° and stairs, each
+drawn by ``service.plots.filmstrip_png`` (the same figure as ``motionx plot --kind filmstrip``).
+docs/img/naturalness/before/ holds the same figures made by the code before the fidelity issue
+(HalfBoy at 15 frames/s, its features on bounds).
 
-    python -m bench.filmstrips [--out docs/img/naturalness]
+    python -m bench.filmstrips [--out docs/img/naturalness] [--character fullbody|halfboy]
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ from solver.continuation import StepControl, Target, extrapolate
 from solver.gait import extract_cycle
 from solver.io import load_trial
 from solver.motion import Motion
-from solver.pipeline import make_tutor
+from solver.pipeline import DEFAULT_CHARACTER, make_tutor
 
 TRIALS = ("deepmimic_walk", "opensim_overground")
 TARGETS = {"uphill_20": Target(slope_deg=20.0), "downhill_20": Target(slope_deg=-20.0),
@@ -47,6 +49,7 @@ def capture_cycle(capture, fps: float) -> Motion:
 def main() -> int:
     p = argparse.ArgumentParser()
     p.add_argument("--out", default="docs/img/naturalness")
+    p.add_argument("--character", default=DEFAULT_CHARACTER, choices=["fullbody", "halfboy"])
     args = p.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -55,7 +58,7 @@ def main() -> int:
     for name in TRIALS:
         files, opts = trials[name]
         capture = load_trial(files, **opts)
-        tutor = make_tutor(capture, character="halfboy", fps=15.0).motion
+        tutor = make_tutor(capture, character=args.character).motion
         assert tutor is not None, name
         (out / f"{name}.capture.png").write_bytes(
             filmstrip_png(capture_cycle(capture, tutor.fps), title=f"{name}: the captured cycle"))

@@ -186,7 +186,10 @@ def _contact_checks(motion: Motion, mu: float, weight: float) -> dict:
     for k, side in enumerate(FEET):
         foot = ch.foot(side)
         si = seg_index[foot.segment]
-        sole_centre, sole_half = ch.sole_box(side)  # the centre of pressure stays on the sole
+        try:
+            sole_centre, sole_half = ch.sole_box(side)  # the centre of pressure stays on the sole
+        except ValueError:  # a foot without a heel and a toe point: its box
+            sole_centre, sole_half = foot.center, foot.half
         for t in range(1, T - 1):
             n0, f = W[k, :3, t], W[k, 3:, t]
             if not B[k, t]:
