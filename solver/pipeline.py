@@ -487,7 +487,8 @@ def closed_cycle(prep: PreparedCycle, character: Character | None = None) -> np.
         N = q.shape[1] - 2                                 # is its own last frames
         lead_in = q[:, max(0, N - int(round(LEAD_S * prep.fps))):N]
     closed = close_loop(q, keep_yaw=turning, lead_in=lead_in, lead_out=on(prep.cycle.lead_out))
-    closed, _ = arm_swing(ch.coordinate_names, closed)  # still arms (a model or marker set without them) swing
+    # still arms (a model or marker set without them) swing: as decided on the captured cycle
+    closed, _ = arm_swing(ch.coordinate_names, closed, still=bool(prep.stats.get("arm_swing")))
     return periodic_lowpass(closed, prep.fps)
 
 

@@ -370,8 +370,9 @@ def test_validate_shows_every_realism_check(tmp_path, capsys):
 
 
 def test_optimizer_bounds_lie_strictly_inside_the_checks_limits():
-    """Every bound the optimizer keeps lies strictly inside the limit its check judges (an
-    optimum is never on the edge of a check), and follows that limit when it changes."""
+    """Every bound the optimizer keeps lies strictly inside the limit its check judges, or is a
+    safety net behind a cost whose target lies inside it (the swing clearance, the joints' band and
+    speed): an optimum is never on the edge of a check; the bounds follow the limits when they change."""
     from dataclasses import replace
 
     from solver.naturalness import NaturalnessLimits
@@ -385,9 +386,14 @@ def test_optimizer_bounds_lie_strictly_inside_the_checks_limits():
     assert r.torsion_radius_fraction == rl.torsion_radius
     # whole-body Newton–Euler from positions sees a sixth of the ground wrench's second differences
     assert r.force_curvature / 6 < rl.newton_force and r.moment_curvature / 6 < rl.newton_moment
-    assert n.clearance_m > nl.clearance_m and n.shared_load > nl.shared_load and n.pitch_load < nl.pitch_load
+    # swing clearance: costed toward a target above the check's limit; the hard bound a safety net below
+    assert n.clearance_m < nl.clearance_m < n.clearance_target_m
+    assert n.shared_load > nl.shared_load and n.pitch_load < nl.pitch_load
     assert n.pitch_deg == nl.pitch_deg and n.friction_use < nl.friction_use and n.fore_aft < nl.fore_aft
-    assert n.crossover_m < nl.crossover_m and n.limit_margin_deg > nl.limit_band_deg and n.level_deg == nl.level_deg
+    # joints: costed out of a band wider than the check's, the bounds the model's own; joint speed costed
+    # below the check's limit
+    assert n.crossover_m < nl.crossover_m and n.limit_band_deg > nl.limit_band_deg and n.limit_margin_deg == 0.0
+    assert n.joint_speed_deg_s < nl.joint_speed_deg_s and n.level_deg == nl.level_deg
     assert -n.push_margin > nl.push
     moved = Realism.from_limits(replace(rl, total_force=3.0, spin_rate=100.0))
     assert 2.9 < moved.support_max < 3.0 and 50.0 < moved.spin_rate_deg_s < 100.0

@@ -100,7 +100,9 @@ def test_tutors_from_c3d_halfboy_and_fullbody(c3d_capture):
     for kind, fps, n in (("halfboy", 15, 16), ("fullbody", 30, 43)):
         res = make_tutor(c3d_capture, character=kind, fps=fps)
         assert res.status == "succeeded", res.message
-        assert res.motion.character.n == n
+        kept = res.stats.get("kept_coordinates") or []  # the superfluous ones the capture uses (full body)
+        assert res.motion.character.n == n + len(kept) and (kind == "fullbody" or not kept)
+        assert set(kept) <= set(C.FULL_SUPERFLUOUS) and set(kept) <= set(res.motion.character.coordinate_names)
         _assert_plausible(res.motion)
 
 
@@ -268,10 +270,11 @@ def test_each_weight_reaches_the_nlp_in_its_named_slot():
         p = prob.parameters(prob.guide_markers(q), q, Environment(), w, prob.ref_points(q), prob.anchor_points(q), 0.0)
         return weight_slots(p[o : o + s])
 
-    base = slots(Weights())
+    ones = Weights(**{name: 1.0 for name in WEIGHT_SLOTS})  # every slot non-zero (com_track's default is 0)
+    base = slots(ones)
     assert set(base) == {f for f in Weights.__dataclass_fields__} and all(v > 0 for v in base.values())
     for name in WEIGHT_SLOTS:
-        got = slots(replace(Weights(), **{name: 2.0 * getattr(Weights(), name)}))
+        got = slots(replace(ones, **{name: 2.0}))
         assert got == pytest.approx({k: (2.0 if k == name else 1.0) * v for k, v in base.items()}, rel=1e-12), name
 
 

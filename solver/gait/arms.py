@@ -15,8 +15,11 @@ from typing import Any
 
 import numpy as np
 
-#: a capture's arms are still when no shoulder or elbow flexion moves more than this over the cycle (degrees)
+#: a capture's arms are still when neither elbow's flexion moves more than ``STILL_DEG`` over the cycle and
+#: neither shoulder's more than ``STILL_SHOULDER_DEG`` (degrees; hanging arms follow the trunk a little;
+#: swinging ones move their shoulders 15-40° and their elbows 10-25°)
 STILL_DEG = 1.0
+STILL_SHOULDER_DEG = 3.0
 #: the swing given to still arms (degrees): shoulder flexion about its mean, amplitude (half the range),
 #: elbow flexion mean and amplitude, shoulder adduction (the arm a little away from the trunk)
 SHOULDER_MEAN, SHOULDER_AMPLITUDE = -2.0, 12.0
@@ -27,20 +30,22 @@ SOURCES = ("Collins, Adamczyk & Kuo 2009, Proc R Soc B 276:3679 (dynamic arm swi
 
 
 def arms_still(names: list[str] | tuple[str, ...], q: np.ndarray) -> bool:
-    """Whether a capture (coordinates ``names``, cycle ``q``) has arms and none of them moves."""
-    rows = [names.index(f"{j}_{s}") for j in ("shoulder_flexion", "elbow_flexion") for s in ("r", "l")
-            if f"{j}_{s}" in names]
+    """Whether a capture (coordinates ``names``, cycle ``q``) has arms and none of them swings."""
+    joints = {"shoulder_flexion": STILL_SHOULDER_DEG, "elbow_flexion": STILL_DEG}
+    rows = [(names.index(f"{j}_{s}"), lim) for j, lim in joints.items() for s in ("r", "l") if f"{j}_{s}" in names]
     if len(rows) < 4:
         return False
     N = q.shape[1] - 2 if q.shape[1] > 4 else q.shape[1]
-    return bool(np.all(np.degrees(np.ptp(q[rows, :N], axis=1)) < STILL_DEG))
+    return all(float(np.degrees(np.ptp(q[i, :N]))) < lim for i, lim in rows)
 
 
-def arm_swing(names: list[str] | tuple[str, ...], q: np.ndarray) -> tuple[np.ndarray, dict[str, Any] | None]:
+def arm_swing(names: list[str] | tuple[str, ...], q: np.ndarray,
+              still: bool | None = None) -> tuple[np.ndarray, dict[str, Any] | None]:
     """(q, what was done): a cycle whose arms are still given the published arm swing, each
     shoulder in antiphase with its own side's hip flexion (scaled to ``SHOULDER_AMPLITUDE``), each
-    elbow flexing with its shoulder; unchanged (None) when the arms move or there are none."""
-    if not arms_still(names, q):
+    elbow flexing with its shoulder; unchanged (None) when the arms move or there are none.
+    ``still``: whether they are, decided already (on the captured cycle), else ``arms_still``."""
+    if not (arms_still(names, q) if still is None else still):
         return q, None
     out = np.array(q, dtype=float, copy=True)
     N = q.shape[1] - 2 if q.shape[1] > 4 else q.shape[1]
