@@ -16,7 +16,8 @@ from solver.environment import STANDARD_GRAVITY, Environment
 
 
 def test_the_registry_has_every_axis_with_unit_bounds_default_and_doc():
-    assert registry.names() == ("slope_deg", "curve_deg", "friction", "gravity", "speed_scale", "step_height_m")
+    assert registry.names() == ("slope_deg", "curve_deg", "friction", "gravity", "speed_scale", "step_height_m",
+                                "step_going_m")
     for ax in registry.axes():
         assert ax.doc and ax.cli.startswith("--") and ax.lo < ax.hi
         if ax.default is not None:
@@ -48,7 +49,7 @@ def test_target_is_a_value_over_the_registered_axes():
     assert [a.name for a, _ in t.active()] == ["speed_scale", "slope_deg"]  # application order
     assert Target(slope_deg=0.0, speed_scale=1.0).is_identity() and not Target(friction=1.0).is_identity()
     assert t.to_dict() == {"slope_deg": 5.0, "curve_deg": 0.0, "friction": None, "gravity": None, "speed_scale": 1.2,
-                           "step_height_m": 0.0}
+                           "step_height_m": 0.0, "step_going_m": None}
     with pytest.raises(AttributeError):
         t.slope_deg = 3.0  # type: ignore[misc]
 
@@ -57,7 +58,8 @@ def test_environment_values_report_every_axis_and_gravity_is_standard():
     env, values = environment_at(Environment(), Target(speed_scale=1.44), 0.5)
     assert env == Environment() and env.gravity == (0.0, 0.0, -STANDARD_GRAVITY)
     assert values == pytest.approx({"slope_deg": 0.0, "curve_deg": 0.0, "friction": 1.0,
-                                    "gravity": STANDARD_GRAVITY, "speed_scale": 1.22, "step_height_m": 0.0})
+                                    "gravity": STANDARD_GRAVITY, "speed_scale": 1.22, "step_height_m": 0.0,
+                                    "step_going_m": 0.0})
 
 
 def test_speed_splits_into_stride_and_cadence_and_scales_the_frame_interval():
