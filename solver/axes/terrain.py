@@ -68,16 +68,14 @@ STEP_GOING = register(Axis(
         f"default {DEFAULT_GOING_M:g}, building codes 0.25-0.30)",
     lo=0.2, hi=1.0, default=None, label="going", cli="--step-going", metavar="M", order=4, grid=False,
     base_value=lambda env: env.step_going_m, environment=lambda env, v: env.with_(step_going_m=v),
-    guide=lambda q, v: shorten_stride(q, v), words="going {} m"))
+    guide=lambda q, v: shorten_stride(q, v), words="going {} m", requires="step_height_m"))
 
 
 def stairs_target(target: Target) -> Target:
     """The target with the stairs' default going (``DEFAULT_GOING_M``) when it has a rise and no
-    going; ValueError for a going without a rise (no stairs to be deep)."""
+    going (a going without a rise is refused by ``Target`` itself: ``Axis.requires``)."""
     values: dict[str, Any] = {k: v for k, v in target.to_dict().items() if v is not None}
     if not target.step_height_m:
-        if target.step_going_m is not None:
-            raise ValueError("step_going_m is the depth of stairs' treads: give a rise (step_height_m) too")
         return target
     if target.step_going_m is None:
         values["step_going_m"] = DEFAULT_GOING_M

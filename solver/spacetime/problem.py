@@ -46,7 +46,7 @@ from solver.spacetime.callback import STOP, STOP_CALLBACK
 from solver.spacetime.derivatives import Term, assemble
 from solver.spacetime.frame import CROSS_ROWS, FOOT_ROWS, FRAME_COST_WEIGHTS, SOLE_CORNERS, frame_functions
 from solver.spacetime.layout import Layout
-from solver.spacetime.stairs import STAIRS_PARAMS, add_stairs_terms, stairs_parameters
+from solver.spacetime.stairs import STAIRS_PARAMS, add_stairs_terms, stairs_joint_bounds, stairs_parameters
 from solver.spacetime.types import (
     DEFAULT_IPOPT,
     STANDARD_GRAVITY,
@@ -485,6 +485,8 @@ class SpacetimeProblem(Layout):
         x0 = np.concatenate(parts)
         g_ratio = float(np.linalg.norm(env.gravity)) / STANDARD_GRAVITY  # loads in the environment's body weights
         lbx, ubx = self.bounds(locks, shared_load=self.ff.naturalness.shared_load * g_ratio)
+        if self.rising:  # [stairs] joints off their limits (solver.spacetime.stairs)
+            lbx, ubx = stairs_joint_bounds(self, lbx, ubx)
         x0 = np.clip(x0, lbx, ubx)
         args: dict[str, Any] = dict(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
         opts: dict[str, Any] = {"ipopt.max_iter": int(max_iter)}

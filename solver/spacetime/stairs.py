@@ -41,15 +41,17 @@ from solver.spacetime.derivatives import jacobian, lagrangian_hessian
 
 #: per frame: the flight (6), then per foot the tread extent (2) and the nosing slots (3 each)
 FLIGHT_PARAMS = 6
-#: nosings per swinging foot: the risers behind the tread it left and past the tread it reaches (walls),
-#: and the two it crosses (step-over-step)
-NOSING_SLOTS = 4
+#: nosings per swinging foot: the two it crosses (step-over-step), then the riser past the tread it
+#: reaches (a wall); the riser behind the tread it left needs no row (the ground under a swinging foot,
+#: ``stair_heights``, already keeps it above that tread going up; going down the first crossed nosing does)
+NOSING_SLOTS = 3
+CROSSED = 2
 FOOT_PARAMS = 2 + 3 * NOSING_SLOTS
 STAIRS_PARAMS = FLIGHT_PARAMS + 2 * FOOT_PARAMS
 CORNERS = 4  # heel-right, heel-left, toe-right, toe-left (``solver.naturalness.sole_corners``)
 TREAD_ROWS = 2 * CORNERS  # per frame: each foot's four corners against its tread's extent
-#: per frame: each foot's corners against each nosing slot, twice (inside the step; over the nosing)
-STEP_ROWS = 2 * CORNERS * NOSING_SLOTS * 2
+#: per frame: each foot's corners out of the step of each nosing slot, and over the crossed nosings
+STEP_ROWS = 2 * CORNERS * (NOSING_SLOTS + CROSSED)
 SMOOTH_M = 0.004  # m: the smooth maximum's rounding
 #: where between two frames the step and nosing rows also hold (fractions of the frame interval)
 SPLINE_POINTS = (0.25, 0.5, 0.75)
@@ -74,6 +76,9 @@ class StairsBounds:
     #: on stairs the joints turn faster: each joint's change between frames stays this far inside the
     #: naturalness check's speed (°/s)
     joint_speed_margin_deg_s: float = 30.0
+    #: on stairs a joint's bounds lie this far inside its model limits (the naturalness check: at most
+    #: one frame within 3°): the knee, hip and ankle work near their ranges' ends climbing
+    joint_limit_margin_deg: float = 4.0
 
 
 def _smax(a, b):
@@ -114,7 +119,8 @@ class StairsFunctions:
                 for c in cs:
                     behind = sgn_ * (s_i - along(c))  # > 0: on the lower tread's side of the riser plane
                     step.append(_smax(behind - gap, c[2] - h_i))  # not inside the step
-                    step.append(_smax(_smax(behind - gap, -behind - over), c[2] - h_i - m_i))  # over the nosing
+                    if i < CROSSED:  # over the nosing
+                        step.append(_smax(_smax(behind - gap, -behind - over), c[2] - h_i - m_i))
         self.tread = ca.Function("stairs_tread", [q, par], [ca.vertcat(*tread)])
         self.step = ca.Function("stairs_step", [q, par], [ca.vertcat(*step)])
         qa, va, qb, vb = (ca.SX.sym(name, n) for name in ("qa", "va", "qb", "vb"))
@@ -176,11 +182,12 @@ def stairs_parameters(flight: Flight | None, foot_contact: np.ndarray, bounds: S
                 out[o, t], out[o + 1, t] = a * g + m, (a + 1) * g - m
                 continue
             lo_, hi_ = min(a, c), max(a, c)
-            for i, kk in enumerate(range(lo_, hi_ + 2)[:NOSING_SLOTS]):  # the risers behind, crossed, ahead
+            crossed = list(range(lo_ + 1, hi_ + 1))[-CROSSED:]
+            for i, kk in enumerate([*crossed, hi_ + 1]):  # the risers crossed, then the one ahead
+                j = i if kk <= hi_ else CROSSED
                 s_i, h_i = flight.nosing(kk)
-                out[o + 2 + 3 * i, t], out[o + 3 + 3 * i, t] = float(s_i), float(h_i)
-                crossed = lo_ < kk <= hi_
-                out[o + 4 + 3 * i, t] = bounds.nosing_margin_m if crossed and t not in first_last else 0.0
+                out[o + 2 + 3 * j, t], out[o + 3 + 3 * j, t] = float(s_i), float(h_i)
+                out[o + 4 + 3 * j, t] = bounds.nosing_margin_m if kk <= hi_ and t not in first_last else 0.0
     return out
 
 
@@ -241,3 +248,19 @@ def add_stairs_terms(prob, STAIRS, bounds: StairsBounds = StairsBounds()) -> Non
     z = np.array([qi[0, 0], qi[1, 0], qi[0, Tn - 2], qi[1, Tn - 2]])[:, None]
     prob._rows(Term("stairs_travel", fns.travel, 1, z, [STAIRS[[2, 3, 5], 0]], derivatives=D["travel"]),
                [(0, 0)], 0.0, 0.0, "stairs_travel")
+
+
+def stairs_joint_bounds(prob, lbx: np.ndarray, ubx: np.ndarray, bounds: StairsBounds = StairsBounds()
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """The variable bounds of a ``rising`` problem with each limited joint coordinate
+    (``solver.naturalness.limited_coordinates``) ``joint_limit_margin_deg`` inside its model limits."""
+    from solver.naturalness import limited_coordinates
+
+    lbx, ubx = lbx.copy(), ubx.copy()
+    m = math.radians(bounds.joint_limit_margin_deg)
+    lo, hi = prob.character.lower, prob.character.upper
+    for i in np.flatnonzero(limited_coordinates(prob.character)):
+        idx = np.unique(prob._q_index[i])
+        lbx[idx] = np.maximum(lbx[idx], lo[i] + m)
+        ubx[idx] = np.minimum(ubx[idx], hi[i] - m)
+    return lbx, ubx
