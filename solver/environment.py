@@ -70,11 +70,12 @@ class Environment:
     def to_dict(self) -> dict:
         out = {"gravity": [float(g) for g in self.gravity], "friction": float(self.friction)}
         if self.step_height_m:
-            out["terrain"] = {"step_height_m": float(self.step_height_m)}
+            terrain: dict[str, Any] = {"step_height_m": float(self.step_height_m)}
             if self.step_going_m:
-                out["terrain"]["step_going_m"] = float(self.step_going_m)
+                terrain["step_going_m"] = float(self.step_going_m)
             if self.stairs_at is not None:
-                out["terrain"]["stairs_at"] = [float(v) for v in self.stairs_at]
+                terrain["stairs_at"] = [float(v) for v in self.stairs_at]
+            out["terrain"] = terrain
         return out
 
     @staticmethod

@@ -545,16 +545,16 @@ def _stairs(w: _Walk, flight: Flight, fps: float, lim: NaturalnessLimits) -> dic
             for kk in range(min(lo, hi), max(lo, hi) + 2):  # the risers behind, crossed and ahead
                 s_i, h_i = (float(x) for x in flight.nosing(kk))
                 past = sgn * (s_c - s_i)  # > 0: on the higher tread's side of the riser plane
-                for c in range(4):
+                for ci in range(4):
                     vals = []
                     for i in range(len(times) - 1):
-                        if (past[c, i] <= 0) != (past[c, i + 1] <= 0):
-                            f = past[c, i] / (past[c, i] - past[c, i + 1])
-                            vals.append(float(z[c, i] + f * (z[c, i + 1] - z[c, i]) - h_i))
+                        if (past[ci, i] <= 0) != (past[ci, i + 1] <= 0):
+                            f = past[ci, i] / (past[ci, i] - past[ci, i + 1])
+                            vals.append(float(z[ci, i] + f * (z[ci, i + 1] - z[ci, i]) - h_i))
                     if vals and min(vals) < clear:
                         clear = min(vals)
-                        worst = {"foot": side, "corner": CORNERS[c], "nosing": kk, "swing_frames": [a, b - 1]}
-            pk = {"foot": side, "frames": [int(a), int(b - 1)]}
+                        worst = {"foot": side, "corner": CORNERS[ci], "nosing": kk, "swing_frames": [a, b - 1]}
+            pk: dict[str, Any] = {"foot": side, "frames": [int(a), int(b - 1)]}
             for label, coord in (("knee_deg", knee[side]), ("hip_deg", hip[side])):
                 if coord in names:
                     pk[label] = float(np.degrees(qs[names.index(coord)].max()))

@@ -28,6 +28,7 @@ from __future__ import annotations
 import math
 import weakref
 from dataclasses import dataclass
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -95,7 +96,7 @@ class StairsFunctions:
         q = ca.SX.sym("q", n)
         pose = forward_kinematics(ch, q)
         model = ch.model
-        corners = []  # per foot: 4 corners (world x, y, z)
+        corners: list[Any] = []  # per foot: 4 corners (world x, y, z)
         for side in FEET:
             half_w = float(ch.foot(side).half[1])
             for c in heel_toe(ch, side):
