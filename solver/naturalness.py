@@ -534,10 +534,10 @@ def _stairs(w: _Walk, flight: Flight, fps: float, lim: NaturalnessLimits) -> dic
             times = np.where(times < 0, times + N * w.dt, times)  # frame −1 is frame N−1
             c_, u = np.divmod(times, N * w.dt)  # a swing past the cycle's end: the next cycle's frames
             qs = sample(q, fps, u, cyclic=True, interpolation="cubic-spline")
-            for i in np.flatnonzero(c_ > 0):
-                qs[:2, i] = R @ qs[:2, i] + shift
-                qs[3, i] += turn
-                qs[2, i] += rise
+            for j_ in np.flatnonzero(c_ > 0):
+                qs[:2, j_] = R @ qs[:2, j_] + shift
+                qs[3, j_] += turn
+                qs[2, j_] += rise
             corners = sole_corners(ch, qs)[k]  # (4, 3, S)
             s_c = flight.along(np.moveaxis(corners[:, :2], 1, 0))  # (4, S)
             z = corners[:, 2]

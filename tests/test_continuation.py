@@ -201,44 +201,6 @@ def test_impossible_slope_ends_in_an_impasse_and_keeps_only_realistic_motions(tu
 # --- stairs as stairs: treads of a rise and a going, risers, nosings ------------------------------
 
 
-def test_stair_flight_puts_each_step_on_its_own_tread_and_the_nosings_on_the_higher_edge():
-    from solver.environment import DEFAULT_GOING_M, Environment, stair_flight, stair_indices, walker_going
-
-    T, P = 21, 19
-    B = np.zeros((2, T), dtype=bool)
-    B[0, :P] = [t <= 10 or t >= 18 for t in range(P)]  # right: stance from frame 18 over the cycle end
-    B[1, :P] = [8 <= t <= 18 for t in range(P)]  # left: stance 8..18
-    B[:, P:] = B[:, :2]
-    left, reached, n = stair_indices(B)
-    assert n == 2 and left[1, 8] == reached[1, 8] == 0 and left[0, 18] == 1 and left[0, 0] == -1
-    assert left[0, 12] == -1 and reached[0, 12] == 1  # a swing passes over one tread onto the next
-    np.testing.assert_array_equal(left[:, P:], left[:, :2] + 2)
-    # a walk along +x turned by 30°, its stance feet 0.3 m apart per step
-    q = np.zeros((16, T))
-    heading = math.radians(30.0)
-    u = np.array([math.cos(heading), math.sin(heading)])
-    q[:2] = np.outer(u, np.arange(T) * 0.6 / P)
-    assert walker_going(q, B) == pytest.approx(0.3)
-    feet = np.zeros((2, 2, T))
-    for k in range(2):
-        feet[k] = np.outer(u, 0.3 * left[k] + 0.12)  # each stance foot 0.12 m past its tread's start
-    f = stair_flight(feet, B, 0.17, 0.28, q=q)
-    assert f.heading == pytest.approx(heading) and f.going == 0.28 and f.n == 2
-    s = f.along(np.moveaxis(feet, 1, 0))
-    mid = (left + 0.5) * 0.28
-    assert np.mean((s - mid)[:, :P][B[:, :P]]) == pytest.approx(0.0, abs=1e-12)  # centred on average
-    assert f.nosing(1) == (pytest.approx(0.28), pytest.approx(0.17))  # going up: the front edge of tread 1
-    down = stair_flight(None, B, -0.17, 0.28, at=f.at)
-    assert down.nosing(1) == (pytest.approx(0.28), pytest.approx(0.0))  # going down: the edge of tread 0
-    assert down.ground(np.array([0.27, 0.29])).tolist() == pytest.approx([0.0, -0.17])
-    assert DEFAULT_GOING_M == 0.28 and Environment.from_dict(Environment(step_height_m=0.17, step_going_m=0.28,
-                                                                         stairs_at=f.at).to_dict()).stairs_at == f.at
-    with pytest.raises(ValueError, match="going"):
-        stair_flight(feet, B, 0.17, 0.0, q=q)
-    with pytest.raises(ValueError, match="step_going_m"):
-        Environment(step_going_m=-0.1)
-
-
 def test_stairs_bad_targets_are_refused_clearly():
     with pytest.raises(ValueError, match=r"step_going_m must be within \[0.2, 1\] m, got 0"):
         Target(step_height_m=0.17, step_going_m=0.0)
