@@ -5,18 +5,20 @@ checks, the simulation and the plots read), passed per frame as the ``stairs`` p
 
 ``[ox, oy, cx, cy, σ, d]`` the flight (origin of s, its direction, the sign of the rise, the cycle's
 travel along it), then per foot
-(right, left) ``[lo, hi, s₁, h₁, m₁, …, s₄, h₄, m₄]``: in contact, the tread's extent along s less the
-margins (``StairsBounds``); swinging, the nosings it passes (s, height, the margin over it; an
-unused slot lies far below). Rows, for the sole's corners (heel and toe ends of the sole through the
-foot's heel and toe contact points, as wide as its foot box):
+(right, left) ``[lo, hi, s₁, h₁, m₁, w₁, …]``: in contact, the tread's extent along s less the
+margins (``StairsBounds``); swinging, the nosings it passes (s, height, the margin over it, the
+lead-in of its approach slope; an unused slot lies far below). Rows, for the sole's corners (heel
+and toe ends of the sole through the foot's heel and toe contact points, as wide as its foot box):
 
 * **tread** (a foot in contact): heel corners' s ≥ lo, toe corners' s ≤ hi;
-* **step** (a swinging foot, at the frames and at the spline's midpoints between them): no corner
-  inside a step — beyond the riser plane of a nosing (less ``riser_gap_m``, on the side of the
-  higher tread) a corner is above the nosing's height;
+* **step** (a swinging foot, at the frames and on the spline between them): no corner inside a
+  step — beyond the riser plane of a nosing it crosses (less ``riser_gap_m``, on the side of the
+  higher tread) a corner is above the nosing's height — and none beyond the riser past the tread
+  it lands on (less ``riser_gap_m``);
 * **nosing** (same frames): a corner over the nosing (from ``riser_gap_m`` before the riser plane
-  to ``over_m`` past it onto the higher tread) is ``nosing_margin_m`` above it (not at the swing's
-  first and last frames: lift-off and landing);
+  to ``over_m`` past it onto the higher tread) is ``nosing_margin_m`` above it, and before it
+  above a slope falling from there by ``approach_slope`` (not at the swing's first and last
+  frames: lift-off and landing);
 * **travel** (once): the root's travel over the cycle along the flight = (steps per cycle) × going.
 
 "Either behind the riser or above the nosing" is a disjunction: a smooth maximum (a hyperbola
@@ -40,14 +42,17 @@ from solver.motion import FEET
 from solver.naturalness import heel_toe
 from solver.spacetime.derivatives import jacobian, lagrangian_hessian
 
-#: per frame: the flight (6), then per foot the tread extent (2) and the nosing slots (3 each)
+#: per frame: the flight (6), then per foot the tread extent (2) and the nosing slots (4 each)
 FLIGHT_PARAMS = 6
 #: nosings per swinging foot: the two it crosses (step-over-step), then the riser past the tread it
-#: reaches (a wall); the riser behind the tread it left needs no row (the ground under a swinging foot,
-#: ``stair_heights``, already keeps it above that tread going up; going down the first crossed nosing does)
+#: reaches (the foot does not reach over it: a swing foot overshooting its tread and pulled back
+#: would hover over the next step's nosing); the riser behind the tread it left needs no row (the
+#: ground under a swinging foot, ``stair_heights``, already keeps it above that tread going up;
+#: going down the first crossed nosing does)
 NOSING_SLOTS = 3
 CROSSED = 2
-FOOT_PARAMS = 2 + 3 * NOSING_SLOTS
+SLOT_PARAMS = 4  # a nosing slot: s, height, the margin over it, the lead-in (m) of the approach slope
+FOOT_PARAMS = 2 + SLOT_PARAMS * NOSING_SLOTS
 STAIRS_PARAMS = FLIGHT_PARAMS + 2 * FOOT_PARAMS
 CORNERS = 4  # heel-right, heel-left, toe-right, toe-left (``solver.naturalness.sole_corners``)
 TREAD_ROWS = 2 * CORNERS  # per frame: each foot's four corners against its tread's extent
@@ -71,6 +76,10 @@ class StairsBounds:
     #: ... and "over the nosing" reaches this far past it onto the higher tread (a foot does not skim
     #: onto a tread at its height: between the frames the spline would cut the nosing)
     over_m: float = 0.12
+    #: ... and a corner before it (on the lower side, beyond ``riser_gap_m``) is above a slope falling
+    #: from the margin by this (m per m): between the samples the spline cannot dip under the nosing
+    #: from a corner far below it (not at the swing's first and last frames)
+    approach_slope: float = 1.5
     #: a stance sole's corners stay this far inside its tread's edges (check: 2 cm over the nosing,
     #: none into the riser; ≥ ``riser_gap_m``, so that a foot lifting off is clear of the riser ahead)
     tread_margin_m: float = 0.03
@@ -116,12 +125,16 @@ class StairsFunctions:
             cs = corners[CORNERS * k : CORNERS * (k + 1)]
             tread += [along(cs[0]) - fp[0], along(cs[1]) - fp[0], fp[1] - along(cs[2]), fp[1] - along(cs[3])]
             for i in range(NOSING_SLOTS):
-                s_i, h_i, m_i = fp[2 + 3 * i], fp[3 + 3 * i], fp[4 + 3 * i]
+                s_i, h_i, m_i, w_i = (fp[2 + SLOT_PARAMS * i + r] for r in range(SLOT_PARAMS))
                 for c in cs:
                     behind = sgn_ * (s_i - along(c))  # > 0: on the lower tread's side of the riser plane
+                    if i == CROSSED:  # the riser past the tread it lands on: the foot does not reach over it
+                        step.append(s_i - along(c) - gap)
+                        continue
                     step.append(_smax(behind - gap, c[2] - h_i))  # not inside the step
-                    if i < CROSSED:  # over the nosing
-                        step.append(_smax(_smax(behind - gap, -behind - over), c[2] - h_i - m_i))
+                    if i < CROSSED:  # over the nosing, approached from above a slope on the riser's side
+                        lead = self.bounds.approach_slope * _smax(behind - gap, 0.0)
+                        step.append(_smax(_smax(behind - gap - w_i, -behind - over), c[2] - h_i - m_i + lead))
         self.tread = ca.Function("stairs_tread", [q, par], [ca.vertcat(*tread)])
         self.step = ca.Function("stairs_step", [q, par], [ca.vertcat(*step)])
         qa, va, qb, vb = (ca.SX.sym(name, n) for name in ("qa", "va", "qb", "vb"))
@@ -165,7 +178,8 @@ def stairs_parameters(flight: Flight | None, foot_contact: np.ndarray, bounds: S
     for k in range(2):
         o = FLIGHT_PARAMS + FOOT_PARAMS * k
         out[o], out[o + 1] = -1e3, 1e3
-        out[o + 3 : o + FOOT_PARAMS : 3] = UNUSED
+        out[o + 3 : o + FOOT_PARAMS : SLOT_PARAMS] = UNUSED
+        out[o + 2 + SLOT_PARAMS * CROSSED] = -UNUSED  # no riser ahead: far away
     if flight is None:
         return out
     g, sgn = flight.going, float(np.sign(flight.rise))
@@ -187,8 +201,10 @@ def stairs_parameters(flight: Flight | None, foot_contact: np.ndarray, bounds: S
             for i, kk in enumerate([*crossed, hi_ + 1]):  # the risers crossed, then the one ahead
                 j = i if kk <= hi_ else CROSSED
                 s_i, h_i = flight.nosing(kk)
-                out[o + 2 + 3 * j, t], out[o + 3 + 3 * j, t] = float(s_i), float(h_i)
-                out[o + 4 + 3 * j, t] = bounds.nosing_margin_m if kk <= hi_ and t not in first_last else 0.0
+                o_ = o + 2 + SLOT_PARAMS * j
+                out[o_, t], out[o_ + 1, t] = float(s_i), float(h_i)
+                if kk <= hi_ and t not in first_last:  # the margin, and the approach slope up to 1 m before
+                    out[o_ + 2, t], out[o_ + 3, t] = bounds.nosing_margin_m, 1.0
     return out
 
 
