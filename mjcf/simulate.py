@@ -38,7 +38,7 @@ import numpy as np
 import quadprog
 
 from mjcf.builder import ContactOptions, Tread, build_spec, sole_corners
-from solver.environment import body_weight, environment_of, ground_of
+from solver.environment import body_weight, environment_of, flight_of, ground_of
 from solver.motion import FEET, Motion
 from solver.trajectory import ROOT_XY, ROOT_YAW, cycle_turn, dynamics_samples, spline_velocities
 
@@ -216,64 +216,23 @@ def _mean_stance_roll(motion: Motion, model: mujoco.MjModel, qpos_index: np.ndar
     return out[0], out[1]
 
 
-def _treads(motion: Motion, ref: Reference, cycles: int, model: mujoco.MjModel, qadr: np.ndarray,
-            margin: float = 0.02) -> tuple[Tread, ...]:
-    """Stairs: one block per stance of the walk, its top at the stance's ground height, spanning
-    the width of the walk. Each riser stands where the reference's swing foot clears it: going
-    up, ``margin`` behind the heel of the stance on the higher tread (the swing foot rises onto it
-    late); going down, ``margin`` ahead of the toe of the stance on the higher tread."""
-    env = environment_of(motion)
-    if not env.step_height_m:
+def _treads(motion: Motion, cycles: int) -> tuple[Tread, ...]:
+    """Stairs: one block per tread of the motion's flight (``solver.environment.flight_of``: the
+    geometry the optimizer and the checks used), its top at the tread's height, as deep as the
+    going along the flight, spanning the width of the walk, from the cycle before the first to the
+    cycle after the last simulated one. Its front face is the riser of the next tread."""
+    flight = flight_of(motion)
+    if flight is None:
         return ()
-    ch = motion.character
-    data = mujoco.MjData(model)
-    B = ref.motion.foot_contact()
-    P = ref.P
-    # one heading for the flight of stairs: the cycle's displacement
-    yaw = math.atan2(float(ref.shift_xy[1]), float(ref.shift_xy[0]))
-    fwd = np.array([math.cos(yaw), math.sin(yaw), 0.0])
-    stances = []  # (time, height, centre, back, front): extents along the heading
-    for k in range(-1, cycles + 2):
-        for f, side in enumerate(FEET):
-            seg, corners = sole_corners(ch, side, 0.0)
-            bid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, seg)
-            for t in range(P):
-                if B[f, t] and not B[f, (t - 1) % P]:
-                    n = 0
-                    while n < P and B[f, (t + n) % P]:
-                        n += 1
-                    tm = (k * P + t + n / 2.0) * ref.dt  # the stance's middle
-                    q, _, _ = ref.state(max(tm, 0.0) if k >= 0 else tm + ref.period)
-                    if k < 0:
-                        turn, dxy, rise = ref.transform(1)
-                        q[list(ROOT_XY)] = _rot2(-turn) @ (q[list(ROOT_XY)] - dxy)
-                        q[ROOT_YAW] -= turn
-                        q[ROOT_Z] -= rise
-                    data.qpos[qadr] = q
-                    mujoco.mj_kinematics(model, data)
-                    pts = np.array([data.xpos[bid] + data.xmat[bid].reshape(3, 3) @ c for c in corners])
-                    along = pts @ fwd
-                    h = float(ref.ground[f, (t + n // 2) % P]) + k * ref.rise
-                    stances.append((tm, h, pts.mean(axis=0), float(along.min()), float(along.max())))
-    stances.sort(key=lambda s: s[0])
-    # riser j stands between stance j and stance j + 1
-    risers = []
-    for (_, h0, _, _, front0), (_, h1, _, back1, _) in zip(stances, stances[1:], strict=False):
-        if h1 > h0 + 1e-6:
-            risers.append(back1 - margin)
-        elif h1 < h0 - 1e-6:
-            risers.append(front0 + margin)
-        else:
-            risers.append(0.5 * (front0 + back1))
+    first = int(min(flight.left.min(), flight.reached.min())) - flight.n
+    last = int(max(flight.left.max(), flight.reached.max())) + flight.n * (cycles + 1)
+    depth = 1.0
+    u = flight.direction
     out = []
-    for j in range(1, len(stances) - 1):
-        _, h, c, _, _ = stances[j]
-        lo, hi = risers[j - 1], risers[j]
-        if hi <= lo:
-            raise SimulationError(f"stairs: no room for the tread of stance {j} between its neighbours' feet")
-        depth = 1.0
-        mid = c + fwd * (0.5 * (lo + hi) - float(c @ fwd))
-        out.append(Tread((float(mid[0]), float(mid[1]), h - depth), ((hi - lo) / 2.0, 0.6, depth), yaw))
+    for tr in flight.treads(first, last):
+        mid = 0.5 * (np.asarray(tr["back_xy"]) + np.asarray(tr["front_xy"]))
+        out.append(Tread((float(mid[0]), float(mid[1]), tr["height"] - depth), (flight.going / 2.0, 0.6, depth),
+                         float(math.atan2(u[1], u[0]))))
     return tuple(out)
 
 
@@ -370,7 +329,7 @@ def performable_model(motion: Motion, cycles: int = 10, ref: Reference | None = 
     ids = [mujoco.mj_name2id(base, mujoco.mjtObj.mjOBJ_JOINT, nm) for nm in ch.coordinate_names]
     qadr = np.array([base.jnt_qposadr[i] for i in ids])
     roll = _mean_stance_roll(motion, base, qadr)
-    treads = _treads(motion, ref, cycles, base, qadr)
+    treads = _treads(motion, cycles)
     opts = ContactOptions(sole_roll=roll, friction=env.friction, treads=treads, floor=not treads,
                           sole_half_width=sole_half_width, inversion=inversion)
     spec = build_spec(ch, env.gravity, opts)

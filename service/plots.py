@@ -432,7 +432,7 @@ def filmstrip_figure(motion, *, title: str | None = None, max_frames: int = 16):
     reaction force as an arrow at its centre of pressure (1 BW = the standing leg length). The
     views are turned so that gravity points down: a slope shows as an inclined ground. Top: the
     cycle in the ground plane — the pelvis path and heading, and the soles of the stance feet."""
-    from solver.environment import environment_of, ground_of
+    from solver.environment import environment_of, flight_of, ground_of
     from solver.kinematics import standing_leg_length
     from solver.motion import FEET, Motion
     from solver.naturalness import has_two_point_feet, path_heading, sole_corners
@@ -465,6 +465,7 @@ def filmstrip_figure(motion, *, title: str | None = None, max_frames: int = 16):
     W = body_weight(motion)
     leg = standing_leg_length(ch)
     G = ground_of(motion)
+    flight = flight_of(motion)  # stairs: the treads and risers the optimizer and the checks used
     arrows = None
     if motion.wrenches is not None:
         from solver.export import ground_reactions
@@ -485,6 +486,17 @@ def filmstrip_figure(motion, *, title: str | None = None, max_frames: int = 16):
         """The ground under frame t's feet (world z = its height), through the point below the
         pelvis: inclined along the walk in the side view (a slope), level across it (the rear view)."""
         D = Ds[t]
+        if flight is not None and u == 0:  # stairs: the treads and risers along the flight, around the pelvis
+            s0 = float(flight.along(q[:2, t]))
+            lo, hi = s0 - 0.6 * slot, s0 + 0.6 * slot
+            pts = []
+            for k in range(math.floor(lo / flight.going), math.floor(hi / flight.going) + 1):
+                a, b = max(k * flight.going, lo), min((k + 1) * flight.going, hi)
+                pts += [(a, k * flight.rise), (b, k * flight.rise)]
+            o, dirn = np.asarray(flight.origin), flight.direction
+            disp = np.array([D @ np.r_[o + s_ * dirn, z_] for s_, z_ in pts])
+            ax.plot(disp[:, 0] + h_off, disp[:, 2] + v_off, color="0.45", lw=0.8)
+            return
         tang = D @ np.array([math.cos(path[t]), math.sin(path[t]), 0.0])  # the ground along the walk
         for h in np.unique(np.round(G[:, t], 6)):
             o = D @ np.array([q[0, t], q[1, t], h])
@@ -524,6 +536,14 @@ def filmstrip_figure(motion, *, title: str | None = None, max_frames: int = 16):
             ax.text(i * slot, -0.12 * leg, f"{t}", ha="center", va="top", fontsize=7, color="0.3")
     # top: pelvis path and heading, soles (stance filled), in the ground plane (world x, y)
     top.plot(q[0, :N + 1], q[1, :N + 1], "-", color="0.15", lw=1.2)
+    if flight is not None:  # stairs: each riser's line across the flight
+        s_all = flight.along(q[:2, :N + 1])
+        o, dirn = np.asarray(flight.origin), flight.direction
+        across = np.array([-dirn[1], dirn[0]]) * 0.3
+        k0, k1 = (math.floor((v + 0.3 * sg) / flight.going) for v, sg in ((s_all.min(), -1), (s_all.max(), 1)))
+        for k in range(k0, k1 + 2):
+            c = o + k * flight.going * dirn
+            top.plot([c[0] - across[0], c[0] + across[0]], [c[1] - across[1], c[1] + across[1]], color="0.6", lw=0.7)
     sw = world_soles
     for t in range(N):
         top.annotate("", xy=(q[0, t] + 0.12 * leg * math.cos(q[3, t]), q[1, t] + 0.12 * leg * math.sin(q[3, t])),

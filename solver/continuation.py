@@ -18,7 +18,8 @@ import numpy as np
 
 from solver import native
 from solver.axes import Target, environment_at, guide_at, nlp_at
-from solver.environment import Environment, environment_of
+from solver.axes.terrain import stairs_base, stairs_target
+from solver.environment import Environment, environment_of, flight_for
 from solver.jsonable import jsonable
 from solver.motion import Motion
 from solver.naturalness import has_two_point_feet, motion_figures
@@ -231,6 +232,8 @@ class _Walk:
         self.weights = weights
         self.on_progress, self.on_step, self.should_cancel = on_progress, on_step, should_cancel
         self.env0 = environment_of(tutor)
+        if target.step_height_m:  # the going starts from the walker's own step
+            self.env0 = stairs_base(self.env0, tutor.q, tutor.foot_contact())
         self.t0 = time.perf_counter()
         self.records: list[ProgressRecord] = []
         self.steps: list[StepResult] = []
@@ -288,6 +291,9 @@ class _Walk:
         env, values = environment_at(self.env0, self.target, lam)
         if guide is None:
             guide = self.guide(lam)
+        if env.step_height_m:  # the flight stands under the start iterate's stance feet
+            flight = flight_for(self.tutor.character, init[0], self.tutor.foot_contact(), env.with_(stairs_at=None))
+            env = env.with_(stairs_at=flight.at if flight is not None else None)
         warm = warm_from is not None and warm_from.lam_x is not None
         opts = None
         if restart_mu is not None:  # mu_init only acts with the monotone barrier strategy
@@ -425,6 +431,7 @@ def extrapolate(
 
     native.ensure()
     _is_tutor(tutor)
+    target = stairs_target(target)  # stairs: the default going when the target gives none
     if not 0.0 < lam_end <= 1.0:
         raise ValueError("lam_end must be in (0, 1]")
     rising = needs_rising(target)

@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from solver.checks import Check, Context, SectionResult, register_check
-from solver.environment import STANDARD_GRAVITY_VECTOR, body_weight, environment_of, ground_of
+from solver.environment import STANDARD_GRAVITY_VECTOR, Flight, body_weight, environment_of, flight_of, ground_of
 from solver.jsonable import jsonable
 from solver.kinematics import centre_of_mass, contact_points, points_world, segment_frames, standing_leg_length
 from solver.motion import FEET, Motion, foot_schedule_of
@@ -77,6 +77,20 @@ class NaturalnessLimits:
     #: motion's valley (``hump``) is then a failure, not a warning
     plates_hump: float = 0.1
     fit_marker_rms_mm: float = 20.0  # the capture's fit: marker RMS at most this (a broken fit is no reference)
+    #: stairs: a swinging sole corner clears every nosing it passes by this (m, along the spline)
+    nosing_clearance_m: float = 0.02
+    #: stairs: a stance sole's corner stands at most this far over its tread's nosing ...
+    tread_overhang_m: float = 0.02
+    #: ... and at most this far into the riser of the tread above (a foot inside the step)
+    tread_riser_m: float = 0.005
+    #: stairs: spline samples per frame interval the nosing clearance is measured on
+    stairs_swing_samples: int = 20
+
+
+#: stairs: the published peak swing flexion (deg) of the knee and the hip, going up and down
+#: (``SOURCES["stairs_swing"]``): the stairs_swing warnings compare a walk's peaks with the lower ends
+STAIRS_SWING = {"up": {"knee": (90.0, 100.0), "hip": (55.0, 65.0)},
+                "down": {"knee": (85.0, 100.0), "hip": (25.0, 40.0)}}
 
 
 #: where each limit comes from. "This project's" marks a limit the literature does not give as a
@@ -115,6 +129,17 @@ SOURCES = {
                     "stance-foot pivot and foot placement); 35° is this project's warning threshold",
     "friction_margin": "a slope needs at least tan(slope) of friction on average, and a walk that needs all of μ "
                        "slips at the slightest disturbance; the 10 % margin is this project's",
+    "nosing_clearance": "Hamel, Okita, Higginson & Cavanagh 2005, Gait Posture 21:135 (foot clearance over stair "
+                        "edges in descent); McFadyen & Winter 1988, J Biomech 21:733 (in ascent the swing leg "
+                        "lifts the foot over the next step's edge); a toe or heel catching a nosing is the usual "
+                        "stair trip; 2 cm is this project's margin",
+    "stance_on_tread": "building codes' going (0.25-0.30 m: a foot fits on a tread); Riener, Rabuffetti & Frigo "
+                       "2002, Gait Posture 15:32 (the forefoot lands first on the tread, up and down); a sole "
+                       "corner 2 cm over the nosing or into the riser above is this project's limit",
+    "stairs_swing": "McFadyen & Winter 1988, J Biomech 21:733 and Riener, Rabuffetti & Frigo 2002, Gait Posture "
+                    "15:32 (step-over-step stairs of ~0.17 m rise, ~0.28 m going): peak swing knee flexion "
+                    "~90-100° going up, ~85-100° going down; peak hip flexion ~55-65° going up, ~25-40° going down "
+                    "(the ranges over the inclinations and subjects, read from their figures)",
     "push": "a walking leg pushes the body: its ground reaction points from the foot toward the centre of mass "
             "(the shared trials' force plates: ≥ -0.01 f_z × leg at every loaded frame)",
 }
@@ -468,16 +493,95 @@ def _loads(w: _Walk, lim: NaturalnessLimits, mu: float) -> dict[str, Any]:
     }
 
 
+def _stairs(w: _Walk, flight: Flight, fps: float, lim: NaturalnessLimits) -> dict[str, Any]:
+    """Stairs figures: the least clearance of a swinging sole corner over the nosings it passes
+    (along the spline between the frames: the height above a nosing where the corner crosses its
+    riser's plane; negative: the corner went through the riser), how far a stance sole stands over
+    its nosing or into the riser above, and the peak knee and hip flexion of each swing."""
+    from solver.trajectory import sample
+
+    ch, q, N = w.character, w.q, w.N
+    sgn = 1.0 if flight.rise > 0 else -1.0
+    g = flight.going
+    # stance: each corner against its tread's edges (nosing side: the lower tread's; riser: the higher's)
+    over, into, worst_tread = -math.inf, -math.inf, None
+    for k, side in enumerate(FEET):
+        for t in range(N):
+            if not w.B[k, t]:
+                continue
+            j = int(flight.left[k, t])
+            s_c = flight.along(w.soles[k, :, :2, t].T)  # (4,)
+            back, front = j * g - s_c.min(), s_c.max() - (j + 1) * g  # > 0: beyond the edge
+            o_, i_ = (back, front) if sgn > 0 else (front, back)
+            if o_ > over or i_ > into:
+                worst_tread = {"foot": side, "frame": t, "tread": j, "over_nosing_m": float(o_),
+                               "into_riser_m": float(i_)}
+            over, into = max(over, o_), max(into, i_)
+    # swing: corners along the spline, against the nosings between the tread left and the tread reached
+    n_sub = max(int(lim.stairs_swing_samples), 2)
+    turn = float(q[3, N] - q[3, 0])
+    R = np.array([[math.cos(turn), -math.sin(turn)], [math.sin(turn), math.cos(turn)]])
+    shift = q[:2, N] - R @ q[:2, 0]
+    rise = float(q[2, N] - q[2, 0])
+    clear, worst = math.inf, None
+    knee = {side: f"knee_angle_{side[0]}" for side in FEET}
+    hip = {side: f"hip_flexion_{side[0]}" for side in FEET}
+    names = list(ch.coordinate_names)
+    peaks: list[dict[str, Any]] = []
+    for k, side in enumerate(FEET):
+        for a, b in _runs(~w.B[k, :N]):
+            times = np.linspace(a - 1, b, (b + 1 - a) * n_sub + 1) * w.dt  # lift-off to touch-down
+            times = np.where(times < 0, times + N * w.dt, times)  # frame −1 is frame N−1
+            c_, u = np.divmod(times, N * w.dt)  # a swing past the cycle's end: the next cycle's frames
+            qs = sample(q, fps, u, cyclic=True, interpolation="cubic-spline")
+            for j_ in np.flatnonzero(c_ > 0):
+                qs[:2, j_] = R @ qs[:2, j_] + shift
+                qs[3, j_] += turn
+                qs[2, j_] += rise
+            corners = sole_corners(ch, qs)[k]  # (4, 3, S)
+            s_c = flight.along(np.moveaxis(corners[:, :2], 1, 0))  # (4, S)
+            z = corners[:, 2]
+            lo, hi = int(flight.left[k, a % N]), int(flight.reached[k, a % N])
+            for kk in range(min(lo, hi), max(lo, hi) + 2):  # the risers behind, crossed and ahead
+                s_i, h_i = (float(x) for x in flight.nosing(kk))
+                past = sgn * (s_c - s_i)  # > 0: on the higher tread's side of the riser plane
+                for ci in range(4):
+                    vals = []
+                    for i in range(len(times) - 1):
+                        if (past[ci, i] <= 0) != (past[ci, i + 1] <= 0):
+                            f = past[ci, i] / (past[ci, i] - past[ci, i + 1])
+                            vals.append(float(z[ci, i] + f * (z[ci, i + 1] - z[ci, i]) - h_i))
+                    if vals and min(vals) < clear:
+                        clear = min(vals)
+                        worst = {"foot": side, "corner": CORNERS[ci], "nosing": kk, "swing_frames": [a, b - 1]}
+            pk: dict[str, Any] = {"foot": side, "frames": [int(a), int(b - 1)]}
+            for label, coord in (("knee_deg", knee[side]), ("hip_deg", hip[side])):
+                if coord in names:
+                    pk[label] = float(np.degrees(qs[names.index(coord)].max()))
+            peaks.append(pk)
+    knees = [p_["knee_deg"] for p_ in peaks if "knee_deg" in p_]
+    hips = [p_["hip_deg"] for p_ in peaks if "hip_deg" in p_]
+    return {
+        "rise_m": float(flight.rise), "going_m": float(g), "direction": "up" if sgn > 0 else "down",
+        "nosing_clearance": {"min_m": None if worst is None else float(clear), "worst": worst},
+        "tread": {"max_over_nosing_m": None if worst_tread is None else float(over),
+                  "max_into_riser_m": None if worst_tread is None else float(into), "worst": worst_tread},
+        "swing_peaks": {"swings": peaks, "knee_min_deg": min(knees) if knees else None,
+                        "hip_min_deg": min(hips) if hips else None},
+    }
+
+
 def gait_figures(character, q: np.ndarray, fps: float, contacts: np.ndarray, *, forces: np.ndarray | None = None,
                  gravity=STANDARD_GRAVITY_VECTOR, mu: float = 1.0, weight: float | None = None,
                  ground: np.ndarray | None = None, cyclic: bool = True,
-                 lim: NaturalnessLimits = NaturalnessLimits()) -> dict[str, Any]:
+                 lim: NaturalnessLimits = NaturalnessLimits(), flight: Flight | None = None) -> dict[str, Any]:
     """The figures of a walk's naturalness checks.
 
     ``q`` (n, T) frames of one gait cycle (with the two overlap frames when ``cyclic``),
     ``contacts`` (P, T), ``forces`` (2, 3, T) each foot's ground reaction force in the world
     frame (NaN where unknown: incomplete plates) or None (kinematic figures only), ``ground``
-    (2, T) the ground height under each foot (stairs). Figures are taken over the cycle's
+    (2, T) the ground height under each foot (stairs), ``flight`` the stairs' geometry
+    (``solver.environment.flight_of``: nosings and treads). Figures are taken over the cycle's
     distinct frames (0 .. T−3 for a cycle)."""
     q = np.asarray(q, dtype=float)
     T = q.shape[1]
@@ -501,6 +605,8 @@ def gait_figures(character, q: np.ndarray, fps: float, contacts: np.ndarray, *, 
     if under_load is not None:
         out["foot_pitch_under_load"] = under_load
         out.update(_loads(w, lim, mu))
+    if flight is not None and cyclic:
+        out["stairs_geometry"] = _stairs(w, flight, fps, lim)
     return out
 
 
@@ -598,6 +704,28 @@ def checks_of(fig: Mapping[str, Any], *, reference: Mapping[str, Any] | None = N
             "push", _get(fig, "push", "min"), lim.push, "f_z·leg",
             "least horizontal force of a loaded foot along the line from the foot to the centre of mass",
             source=SOURCES["push"], warning=True, at_least=True, capture=_get(cap, "push", "min")))
+    st = fig.get("stairs_geometry")
+    if st:
+        checks.append(Check.measure(
+            "nosing_clearance", _get(st, "nosing_clearance", "min_m"), lim.nosing_clearance_m, "m",
+            "least height of a swinging sole corner above a nosing it passes, where it crosses the riser's plane "
+            "(along the spline between the frames; negative: through the riser)", source=SOURCES["nosing_clearance"],
+            at_least=True))
+        checks.append(Check.measure(
+            "stance_over_nosing", _get(st, "tread", "max_over_nosing_m"), lim.tread_overhang_m, "m",
+            "furthest a stance sole's corner stands beyond its tread's nosing (over the step below)",
+            source=SOURCES["stance_on_tread"]))
+        checks.append(Check.measure(
+            "stance_into_riser", _get(st, "tread", "max_into_riser_m"), lim.tread_riser_m, "m",
+            "furthest a stance sole's corner reaches into the riser of the step above its tread",
+            source=SOURCES["stance_on_tread"]))
+        ref = STAIRS_SWING[st["direction"]]
+        for joint in ("knee", "hip"):
+            lo_, hi_ = ref[joint]
+            checks.append(Check.measure(
+                f"stairs_swing_{joint}", _get(st, "swing_peaks", f"{joint}_min_deg"), lo_, "deg",
+                f"least, over the swings, of the peak swing {joint} flexion (people going {st['direction']}: "
+                f"{lo_:g}-{hi_:g}°)", source=SOURCES["stairs_swing"], warning=True, at_least=True))
     slope = fig["slope_along_deg"]
     lean, tut_lean = fig["trunk_lean_deg"]["mean"], _get(tut, "trunk_lean_deg", "mean")
     if tut_lean is not None and abs(slope) > lim.level_deg:
@@ -631,7 +759,7 @@ def motion_figures(motion: Motion, lim: NaturalnessLimits = NaturalnessLimits())
     forces = None if motion.wrenches is None else np.asarray(motion.wrenches)[:, 3:6]
     return gait_figures(motion.character, motion.q, motion.fps, motion.contacts, forces=forces, gravity=env.gravity,
                         mu=env.friction, weight=body_weight(motion), ground=ground_of(motion),
-                        cyclic=motion.cyclic, lim=lim)
+                        cyclic=motion.cyclic, lim=lim, flight=flight_of(motion))
 
 
 def naturalness_report(motion: Motion, reference: Mapping[str, Any] | None = None,

@@ -16,7 +16,8 @@ from solver.environment import STANDARD_GRAVITY, Environment
 
 
 def test_the_registry_has_every_axis_with_unit_bounds_default_and_doc():
-    assert registry.names() == ("slope_deg", "curve_deg", "friction", "gravity", "speed_scale", "step_height_m")
+    assert registry.names() == ("slope_deg", "curve_deg", "friction", "gravity", "speed_scale", "step_height_m",
+                                "step_going_m")
     for ax in registry.axes():
         assert ax.doc and ax.cli.startswith("--") and ax.lo < ax.hi
         if ax.default is not None:
@@ -48,7 +49,7 @@ def test_target_is_a_value_over_the_registered_axes():
     assert [a.name for a, _ in t.active()] == ["speed_scale", "slope_deg"]  # application order
     assert Target(slope_deg=0.0, speed_scale=1.0).is_identity() and not Target(friction=1.0).is_identity()
     assert t.to_dict() == {"slope_deg": 5.0, "curve_deg": 0.0, "friction": None, "gravity": None, "speed_scale": 1.2,
-                           "step_height_m": 0.0}
+                           "step_height_m": 0.0, "step_going_m": None}
     with pytest.raises(AttributeError):
         t.slope_deg = 3.0  # type: ignore[misc]
 
@@ -57,7 +58,8 @@ def test_environment_values_report_every_axis_and_gravity_is_standard():
     env, values = environment_at(Environment(), Target(speed_scale=1.44), 0.5)
     assert env == Environment() and env.gravity == (0.0, 0.0, -STANDARD_GRAVITY)
     assert values == pytest.approx({"slope_deg": 0.0, "curve_deg": 0.0, "friction": 1.0,
-                                    "gravity": STANDARD_GRAVITY, "speed_scale": 1.22, "step_height_m": 0.0})
+                                    "gravity": STANDARD_GRAVITY, "speed_scale": 1.22, "step_height_m": 0.0,
+                                    "step_going_m": 0.0})
 
 
 def test_speed_splits_into_stride_and_cadence_and_scales_the_frame_interval():
@@ -139,14 +141,22 @@ def test_a_faster_walk_is_realistic_with_a_shorter_cycle_and_a_longer_stride(tut
 # --- the terrain axis: stairs -----------------------------------------------------------------
 
 
+def _two_steps() -> np.ndarray:
+    """A cyclic foot schedule of 21 frames (19 distinct), two steps: the right foot's stance from
+    frame 18 over the cycle's end to frame 10, the left's 8..18."""
+    T, P = 21, 19
+    B = np.zeros((2, T), dtype=bool)
+    B[0, :P] = [t <= 10 or t >= 18 for t in range(P)]
+    B[1, :P] = [8 <= t <= 18 for t in range(P)]
+    B[:, P:] = B[:, :2]
+    return B
+
+
 def test_stair_heights_put_successive_stances_on_successive_treads():
     from solver.environment import stair_heights, stair_rise
 
-    T, P = 21, 19
-    B = np.zeros((2, T), dtype=bool)
-    B[0, :P] = [t <= 10 or t >= 18 for t in range(P)]  # right: stance from frame 18 over the cycle end
-    B[1, :P] = [8 <= t <= 18 for t in range(P)]  # left: stance 8..18
-    B[:, P:] = B[:, :2]
+    B = _two_steps()
+    P = B.shape[1] - 2
     H = stair_heights(B, 0.1)
     assert stair_rise(B, 0.1) == pytest.approx(0.2)  # two stances per cycle
     np.testing.assert_allclose(H[1, 8:19], 0.0)  # the first stance of the cycle: tread 0
@@ -183,3 +193,38 @@ def test_a_small_stair_is_climbed_realistically_with_every_contact_on_its_tread(
     assert m.report["environment"]["step_height_m"] == pytest.approx(step) and len(treads) >= 3
     heights = sorted({round(t["center"][2], 9) for t in treads})
     assert np.allclose(np.diff(heights), step)
+
+
+def test_stair_flight_puts_each_step_on_its_own_tread_and_the_nosings_on_the_higher_edge():
+    from solver.environment import DEFAULT_GOING_M, Environment, stair_flight, stair_indices, walker_going
+
+    B = _two_steps()
+    T, P = B.shape[1], B.shape[1] - 2
+    left, reached, n = stair_indices(B)
+    assert n == 2 and left[1, 8] == reached[1, 8] == 0 and left[0, 18] == 1 and left[0, 0] == -1
+    assert left[0, 12] == -1 and reached[0, 12] == 1  # a swing passes over one tread onto the next
+    np.testing.assert_array_equal(left[:, P:], left[:, :2] + 2)
+    # a walk along +x turned by 30°, its stance feet 0.3 m apart per step
+    q = np.zeros((16, T))
+    heading = math.radians(30.0)
+    u = np.array([math.cos(heading), math.sin(heading)])
+    q[:2] = np.outer(u, np.arange(T) * 0.6 / P)
+    assert walker_going(q, B) == pytest.approx(0.3)
+    feet = np.zeros((2, 2, T))
+    for k in range(2):
+        feet[k] = np.outer(u, 0.3 * left[k] + 0.12)  # each stance foot 0.12 m past its tread's start
+    f = stair_flight(feet, B, 0.17, 0.28, q=q)
+    assert f.heading == pytest.approx(heading) and f.going == 0.28 and f.n == 2
+    s = f.along(np.moveaxis(feet, 1, 0))
+    mid = (left + 0.5) * 0.28
+    assert np.mean((s - mid)[:, :P][B[:, :P]]) == pytest.approx(0.0, abs=1e-12)  # centred on average
+    assert f.nosing(1) == (pytest.approx(0.28), pytest.approx(0.17))  # going up: the front edge of tread 1
+    down = stair_flight(None, B, -0.17, 0.28, at=f.at)
+    assert down.nosing(1) == (pytest.approx(0.28), pytest.approx(0.0))  # going down: the edge of tread 0
+    assert down.ground(np.array([0.27, 0.29])).tolist() == pytest.approx([0.0, -0.17])
+    assert DEFAULT_GOING_M == 0.28 and Environment.from_dict(Environment(step_height_m=0.17, step_going_m=0.28,
+                                                                         stairs_at=f.at).to_dict()).stairs_at == f.at
+    with pytest.raises(ValueError, match="going"):
+        stair_flight(feet, B, 0.17, 0.0, q=q)
+    with pytest.raises(ValueError, match="step_going_m"):
+        Environment(step_going_m=-0.1)

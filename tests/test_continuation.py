@@ -1,6 +1,7 @@
 """Extrapolation by continuation: homotopies, step control, every λ a plausible motion."""
 
 import math
+import time
 
 import numpy as np
 import pytest
@@ -196,3 +197,91 @@ def test_impossible_slope_ends_in_an_impasse_and_keeps_only_realistic_motions(tu
     res = extrapolate(tutor, Target(slope_deg=80.0), StepControl(eps=0.05, max_iter=100))
     assert res.status == "impasse" and 0.0 < res.lam_reached < 0.8, (res.status, res.lam_reached)
     assert all(s.motion.report["plausible"] and s.motion.report["realism"]["passed"] for s in res.steps)
+
+
+# --- stairs as stairs: treads of a rise and a going, risers, nosings ------------------------------
+
+
+def test_stairs_bad_targets_are_refused_clearly():
+    with pytest.raises(ValueError, match=r"step_going_m must be within \[0.2, 1\] m, got 0"):
+        Target(step_height_m=0.17, step_going_m=0.0)
+    with pytest.raises(ValueError, match=r"step_height_m must be within \[-0.3, 0.3\] m, got 0.4"):
+        Target(step_height_m=0.4)
+    with pytest.raises(ValueError, match="step_going_m needs step_height_m"):
+        Target(step_going_m=0.28)  # a going without a rise: no stairs to be deep
+    assert Target(step_height_m=-0.17).step_going_m is None  # the default going is the continuation's
+
+
+@pytest.fixture(scope="module")
+def stairs(tutor):
+    """The tutor's continuation to stairs of 0.17 m rise and 0.28 m going, up and down."""
+    out = {}
+    for name, rise in (("up", 0.17), ("down", -0.17)):
+        t0 = time.perf_counter()
+        out[name] = (extrapolate(tutor, Target(step_height_m=rise, step_going_m=0.28), StepControl()),
+                     time.perf_counter() - t0)
+    return out
+
+
+@pytest.mark.parametrize("way", ["up", "down"])
+def test_stairs_continuation_keeps_the_feet_on_their_treads_and_clears_every_nosing(tutor, stairs, way):
+    """Every accepted λ is plausible and natural (the stairs checks included); the last optimum
+    stands each stance foot on its own tread, one going per step, and its swinging feet clear
+    every nosing by 2 cm along the spline (docs/naturalness.md, "Stairs": measured figures)."""
+    from solver.environment import environment_of, flight_of
+    from solver.naturalness import naturalness_report
+
+    res, _ = stairs[way]
+    # measured (docs/naturalness.md, "Stairs"): up and down reach λ = 1 natural
+    assert res.status == "succeeded" and res.lam_reached == 1.0, (res.status, res.lam_reached, res.message)
+    for st in res.steps:
+        rep = st.motion.report
+        assert rep["plausible"] and rep["natural"], rep["naturalness"].get("failed")
+    m = res.steps[-1].motion
+    lam = res.lam_reached
+    env = environment_of(m)
+    going = tutor_going = float(np.linalg.norm(tutor.q[:2, -2] - tutor.q[:2, 0])) / 2
+    going = tutor_going + lam * (0.28 - tutor_going)  # the going shortens from the level step
+    assert env.step_going_m == pytest.approx(going) and env.step_height_m == pytest.approx(lam * (0.17 if way == "up"
+                                                                                                   else -0.17))
+    f = flight_of(m)
+    assert f is not None and f.at == env.stairs_at  # the geometry the optimizer used is stored with the motion
+    assert float(f.direction @ (m.q[:2, -2] - m.q[:2, 0])) == pytest.approx(2 * going, abs=1e-6)  # one going a step
+    checks = naturalness_report(m)["checks"]
+    assert checks["nosing_clearance"]["value"] >= 0.02 and checks["nosing_clearance"]["passed"]
+    assert checks["stance_over_nosing"]["value"] <= 0.02 and checks["stance_into_riser"]["value"] <= 0.005
+    # the swing lifts the foot over the steps as people do: the tutor's level swing peaks at 72-78° of knee
+    # and 36-38° of hip flexion; people climbing 90-100° / 55-65°, descending 85-100° / 25-40°
+    assert checks["stairs_swing_knee"]["value"] >= 80.0
+    assert checks["stairs_swing_hip"]["value"] >= (50.0 if way == "up" else 25.0)
+    # each stance foot's contact points on its own tread, at its height
+    from solver.kinematics import contact_points
+
+    cp = contact_points(m.character, m.q)
+    B = m.foot_contact()
+    for j, c in enumerate(m.character.contacts):
+        k = 0 if c.side == "right" else 1
+        on = m.contacts[j, : m.T - 2]
+        s = f.along(cp[j, :2, : m.T - 2])[on]
+        tread = f.left[k, : m.T - 2][on]
+        assert np.all((s >= tread * going) & (s <= (tread + 1) * going)), c.name
+        np.testing.assert_allclose(cp[j, 2, : m.T - 2][on], tread * f.rise, atol=1e-3)
+    assert B.any()
+
+
+def test_stairs_checks_see_a_foot_off_its_tread(stairs):
+    """The same optimum with its flight moved half a going: stance feet over the nosings, and the
+    checks fail it."""
+    from solver.environment import environment_of
+    from solver.naturalness import naturalness_report
+
+    m = stairs["up"][0].steps[-1].motion
+    env = environment_of(m)
+    x, y, heading = env.stairs_at
+    g = env.step_going_m
+    moved = dict(m.provenance)
+    moved["environment"] = env.with_(stairs_at=(x + 0.5 * g * math.cos(heading), y + 0.5 * g * math.sin(heading),
+                                                heading)).to_dict()
+    rep = naturalness_report(m.evolve(provenance=moved))
+    assert not rep["passed"]
+    assert {"stance_over_nosing", "stance_into_riser"} & set(rep["failed"])

@@ -55,6 +55,8 @@ class Axis:
     nlp: Callable[[float], Mapping[str, float]] | None = None
     #: a value is drawn/told as "slope {v}°"
     words: str = "{}"
+    #: another axis a target must change for this one to mean anything (the going of stairs needs a rise)
+    requires: str | None = None
 
     def bounds_text(self) -> str:
         return (f"{'(' if self.lo_open else '['}{self.lo:g}, {self.hi:g}{')' if self.hi_open else ']'}"
@@ -135,6 +137,10 @@ class Target:
         for name, v in values.items():
             ax = axis(name)
             out[name] = None if v is None else ax.check(v)
+        for name, v in out.items():
+            req = axis(name).requires
+            if v is not None and req is not None and not axis(req).changes(out.get(req, axis(req).default)):
+                raise ValueError(f"{name} needs {req} too ({axis(name).doc})")
         object.__setattr__(self, "_values", out)
 
     def __getattr__(self, name: str) -> float | None:

@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from solver.environment import environment_of, ground_of, stair_rise, stances
+from solver.environment import environment_of, flight_of, ground_of, stair_rise, stances
 from solver.export import AXES_Y_UP, AXES_Z_UP, DEFAULT_WORLD, Y_UP, ExportError, LocalTransforms, local_transforms
 from solver.formats import EXPORT_WORLDS
 from solver.motion import FEET, Motion
@@ -338,8 +338,9 @@ def _path(motion: Motion) -> np.ndarray:
 def ground_of_motion(motion: Motion, world: str | World = DEFAULT_WORLD) -> Ground:
     """The ground under ``motion`` in ``world``: a strip along its path as wide as its feet need
     (plus :data:`MARGIN_M`), one level (a plane: level ground, or a ramp on a slope in the
-    gravity world) or, on stairs, one tread per stance at the ground height the solver put it
-    on (``solver.environment.ground_of``), the risers half-way between consecutive stances."""
+    gravity world) or, on stairs, the flight the solver climbed (``solver.environment.flight_of``:
+    treads a going deep, the risers where it stood them; a motion without its flight's placement:
+    one tread per stance, the risers half-way between consecutive stances)."""
     from solver import kinematics
 
     w = resolve(motion, world)
@@ -365,6 +366,22 @@ def ground_of_motion(motion: Motion, world: str | World = DEFAULT_WORLD) -> Grou
     env = environment_of(motion)
     if not env.step_height_m or motion.contacts is None or not ch.contacts:
         return Ground("plane", w, centre, half, (Tread(0.0, length, 0.0),))
+    flight = flight_of(motion)  # the flight the solver climbed: treads a going deep, risers where it put them
+    if flight is not None:
+        stances_on: dict[int, tuple[str, tuple[int, int]]] = {}
+        for f, a, b in stances(motion.foot_contact()):
+            stances_on.setdefault(int(flight.left[f, a]), (FEET[f], (a, b)))
+        ks = range(int(min(flight.left.min(), flight.reached.min())),
+                   int(max(flight.left.max(), flight.reached.max())) + 1)
+        o, u = np.asarray(flight.origin, dtype=float), flight.direction
+        edges = [float(_project(centre, (o + k * flight.going * u)[None])[0][0]) for k in ks] + \
+            [float(_project(centre, (o + (ks[-1] + 1) * flight.going * u)[None])[0][0])]
+        edges[0], edges[-1] = 0.0, length  # the first and last treads run to the strip's ends
+        out = tuple(Tread(edges[i], edges[i + 1], float(flight.height(k)), *stances_on.get(k, (None, None)))
+                    for i, k in enumerate(ks))
+        if np.any(np.diff(edges) <= 0):
+            raise ExportError("stairs: the flight's treads do not follow one another along the path")
+        return Ground("stairs", w, centre, half, out, riser=env.step_height_m)
     heights = ground_of(motion)  # a stance's ground is one tread (solver.environment.stair_heights)
     treads = []
     for f, a, b in stances(motion.foot_contact()):

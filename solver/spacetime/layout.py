@@ -209,14 +209,18 @@ class Layout:
                    lean: np.ndarray | None = None, fore_aft_cap: float = 1e3,
                    g_ratio: float = 1.0, guide_com: np.ndarray | None = None,
                    clearance: np.ndarray | None = None, guide_force: np.ndarray | None = None,
-                   width: np.ndarray | None = None) -> np.ndarray:
+                   width: np.ndarray | None = None, stairs: np.ndarray | None = None) -> np.ndarray:
         """The parameter vector (``P_LAYOUT`` order); ``h``: frame interval (s), default 1/fps;
         ``joint_range`` (2, n) the joint-range prior's bounds (default: none); ``path`` (T,) the
         direction of travel per frame (rad); ``lean`` (T,) the trunk's target lean (sine);
         ``fore_aft_cap`` each foot's fore-aft force bound (scaled); ``g_ratio`` the environment's
         gravity over the standard (the loads the naturalness rows allow are in its body weights);
         ``guide_com`` (3, T) the centre of mass to track; ``clearance`` (2, T) each foot's sole
-        clearance target (m); ``guide_force`` (3, T) the total ground force to track (scaled)."""
+        clearance target (m); ``guide_force`` (3, T) the total ground force to track (scaled); ``width``
+        (4, T) each foot's step width to keep and its mask; ``stairs`` (STAIRS_PARAMS, T) the stairs rows'
+        parameters (``solver.spacetime.stairs.stairs_parameters``; default: none active)."""
+        from solver.spacetime.stairs import stairs_parameters
+
         nT = self.T
         K = max(len(self.eom_frames), 1)
         hv = float(self.dt if h is None else h)
@@ -256,6 +260,8 @@ class Layout:
             (np.zeros((2, nT)) if clearance is None else np.asarray(clearance, dtype=float)).ravel(order="F"),
             (np.zeros((3, nT)) if guide_force is None else np.asarray(guide_force, dtype=float)).ravel(order="F"),
             (np.zeros((4, nT)) if width is None else np.asarray(width, dtype=float)).ravel(order="F"),
+            (stairs_parameters(None, np.zeros((2, nT), dtype=bool)) if stairs is None
+             else np.asarray(stairs, dtype=float)).ravel(order="F"),
         ])
 
     def width_targets(self, q: np.ndarray, path: np.ndarray) -> np.ndarray:

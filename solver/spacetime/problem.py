@@ -39,13 +39,14 @@ import casadi as ca
 import numpy as np
 
 from solver.character import Character
-from solver.environment import stair_heights, stair_rise
+from solver.environment import flight_for, stair_heights, stair_rise
 from solver.motion import FEET
 from solver.naturalness import path_heading
 from solver.spacetime.callback import STOP, STOP_CALLBACK
 from solver.spacetime.derivatives import Term, assemble
 from solver.spacetime.frame import CROSS_ROWS, FOOT_ROWS, FRAME_COST_WEIGHTS, SOLE_CORNERS, frame_functions
 from solver.spacetime.layout import Layout
+from solver.spacetime.stairs import STAIRS_PARAMS, add_stairs_terms, stairs_joint_bounds, stairs_parameters
 from solver.spacetime.types import (
     DEFAULT_IPOPT,
     STANDARD_GRAVITY,
@@ -73,9 +74,10 @@ YAW = 3
 #: bound (scaled: body weights of standard gravity) and the environment's gravity over the standard;
 #: "gcom": per frame, the centre of mass to track; "clear": per foot and frame, the sole's clearance target;
 #: "gforce": per frame, the total ground force to track (body weights of standard gravity); "width": per frame,
-#: each foot's far-side distance across the direction of travel to keep, then a mask (1: the foot is down)
+#: each foot's far-side distance across the direction of travel to keep, then a mask (1: the foot is down);
+#: "stairs": per frame, the flight of stairs and each foot's tread or nosings (``solver.spacetime.stairs``)
 P_LAYOUT = ("gm", "gq", "g", "mu", "wts", "ref", "anchor", "dpsi", "com", "h", "ground", "rise", "range", "path",
-            "lean", "loads", "gcom", "clear", "gforce", "width")
+            "lean", "loads", "gcom", "clear", "gforce", "width", "stairs")
 
 
 def _heading(vx, vy, psi):
@@ -166,7 +168,7 @@ class SpacetimeProblem(Layout):
         sizes = {"gm": nm3 * Tn, "gq": n * Tn, "g": 3, "mu": 1, "wts": len(WEIGHT_SLOTS), "ref": 6 * Tn,
                  "anchor": 3 * Tn, "dpsi": 1, "com": 3 * Tn, "h": 1, "ground": max(ff.P, 1) * Tn, "rise": 1,
                  "range": 2 * n, "path": Tn, "lean": Tn, "loads": 2, "gcom": 3 * Tn, "clear": 2 * Tn, "gforce": 3 * Tn,
-                 "width": 4 * Tn}
+                 "width": 4 * Tn, "stairs": STAIRS_PARAMS * Tn}
         self._p_layout, off = {}, 0
         for name in P_LAYOUT:
             self._p_layout[name] = (off, sizes[name])
@@ -206,6 +208,8 @@ class SpacetimeProblem(Layout):
         self._cyclic_root(x, dpsi)
         if dynamics:
             self._dynamic_terms(x, grav, mu, wts, dpsi, REF, ANCHOR)
+            if self.rising:  # [stairs] treads, risers and nosings (solver.spacetime.stairs)
+                add_stairs_terms(self, par("stairs", (STAIRS_PARAMS, Tn)))
         else:
             K = list(range(1, Tn - 1))
             zacc = np.vstack([qi[:, [t - 1 for t in K]], qi[:, K], qi[:, [t + 1 for t in K]]])
@@ -464,11 +468,13 @@ class SpacetimeProblem(Layout):
         gq = q0 if guide_q is None else guide_q  # coordinates prior: the guide's, else the start's
         feet_ground = np.zeros((2, self.T))
         rise = 0.0
+        flight = None
         if env.step_height_m:
             if not (self.rising and self.dynamics):
                 raise ValueError("stairs (step_height_m) need a dynamic problem built with rising=True")
             feet_ground = stair_heights(self.foot_contact(), env.step_height_m)
             rise = stair_rise(self.foot_contact(), env.step_height_m)
+            flight = flight_for(self.character, q0, self.foot_contact(), env)
         ref = self.ref_points(q0, feet_ground) if self.dynamics else np.zeros((6, self.T))
         # the direction of travel the crossover rows are measured across: the start iterate's (at a
         # λ step the previous optimum, which the optimum stays closer to than to the guide)
@@ -488,7 +494,8 @@ class SpacetimeProblem(Layout):
                             clearance=self.clearance_targets(q0, h, feet_ground) if self.dynamics else None,
                             guide_force=self.force_targets(com_target, h, env.gravity),
                             width=(self.width_targets(gq, path_heading(gq, self.T - 2))
-                                   if self.dynamics and self.ff.has_contacts else None))
+                                   if self.dynamics and self.ff.has_contacts else None),
+                            stairs=stairs_parameters(flight, self.foot_contact()))
         lbg, ubg = self.constraint_bounds(h)
         parts = [self.pack_q(q0)]
         if self.dynamics:
@@ -496,6 +503,8 @@ class SpacetimeProblem(Layout):
         x0 = np.concatenate(parts)
         g_ratio = float(np.linalg.norm(env.gravity)) / STANDARD_GRAVITY  # loads in the environment's body weights
         lbx, ubx = self.bounds(locks, shared_load=self.ff.naturalness.shared_load * g_ratio)
+        if self.rising:  # [stairs] joints off their limits (solver.spacetime.stairs)
+            lbx, ubx = stairs_joint_bounds(self, lbx, ubx)
         x0 = np.clip(x0, lbx, ubx)
         args: dict[str, Any] = dict(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
         opts: dict[str, Any] = {"ipopt.max_iter": int(max_iter)}
