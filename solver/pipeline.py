@@ -66,10 +66,11 @@ UPPER_ROOT_SEGMENTS = ("abdomen",)  # merging it lumps trunk, head and arms into
 TUTOR_WEIGHTS = Weights(coordinates=300.0, root_rotation=300.0, com_track=10.0)
 #: per synthesis character: HalfBoy, whose trunk, head and arms are welded to its pelvis, cannot keep
 #: both the subject's joints and the subject's centre of mass: it keeps the joints and the force's
-#: shape (one braking → propulsion change per stance) but not the centre of mass's path, which made it
-#: crouch (stance knee 14-24° where the overground capture has -2-17°)
+#: shape (one braking → propulsion change per stance) at a tenth of the full body's force weight, not the
+#: centre of mass's path, which made it crouch further (the overground walk's stance knees 23/20° where
+#: the capture's are 10/14°; 18/17° with these weights)
 TUTOR_WEIGHTS_OF = {"fullbody": TUTOR_WEIGHTS,
-                    "halfboy": Weights(coordinates=300.0, root_rotation=300.0, com_track=0.0, force_track=300.0)}
+                    "halfboy": Weights(coordinates=300.0, root_rotation=300.0, com_track=0.0, force_track=100.0)}
 
 
 def tutor_weights(character: str) -> Weights:

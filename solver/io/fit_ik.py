@@ -130,15 +130,14 @@ def _solve_ik(ch, times, lm, F, origin, ori, attach, w_ori):
             Q[:, t] = cands[-1]
             prev = Q[:, t]
             continue
+        if len(cands) > 1:
+            fun.set_data(tgt[t], wts[t])
+            costs = [fun.cost(c) for c in cands]
+            x0 = cands[int(np.argmin(costs))]
+        else:
+            x0 = cands[0]
         fun.set_data(tgt[t], wts[t])
-        sols = [_levenberg_marquardt(fun, c) for c in cands]
-        costs = [fun.cost(x) for x, _ in sols]
-        best = int(np.argmin(costs))
-        if prev is not None:  # the branch that continues the previous frame unless another fits better
-            tol = 1e-9 + 1e-3 * costs[best]
-            near = [k for k in range(len(sols)) if costs[k] <= costs[best] + tol]
-            best = min(near, key=lambda k: float(np.sum((sols[k][0] - prev) ** 2)))
-        Q[:, t], iters[t] = sols[best]
+        Q[:, t], iters[t] = _levenberg_marquardt(fun, x0)
         prev = Q[:, t]
 
     solve_s = time.perf_counter() - t_solve

@@ -51,7 +51,7 @@ class FrameFunctions:
     VARS: ClassVar[dict[str, tuple[int, int]]] = {
         "cost": (1, 1), "acc": (3, 3), "z": (1, 1), "sole": (1, 1), "slip": (2, 2), "feet": (2, 2), "seg": (6, 4),
         "c2": (5, 5), "jerk": (4, 4), "wrate": (2, 2), "frate": (2, 2), "smooth": (3, 3), "wcom": (1, 1),
-        "cross": (1, 1), "lean": (1, 1), "clr": (1, 1), "ftrack": (1, 1), "jspeed": (1, 1), "width": (1, 1)}
+        "cross": (1, 1), "lean": (1, 1), "clr": (1, 1), "ftrack": (1, 1), "jspeed": (2, 2), "width": (1, 1)}
 
     def __init__(self, character: Character, realism: Realism = Realism(),
                  naturalness: Naturalness = Naturalness()) -> None:
@@ -104,13 +104,15 @@ class FrameFunctions:
         # kinematic fit: squared second difference of the rotations over three frames (rad)
         qm_, qp_, ws_ = ca.SX.sym("qm", n), ca.SX.sym("qp", n), ca.SX.sym("ws")
         self.acc = ca.Function("acc", [qm_, q, qp_, ws_], [ws_ * ca.sumsqr((qm_ - 2 * q + qp_)[3:])])
-        # [naturalness] a joint coordinate's knot velocity beyond ``Naturalness.joint_speed_deg_s`` pays
-        # quadratically (rad/s): the joints' fastest turns, not a flap between frames (check: 450°/s)
-        v_, wjs = ca.SX.sym("v", n), ca.SX.sym("wjs")
+        # [naturalness] a joint coordinate turning faster than ``Naturalness.joint_speed_deg_s`` between two
+        # frames pays quadratically (rad/s): the joints' fastest turns, not a flap between frames (the check
+        # reads the same frame differences: 450°/s)
+        hs_, wjs = ca.SX.sym("h"), ca.SX.sym("wjs")
         vmax = math.radians(naturalness.joint_speed_deg_s)
-        self.jspeed = ca.Function("jspeed", [v_, wjs], [wjs * sum(ca.fmax(0, v_[i] - vmax) ** 2
-                                                                  + ca.fmax(0, -v_[i] - vmax) ** 2
-                                                                  for i in range(6, n))])
+        dv = (qp_ - q) / hs_
+        self.jspeed = ca.Function("jspeed", [q, qp_, hs_, wjs], [wjs * sum(ca.fmax(0, dv[i] - vmax) ** 2
+                                                                          + ca.fmax(0, -dv[i] - vmax) ** 2
+                                                                          for i in range(6, n))])
 
         self.has_contacts = P > 0 and len(ch.feet) == 2
         if self.has_contacts:

@@ -402,7 +402,8 @@ class SpacetimeProblem(Layout):
         GF = self._GFORCE
         self._cost(Term("ftrack", ff.ftrack, 1, W, [GF[:, E], ca.repmat(wts["force_track"], 1, len(E))],
                         derivatives=D["ftrack"], cost=True))
-        self._cost(Term("jspeed", ff.jspeed, 1, vi[:, frames], [ca.repmat(wts["joint_speed"], 1, len(frames))],
+        self._cost(Term("jspeed", ff.jspeed, 2, np.vstack([qi[:, frames], qi[:, [t + 1 for t in frames]]]),
+                        [ca.repmat(h, 1, len(frames)), ca.repmat(wts["joint_speed"], 1, len(frames))],
                         derivatives=D["jspeed"], cost=True))
         self._cost(Term("jerk", ff.jerk, 4, np.vstack([qi[:, K], vi[:, K], qi[:, kp], vi[:, kp]]),
                         [ca.repmat(h, 1, len(K)), ca.repmat(wts["jerk"], 1, len(K))], derivatives=D["jerk"], cost=True))

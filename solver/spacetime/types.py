@@ -91,11 +91,11 @@ class Weights:
     #: marker distance (at 100, HalfBoy's extrapolations to speed ×1.2 and a 90° curve still braked twice
     #: per stance)
     force_track: float = 1000.0
-    #: [naturalness] squared excess of a joint coordinate's knot velocity over
-    #: ``Naturalness.joint_speed_deg_s`` (rad/s), per coordinate and frame: 50°/s too fast at one
-    #: joint and frame weighs like 5° off its angle there (a swing knee asked to clear the ground turned
-    #: 468°/s between two frames where the capture's turned 363°/s)
-    joint_speed: float = 10.0
+    #: [naturalness] squared excess of a joint coordinate's change between two frames over
+    #: ``Naturalness.joint_speed_deg_s`` (rad/s), per coordinate and frame: 50°/s too fast at one joint
+    #: and frame weighs like 16° off its angle there (a swing knee asked to clear the ground turned 468°/s
+    #: between two frames where the capture's turned 363°/s; HalfBoy's ankle on a 10° downhill, 455°/s)
+    joint_speed: float = 100.0
     #: [naturalness] squared difference of each foot's distance from the pelvis across the direction of
     #: travel from the guide's while it is on the ground (per 1 cm, averaged): a walker keeps its step width;
     #: a curve is not turned by bringing the inner foot onto the path line (the crossover bound's edge)
@@ -228,8 +228,8 @@ class Naturalness:
     #: the NLP's joint bounds lie this far inside the model's limits: a safety net, the prior keeps
     #: joints out of the band
     limit_margin_deg: float = 0.0
-    #: the knot velocity beyond which a joint coordinate pays (``Weights.joint_speed``; Winter: the swing
-    #: knee, the fastest joint of a walk, peaks near 400°/s; check: 450°/s between frames)
+    #: the change between frames beyond which a joint coordinate pays (``Weights.joint_speed``; Winter: the
+    #: swing knee, the fastest joint of a walk, peaks near 400°/s; check: 450°/s between frames)
     joint_speed_deg_s: float = 400.0
 
     @classmethod
