@@ -17,7 +17,7 @@ from fastapi.openapi.utils import get_openapi
 from service import problems
 from service.config import Settings, get_settings
 from service.db import get_database, upgrade
-from service.deps import OwnerCache
+from service.deps import GuessGuard, OwnerCache
 from service.middleware import BodyLimitMiddleware, SecurityHeadersMiddleware, page_csp
 from service.runners import make_runner
 from service.work import Compute
@@ -83,6 +83,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     app.state.settings = app_settings
     app.state.owner_cache = OwnerCache()
+    app.state.guess_guard = GuessGuard()
     problems.install(app)
     app.add_middleware(BodyLimitMiddleware, max_bytes=app_settings.max_body_bytes)
 
@@ -101,8 +102,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(docs.router)  # /docs: Swagger UI from local files
     app.include_router(web.router)  # the page at /ui/: public files, its API calls carry the key
     app.state.route_methods = [(r.path_regex, frozenset(r.methods or ())) for router in
-                               (health.router, motions.router, jobs.router, libraries.router, plots.router, docs.router,
-                                              web.router)
+                               (health.router, axes.router, motions.router, jobs.router, simulations.router,
+                                              libraries.router, plots.router, docs.router, web.router)
                                for r in router.routes if hasattr(r, "path_regex")]
     app.openapi = lambda: _openapi(app)
     return app

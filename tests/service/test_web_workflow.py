@@ -99,7 +99,7 @@ def test_upload_start_follow_preview_download_and_cancel(api, page, shared_data)
 
     # 2. the tutor and a small target, from controls built from GET /axes and the OpenAPI document
     assert page.eval_on_selector_all("#tutor-character option", "os => os.map(o => o.value)") == ["halfboy", "fullbody"]
-    axes = [a["name"] for a in api.anon.get("/axes").json()["axes"]]
+    axes = [a["name"] for a in api.a.get("/axes").json()["axes"]]
     assert page.eval_on_selector_all("#target-fields input", "is => is.map(i => i.name)") == axes
     page.select_option("#tutor-character", "halfboy")
     page.fill("#tutor-fps", "15")
@@ -188,7 +188,7 @@ def test_upload_start_follow_preview_download_and_cancel(api, page, shared_data)
     page.check('input[name="start-mode"][value="library"]')
     assert not page.locator("#target-fields").is_visible()
     assert page.eval_on_selector_all("#grid-fields input", "is => is.map(i => i.name)") == \
-        [a["name"] for a in api.anon.get("/axes").json()["axes"] if a["grid"]]
+        [a["name"] for a in api.a.get("/axes").json()["axes"] if a["grid"]]
     page.fill("#grid-slope_deg", "3, 6")
     assert page.text_content("#grid-cells").startswith("2 cells")
     page.click("#start-button")

@@ -268,6 +268,8 @@ export function initNewWalk(ctx) {
   $('source-select').addEventListener('change', renderSourceNote);
 
   const range = (a) => `${a.exclusive_minimum ? '(' : '['}${a.minimum}, ${a.maximum}${a.exclusive_maximum ? ')' : ']'}`;
+  // the axes' fields: built again when the axes arrive later (GET /axes needs the key)
+  function renderAxes() {
   $('target-fields').replaceChildren(...axes.map((a) => h('label', { class: 'field axis', title: a.doc },
     h('span', { class: 'name' }, a.label),
     h('span', { class: 'with-unit' }, h('input', { type: 'number', step: 'any', id: `target-${a.name}`, name: a.name,
@@ -281,6 +283,8 @@ export function initNewWalk(ctx) {
     h('span', { class: 'with-unit' }, h('input', { type: 'text', id: `grid-${a.name}`, name: a.name,
       placeholder: 'values, comma separated', spellcheck: 'false' }), h('span', { class: 'unit' }, a.unit)),
     h('small', { class: 'hint' }, `${a.name} ${range(a)}`))));
+  }
+  renderAxes();
   $('grid-fields').addEventListener('input', () => {
     const grid = readGrid();
     $('grid-cells').textContent = grid.error || `${grid.cells} cell${grid.cells === 1 ? '' : 's'} (at most ${MAX_GRID_CELLS})`;
@@ -408,7 +412,7 @@ export function initNewWalk(ctx) {
     renderSources();
   }
 
-  return { renderSources, reset };
+  return { renderSources, reset, renderAxes };
 }
 
 function sizeText(bytes) {
