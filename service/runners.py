@@ -165,19 +165,20 @@ class LocalRunner:
         t.start()
 
     def recover(self, *, all_unfinished: bool = False) -> list[str]:
-        """Resubmit the running jobs whose process is gone (all of them on start), and queued jobs
-        dispatched longer ago than ``redispatch_after``; never-dispatched ones wait for their turn
-        (:meth:`dispatch`)."""
+        """Resubmit the running jobs whose process is gone (all of them on start), and the queued
+        jobs dispatched to this runner that are no longer in its pool; never-dispatched ones wait
+        for their turn (:meth:`dispatch`)."""
         big = 1e18
-        with self.db.read() as s:
-            ids = store.stranded_jobs(
-                s, runner=self.name, queued_after=self.settings.redispatch_after,
-                running_after=-big if all_unfinished else 0.0, limit=1000, dispatched_only=True,
-            )
-        with self._lock:
-            ids = [j for j in ids if j not in self._inflight]
-        for j in ids:
-            self.submit(j)
+        with self._dispatch_lock:  # a job being dispatched is in self._inflight before the lock is released
+            with self.db.read() as s:  # the pool's queue is this process's memory: a dispatched job not in it
+                ids = store.stranded_jobs(  # was lost (its process failed, e.g. the database was unreachable)
+                    s, runner=self.name, queued_after=0.0,
+                    running_after=-big if all_unfinished else 0.0, limit=1000, dispatched_only=True,
+                )
+            with self._lock:
+                ids = [j for j in ids if j not in self._inflight]
+            for j in ids:
+                self.submit(j)
         if ids:
             log.info("local runner: (re)submitted %d job(s)", len(ids))
         return ids
