@@ -180,12 +180,17 @@ LINKS = {
         "Extrapolate": ("/motions/{motion_id}/extrapolate", "post", "motion_id"),
         "GrfPlot": ("/motions/{motion_id}/plots/grf.png", "get", "motion_id"),
         "ResidualsPlot": ("/motions/{motion_id}/plots/residuals.png", "get", "motion_id"),
+        "FilmstripPlot": ("/motions/{motion_id}/plots/filmstrip.png", "get", "motion_id"),
+        "Simulate": ("/motions/{motion_id}/simulation", "post", "motion_id"),
+        "DeleteSimulations": ("/motions/{motion_id}/simulation", "delete", "motion_id"),
+        "DeleteMotion": ("/motions/{motion_id}", "delete", "motion_id"),
     },
     ("/motions/{motion_id}/extrapolate", "post", "202"): {
         "GetJob": ("/jobs/{job_id}", "get", "job_id"),
         "JobMotions": ("/jobs/{job_id}/motions", "get", "job_id"),
         "CancelJob": ("/jobs/{job_id}/cancel", "post", "job_id"),
         "ProgressPlot": ("/jobs/{job_id}/plots/progress.png", "get", "job_id"),
+        "DeleteJob": ("/jobs/{job_id}", "delete", "job_id"),
     },
 }
 

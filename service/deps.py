@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import asyncio
 import collections
+import hashlib
 import threading
 from dataclasses import dataclass
 from typing import Annotated
@@ -76,14 +77,16 @@ def _unauthorized(detail: str) -> Problem:
 
 
 class GuessGuard:
-    """Slows down wrong-key guesses, per client address: past ``FREE`` wrong keys within
-    ``WINDOW_S``, each further wrong key of that client is answered (401) only after a delay that
-    doubles with each one (up to ``MAX_DELAY_S``), one at a time; more than ``MAX_WAITING``
-    waiting get 429. Requests with a valid key are not affected."""
+    """Slows down wrong-key guesses, per client address: past ``FREE`` *distinct* wrong keys
+    within ``WINDOW_S``, each further wrong key of that client is answered (401) only after a
+    delay that doubles with each one (up to ``MAX_DELAY_S``), one at a time; more than
+    ``MAX_WAITING`` waiting get 429. The same wrong key sent again (a misconfigured client, a
+    contract test's probe) is not a new guess, and requests with a valid key are not affected."""
 
     FREE, WINDOW_S, BASE_DELAY_S, MAX_DELAY_S, MAX_WAITING = 10, 600.0, 0.05, 5.0, 16
 
     def __init__(self) -> None:
+        self._seen: TTLCache[tuple[str, str], bool] = TTLCache(maxsize=100_000, ttl=self.WINDOW_S)
         self._wrong: TTLCache[str, int] = TTLCache(maxsize=10_000, ttl=self.WINDOW_S)
         self._locks: dict[str, asyncio.Lock] = {}
         self._waiting: collections.Counter[str] = collections.Counter()
@@ -92,9 +95,12 @@ class GuessGuard:
         n = self._wrong.get(client, 0) - self.FREE
         return 0.0 if n <= 0 else min(self.MAX_DELAY_S, self.BASE_DELAY_S * 2.0 ** min(n, 20))
 
-    async def wrong_key(self, client: str) -> Problem:
+    async def wrong_key(self, client: str, key: str) -> Problem:
         """Count a wrong key of ``client``; wait its turn and its delay; the 401 (or 429) to raise."""
-        self._wrong[client] = self._wrong.get(client, 0) + 1
+        seen = (client, hashlib.sha256(key.encode("utf-8", "replace")).hexdigest())
+        if seen not in self._seen:
+            self._seen[seen] = True
+            self._wrong[client] = self._wrong.get(client, 0) + 1
         d = self.delay(client)
         if d <= 0:
             return _unauthorized("invalid API key")
@@ -128,7 +134,7 @@ async def get_owner(
     if not key:
         raise _unauthorized("an API key is required (header X-API-Key or Authorization: Bearer)")
     if len(key) > 512:
-        raise await request.app.state.guess_guard.wrong_key(request.client.host if request.client else "")
+        raise await request.app.state.guess_guard.wrong_key(request.client.host if request.client else "", key)
     cache: OwnerCache = request.app.state.owner_cache
     hit = cache.get(key)
     if hit is not None:
@@ -141,7 +147,7 @@ async def get_owner(
     owner = await run_in_threadpool(lookup)
     if owner is None:
         guard: GuessGuard = request.app.state.guess_guard
-        raise await guard.wrong_key(request.client.host if request.client else "")
+        raise await guard.wrong_key(request.client.host if request.client else "", key)
     cache.put(key, owner)
     return owner
 

@@ -57,7 +57,8 @@ def test_compose_environment_names_are_settings(compose):
     stack_env = service_env(database_url="sqlite://", broker_url="redis://x", api_keys="k", data_dir=Path("/tmp"))
     assert {k for k in env} <= set(stack_env) | {"MOTIONX_JOB_TIME_LIMIT_S", "MOTIONX_VISIBILITY_TIMEOUT_S",
                                                   "MOTIONX_JOB_MAX_ATTEMPTS", "MOTIONX_JOB_LEASE_S",
-                                                  "MOTIONX_JOB_MEMORY_MB", "MOTIONX_COMPUTE_MEMORY_MB"}
+                                                  "MOTIONX_JOB_MEMORY_MB", "MOTIONX_COMPUTE_MEMORY_MB",
+                                                  "MOTIONX_COMPUTE_WORKERS", "MOTIONX_JOB_SLOTS"}
 
 
 def test_dockerfile_installs_every_package():
