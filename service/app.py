@@ -79,6 +79,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             400: {"model": _problem_model(), "description": "malformed request (e.g. an unparsable body)"},
             401: {"model": _problem_model(), "description": "missing or invalid API key"},
             422: {"model": _problem_model(), "description": "invalid request"},
+            429: {"model": _problem_model(), "description": "this API key is over one of its quotas, or this client "
+                  "sent too many wrong keys: retry after Retry-After seconds (`quota` names it)"},
+            503: {"model": _problem_model(), "description": "the database is unavailable or a compute process "
+                  "restarted: retry after Retry-After seconds"},
         },
     )
     app.state.settings = app_settings

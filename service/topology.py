@@ -159,6 +159,48 @@ def drop_postgres_database(admin_url: str, name: str) -> None:
         conn.execute(sql.SQL("DROP DATABASE IF EXISTS {} WITH (FORCE)").format(sql.Identifier(name)))
 
 
+class PostgresServer:
+    """A PostgreSQL cluster in a temporary folder of its own (initdb, trust auth) on a free
+    loopback port, run as the ``postgres`` user when we are root (the server refuses to run as
+    root, and cannot enter pytest's private temporary folders). ``stop()``/``start()`` is a real
+    server restart: every connection is cut. ``remove()`` deletes the folder."""
+
+    def __init__(self) -> None:
+        import tempfile
+
+        self.root, self.port = Path(tempfile.mkdtemp(prefix="motionx-pg-")), free_port()
+        self.data, self.log = self.root / "pgdata", self.root / "pg.log"
+        self.bin = Path(shutil.which("pg_ctl") or "pg_ctl").resolve().parent
+
+    def _run(self, *args: str, check: bool = True):
+        cmd = [str(self.bin / args[0]), *args[1:]]
+        if os.geteuid() == 0:
+            cmd = ["runuser", "-u", "postgres", "--", *cmd]
+        return subprocess.run(cmd, check=check, capture_output=True, text=True, timeout=120)
+
+    def init(self) -> PostgresServer:
+        self.root.mkdir(parents=True, exist_ok=True)
+        if os.geteuid() == 0:
+            shutil.chown(self.root, "postgres", "postgres")
+        self._run("initdb", "-D", str(self.data), "-A", "trust", "-U", "postgres", "--no-sync")
+        return self
+
+    def start(self) -> None:
+        opts = f"-p {self.port} -k {self.root} -c listen_addresses=127.0.0.1 -c fsync=off"
+        self._run("pg_ctl", "-D", str(self.data), "-l", str(self.log), "-o", opts, "-w", "start")
+
+    def stop(self) -> None:
+        self._run("pg_ctl", "-D", str(self.data), "-m", "fast", "-w", "stop", check=False)
+
+    def remove(self) -> None:
+        self.stop()
+        shutil.rmtree(self.root, ignore_errors=True)
+
+    @property
+    def admin_url(self) -> str:
+        return f"postgresql://postgres@127.0.0.1:{self.port}/postgres"
+
+
 # --- API and workers --------------------------------------------------------------------
 
 

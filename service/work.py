@@ -325,7 +325,9 @@ class Compute:
                 self._waiters[key] -= 1
                 if self._waiters[key] <= 0:
                     del self._waiters[key]
-                    if not fut.done():
+                    if not fut.done():  # nobody waits for it any more: cancelled, and not handed to anyone
+                        if self._inflight.get(key) is fut:
+                            del self._inflight[key]
                         fut.cancel()
 
     def _start(self, key: Hashable, fn: Callable[..., Any], args: tuple, what: str, lane: str) -> asyncio.Future:

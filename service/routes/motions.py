@@ -114,6 +114,11 @@ def _store_motion(db: Database, settings: Settings, owner: str, encoded: Encoded
         return motion_out(row)
 
 
+def _storage_left(db: Database, settings: Settings, owner: str) -> None:
+    with db.read() as s:
+        quota.check_storage(s, settings, owner=owner)
+
+
 def _upload_memo(kind: str, *parts: Any) -> tuple[str, str]:
     """The key under which an upload's failure is remembered: its bytes and options."""
     h = hashlib.sha256()
@@ -151,6 +156,7 @@ async def upload_motion(
 ) -> Response:
     ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
     compute: Compute = request.app.state.compute
+    await run_in_threadpool(_storage_left, db, settings, owner)  # a key over its storage computes nothing
     try:
         if ctype == "application/json" or ctype.endswith("+json"):
             body = await request.body()

@@ -11,14 +11,14 @@ import time
 import httpx
 import pytest
 from conftest import start_api_process
-from svc_util import CHEAP, PrivatePostgres, wait_job
+from svc_util import CHEAP, wait_job
 
-from service.topology import create_postgres_database
+from service.topology import PostgresServer, create_postgres_database
 
 
 @pytest.fixture(scope="module")
 def pg():
-    p = PrivatePostgres().init()
+    p = PostgresServer().init()
     p.start()
     yield p
     p.remove()
