@@ -41,13 +41,14 @@ def page(api, browser):
         _missing("three.js is not installed: run `npm ci` in service/web")
     context, page, requests, errors = _open(browser, 1400, 1100)
     page.goto(f"{api.base_url}/ui/")
-    # the form is built from GET /axes and the OpenAPI document
-    wait_js(page, "document.querySelectorAll('#target-fields input').length > 0 && "
-                  "document.querySelectorAll('#download-buttons button').length > 0")
+    # the form is built from the OpenAPI document (public), its targets from GET /axes (with the key)
+    wait_js(page, "document.querySelectorAll('#download-buttons button').length > 0")
     assert page.locator("#new-walk-key").is_visible()  # no key yet: the form says where to get one
+    assert page.locator("#target-fields input").count() == 0
     page.fill("#key-input", KEY_A)
     page.click("#key-form button[type=submit]")
     page.wait_for_selector("#key-status.ok")
+    wait_js(page, "document.querySelectorAll('#target-fields input').length > 0")
     assert not page.locator("#new-walk-key").is_visible()
     page.requests, page.errors = requests, errors
     yield page
