@@ -360,3 +360,20 @@ def test_wrong_key_guesses_are_slowed(api):
     assert max(times[:9]) < 0.5 and times[-1] >= 0.75, times  # the 11th distinct one waits 0.1 s, the 14th 0.8 s
     t0 = time.monotonic()
     assert api.a.get("/jobs").status_code == 200 and time.monotonic() - t0 < 0.5  # a valid key is not slowed
+
+
+def test_messages_say_no_library_internals(api, shared_data):
+    """An XML parser's line and column (an OpenSim ExternalLoads file cut short) and C++ text never
+    reach a message."""
+    from service.limits import plain
+
+    assert plain("the tutor failed: std::bad_alloc") == "the tutor failed: out of memory"
+    assert plain("x.xml: not valid XML (mismatched tag: line 3, column 4)") == "x.xml: not valid XML (mismatched tag)"
+    d = shared_data / "opensim_gait2354_subject01_treadmill"
+    files = [("files", (p.name, p.read_bytes())) for p in (d / "subject01.osim", d / "subject01_walk1_ik.mot",
+                                                            d / "subject01_walk1_grf.mot")]
+    files.append(("files", ("subject01_walk1_grf.xml", (d / "subject01_walk1_grf.xml").read_bytes()[:700])))
+    r = api.a.post("/motions", files=files)
+    assert r.status_code == 422, r.text[:300]
+    detail = r.json()["detail"]
+    assert "not valid XML" in detail and "line" not in detail and "column" not in detail, detail
