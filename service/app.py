@@ -17,7 +17,7 @@ from fastapi.openapi.utils import get_openapi
 from service import problems
 from service.config import Settings, get_settings
 from service.db import get_database, upgrade
-from service.deps import OwnerCache
+from service.deps import GuessGuard, OwnerCache
 from service.middleware import BodyLimitMiddleware, SecurityHeadersMiddleware, page_csp
 from service.runners import make_runner
 from service.work import Compute
@@ -79,10 +79,15 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             400: {"model": _problem_model(), "description": "malformed request (e.g. an unparsable body)"},
             401: {"model": _problem_model(), "description": "missing or invalid API key"},
             422: {"model": _problem_model(), "description": "invalid request"},
+            429: {"model": _problem_model(), "description": "this API key is over one of its quotas, or this client "
+                  "sent too many wrong keys: retry after Retry-After seconds (`quota` names it)"},
+            503: {"model": _problem_model(), "description": "the database is unavailable or a compute process "
+                  "restarted: retry after Retry-After seconds"},
         },
     )
     app.state.settings = app_settings
     app.state.owner_cache = OwnerCache()
+    app.state.guess_guard = GuessGuard()
     problems.install(app)
     app.add_middleware(BodyLimitMiddleware, max_bytes=app_settings.max_body_bytes)
 
@@ -101,8 +106,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(docs.router)  # /docs: Swagger UI from local files
     app.include_router(web.router)  # the page at /ui/: public files, its API calls carry the key
     app.state.route_methods = [(r.path_regex, frozenset(r.methods or ())) for router in
-                               (health.router, motions.router, jobs.router, libraries.router, plots.router, docs.router,
-                                              web.router)
+                               (health.router, axes.router, motions.router, jobs.router, simulations.router,
+                                              libraries.router, plots.router, docs.router, web.router)
                                for r in router.routes if hasattr(r, "path_regex")]
     app.openapi = lambda: _openapi(app)
     return app
@@ -179,12 +184,17 @@ LINKS = {
         "Extrapolate": ("/motions/{motion_id}/extrapolate", "post", "motion_id"),
         "GrfPlot": ("/motions/{motion_id}/plots/grf.png", "get", "motion_id"),
         "ResidualsPlot": ("/motions/{motion_id}/plots/residuals.png", "get", "motion_id"),
+        "FilmstripPlot": ("/motions/{motion_id}/plots/filmstrip.png", "get", "motion_id"),
+        "Simulate": ("/motions/{motion_id}/simulation", "post", "motion_id"),
+        "DeleteSimulations": ("/motions/{motion_id}/simulation", "delete", "motion_id"),
+        "DeleteMotion": ("/motions/{motion_id}", "delete", "motion_id"),
     },
     ("/motions/{motion_id}/extrapolate", "post", "202"): {
         "GetJob": ("/jobs/{job_id}", "get", "job_id"),
         "JobMotions": ("/jobs/{job_id}/motions", "get", "job_id"),
         "CancelJob": ("/jobs/{job_id}/cancel", "post", "job_id"),
         "ProgressPlot": ("/jobs/{job_id}/plots/progress.png", "get", "job_id"),
+        "DeleteJob": ("/jobs/{job_id}", "delete", "job_id"),
     },
 }
 

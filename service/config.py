@@ -11,6 +11,7 @@ database also answers to ``DATABASE_URL`` and the broker to ``REDIS_URL``.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping
 from functools import lru_cache
 from pathlib import Path
@@ -24,6 +25,11 @@ from solver.native import default_cache_dir
 
 def _default_data_dir() -> Path:
     return Path.home() / ".local" / "share" / "motionx"
+
+
+def _machine_processes() -> int:
+    """One compute process per core, 2 to 8."""
+    return min(8, max(2, os.cpu_count() or 2))
 
 
 #: the runners' names (service.runners.RUNNERS maps each to its class; a test checks they agree)
@@ -111,12 +117,32 @@ class Settings(BaseSettings):
         return str(character), float(fps)
 
     # --- the API's compute processes (uploads, exports, reports, plots) --------------------
-    compute_workers: int = Field(1, ge=0, le=64, description="compute processes of the API (0: its threads, "
-                                 "for debugging only)")
+    compute_workers: int = Field(default_factory=_machine_processes, ge=0, le=64,
+                                 description="compute processes of the API, default one per core (2 to 8; 0: its "
+                                 "threads, for debugging only)")
+    compute_lane_running: int | None = Field(
+        None, ge=1, description="heavy requests of one API key computed at once; default one process fewer than "
+        "compute_workers (at least 1), so another key always finds one free")
     compute_timeout_s: float = Field(120.0, gt=0, description="time limit of one heavy request")
     compute_memory_mb: float = Field(2048.0, ge=0, description="address-space cap of each compute process, MB")
-    compute_queue: int = Field(32, ge=0, description="heavy requests waiting beyond this get 429")
+    compute_queue: int = Field(64, ge=0, description="heavy requests of all keys waiting beyond this get 429")
     export_cache_bytes: int = Field(64 * 1024 * 1024, ge=0, description="in-memory cache of exports and plots")
+    failure_memo_s: float = Field(3600.0, gt=0, description="a heavy request refused for its input is answered "
+                                  "the same way this long without computing it again")
+
+    # --- per-key quotas (429 with Retry-After for that key only) --------------------------
+    quota_heavy_requests: int = Field(8, ge=1, description="heavy requests (uploads, exports, reports, plots) of "
+                                      "one key in flight, computed or waiting")
+    quota_jobs: int = Field(250, ge=1, description="jobs of one key queued or running (a library's cells "
+                            "included)")
+    quota_simulations: int = Field(16, ge=1, description="simulations of one key queued or running")
+    quota_storage_mb: float = Field(2048.0, gt=0, description="what one key stores: motions (compressed) and "
+                                    "simulation files, MB")
+    job_slots: int | None = Field(None, ge=1, description="job processes of the whole service (default: "
+                                  "local_workers; `motionx stack` sets workers x concurrency)")
+    jobs_per_key: int | None = Field(None, ge=1, description="jobs of one key running (or dispatched) at once; "
+                                     "default one slot fewer than job_slots (at least 1), so another key's job "
+                                     "starts at once")
 
     # --- HTTP ------------------------------------------------------------------------
     host: str = "127.0.0.1"
@@ -151,6 +177,18 @@ class Settings(BaseSettings):
         """Celery's hard time limit: a backstop after the job's own limit and its watchdog
         (which stops a job ``job_stop_grace_s`` past the limit and records it)."""
         return self.job_time_limit_s + self.job_stop_grace_s + max(5.0, 0.1 * self.job_time_limit_s)
+
+    @property
+    def lane_running(self) -> int:
+        return self.compute_lane_running or max(1, self.compute_workers - 1)
+
+    @property
+    def total_job_slots(self) -> int:
+        return self.job_slots or (self.local_workers if self.runner == "local" else 2)
+
+    @property
+    def key_job_slots(self) -> int:
+        return self.jobs_per_key or max(1, self.total_job_slots - 1)
 
     @property
     def sqlalchemy_url(self) -> str:

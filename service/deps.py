@@ -13,6 +13,9 @@ builds the page (items, total, limit, the next page's link).
 
 from __future__ import annotations
 
+import asyncio
+import collections
+import hashlib
 import threading
 from dataclasses import dataclass
 from typing import Annotated
@@ -73,6 +76,49 @@ def _unauthorized(detail: str) -> Problem:
     return Problem(401, detail, headers={"WWW-Authenticate": "Bearer"})
 
 
+class GuessGuard:
+    """Slows down wrong-key guesses, per client address: past ``FREE`` *distinct* wrong keys
+    within ``WINDOW_S``, each further wrong key of that client is answered (401) only after a
+    delay that doubles with each one (up to ``MAX_DELAY_S``), one at a time; more than
+    ``MAX_WAITING`` waiting get 429. The same wrong key sent again (a misconfigured client, a
+    contract test's probe) is not a new guess, and requests with a valid key are not affected."""
+
+    FREE, WINDOW_S, BASE_DELAY_S, MAX_DELAY_S, MAX_WAITING = 10, 600.0, 0.05, 5.0, 16
+
+    def __init__(self) -> None:
+        self._seen: TTLCache[tuple[str, str], bool] = TTLCache(maxsize=100_000, ttl=self.WINDOW_S)
+        self._wrong: TTLCache[str, int] = TTLCache(maxsize=10_000, ttl=self.WINDOW_S)
+        self._locks: dict[str, asyncio.Lock] = {}
+        self._waiting: collections.Counter[str] = collections.Counter()
+
+    def delay(self, client: str) -> float:
+        n = self._wrong.get(client, 0) - self.FREE
+        return 0.0 if n <= 0 else min(self.MAX_DELAY_S, self.BASE_DELAY_S * 2.0 ** min(n, 20))
+
+    async def wrong_key(self, client: str, key: str) -> Problem:
+        """Count a wrong key of ``client``; wait its turn and its delay; the 401 (or 429) to raise."""
+        seen = (client, hashlib.sha256(key.encode("utf-8", "replace")).hexdigest())
+        if seen not in self._seen:
+            self._seen[seen] = True
+            self._wrong[client] = self._wrong.get(client, 0) + 1
+        d = self.delay(client)
+        if d <= 0:
+            return _unauthorized("invalid API key")
+        if self._waiting[client] >= self.MAX_WAITING:
+            return Problem(429, "too many wrong API keys from this client; retry later",
+                           headers={"Retry-After": str(int(self.MAX_DELAY_S))}, quota="wrong_keys")
+        self._waiting[client] += 1
+        try:
+            async with self._locks.setdefault(client, asyncio.Lock()):
+                await asyncio.sleep(d)
+        finally:
+            self._waiting[client] -= 1
+            if self._waiting[client] <= 0:
+                del self._waiting[client]
+                self._locks.pop(client, None)
+        return _unauthorized("invalid API key")
+
+
 async def get_owner(
     request: Request,
     api_key: Annotated[str | None, Depends(api_key_header)],
@@ -88,7 +134,7 @@ async def get_owner(
     if not key:
         raise _unauthorized("an API key is required (header X-API-Key or Authorization: Bearer)")
     if len(key) > 512:
-        raise _unauthorized("invalid API key")
+        raise await request.app.state.guess_guard.wrong_key(request.client.host if request.client else "", key)
     cache: OwnerCache = request.app.state.owner_cache
     hit = cache.get(key)
     if hit is not None:
@@ -100,12 +146,19 @@ async def get_owner(
 
     owner = await run_in_threadpool(lookup)
     if owner is None:
-        raise _unauthorized("invalid API key")
+        guard: GuessGuard = request.app.state.guess_guard
+        raise await guard.wrong_key(request.client.host if request.client else "", key)
     cache.put(key, owner)
     return owner
 
 
 OwnerDep = Annotated[str, Depends(get_owner)]
+
+#: the OpenAPI responses of a route with per-key quotas, and of one that can meet an infrastructure fault
+QUOTA_429 = {"description": "this API key is over one of its quotas (the body's `quota` names it): retry after "
+                            "Retry-After seconds"}
+UNAVAILABLE_503 = {"description": "a compute process restarted or the database is unavailable: retry after "
+                                  "Retry-After seconds"}
 
 
 # --- pages of a list --------------------------------------------------------------------

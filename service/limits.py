@@ -19,6 +19,7 @@ values are built: :mod:`solver.motion` and :mod:`solver.character`.
 from __future__ import annotations
 
 import math
+import re
 from typing import Any
 
 MAX_TUTOR_S = 4.0
@@ -108,6 +109,23 @@ def clip(text: str, n: int = 300) -> str:
     return text if len(text) <= n else text[: n - 1] + "…"
 
 
+#: what a library's internals say, and what a person reads instead
+_INTERNALS = (
+    (re.compile(r"std::bad_alloc"), "out of memory"),
+    (re.compile(r"\bstd::[A-Za-z_:]+"), "an internal error of a library"),
+    (re.compile(r"\bSimTK\b[^.;]*"), "the model could not be read"),
+    (re.compile(r":\s*line \d+, column \d+"), ""),  # an XML parser's position (expat)
+)
+
+
+def plain(text: str) -> str:
+    """A message without C++ or parser internals (``std::bad_alloc``, a parser's line and
+    column): every ``detail`` passes through it."""
+    for pattern, repl in _INTERNALS:
+        text = pattern.sub(repl, text)
+    return text
+
+
 def refusal_text(e: BaseException, fallback: str, n: int = 500) -> str:
     """What a client may read about exception ``e``: the message of a refusal our own code
     raised on purpose (a subclass of ``ValueError`` defined in ``solver``, ``mjcf`` or
@@ -116,5 +134,5 @@ def refusal_text(e: BaseException, fallback: str, n: int = 500) -> str:
     names internals (the caller logs it in full)."""
     ours = type(e).__module__.split(".")[0] in ("solver", "mjcf", "service")
     if isinstance(e, ValueError) and type(e) is not ValueError and ours and str(e):
-        return clip(str(e), n)
+        return clip(plain(str(e)), n)
     return fallback

@@ -42,6 +42,7 @@ class MotionRow(Base):
         UniqueConstraint("job_id", "step", name="uq_motions_job_step"),
         UniqueConstraint("parent_id", "tutor_key", name="uq_motions_parent_tutor"),
         Index("ix_motions_owner_created", "owner", "created_at"),
+        Index("ix_motions_parent", "parent_id"),
     )
 
     id: Mapped[str] = mapped_column(String(40), primary_key=True)
@@ -60,6 +61,7 @@ class MotionRow(Base):
     tutor_key: Mapped[str | None] = mapped_column(String(100), nullable=True)
     data: Mapped[bytes] = mapped_column(LargeBinary, deferred=True)  # zlib-compressed motion file v1 (JSON)
     sha256: Mapped[str] = mapped_column(String(64))  # of the uncompressed JSON
+    size: Mapped[int] = mapped_column(Integer, default=0, server_default="0")  # bytes of data (storage quota)
     validation: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True, deferred=True)
     plausible: Mapped[bool | None] = mapped_column(Boolean, nullable=True)
     created_at: Mapped[float] = mapped_column(Float)
@@ -67,7 +69,8 @@ class MotionRow(Base):
 
 class JobRow(Base):
     __tablename__ = "jobs"
-    __table_args__ = (Index("ix_jobs_status_dispatched", "status", "dispatched_at"),)
+    __table_args__ = (Index("ix_jobs_status_dispatched", "status", "dispatched_at"),
+                      Index("ix_jobs_owner_status", "owner", "status"))
 
     id: Mapped[str] = mapped_column(String(40), primary_key=True)
     owner: Mapped[str] = mapped_column(String(40), index=True)

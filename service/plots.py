@@ -425,6 +425,10 @@ def _stick_lines(character, q: np.ndarray) -> np.ndarray:
     return np.stack([poss[segs], tips], axis=1)
 
 
+#: the most frames whose heading and soles the filmstrip's top view draws (a cycle has fewer)
+TOP_FRAMES = 240
+
+
 def filmstrip_figure(motion, *, title: str | None = None, max_frames: int = 16):
     """Side, rear and top views of a motion's cycle. Side and rear: one stick figure per frame,
     side by side (each frame centred on its pelvis), with each foot's sole as the exports draw
@@ -545,7 +549,10 @@ def filmstrip_figure(motion, *, title: str | None = None, max_frames: int = 16):
             c = o + k * flight.going * dirn
             top.plot([c[0] - across[0], c[0] + across[0]], [c[1] - across[1], c[1] + across[1]], color="0.6", lw=0.7)
     sw = world_soles
-    for t in range(N):
+    # headings and soles: every frame of a cycle, at most TOP_FRAMES of a long motion (each is a matplotlib
+    # artist: a 29,000-frame capture drew for minutes)
+    top_frames = range(N) if N <= TOP_FRAMES else np.unique(np.linspace(0, N - 1, TOP_FRAMES).round().astype(int))
+    for t in top_frames:
         top.annotate("", xy=(q[0, t] + 0.12 * leg * math.cos(q[3, t]), q[1, t] + 0.12 * leg * math.sin(q[3, t])),
                      xytext=(q[0, t], q[1, t]), arrowprops={"arrowstyle": "->", "color": "0.3", "lw": 0.8})
         for k, s in enumerate(FEET if has_soles else ()):

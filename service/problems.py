@@ -14,7 +14,11 @@ from typing import Any
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, Response
+from sqlalchemy.exc import DBAPIError, DisconnectionError, InterfaceError, OperationalError, SQLAlchemyError
+from sqlalchemy.exc import TimeoutError as PoolTimeout
 from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from service.limits import plain
 
 log = logging.getLogger(__name__)
 
@@ -32,6 +36,7 @@ TITLES = {
     413: "Content Too Large",
     415: "Unsupported Media Type",
     422: "Unprocessable Content",
+    429: "Too Many Requests",
     500: "Internal Server Error",
     501: "Not Implemented",
     503: "Service Unavailable",
@@ -61,6 +66,7 @@ def problem_response(
     status: int, detail: str, *, instance: str | None = None, type: str = "about:blank", title: str | None = None,
     headers: dict[str, str] | None = None, **extra: Any,
 ) -> JSONResponse:
+    detail = plain(detail)
     if len(detail) > MAX_DETAIL:
         detail = detail[: MAX_DETAIL - 1] + "…"
     body: dict[str, Any] = {"type": type, "title": title or TITLES.get(status, "Error"), "status": status,
@@ -143,7 +149,49 @@ def install(app: FastAPI) -> None:
             detail = f"{_short(request.method, 20)} is not allowed here; allowed: {allow}"
         return problem_response(exc.status_code, detail, instance=request.url.path, headers=headers or None)
 
+    from service.work import ClientGone  # the compute layer's exception (service.work imports this module)
+
+    @app.exception_handler(ClientGone)
+    async def _gone(request: Request, exc: ClientGone):  # nobody reads it: the client has closed its connection
+        return problem_response(499, "the client closed the request; its work was cancelled",
+                                instance=request.url.path, title="Client Closed Request")
+
+    @app.exception_handler(SQLAlchemyError)
+    async def _database(request: Request, exc: SQLAlchemyError):
+        return _database_problem(request, exc)
+
     @app.exception_handler(Exception)
     async def _unexpected(request: Request, exc: Exception):
+        if database_unavailable(exc):
+            return _database_problem(request, exc)
         log.exception("unhandled error on %s %s", request.method, request.url.path)
         return problem_response(500, "internal error (logged on the server)", instance=request.url.path)
+
+
+#: Retry-After of a 503 while the database is out of reach (a restart takes seconds)
+DATABASE_RETRY_S = 3
+
+
+def database_unavailable(exc: BaseException) -> bool:
+    """An error that means the database cannot be reached or used right now (a restart, a
+    connection lost, the pool exhausted, SQLite busy), anywhere in the exception's chain."""
+    seen = 0
+    e: BaseException | None = exc
+    while e is not None and seen < 10:
+        if isinstance(e, (OperationalError, InterfaceError, DisconnectionError, PoolTimeout)):
+            return True
+        if isinstance(e, DBAPIError) and e.connection_invalidated:
+            return True
+        e = e.__cause__ or e.__context__
+        seen += 1
+    return False
+
+
+def _database_problem(request: Request, exc: BaseException) -> JSONResponse:
+    if database_unavailable(exc):
+        log.warning("database unavailable on %s %s: %s", request.method, request.url.path,
+                    str(exc).splitlines()[0][:300] if str(exc) else type(exc).__name__)
+        return problem_response(503, "the database is unavailable right now; retry in a few seconds",
+                                instance=request.url.path, headers={"Retry-After": str(DATABASE_RETRY_S)})
+    log.error("database error on %s %s", request.method, request.url.path, exc_info=exc)
+    return problem_response(500, "internal error (logged on the server)", instance=request.url.path)

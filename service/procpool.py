@@ -57,6 +57,11 @@ class RemoteError(RuntimeError):
     """An exception of the child that could not be sent back as itself (type and message kept)."""
 
 
+class Abandoned(RuntimeError):
+    """The task was cancelled by its caller (:meth:`ProcPool.cancel`): dropped from the queue, or its
+    process killed while it ran."""
+
+
 # --- the child ------------------------------------------------------------------------------
 
 
@@ -149,7 +154,9 @@ class _Task:
     kwargs: dict
     timeout: float | None
     future: Future
+    lane: str = ""
     deadline: float | None = None
+    abandoned: bool = False
 
 
 @dataclass
@@ -169,16 +176,24 @@ class _Slot:
 
 @dataclass
 class ProcPool:
-    """``size`` supervised child processes. ``submit(fn, *args, timeout=...)`` returns a
-    :class:`concurrent.futures.Future`; ``fn`` must be importable (pickled by reference)."""
+    """``size`` supervised child processes. ``submit(fn, *args, timeout=..., lane=...)`` returns a
+    :class:`concurrent.futures.Future`; ``fn`` must be importable (pickled by reference).
+
+    **Lanes.** Each task belongs to a lane (the API uses one per API key). Waiting tasks are
+    handed to free processes round-robin over the lanes, never more than ``lane_limit`` of one
+    lane at a time: a lane with many long tasks cannot take every process, and a task of another
+    lane starts at the next free process however long the first lane's queue is.
+    :meth:`cancel` drops a waiting task or kills the process of a running one (its caller went
+    away)."""
 
     name: str
     size: int
     memory_mb: float | None = None
     warm: Sequence[str] = ()
     env: dict[str, str] | None = None
+    lane_limit: int | None = None
     _slots: list[_Slot] = field(default_factory=list, repr=False)
-    _queue: collections.deque = field(default_factory=collections.deque, repr=False)
+    _lanes: dict[str, collections.deque] = field(default_factory=dict, repr=False)
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
     _thread: threading.Thread | None = field(default=None, repr=False)
     _stop: bool = field(default=False, repr=False)
@@ -199,14 +214,47 @@ class ProcPool:
         self._thread.start()
         return self
 
-    def submit(self, fn: Callable[..., Any], *args: Any, timeout: float | None = None, **kwargs: Any) -> Future:
+    def submit(self, fn: Callable[..., Any], *args: Any, timeout: float | None = None, lane: str = "",
+               **kwargs: Any) -> Future:
         fut: Future = Future()
         with self._lock:
             if self._stop:
                 raise RuntimeError(f"pool {self.name!r} is closed")
-            self._queue.append(_Task(next(self._ids), fn, args, kwargs, timeout, fut))
+            self._lanes.setdefault(lane, collections.deque()).append(
+                _Task(next(self._ids), fn, args, kwargs, timeout, fut, lane))
         self._wake()
         return fut
+
+    def cancel(self, fut: Future) -> bool:
+        """Cancel the task of ``fut``: a waiting one leaves the queue, a running one has its process
+        killed (the slot gets a new one). Returns False when the task had already ended."""
+        with self._lock:
+            for lane, q in self._lanes.items():
+                for t in q:
+                    if t.future is fut:
+                        q.remove(t)
+                        if not q:
+                            del self._lanes[lane]
+                        fut.cancel()
+                        return True
+            for s in self._slots:
+                if s.task is not None and s.task.future is fut and not fut.done():
+                    s.task.abandoned = True
+                    break
+            else:
+                return False
+        self._wake()
+        return True
+
+    def stats(self) -> dict[str, Any]:
+        """Processes, tasks running and waiting, and per lane (running, waiting)."""
+        with self._lock:
+            lanes: dict[str, list[int]] = {k: [0, len(q)] for k, q in self._lanes.items()}
+            for s in self._slots:
+                if s.task is not None:
+                    lanes.setdefault(s.task.lane, [0, 0])[0] += 1
+            return {"processes": self.size, "running": sum(v[0] for v in lanes.values()),
+                    "waiting": sum(v[1] for v in lanes.values()), "lanes": {k: tuple(v) for k, v in lanes.items()}}
 
     def pids(self) -> list[int]:
         with self._lock:
@@ -214,7 +262,7 @@ class ProcPool:
 
     def busy(self) -> int:
         with self._lock:
-            return sum(1 for s in self._slots if s.task is not None) + len(self._queue)
+            return sum(1 for s in self._slots if s.task is not None) + sum(len(q) for q in self._lanes.values())
 
     def healthy(self) -> bool:
         return self._thread is not None and self._thread.is_alive() and not self._stop
@@ -297,8 +345,8 @@ class ProcPool:
         finally:
             with self._lock:
                 self._stop = True
-                queued = list(self._queue)
-                self._queue.clear()
+                queued = [t for q in self._lanes.values() for t in q]
+                self._lanes.clear()
             for t in queued:
                 if not t.future.done():
                     t.future.set_exception(RuntimeError(f"pool {self.name!r} closed"))
@@ -315,11 +363,11 @@ class ProcPool:
                     log.exception("pool %s: could not start a process", self.name)
                     continue
                 sel.register(slot.conn_out.fileno(), selectors.EVENT_READ, slot)
-        # hand queued tasks to idle children
+        # hand queued tasks to idle children, round-robin over the lanes
         for slot in self._slots:
             if slot.ready and slot.task is None:
                 with self._lock:
-                    task = self._queue.popleft() if self._queue else None
+                    task = self._next_task()
                 if task is None:
                     break
                 if not task.future.set_running_or_notify_cancel():
@@ -373,12 +421,29 @@ class ProcPool:
             if slot.proc is None:
                 continue
             t = slot.task
-            if t is not None and t.deadline is not None and now > t.deadline:
+            if t is not None and t.abandoned:
+                log.info("pool %s: task cancelled by its caller; stopping process %s", self.name, slot.pid)
+                self._forget(sel, slot, Abandoned("the task was cancelled by its caller"))
+            elif t is not None and t.deadline is not None and now > t.deadline:
                 log.warning("pool %s: task ran past its %g s limit; killing process %s", self.name, t.timeout,
                             slot.pid)
                 self._forget(sel, slot, TaskTimeout(f"the task ran past its time limit of {t.timeout:g} s"))
             elif slot.proc.poll() is not None:
                 self._forget(sel, slot, None)
+
+    def _next_task(self) -> _Task | None:
+        """The next task to run (under the lock): the first lane in turn with a task waiting and
+        fewer than ``lane_limit`` running; that lane then goes to the back of the turn."""
+        running: collections.Counter[str] = collections.Counter(s.task.lane for s in self._slots if s.task is not None)
+        for lane in list(self._lanes):
+            if self.lane_limit is not None and running[lane] >= self.lane_limit:
+                continue
+            q = self._lanes.pop(lane)
+            task = q.popleft()
+            if q:
+                self._lanes[lane] = q  # re-inserted: the back of the turn
+            return task
+        return None
 
     def _forget(self, sel: selectors.BaseSelector, slot: _Slot, why: Exception | None) -> None:
         if slot.conn_out is not None:

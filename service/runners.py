@@ -41,6 +41,8 @@ class Runner(Protocol):
 
     def submit(self, job_id: str) -> bool: ...
 
+    def dispatch(self) -> list[str]: ...
+
     def sweep(self) -> list[str]: ...
 
     def health(self) -> str: ...
@@ -51,6 +53,12 @@ class Runner(Protocol):
 def _mark_dispatched(db: Database, job_id: str) -> None:
     with db.write() as s:
         store.mark_dispatched(s, job_id=job_id)
+
+
+def _fair_turns(db: Database, settings: Settings, runner: str) -> list[str]:
+    """The queued jobs whose turn it is (:func:`service.store.dispatch_fair`), marked dispatched."""
+    with db.write() as s:
+        return store.dispatch_fair(s, runner=runner, per_key=settings.key_job_slots)
 
 
 class LocalRunner:
@@ -69,14 +77,32 @@ class LocalRunner:
         self._lock = threading.Lock()
         self._pool: ProcPool | None = None
         self._inflight: dict[str, Future] = {}
+        self._dispatch_lock = threading.Lock()
 
     def start(self) -> None:
         with self._lock:
             self._pool = ProcPool("job", self.settings.local_workers, memory_mb=self.settings.job_memory_mb,
                                   warm=JOB_MODULES).start()
+        with self.db.write() as s:  # the previous process's queue is gone: queued jobs take their turn again
+            store.forget_dispatches(s, runner=self.name)
         self.recover(all_unfinished=True)
+        self.dispatch()
+
+    def dispatch(self) -> list[str]:
+        """Submit the queued jobs whose turn it is: a key has at most ``jobs_per_key`` jobs in the
+        job processes at once (:func:`service.store.dispatch_fair`), the rest wait in SQL."""
+        with self._dispatch_lock:
+            ids = _fair_turns(self.db, self.settings, self.name)
+            for j in ids:
+                self._submit(j)
+        return ids
 
     def submit(self, job_id: str) -> bool:
+        ok = self._submit(job_id)
+        _mark_dispatched(self.db, job_id)
+        return ok
+
+    def _submit(self, job_id: str) -> bool:
         with self._lock:
             if self._pool is None:
                 raise RuntimeError("LocalRunner not started")
@@ -90,7 +116,6 @@ class LocalRunner:
                 return False
             self._inflight[job_id] = fut
         fut.add_done_callback(lambda f, j=job_id: self._done(j, f))
-        _mark_dispatched(self.db, job_id)
         return True
 
     def _done(self, job_id: str, fut: Future) -> None:
@@ -99,7 +124,10 @@ class LocalRunner:
                 del self._inflight[job_id]
             closing = self._pool is None
         exc = fut.exception() if not fut.cancelled() else None
-        if exc is None or closing:
+        if closing:
+            return
+        if exc is None:  # a job ended: the next key's turn
+            self._dispatch_soon()
             return
         if isinstance(exc, TaskTimeout):  # the job ignored its own limits: it ends here, failed
             log.error("job %s: its process was killed past the hard time limit", job_id)
@@ -116,6 +144,15 @@ class LocalRunner:
         else:  # e.g. the database was unreachable: the sweep resubmits it
             log.error("job %s raised in its process: %r", job_id, exc)
 
+    def _dispatch_soon(self) -> None:
+        def run() -> None:
+            try:
+                self.dispatch()
+            except Exception:  # the periodic sweep tries again
+                log.warning("dispatch failed", exc_info=True)
+
+        threading.Thread(target=run, name="local-dispatch", daemon=True).start()
+
     def _resubmit_soon(self, job_id: str, delay: float = 0.2) -> None:
         def run() -> None:
             try:
@@ -128,24 +165,26 @@ class LocalRunner:
         t.start()
 
     def recover(self, *, all_unfinished: bool = False) -> list[str]:
+        """Resubmit the running jobs whose process is gone (all of them on start), and the queued
+        jobs dispatched to this runner that are no longer in its pool; never-dispatched ones wait
+        for their turn (:meth:`dispatch`)."""
         big = 1e18
-        with self.db.read() as s:
-            ids = store.stranded_jobs(
-                s, runner=self.name,
-                queued_after=-big if all_unfinished else self.settings.redispatch_after,
-                running_after=-big if all_unfinished else 0.0,
-                limit=1000,
-            )
-        with self._lock:
-            ids = [j for j in ids if j not in self._inflight]
-        for j in ids:
-            self.submit(j)
+        with self._dispatch_lock:  # a job being dispatched is in self._inflight before the lock is released
+            with self.db.read() as s:  # the pool's queue is this process's memory: a dispatched job not in it
+                ids = store.stranded_jobs(  # was lost (its process failed, e.g. the database was unreachable)
+                    s, runner=self.name, queued_after=0.0,
+                    running_after=-big if all_unfinished else 0.0, limit=1000, dispatched_only=True,
+                )
+            with self._lock:
+                ids = [j for j in ids if j not in self._inflight]
+            for j in ids:
+                self.submit(j)
         if ids:
             log.info("local runner: (re)submitted %d job(s)", len(ids))
         return ids
 
     def sweep(self) -> list[str]:
-        return self.recover()
+        return self.recover() + self.dispatch()
 
     def health(self) -> str:
         pool = self._pool
@@ -174,14 +213,30 @@ class CeleryRunner:
     def start(self) -> None:
         self.sweep()
 
-    def submit(self, job_id: str) -> bool:
+    def _send(self, job_id: str) -> bool:
         try:
             self.app.send_task(TASK_NAME, args=[job_id], queue=self.settings.celery_queue)
         except Exception as e:  # broker down: the job stays queued in SQL; the sweep dispatches it later
             log.warning("could not dispatch job %s (%s); will retry", job_id, e)
             return False
+        return True
+
+    def submit(self, job_id: str) -> bool:
+        if not self._send(job_id):
+            return False
         _mark_dispatched(self.db, job_id)
         return True
+
+    def dispatch(self) -> list[str]:
+        """Publish the queued jobs whose turn it is: a key has at most ``jobs_per_key`` jobs running
+        or in the broker's queue (:func:`service.store.dispatch_fair`); the rest wait in SQL and
+        are published by the sweep as that key's jobs end."""
+        ids = _fair_turns(self.db, self.settings, self.name)
+        failed = [j for j in ids if not self._send(j)]
+        if failed:
+            with self.db.write() as s:
+                store.undo_dispatch(s, job_ids=failed)
+        return [j for j in ids if j not in failed]
 
     def sweep(self) -> list[str]:
         """Dispatch again what Redis would only redeliver after its visibility timeout: a job
@@ -190,11 +245,11 @@ class CeleryRunner:
         with self.db.read() as s:
             ids = store.stranded_jobs(s, runner=self.name, queued_after=self.settings.redispatch_after,
                                       running_after=self.settings.redispatch_expired_s,
-                                      redispatch_gap=self.settings.redispatch_gap_s)
+                                      redispatch_gap=self.settings.redispatch_gap_s, dispatched_only=True)
         done = [j for j in ids if self.submit(j)]
         if done:
             log.info("celery runner: re-dispatched %d stranded job(s)", len(done))
-        return done
+        return done + self.dispatch()
 
     def health(self) -> str:
         try:

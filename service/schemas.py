@@ -214,6 +214,8 @@ class Problem(BaseModel):
     detail: str
     instance: str | None = None
     errors: list[dict[str, Any]] | None = None
+    quota: str | None = Field(None, description="on a 429: the quota the key is over (heavy_requests, jobs, "
+                              "simulations, storage)")
 
 
 class Health(BaseModel):
@@ -223,6 +225,21 @@ class Health(BaseModel):
     broker: str | None = None
     compute: str | None = None
     schema_revision: str | None = None
+    saturation: dict[str, Any] | None = Field(
+        None, description="how busy the service is: compute processes, heavy requests running and waiting, "
+        "keys with heavy requests; jobs queued, dispatched and running, job slots and per-key turns")
+
+
+class Usage(BaseModel):
+    """A key's usage next to its quotas (docs/service.md, "Sharing the service")."""
+
+    storage_bytes: int
+    storage_limit_bytes: int
+    jobs_in_flight: int
+    jobs_limit: int
+    simulations_in_flight: int
+    simulations_limit: int
+    heavy_requests_limit: int
 
 
 # --- libraries ---------------------------------------------------------------------------------

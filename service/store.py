@@ -20,7 +20,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
-from sqlalchemy import Select, delete, func, or_, select, update
+from sqlalchemy import Select, delete, false, func, or_, select, update
 from sqlalchemy.orm import Session
 
 from service.models import (
@@ -119,6 +119,7 @@ def _motion_fields(motion: Motion) -> dict[str, Any]:
         has_wrenches=motion.wrenches is not None,
         data=data,
         sha256=digest,
+        size=len(data),
     )
 
 
@@ -140,7 +141,7 @@ def add_encoded(session: Session, *, owner: str, encoded: Any, name: str = "") -
     row = MotionRow(
         id=new_id("m"), owner=owner, kind=encoded.kind, name=name, parent_id=None, created_at=now(),
         character=encoded.character, n=encoded.n, frames=encoded.frames, fps=encoded.fps,
-        has_wrenches=encoded.has_wrenches, data=encoded.data, sha256=encoded.sha256,
+        has_wrenches=encoded.has_wrenches, data=encoded.data, sha256=encoded.sha256, size=len(encoded.data),
     )
     session.add(row)
     session.flush()
@@ -361,10 +362,11 @@ def create_job(
     idempotency_key: str | None = None,
     request_hash: str = "",
     kind: str = "extrapolate",
+    created_at: float | None = None,
 ) -> JobRow:
     """Insert a queued job (and its idempotency record). A concurrent duplicate key makes
     the commit fail with IntegrityError; the caller then reads the winner."""
-    t = now()
+    t = now() if created_at is None else created_at
     job = JobRow(
         id=new_id("j"), owner=owner, motion_id=motion_id, kind=kind, spec=spec, status="queued", message="",
         lam_reached=0.0, steps=0, solves=0, attempts=0, max_attempts=max_attempts, cancel_requested=False,
@@ -396,6 +398,155 @@ def list_jobs(session: Session, *, owner: str, offset: int = 0, limit: int = 50)
 
 def mark_dispatched(session: Session, *, job_id: str) -> None:
     session.execute(update(JobRow).where(JobRow.id == job_id).values(dispatched_at=now()))
+
+
+def undo_dispatch(session: Session, *, job_ids: Sequence[str]) -> None:
+    """Forget the dispatch of queued jobs that did not reach a runner (the broker was down): the
+    next :func:`dispatch_fair` takes them again."""
+    if job_ids:
+        session.execute(update(JobRow).where(JobRow.id.in_(list(job_ids)), JobRow.status == "queued")
+                        .values(dispatched_at=None))
+
+
+def forget_dispatches(session: Session, *, runner: str) -> int:
+    """Queued jobs of ``runner`` count as never dispatched (the LocalRunner on start: its previous
+    process's queue is gone)."""
+    r = session.execute(update(JobRow).where(JobRow.runner == runner, JobRow.status == "queued",
+                                             JobRow.dispatched_at.is_not(None)).values(dispatched_at=None))
+    return r.rowcount or 0
+
+
+def dispatch_fair(session: Session, *, runner: str, per_key: int, limit: int = 1000) -> list[str]:
+    """The queued jobs of ``runner`` to dispatch now, marked dispatched (in the caller's write
+    transaction): of each key, its oldest never-dispatched jobs while it has fewer than
+    ``per_key`` jobs running or dispatched. So one key's many jobs wait in SQL, not in the
+    broker's queue ahead of other keys' jobs; the rest are dispatched as its jobs end."""
+    active = dict(session.execute(
+        select(JobRow.owner, func.count()).where(
+            JobRow.runner == runner,
+            (JobRow.status == "running") | ((JobRow.status == "queued") & JobRow.dispatched_at.is_not(None)))
+        .group_by(JobRow.owner)).all())
+    waiting = session.execute(
+        select(JobRow.id, JobRow.owner).where(JobRow.runner == runner, JobRow.status == "queued",
+                                              JobRow.dispatched_at.is_(None))
+        .order_by(JobRow.created_at, JobRow.id).limit(limit)).all()
+    out = []
+    for job_id, owner in waiting:
+        if active.get(owner, 0) < per_key:
+            active[owner] = active.get(owner, 0) + 1
+            out.append(job_id)
+    if out:
+        session.execute(update(JobRow).where(JobRow.id.in_(out)).values(dispatched_at=now()))
+    return out
+
+
+# --- per-key usage (quotas) ------------------------------------------------------------------
+
+ACTIVE = ("queued", "running")
+
+
+def active_jobs(session: Session, *, owner: str, kind: str | None = None) -> int:
+    """The key's jobs queued or running (``kind``: of that kind only)."""
+    q = select(func.count()).select_from(JobRow).where(JobRow.owner == owner, JobRow.status.in_(ACTIVE))
+    if kind is not None:
+        q = q.where(JobRow.kind == kind)
+    return session.scalar(q) or 0
+
+
+def storage_bytes(session: Session, *, owner: str) -> int:
+    """What the key stores: its motions (compressed) and its simulations' files, bytes."""
+    motions = session.scalar(select(func.coalesce(func.sum(MotionRow.size), 0)).where(MotionRow.owner == owner))
+    files = session.scalar(
+        select(func.coalesce(func.sum(SimulationFileRow.size), 0))
+        .join(SimulationRow, SimulationRow.id == SimulationFileRow.simulation_id)
+        .where(SimulationRow.owner == owner))
+    return int(motions or 0) + int(files or 0)
+
+
+# --- deletion -------------------------------------------------------------------------------
+
+
+@dataclass
+class Deletion:
+    """What goes with a resource: motions, jobs, libraries and simulations (ids)."""
+
+    motions: set[str]
+    jobs: set[str]
+    libraries: set[str]
+    simulations: set[str]
+
+    def active_jobs(self, session: Session) -> list[str]:
+        if not self.jobs:
+            return []
+        return list(session.scalars(select(JobRow.id).where(JobRow.id.in_(list(self.jobs)),
+                                                            JobRow.status.in_(ACTIVE)).limit(5)))
+
+
+def _ids(session: Session, q) -> set[str]:
+    return set(session.scalars(q))
+
+
+def deletion(session: Session, *, motions: Sequence[str] = (), jobs: Sequence[str] = (),
+             libraries: Sequence[str] = ()) -> Deletion:
+    """Everything that hangs on these motions, jobs and libraries: a motion's tutors, the jobs
+    started from a motion (or using it as their tutor) and their λ optima, the libraries of a
+    motion and their cells, and the simulations of any of them — to the end of the chain."""
+    d = Deletion(set(motions), set(jobs), set(libraries), set())
+    while True:
+        before = (len(d.motions), len(d.jobs), len(d.libraries))
+        for lib in session.scalars(select(LibraryRow).where(
+                LibraryRow.id.in_(list(d.libraries)) | LibraryRow.motion_id.in_(list(d.motions)))):
+            d.libraries.add(lib.id)
+            d.jobs |= {c["job_id"] for c in (lib.spec or {}).get("cells", [])}
+        m = list(d.motions)
+        d.motions |= _ids(session, select(MotionRow.id).where(MotionRow.parent_id.in_(m)))
+        d.jobs |= _ids(session, select(JobRow.id).where(JobRow.motion_id.in_(m) | JobRow.tutor_motion_id.in_(m)))
+        d.motions |= _ids(session, select(MotionRow.id).where(MotionRow.job_id.in_(list(d.jobs))))
+        if (len(d.motions), len(d.jobs), len(d.libraries)) == before:
+            break
+    d.simulations = _ids(session, select(SimulationRow.id).where(
+        SimulationRow.motion_id.in_(list(d.motions)) | SimulationRow.job_id.in_(list(d.jobs))))
+    return d
+
+
+def delete_all(session: Session, d: Deletion) -> None:
+    """Delete what :func:`deletion` found (in the caller's write transaction)."""
+    sims, jobs, motions = list(d.simulations), list(d.jobs), list(d.motions)
+    delete_simulations(session, simulation_ids=sims)
+    if jobs:
+        session.execute(delete(ProgressRow).where(ProgressRow.job_id.in_(jobs)))
+        session.execute(delete(IdempotencyRow).where(IdempotencyRow.job_id.in_(jobs)))
+    if motions:
+        session.execute(delete(TutorClaimRow).where(TutorClaimRow.parent_id.in_(motions)))
+        session.execute(delete(MotionRow).where(MotionRow.id.in_(motions)))
+    if jobs:
+        session.execute(delete(MotionRow).where(MotionRow.job_id.in_(jobs)))
+        session.execute(delete(JobRow).where(JobRow.id.in_(jobs)))
+    if d.libraries:
+        session.execute(delete(LibraryRow).where(LibraryRow.id.in_(list(d.libraries))))
+
+
+def delete_simulations(session: Session, *, simulation_ids: Sequence[str]) -> None:
+    if simulation_ids:
+        ids = list(simulation_ids)
+        session.execute(delete(SimulationFileRow).where(SimulationFileRow.simulation_id.in_(ids)))
+        session.execute(delete(SimulationRow).where(SimulationRow.id.in_(ids)))
+
+
+def motion_simulations(session: Session, *, motion_id: str) -> list[SimulationRow]:
+    return list(session.scalars(select(SimulationRow).where(SimulationRow.motion_id == motion_id)))
+
+
+def blob_size(session: Session, column, key_column, key) -> int | None:
+    """The length of one stored blob (``column`` of the row whose ``key_column`` is ``key``)."""
+    return session.scalar(select(func.length(column)).where(key_column == key))
+
+
+def blob_chunk(session: Session, column, where, offset: int, size: int) -> bytes:
+    """``size`` bytes of a stored blob from ``offset``, read in SQL (``substr``: SQLite and
+    PostgreSQL alike), so a download never holds the whole blob in the API's memory."""
+    out = session.scalar(select(func.substr(column, offset + 1, size)).where(*where))
+    return bytes(out or b"")
 
 
 def request_cancel(session: Session, *, job_id: str) -> JobRow | None:
@@ -584,22 +735,23 @@ def fail_unfinished(session: Session, *, job_id: str, message: str) -> bool:
 
 def stranded_jobs(
     session: Session, *, runner: str, queued_after: float, running_after: float, limit: int = 100,
-    redispatch_gap: float = 0.0,
+    redispatch_gap: float = 0.0, dispatched_only: bool = False,
 ) -> list[str]:
     """Jobs nobody will run unless dispatched again: queued and never dispatched (or
     dispatched longer ago than ``queued_after`` s), or running with a lease expired for
     longer than ``running_after`` s (its process died: a broker would only redeliver it after
     its visibility timeout). Once re-dispatched for an expired lease (dispatched after the lease
     ended), a running job is not dispatched again within ``redispatch_gap`` s (one new delivery
-    at a time, while it waits for a free worker)."""
+    at a time, while it waits for a free worker). ``dispatched_only``: queued jobs never
+    dispatched are left to :func:`dispatch_fair`."""
     t = now()
+    never = JobRow.dispatched_at.is_(None) if not dispatched_only else false()
     q: Select = (
         select(JobRow.id)
         .where(
             JobRow.runner == runner,
             or_(
-                (JobRow.status == "queued")
-                & (JobRow.dispatched_at.is_(None) | (JobRow.dispatched_at < t - queued_after)),
+                (JobRow.status == "queued") & (never | (JobRow.dispatched_at < t - queued_after)),
                 (JobRow.status == "running") & (JobRow.lease_until < t - running_after)
                 & (JobRow.dispatched_at.is_(None) | (JobRow.dispatched_at < JobRow.lease_until)
                    | (JobRow.dispatched_at < t - redispatch_gap)),
@@ -616,20 +768,23 @@ def stranded_jobs(
 
 def create_library(
     session: Session, *, owner: str, motion_id: str, spec: dict, cells: Sequence[tuple[str, dict, dict]],
-    runner: str, max_attempts: int,
+    runner: str, max_attempts: int, dispatch: Sequence[str] = (),
 ) -> tuple[LibraryRow, list[str]]:
     """Insert a library and its cell jobs (one queued job per (key, parameters, job spec)), in
     the caller's transaction: all of them or none. Returns the row and the job ids in the
-    order given."""
+    order given. The jobs are created (and so dispatched) in the order of the keys in
+    ``dispatch`` (default: as given)."""
     lid = new_id("l")
     t = now()
-    listed, ids = [], []
-    for key, params, job_spec in cells:
+    turn = {key: i for i, key in enumerate(dispatch)}
+    by_key: dict[str, str] = {}
+    for key, _, job_spec in sorted(cells, key=lambda c: turn.get(c[0], len(turn))):
         job = create_job(session, owner=owner, motion_id=motion_id,
                          spec={**job_spec, "library": {"id": lid, "cell": key}}, runner=runner,
-                         max_attempts=max_attempts)
-        listed.append({"key": key, "parameters": params, "job_id": job.id})
-        ids.append(job.id)
+                         max_attempts=max_attempts, created_at=t + 1e-6 * len(by_key))
+        by_key[key] = job.id
+    listed = [{"key": key, "parameters": params, "job_id": by_key[key]} for key, params, _ in cells]
+    ids = [by_key[key] for key, _, _ in cells]
     row = LibraryRow(id=lid, owner=owner, motion_id=motion_id, spec={**spec, "cells": listed},
                      cancel_requested=False, created_at=t)
     session.add(row)
@@ -737,6 +892,12 @@ def finish_simulation(session: Session, *, simulation_id: str, report: dict, fil
     from service.simulation import FILES
 
     session.execute(delete(SimulationFileRow).where(SimulationFileRow.simulation_id == simulation_id))
+    sim = session.get(SimulationRow, simulation_id)
+    if sim is not None:  # the motion's earlier simulations are superseded: their files go (the rows stay)
+        older = select(SimulationRow.id).where(SimulationRow.motion_id == sim.motion_id,
+                                               SimulationRow.id != simulation_id,
+                                               SimulationRow.created_at <= sim.created_at)
+        session.execute(delete(SimulationFileRow).where(SimulationFileRow.simulation_id.in_(older)))
     for name, data in files.items():
         session.add(SimulationFileRow(simulation_id=simulation_id, name=name, media_type=FILES[name], size=len(data),
                                       data=data))

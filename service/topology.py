@@ -17,11 +17,12 @@ import signal
 import socket
 import subprocess
 import sys
+import time
 import urllib.error
 import urllib.request
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO
+from typing import IO, Any
 
 from tenacity import RetryError, Retrying, retry_if_exception, retry_if_result, stop_after_delay, wait_fixed
 
@@ -158,6 +159,48 @@ def drop_postgres_database(admin_url: str, name: str) -> None:
         conn.execute(sql.SQL("DROP DATABASE IF EXISTS {} WITH (FORCE)").format(sql.Identifier(name)))
 
 
+class PostgresServer:
+    """A PostgreSQL cluster in a temporary folder of its own (initdb, trust auth) on a free
+    loopback port, run as the ``postgres`` user when we are root (the server refuses to run as
+    root, and cannot enter pytest's private temporary folders). ``stop()``/``start()`` is a real
+    server restart: every connection is cut. ``remove()`` deletes the folder."""
+
+    def __init__(self) -> None:
+        import tempfile
+
+        self.root, self.port = Path(tempfile.mkdtemp(prefix="motionx-pg-")), free_port()
+        self.data, self.log = self.root / "pgdata", self.root / "pg.log"
+        self.bin = Path(shutil.which("pg_ctl") or "pg_ctl").resolve().parent
+
+    def _run(self, *args: str, check: bool = True):
+        cmd = [str(self.bin / args[0]), *args[1:]]
+        if os.geteuid() == 0:
+            cmd = ["runuser", "-u", "postgres", "--", *cmd]
+        return subprocess.run(cmd, check=check, capture_output=True, text=True, timeout=120)
+
+    def init(self) -> PostgresServer:
+        self.root.mkdir(parents=True, exist_ok=True)
+        if os.geteuid() == 0:
+            shutil.chown(self.root, "postgres", "postgres")
+        self._run("initdb", "-D", str(self.data), "-A", "trust", "-U", "postgres", "--no-sync")
+        return self
+
+    def start(self) -> None:
+        opts = f"-p {self.port} -k {self.root} -c listen_addresses=127.0.0.1 -c fsync=off"
+        self._run("pg_ctl", "-D", str(self.data), "-l", str(self.log), "-o", opts, "-w", "start")
+
+    def stop(self) -> None:
+        self._run("pg_ctl", "-D", str(self.data), "-m", "fast", "-w", "stop", check=False)
+
+    def remove(self) -> None:
+        self.stop()
+        shutil.rmtree(self.root, ignore_errors=True)
+
+    @property
+    def admin_url(self) -> str:
+        return f"postgresql://postgres@127.0.0.1:{self.port}/postgres"
+
+
 # --- API and workers --------------------------------------------------------------------
 
 
@@ -286,11 +329,35 @@ def wait_worker_ready(worker: Proc, timeout: float = 60.0) -> None:
 
 
 @dataclass
+class Backoff:
+    """When a process that died may be started again: 1 s after its first death, then twice as
+    long after each death that follows a short run (shorter than ``stable_s``), at most ``max_s``;
+    a run of ``stable_s`` or more resets it — as a container restart policy does."""
+
+    first_s: float = 1.0
+    max_s: float = 60.0
+    stable_s: float = 60.0
+    delay: float = 0.0
+    due: float | None = None
+    restarts: int = 0
+
+    def died(self, now: float, started: float) -> float:
+        """A death seen at ``now`` of a process started at ``started``: the time it may start again."""
+        ran = now - started
+        self.delay = self.first_s if ran >= self.stable_s or not self.delay else min(self.max_s, 2 * self.delay)
+        self.due = now + self.delay
+        return self.due
+
+
+@dataclass
 class Stack:
-    """Redis (AOF) + database + API + N workers, as processes. ``start()`` / ``stop()``."""
+    """Redis (AOF) + database + API + N workers, as processes. ``start()`` / ``stop()``;
+    ``supervise()``, called every second or so, restarts a process that died (with
+    :class:`Backoff`) while the others keep running."""
 
     data_dir: Path
     workers: int = 2
+    concurrency: int = 1
     port: int = 0
     database_url: str | None = None  # None: SQLite in data_dir
     api_keys: str = ""
@@ -298,6 +365,8 @@ class Stack:
     redis: RedisServer | None = None
     api: Proc | None = None
     worker_procs: list[Proc] = field(default_factory=list)
+    backoff: dict[str, Backoff] = field(default_factory=dict)
+    started: dict[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         self.data_dir = Path(self.data_dir)
@@ -313,7 +382,8 @@ class Stack:
     def env(self) -> dict[str, str]:
         assert self.redis is not None
         return service_env(database_url=self.database_url, broker_url=self.redis.url, api_keys=self.api_keys,
-                           data_dir=self.data_dir, extra=self.extra_env)
+                           data_dir=self.data_dir,
+                           extra={"MOTIONX_JOB_SLOTS": str(self.workers * self.concurrency), **self.extra_env})
 
     def start(self, timeout: float = 90.0) -> Stack:
         from service.db import upgrade  # lazy: only `motionx stack` needs it
@@ -322,6 +392,7 @@ class Stack:
         self.redis = RedisServer(self.data_dir / "redis").start()
         upgrade(self.database_url)
         self.api = start_api(self.env, port=self.port, log_path=self.data_dir / "logs" / "api.log")
+        self.started["api"] = time.monotonic()
         for _ in range(self.workers):
             self.add_worker()
         wait_api(self.base_url, self.api, timeout)
@@ -332,9 +403,47 @@ class Stack:
     def add_worker(self) -> Proc:
         i = len(self.worker_procs)
         name = f"worker{i + 1}-{secrets.token_hex(2)}"
-        w = start_worker(self.env, name=name, log_path=self.data_dir / "logs" / f"{name}.log")
+        w = start_worker(self.env, name=name, log_path=self.data_dir / "logs" / f"{name}.log",
+                         concurrency=self.concurrency)
         self.worker_procs.append(w)
+        self.started[name] = time.monotonic()
         return w
+
+    def supervise(self, now: float | None = None) -> list[dict]:
+        """Restart what died (Redis, the API, a worker), each after its back-off; the others keep
+        running. Returns what happened (one dict per death seen or restart made)."""
+        now = time.monotonic() if now is None else now
+        events: list[dict] = []
+        procs: list[tuple[str, Any]] = [("api", self.api), *((w.name, w) for w in self.worker_procs)]
+        if self.redis is not None:
+            procs.insert(0, ("redis", self.redis))
+        for name, p in procs:
+            alive = (p.proc is not None and p.proc.poll() is None) if name == "redis" else p.alive()
+            if alive:
+                continue
+            b = self.backoff.setdefault(name, Backoff())
+            if b.due is None:
+                code = p.proc.returncode if p.proc is not None else None
+                due = b.died(now, self.started.get(name, now))
+                events.append({"exited": name, "status": code, "restart_in_s": round(due - now, 1)})
+                continue
+            if now < b.due:
+                continue
+            try:
+                if name == "redis":
+                    p.start()
+                else:
+                    p.stop(timeout=2)  # closes its log; reaps what is left of its process group
+                    p.start()
+            except (OSError, TopologyError) as e:
+                due = b.died(now, now)
+                events.append({"restart_failed": name, "error": str(e)[:200], "restart_in_s": round(due - now, 1)})
+                continue
+            b.due, b.restarts = None, b.restarts + 1
+            self.started[name] = now
+            events.append({"restarted": name, "pid": p.proc.pid if p.proc is not None else None,
+                           "restarts": b.restarts})
+        return events
 
     def describe(self) -> dict:
         return {

@@ -19,6 +19,8 @@ by :mod:`solver.motion` and :mod:`solver.character`. Every failure raises
 
 from __future__ import annotations
 
+import base64
+import binascii
 import dataclasses
 import json
 import logging
@@ -160,8 +162,26 @@ def check_motion(motion: Motion) -> None:
             raise UploadError(f"{what} {clip(nm, 60)!r} must be 1 to {limits.MAX_NAME_CHARS} characters without "
                               "control characters")
     _check_environment(motion)
+    _check_rig_asset(motion)
     if classify(motion) == "capture":
         _check_capture(motion)
+
+
+def _check_rig_asset(motion: Motion) -> None:
+    """A glTF rig's asset (``provenance.rig.extra.asset``, a GLB the ``rig=source`` exports carry
+    into what they write) is checked like an imported glTF file: never passed on unchecked."""
+    rig = (motion.provenance or {}).get("rig")
+    if not isinstance(rig, dict) or rig.get("format") != "gltf":
+        return
+    from solver.io.gltf import GltfError, parse_gltf  # lazy: runs in a compute process
+
+    asset = (rig.get("extra") or {}).get("asset") if isinstance(rig.get("extra"), dict) else None
+    try:
+        if not isinstance(asset, str):
+            raise GltfError("provenance.rig: a glTF rig without its asset")
+        parse_gltf(base64.b64decode(asset, validate=True), "provenance.rig.extra.asset")
+    except (GltfError, binascii.Error, ValueError) as e:
+        raise UploadError(clip(str(e), 500)) from None
 
 
 def _check_capture(motion: Motion) -> None:
@@ -354,8 +374,8 @@ def motion_from_trial(files: list[tuple[str, bytes]], *, mass: float | None, bel
             raise UploadError(f"{name} must be finite")
     if mass is not None and not 1.0 <= mass <= 500.0:
         raise UploadError(f"mass must be a subject's mass in kg (1 to 500), got {mass:g}")
-    if belt_speed is not None and not abs(belt_speed) <= 20.0:
-        raise UploadError(f"belt_speed must be a treadmill speed in m/s (at most 20), got {belt_speed:g}")
+    if belt_speed is not None and not 0.0 <= belt_speed <= 20.0:
+        raise UploadError(f"belt_speed must be a treadmill's speed in m/s (0 to 20), got {belt_speed:g}")
     names = [_safe_name(n, i) for i, (n, _) in enumerate(files)]
     if len(set(names)) != len(names):
         raise UploadError(f"file names must be distinct, got {clip(str(names), 200)}")

@@ -457,7 +457,7 @@ def _loads(w: _Walk, lim: NaturalnessLimits, mu: float) -> dict[str, Any]:
             mid = x[int(0.25 * n): max(int(0.25 * n) + 1, math.ceil(0.75 * n))]
             shapes.append({"foot": FEET[k], "frames": n, "loading_peak_bw": float(np.max(x[: max(2, int(0.45 * n))])),
                            "valley_bw": float(np.min(mid)), "push_off_peak_bw": float(np.max(x[int(0.55 * n):]))})
-    patterns = []
+    patterns: list[dict[str, Any]] = []
     for k in range(2):
         for a, b in _runs(w.B[k, :N]):
             frames = [t % N for t in range(a, b)]
@@ -487,7 +487,7 @@ def _loads(w: _Walk, lim: NaturalnessLimits, mu: float) -> dict[str, Any]:
         "shared_load": {"changes": shares, "min_bw": min((float(c["shared_bw"]) for c in shares), default=None)},
         "vertical_force_shape": shapes,
         "fore_aft_pattern": {"stances": patterns,
-                             "max_sign_changes": max((p["sign_changes"] for p in patterns), default=None)},
+                             "max_sign_changes": max((int(p["sign_changes"]) for p in patterns), default=None)},
         "required_friction": {"max": float(np.nanmax(np.where(loaded, rcof, 0.0))), "mu": float(mu)},
         "push": {"min": float(np.nanmin(np.where(loaded, push, np.inf))) if loaded.any() else None},
     }

@@ -84,13 +84,9 @@ def cmd_stack(args: argparse.Namespace) -> int:
     try:
         stack.start()
         print(json.dumps(stack.describe()), flush=True)
-        while not stop.wait(1.0):
-            dead = [p.name for p in [stack.api, *stack.worker_procs] if p is not None and not p.alive()]
-            if stack.redis and stack.redis.proc.poll() is not None:
-                dead.append("redis")
-            if dead:
-                print(json.dumps({"exited": dead}), file=sys.stderr, flush=True)
-                return 1
+        while not stop.wait(1.0):  # a process that dies is restarted after its back-off; the rest keep running
+            for event in stack.supervise():
+                print(json.dumps(event), file=sys.stderr, flush=True)
         return 0
     except TopologyError as e:
         raise CliError(str(e)) from None

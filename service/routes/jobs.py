@@ -9,13 +9,13 @@ import time
 
 from fastapi import APIRouter, Header
 from fastapi.concurrency import run_in_threadpool
-from fastapi.responses import JSONResponse
+from fastapi.responses import JSONResponse, Response
 from sqlalchemy.exc import IntegrityError
 from sse_starlette import EventSourceResponse
 
-from service import limits, store
+from service import limits, quota, store
 from service.db import Database
-from service.deps import CursorPageDep, DatabaseDep, OffsetPageDep, OwnerDep, RunnerDep, SettingsDep
+from service.deps import QUOTA_429, CursorPageDep, DatabaseDep, OffsetPageDep, OwnerDep, RunnerDep, SettingsDep
 from service.limits import LimitError
 from service.models import TERMINAL
 from service.problems import Problem, known_id, not_found
@@ -61,7 +61,8 @@ def _accepted(out: dict, replayed: bool = False) -> JSONResponse:
                404: {"description": "no such motion for this key"},
                409: {"description": "concurrent requests with the same Idempotency-Key: retry"},
                422: {"description": "inconsistent target or step control, a source motion beyond the limits, "
-                                    "or an Idempotency-Key reused with another request"}},
+                                    "or an Idempotency-Key reused with another request"},
+               429: QUOTA_429},
 )
 def extrapolate(
     motion_id: str,
@@ -99,6 +100,7 @@ def extrapolate(
                     existing = store.find_idempotent(s, owner=owner, key=idempotency_key, request_hash=request_hash)
                 if existing is not None:
                     return _accepted(job_out(existing, store.progress(s, job_id=existing.id)), replayed=True)
+                quota.check_jobs(s, settings, owner=owner, new=1)
                 job = store.create_job(
                     s, owner=owner, motion_id=motion_id, spec=spec, runner=runner.name,
                     max_attempts=settings.job_max_attempts, idempotency_key=idempotency_key,
@@ -113,7 +115,7 @@ def extrapolate(
             continue
     else:
         raise Problem(409, "concurrent requests with the same Idempotency-Key; retry")
-    runner.submit(job_id)  # if the broker is down the job stays queued in SQL; the sweep dispatches it
+    runner.dispatch()  # its key's turn allowing; if the broker is down the job stays queued and the sweep dispatches it
     return _accepted(_job(db, job_id, owner))
 
 
@@ -158,6 +160,30 @@ def cancel_job(job_id: str, owner: OwnerDep, db: DatabaseDep) -> JSONResponse:
             raise Problem(409, f"job {job_id} has already finished ({job.status})")
         store.request_cancel(s, job_id=job_id)
     return JSONResponse(_job(db, job_id, owner), status_code=202, headers={"Location": f"/jobs/{job_id}"})
+
+
+@router.delete(
+    "/jobs/{job_id}",
+    status_code=204,
+    response_class=Response,
+    summary="delete a finished job: its λ optima (and what hangs on them), progress and simulations",
+    responses={204: {"description": "deleted"}, 404: {"description": "no such job for this key"},
+               409: {"description": "the job is still queued or running (cancel it first), or it is a library's "
+                                    "cell (delete the library)"}},
+)
+def delete_job(job_id: str, owner: OwnerDep, db: DatabaseDep) -> Response:
+    from service.routes.motions import delete_planned  # the one way to delete a plan (409 while a job runs)
+
+    known_id("job", job_id)
+    with db.write() as s:
+        job = store.get_job(s, job_id=job_id, owner=owner)
+        if job is None:
+            raise not_found("job", job_id)
+        lib = (job.spec or {}).get("library")
+        if lib:
+            raise Problem(409, f"job {job_id} is a cell of library {lib.get('id')}: delete the library")
+        delete_planned(s, store.deletion(s, jobs=[job_id]), f"job {job_id}")
+    return Response(status_code=204)
 
 
 @router.get(

@@ -12,9 +12,9 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse, Response
 from sse_starlette import EventSourceResponse
 
-from service import library, limits, store, work
+from service import library, limits, quota, store, work
 from service.db import Database
-from service.deps import DatabaseDep, OffsetPageDep, OwnerDep, RunnerDep, SettingsDep
+from service.deps import QUOTA_429, UNAVAILABLE_503, DatabaseDep, OffsetPageDep, OwnerDep, RunnerDep, SettingsDep
 from service.limits import LimitError
 from service.models import TERMINAL
 from service.problems import Problem, known_id, not_found
@@ -51,7 +51,8 @@ def _library(db: Database, library_id: str, owner: str) -> dict:
     responses={202: {"headers": {"Location": {"schema": {"type": "string"}}}},
                404: {"description": "no such motion for this key"},
                422: {"description": "an unknown axis, a value out of its bounds, too many cells, a repeated value or "
-                                    "target, or a source motion beyond the limits"}},
+                                    "target, or a source motion beyond the limits"},
+               429: QUOTA_429},
 )
 def create_library(
     motion_id: str,
@@ -82,12 +83,11 @@ def create_library(
             limits.check_source(kind=source.kind, frames=source.frames, fps=source.fps, coordinates=source.n)
         except LimitError as e:
             raise Problem(422, str(e), type="https://motionx.dev/problems/limit") from None
-        row, job_ids = store.create_library(s, owner=owner, motion_id=motion_id, spec=spec, cells=cells,
-                                            runner=runner.name, max_attempts=settings.job_max_attempts)
+        quota.check_jobs(s, settings, owner=owner, new=len(cells))
+        row, _ = store.create_library(s, owner=owner, motion_id=motion_id, spec=spec, cells=cells,
+                                      runner=runner.name, max_attempts=settings.job_max_attempts, dispatch=dispatch)
         lid = row.id
-    by_key = {key: j for (key, _, _), j in zip(cells, job_ids)}
-    for key in dispatch:  # nearest the tutor first; a broker that is down leaves them queued for the sweep
-        runner.submit(by_key[key])
+    runner.dispatch()  # nearest the tutor first, the key's turns allowing; a broker down: the sweep does it
     out = _library(db, lid, owner)
     return JSONResponse(out, status_code=202, headers={"Location": out["links"]["self"]})
 
@@ -143,7 +143,7 @@ def get_manifest(library_id: str, owner: OwnerDep, db: DatabaseDep) -> dict:
     responses={200: {"content": {"model/gltf-binary": {}}}, 404: {"description": "no such library for this key"},
                409: {"description": "no cell has a motion yet"},
                422: {"description": "rig=source on a library whose input has no rig of its own"},
-               429: {"description": "the server is busy with heavy requests: retry after Retry-After seconds"}},
+               429: QUOTA_429, 503: UNAVAILABLE_503},
 )
 async def get_library_glb(library_id: str, request: Request, owner: OwnerDep, db: DatabaseDep,
                           rig: Literal["character", "source"] = Query(
@@ -174,7 +174,7 @@ async def get_library_glb(library_id: str, request: Request, owner: OwnerDep, db
     compute: Compute = request.app.state.compute
     key = ("library.glb", tuple((k, sha) for k, sha, _ in items), repr(grid), rig, world)
     body, mt = await compute.cached(key, work.library_glb, [(k, d) for k, _, d in items], grid, rig, world,
-                                    what="the library GLB")
+                                    what="the library GLB", owner=owner, request=request)
     return Response(body, media_type=mt)
 
 
@@ -219,3 +219,22 @@ async def library_events(library_id: str, owner: OwnerDep, db: DatabaseDep,
             await asyncio.sleep(settings.sse_poll_s)
 
     return EventSourceResponse(stream())
+
+
+@router.delete(
+    "/libraries/{library_id}",
+    status_code=204,
+    response_class=Response,
+    summary="delete a library and its cells (their jobs, λ optima, progress and simulations)",
+    responses={204: {"description": "deleted"}, 404: {"description": "no such library for this key"},
+               409: {"description": "a cell is still queued or running: cancel the library first"}},
+)
+def delete_library(library_id: str, owner: OwnerDep, db: DatabaseDep) -> Response:
+    from service.routes.motions import delete_planned  # the one way to delete a plan (409 while a job runs)
+
+    known_id("library", library_id)
+    with db.write() as s:
+        if store.get_library(s, library_id=library_id, owner=owner) is None:
+            raise not_found("library", library_id)
+        delete_planned(s, store.deletion(s, libraries=[library_id]), f"library {library_id}")
+    return Response(status_code=204)

@@ -6,20 +6,25 @@ the API's compute processes (:mod:`service.work`), never on the event loop.
 
 from __future__ import annotations
 
+import hashlib
 import math
 import re
 import zlib
+from collections.abc import Iterator
 from typing import Any, Literal
 
 from fastapi import APIRouter, Query, Request
 from fastapi.concurrency import run_in_threadpool
-from fastapi.responses import JSONResponse, Response
+from fastapi.responses import JSONResponse, Response, StreamingResponse
+from starlette.concurrency import iterate_in_threadpool
 from starlette.datastructures import UploadFile
 
-from service import limits, store, uploads, work
+from service import limits, quota, store, uploads, work
+from service.config import Settings
 from service.db import Database
-from service.deps import DatabaseDep, OffsetPageDep, OwnerDep
+from service.deps import QUOTA_429, UNAVAILABLE_503, DatabaseDep, OffsetPageDep, OwnerDep, SettingsDep
 from service.limits import clip
+from service.models import MotionRow
 from service.problems import Problem, known_id, not_found
 from service.schemas import MotionOut, MotionPage
 from service.uploads import MAX_FILES, Encoded, ImporterUnavailable, UploadError
@@ -45,8 +50,8 @@ UPLOAD_BODY = {
                                   "description": "the trial: .osim + .mot (OpenSim), .c3d, .bvh or a DeepMimic .txt"},
                         "mass": {"type": "number", "minimum": 1, "maximum": 500,
                                  "description": "subject mass (kg): C3D without it, BVH"},
-                        "belt_speed": {"type": "number", "minimum": -20, "maximum": 20,
-                                       "description": "treadmill belt speed (m/s)"},
+                        "belt_speed": {"type": "number", "minimum": 0, "maximum": 20,
+                                       "description": "treadmill belt speed (m/s, 0 to 20)"},
                         "lower_only": {"type": "boolean",
                                        "description": "fit the lower body only (default: the whole body when the "
                                                       "data allow)"},
@@ -102,10 +107,25 @@ def _label(v: object) -> str:
     return v
 
 
-def _store_motion(db: Database, owner: str, encoded: Encoded, name: str) -> dict:
+def _store_motion(db: Database, settings: Settings, owner: str, encoded: Encoded, name: str) -> dict:
     with db.write() as s:
+        quota.check_storage(s, settings, owner=owner, adding=len(encoded.data))
         row = store.add_encoded(s, owner=owner, encoded=encoded, name=name)
         return motion_out(row)
+
+
+def _storage_left(db: Database, settings: Settings, owner: str) -> None:
+    with db.read() as s:
+        quota.check_storage(s, settings, owner=owner)
+
+
+def _upload_memo(kind: str, *parts: Any) -> tuple[str, str]:
+    """The key under which an upload's failure is remembered: its bytes and options."""
+    h = hashlib.sha256()
+    for p in parts:
+        h.update(repr(p).encode() if not isinstance(p, bytes) else p)
+        h.update(b"\0")
+    return kind, h.hexdigest()
 
 
 @router.post(
@@ -122,22 +142,26 @@ def _store_motion(db: Database, owner: str, encoded: Encoded, name: str) -> dict
     responses={201: {"headers": {"Location": {"schema": {"type": "string"}}}},
                413: {"description": "body too large"}, 415: {"description": "unsupported content type"},
                422: {"description": "invalid upload: malformed, inconsistent, not physical, or beyond the limits"},
-               429: {"description": "the server is busy with heavy requests: retry after Retry-After seconds"},
-               501: {"description": "importer not available"}},
+               429: QUOTA_429,
+               501: {"description": "importer not available"},
+               503: UNAVAILABLE_503},
 )
 async def upload_motion(
     request: Request,
     owner: OwnerDep,
     db: DatabaseDep,
+    settings: SettingsDep,
     name: str = Query("", max_length=limits.MAX_NAME_CHARS, pattern=NAME_PATTERN,
                       description="a label for the motion"),
 ) -> Response:
     ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
     compute: Compute = request.app.state.compute
+    await run_in_threadpool(_storage_left, db, settings, owner)  # a key over its storage computes nothing
     try:
         if ctype == "application/json" or ctype.endswith("+json"):
             body = await request.body()
-            encoded = await compute.run(uploads.motion_upload, body, what="the upload")
+            encoded = await compute.run(uploads.motion_upload, body, what="the upload", owner=owner, request=request,
+                                        memo=_upload_memo("motion", body))
         elif ctype == "multipart/form-data":
             form = await request.form(max_files=MAX_FILES, max_fields=24)
             try:
@@ -145,6 +169,10 @@ async def upload_motion(
                 if unknown:
                     raise UploadError(f"unknown form field(s) {clip(str(unknown), 120)}; the fields are "
                                       f"{', '.join(MULTIPART_FIELDS)}")
+                repeated = sorted(k for k in set(form.keys()) if k != "files" and len(form.getlist(k)) > 1)
+                if repeated:
+                    raise UploadError(f"form field(s) {', '.join(repeated)} given more than once; each option is "
+                                      "given once (only 'files' repeats)")
                 files = [(f.filename or "", await f.read()) for f in form.getlist("files") if isinstance(f, UploadFile)]
                 mass, belt = _form_float(form, "mass"), _form_float(form, "belt_speed")
                 texts = {k: form.get(k) for k in uploads.OPTION_FIELDS if form.get(k) is not None}
@@ -157,7 +185,10 @@ async def upload_motion(
                     name = _label(label)
             finally:
                 await form.close()
-            encoded = await compute.run(uploads.trial_upload, files, mass, belt, options, what="the trial import")
+            encoded = await compute.run(uploads.trial_upload, files, mass, belt, options, what="the trial import",
+                                        owner=owner, request=request,
+                                        memo=_upload_memo("trial", *(x for f in files for x in f), mass, belt,
+                                                          sorted(options.items())))
         else:
             raise Problem(415, f"unsupported content type {clip(ctype, 60) or '(none)'!r}: send application/json "
                           "(motion file v1) or multipart/form-data (mocap trial)")
@@ -165,7 +196,7 @@ async def upload_motion(
         raise Problem(422, str(e)) from None
     except ImporterUnavailable as e:
         raise Problem(501, str(e)) from None
-    out = await run_in_threadpool(_store_motion, db, owner, encoded, name)
+    out = await run_in_threadpool(_store_motion, db, settings, owner, encoded, name)
     if ctype == "multipart/form-data":
         out["input"] = encoded.input
     return JSONResponse(out, status_code=201, headers={"Location": out["links"]["self"]})
@@ -217,8 +248,9 @@ def _option(k: str, v: str) -> Any:
     responses={200: {"content": {mt: {} for mt in ("application/json", *export_media_types())}},
                404: {"description": "no such motion for this key"},
                422: {"description": "an exporter option it does not know or a value it refuses"},
-               429: {"description": "the server is busy with heavy requests: retry after Retry-After seconds"},
-               501: {"description": "exporter not available"}},
+               429: QUOTA_429,
+               501: {"description": "exporter not available"},
+               503: UNAVAILABLE_503},
 )
 async def get_motion(
     motion_id: str,
@@ -235,6 +267,11 @@ async def get_motion(
         raise Problem(422, f"format=motion takes no options, got {clip(str(sorted(options)), 200)}")
     compute: Compute = request.app.state.compute
 
+    if format == "motion":  # the stored file, streamed from SQL and decompressed on the way
+        size = await run_in_threadpool(_stored_size, db, motion_id, owner)
+        return StreamingResponse(iterate_in_threadpool(_motion_file_chunks(db, motion_id, size)),
+                                 media_type="application/json")
+
     def load() -> tuple[str, bytes]:
         with db.read() as s:
             row = store.get_motion(s, motion_id=motion_id, owner=owner)
@@ -244,13 +281,64 @@ async def get_motion(
 
     sha, data = await run_in_threadpool(load)
     key = (sha, format, tuple(sorted((k, repr(v)) for k, v in options.items())))
-    if format == "motion":
-        hit = compute.cache.get(key)
-        body = hit[0] if hit is not None else await run_in_threadpool(zlib.decompress, data)
-        compute.cache.put(key, body, "application/json")
-        return Response(body, media_type="application/json")
-    body, mt = await compute.cached(key, work.export, data, format, options, what=f"the {format} export")
+    body, mt = await compute.cached(key, work.export, data, format, options, what=f"the {format} export",
+                                    owner=owner, request=request)
     return Response(body, media_type=mt)
+
+
+#: bytes read from SQL at a time by a download
+CHUNK = 256 * 1024
+
+
+def _stored_size(db: Database, motion_id: str, owner: str) -> int:
+    with db.read() as s:
+        row = store.get_motion(s, motion_id=motion_id, owner=owner)
+        if row is None:
+            raise not_found("motion", motion_id)
+        return int(row.size or 0) or int(store.blob_size(s, MotionRow.data, MotionRow.id, motion_id) or 0)
+
+
+def _motion_file_chunks(db: Database, motion_id: str, size: int) -> Iterator[bytes]:
+    """The stored motion file, decompressed chunk by chunk as it is read from SQL."""
+    z = zlib.decompressobj()
+    for off in range(0, size, CHUNK):
+        with db.read() as s:
+            part = store.blob_chunk(s, MotionRow.data, (MotionRow.id == motion_id,), off, CHUNK)
+        if not part:
+            break
+        out = z.decompress(part)
+        if out:
+            yield out
+    tail = z.flush()
+    if tail:
+        yield tail
+
+
+@router.delete(
+    "/motions/{motion_id}",
+    status_code=204,
+    response_class=Response,
+    summary="delete a motion and what hangs on it: its tutors, the jobs started from it (their λ optima and "
+            "progress), its libraries and simulations",
+    responses={204: {"description": "deleted"}, 404: {"description": "no such motion for this key"},
+               409: {"description": "a job on it is still queued or running: cancel it first"}},
+)
+def delete_motion(motion_id: str, owner: OwnerDep, db: DatabaseDep) -> Response:
+    known_id("motion", motion_id)
+    with db.write() as s:
+        if store.get_motion(s, motion_id=motion_id, owner=owner, lock=True) is None:
+            raise not_found("motion", motion_id)
+        delete_planned(s, store.deletion(s, motions=[motion_id]), f"motion {motion_id}")
+    return Response(status_code=204)
+
+
+def delete_planned(s, plan: store.Deletion, what: str) -> None:
+    """Delete ``plan``, or 409 while one of its jobs is queued or running."""
+    active = plan.active_jobs(s)
+    if active:
+        raise Problem(409, f"{what} has jobs still queued or running ({', '.join(active)}): cancel them "
+                      "(POST /jobs/{id}/cancel) and delete it once they have ended")
+    store.delete_all(s, plan)
 
 
 @router.get(
@@ -259,8 +347,9 @@ async def get_motion(
     description="Stored with the motion: λ optima get it from their job; for uploads it is computed on the first "
                 "request (in the server's compute processes) and stored.",
     responses={404: {"description": "no such motion for this key"},
-               429: {"description": "the server is busy with heavy requests: retry after Retry-After seconds"},
-               501: {"description": "validator not available"}},
+               429: QUOTA_429,
+               501: {"description": "validator not available"},
+               503: UNAVAILABLE_503},
 )
 async def get_validation(motion_id: str, request: Request, owner: OwnerDep, db: DatabaseDep) -> dict:
     known_id("motion", motion_id)
@@ -278,7 +367,8 @@ async def get_validation(motion_id: str, request: Request, owner: OwnerDep, db: 
     if report is not None:
         return report
     compute: Compute = request.app.state.compute
-    report = await compute.single(("validation", motion_id), work.validation, data, what="the plausibility report")
+    report = await compute.single(("validation", motion_id), work.validation, data, what="the plausibility report",
+                                  owner=owner, request=request)
 
     def save() -> None:
         with db.write() as s:

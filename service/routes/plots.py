@@ -14,7 +14,7 @@ from fastapi.responses import Response
 
 from service import store, work
 from service.db import Database
-from service.deps import DatabaseDep, OwnerDep
+from service.deps import QUOTA_429, UNAVAILABLE_503, DatabaseDep, OwnerDep
 from service.problems import Problem, known_id, not_found
 from service.views import progress_out
 from service.work import Compute
@@ -31,7 +31,8 @@ def _png_responses(what: str, *, wrenches: bool = False) -> dict:
     if wrenches:
         out[422] = {"description": "the motion has no contact wrenches (a raw capture)"}
         out[501] = {"description": "plotting (or the MuJoCo replay) not available in this build"}
-    out[429] = {"description": "the server is busy with heavy requests: retry after Retry-After seconds"}
+    out[429] = QUOTA_429
+    out[503] = UNAVAILABLE_503
     return out
 
 
@@ -58,7 +59,8 @@ async def progress_plot(job_id: str, request: Request, owner: OwnerDep,
 
     points, target, key = await run_in_threadpool(load)
     compute: Compute = request.app.state.compute
-    body, _ = await compute.cached(key, _progress, points, target, what="the progress plot")
+    body, _ = await compute.cached(key, _progress, points, target, what="the progress plot", owner=owner,
+                                   request=request)
     return Response(body, media_type=PNG)
 
 
@@ -86,7 +88,8 @@ async def _motion_plot(request: Request, db: Database, owner: str, motion_id: st
 
     sha, data = await run_in_threadpool(load)
     compute: Compute = request.app.state.compute
-    body, _ = await compute.cached((sha, f"plot:{kind}"), _motion_plot_png, data, kind, what=f"the {kind} plot")
+    body, _ = await compute.cached((sha, f"plot:{kind}"), _motion_plot_png, data, kind, what=f"the {kind} plot",
+                                   owner=owner, request=request)
     return Response(body, media_type=PNG)
 
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 import time
 import weakref
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import casadi as ca
 import numpy as np
@@ -87,7 +87,8 @@ class FrameFunctions:
         com_expr = ca.SX.zeros(3)
         for sg in ch.segments:
             if sg.mass > 0:
-                com_expr += float(sg.mass) * ca.vertcat(*point_world(pose, *model.point_on_body(sg.name, sg.com)))
+                p_com: Any = ca.vertcat(*point_world(pose, *model.point_on_body(sg.name, sg.com)))
+                com_expr += float(sg.mass) * p_com
         com_expr /= float(sum(sg.mass for sg in ch.segments))
         cost = (w["direction"] * ca.sumsqr(mk - gm) + w["coordinates"] * ca.sumsqr(q[6:] - gq[6:])
                 + w["root_rotation"] * ca.sumsqr(q[3:6] - gq[3:6]) + w["com_track"] * ca.sumsqr(com_expr - gc))

@@ -233,7 +233,7 @@ class Naturalness:
     joint_speed_deg_s: float = 400.0
 
     @classmethod
-    def from_limits(cls, lim: NaturalnessLimits, **changes: float) -> Naturalness:
+    def from_limits(cls, lim: NaturalnessLimits, **changes: Any) -> Naturalness:
         """The bounds inside the naturalness checks' limits ``lim`` (the others: their defaults, or ``changes``)."""
         return cls(**{**_naturalness_bounds(lim), **changes})
 

@@ -140,3 +140,4 @@ def address_space_limit(pid: int) -> int | None:
                 v = line.split()[3]
                 return None if v == "unlimited" else int(v)
     return None
+

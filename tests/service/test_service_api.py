@@ -39,7 +39,8 @@ def motion_id(api) -> str:
 def test_axes_endpoint_is_the_solvers_registry_and_the_target_schema_follows_it(api):
     from solver import axes as registry
 
-    r = api.anon.get("/axes")  # public, like /health: the page builds its words from it
+    assert api.anon.get("/axes").status_code == 401  # like every endpoint but /health, /openapi.json and /docs
+    r = api.a.get("/axes")  # the page builds its words from it, with the key
     assert r.status_code == 200
     got = r.json()["axes"]
     assert [a["name"] for a in got] == list(registry.names())

@@ -107,7 +107,7 @@ def test_job_processes_run_under_the_memory_cap(capped, tutor_id):
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT, signal.SIGKILL], ids=["TERM", "INT", "KILL"])
 def test_no_process_outlives_motionx_serve(tmp_path, tutor_motion_json, sig):
-    a = start_api_process(tmp_path, {"MOTIONX_LOCAL_WORKERS": "2"})
+    a = start_api_process(tmp_path, {"MOTIONX_LOCAL_WORKERS": "2", "MOTIONX_JOBS_PER_KEY": "2"})  # one key, two jobs
     try:
         tid = a.a.post("/motions", content=tutor_motion_json, headers={"content-type": "application/json"}).json()["id"]
         running = a.a.post(f"/motions/{tid}/extrapolate", json=KILLABLE).json()

@@ -60,6 +60,7 @@ STACK_ENV = {
     "MOTIONX_UNACKED_RESTORE_INTERVAL_S": "1",
     "MOTIONX_UNACKED_RESTORE_THROTTLE": "1",
     "MOTIONX_SWEEP_INTERVAL_S": "3600",  # no re-dispatch by the API: Redis alone must keep the jobs
+    "MOTIONX_JOBS_PER_KEY": "8",  # one key's jobs all in Redis at once (per-key turns: test_service_sharing.py)
     "MOTIONX_VALIDATE_STEPS": "true",
 }
 

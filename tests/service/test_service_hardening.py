@@ -282,7 +282,7 @@ def test_options_and_405_list_every_method(api):
     assert r.status_code == 405 and r.headers["allow"] == "GET, POST"
     problem(r, 405, needle="GET, POST")
     mid = "m_" + "0" * 32
-    assert api.a.options(f"/motions/{mid}").headers["allow"] == "GET"
+    assert api.a.options(f"/motions/{mid}").headers["allow"] == "GET, DELETE"
     assert api.a.options(f"/motions/{mid}/extrapolate").headers["allow"] == "POST"
     assert api.a.put("/health").headers["allow"] == "GET"
 

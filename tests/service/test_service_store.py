@@ -7,7 +7,7 @@ import threading
 import time
 
 import pytest
-from sqlalchemy import func, select, text
+from sqlalchemy import func, select, text, update
 from sqlalchemy.exc import IntegrityError
 from svc_util import halfboy_motion
 
@@ -41,7 +41,7 @@ def _job(db, *, max_attempts=3, runner="celery", key=None, own=None):
 
 def test_migrations_reach_head_and_are_idempotent(db):
     upgrade(db.url)  # second run: nothing to do
-    assert current_revision(db.url) == "0004"
+    assert current_revision(db.url) == "0005"
     if db.is_sqlite:
         with db.read() as s:
             assert s.execute(text("PRAGMA journal_mode")).scalar() == "wal"
@@ -346,3 +346,65 @@ def test_concurrent_jobs_claim_a_tutor_once(db):
     assert len(turns) == len(jobs) and outcomes.count("make") == 1 and outcomes.count("wait") == len(jobs) - 1, turns
     maker = next(jobs[i][0] for i, t in turns.items() if t.outcome == "make")
     assert all(t.maker in (None, maker) for t in turns.values())  # None: lost the insert race, asks again
+
+
+def test_jobs_are_dispatched_in_turns_per_key(db):
+    runner = "turns-" + secrets.token_hex(3)
+    a = [_job(db, runner=runner)[0]]
+    own_a = None
+    with db.read() as s:
+        own_a = s.get(JobRow, a[0]).owner
+    for _ in range(3):  # A's later jobs, then one of B
+        a.append(_job(db, runner=runner, own=own_a)[0])
+    b = _job(db, runner=runner)[0]
+    with db.write() as s:
+        first = store.dispatch_fair(s, runner=runner, per_key=1)
+    assert first == [a[0], b]  # one turn each; A's other jobs wait in SQL, oldest first
+    with db.write() as s:
+        assert store.dispatch_fair(s, runner=runner, per_key=1) == []
+        s.execute(update(JobRow).where(JobRow.id == a[0]).values(status="succeeded"))
+    with db.write() as s:
+        assert store.dispatch_fair(s, runner=runner, per_key=1) == [a[1]]  # A's next turn
+        assert store.dispatch_fair(s, runner=runner, per_key=3) == [a[2], a[3]]
+        store.undo_dispatch(s, job_ids=[a[3]])  # the broker refused it: its turn comes again
+    with db.write() as s:
+        assert store.dispatch_fair(s, runner=runner, per_key=3) == [a[3]]
+
+
+def test_deletion_takes_what_hangs_on_a_motion_and_frees_its_storage(db):
+    own = owner()
+    with db.write() as s:
+        keep = store.add_motion(s, owner=own, motion=halfboy_motion(seed=1), kind="capture").id
+        before = store.storage_bytes(s, owner=own)
+        src = store.add_motion(s, owner=own, motion=halfboy_motion(seed=2), kind="capture").id
+        tutor = store.get_or_add_tutor(s, owner=own, parent_id=src, tutor_key="halfboy@15",
+                                       motion=halfboy_motion(seed=3, capture=False)).id
+        job = store.create_job(s, owner=own, motion_id=src, spec={}, runner="local", max_attempts=3,
+                               idempotency_key="k", request_hash="h")
+        job.tutor_motion_id = tutor
+        job.status = "succeeded"
+        step = store.save_step(s, job_id=job.id, owner=own, step=0, lam=1.0, motion=halfboy_motion(seed=4))
+        later = store.create_job(s, owner=own, motion_id=step, spec={}, runner="local", max_attempts=3)
+        later.status = "failed"
+        sim = store.create_simulation(s, owner=own, motion_id=step, job_id=later.id, cycles=1)
+        store.finish_simulation(s, simulation_id=sim.id, report={}, files={"report.json": b"x" * 1000},
+                                message="")
+        lib, _ = store.create_library(s, owner=own, motion_id=src, spec={}, cells=[("c", {}, {})], runner="local",
+                                      max_attempts=3)
+        lib_id = lib.id
+        for j in s.scalars(select(JobRow).where(JobRow.motion_id == src, JobRow.status == "queued")):
+            j.status = "canceled"
+        job_id, later_id = job.id, later.id
+    with db.read() as s:
+        assert store.storage_bytes(s, owner=own) > before + 1000
+        plan = store.deletion(s, motions=[src])
+        assert plan.motions == {src, tutor, step} and {job_id, later_id} <= plan.jobs and plan.libraries == {lib_id}
+        assert plan.simulations == {sim.id} and not plan.active_jobs(s)
+    with db.write() as s:
+        store.delete_all(s, plan)
+    with db.read() as s:
+        assert store.storage_bytes(s, owner=own) == before
+        assert store.get_motion(s, motion_id=keep, owner=own) is not None
+        assert s.scalar(select(func.count()).select_from(MotionRow).where(MotionRow.owner == own)) == 1
+        assert s.scalar(select(func.count()).select_from(JobRow).where(JobRow.owner == own)) == 0
+        assert store.get_library(s, library_id=lib_id, owner=own) is None

@@ -57,7 +57,8 @@ def test_compose_environment_names_are_settings(compose):
     stack_env = service_env(database_url="sqlite://", broker_url="redis://x", api_keys="k", data_dir=Path("/tmp"))
     assert {k for k in env} <= set(stack_env) | {"MOTIONX_JOB_TIME_LIMIT_S", "MOTIONX_VISIBILITY_TIMEOUT_S",
                                                   "MOTIONX_JOB_MAX_ATTEMPTS", "MOTIONX_JOB_LEASE_S",
-                                                  "MOTIONX_JOB_MEMORY_MB", "MOTIONX_COMPUTE_MEMORY_MB"}
+                                                  "MOTIONX_JOB_MEMORY_MB", "MOTIONX_COMPUTE_MEMORY_MB",
+                                                  "MOTIONX_COMPUTE_WORKERS", "MOTIONX_JOB_SLOTS"}
 
 
 def test_dockerfile_installs_every_package():
@@ -102,6 +103,23 @@ def test_motionx_stack_starts_serves_and_stops(tmp_path, pg_admin, redis_binary)
         assert aof, "Redis runs with AOF persistence"
         pids = list(info["pids"].values())
         assert len(_pids_alive(pids)) == 4
+        # a dead worker is restarted after its back-off (1 s), and nothing else stops or restarts
+        dead = info["workers"][0]
+        os.killpg(info["pids"][dead], signal.SIGKILL)
+        events, deadline = [], time.monotonic() + 30
+        while not any(e.get("restarted") == dead for e in events) and time.monotonic() < deadline:
+            ready, _, _ = select.select([proc.stderr], [], [], 1.0)
+            if ready:
+                line = proc.stderr.readline()
+                if line.startswith("{"):
+                    events.append(json.loads(line))
+        assert [e.get("exited") for e in events if "exited" in e] == [dead], events
+        new_pid = next(e["pid"] for e in events if e.get("restarted") == dead)
+        others = [pid for name, pid in info["pids"].items() if name != dead]
+        assert proc.poll() is None and len(_pids_alive([*others, new_pid])) == 4
+        with httpx.Client(base_url=info["api"], headers={"X-API-Key": key}, timeout=10) as c:
+            assert c.get("/health").json()["status"] == "ok"
+        pids = [*others, new_pid]
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(60) == 0
         deadline = time.monotonic() + 20
@@ -113,3 +131,15 @@ def test_motionx_stack_starts_serves_and_stops(tmp_path, pg_admin, redis_binary)
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait(10)
         drop_postgres_database(pg_admin, db_name)
+
+
+def test_restart_backoff_doubles_after_short_runs_and_resets_after_a_stable_one():
+    from service.topology import Backoff
+
+    b = Backoff(first_s=1.0, max_s=8.0, stable_s=60.0)
+    t = 1000.0
+    delays = []
+    for _ in range(6):  # dies right after each start
+        delays.append(b.died(t, t - 0.5) - t)
+    assert delays == [1.0, 2.0, 4.0, 8.0, 8.0, 8.0]
+    assert b.died(t, t - 120.0) - t == 1.0  # it ran for 2 minutes: the back-off starts over

@@ -16,7 +16,8 @@ from service.models import JobRow, MotionRow, TutorClaimRow
 @pytest.fixture(scope="module")
 def two_workers(tmp_path_factory):
     d = tmp_path_factory.mktemp("tutor_once")
-    a = start_api_process(d, {"MOTIONX_LOCAL_WORKERS": "2", "MOTIONX_JOB_LEASE_S": "3"})
+    a = start_api_process(d, {"MOTIONX_LOCAL_WORKERS": "2", "MOTIONX_JOB_LEASE_S": "3",
+                             "MOTIONX_JOBS_PER_KEY": "2"})  # one key's jobs at the same moment
     yield a
     a.close()
     a.proc.stop()

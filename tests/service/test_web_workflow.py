@@ -42,13 +42,14 @@ def page(api, browser):
         _missing("three.js is not installed: run `npm ci` in service/web")
     context, page, requests, errors = _open(browser, 1400, 1100)
     page.goto(f"{api.base_url}/ui/")
-    # the form is built from GET /axes and the OpenAPI document
-    wait_js(page, "document.querySelectorAll('#target-fields input').length > 0 && "
-                  "document.querySelectorAll('#download-buttons button').length > 0")
+    # the form is built from the OpenAPI document (public), its targets from GET /axes (with the key)
+    wait_js(page, "document.querySelectorAll('#download-buttons button').length > 0")
     assert page.locator("#new-walk-key").is_visible()  # no key yet: the form says where to get one
+    assert page.locator("#target-fields input").count() == 0
     page.fill("#key-input", KEY_A)
     page.click("#key-form button[type=submit]")
     page.wait_for_selector("#key-status.ok")
+    wait_js(page, "document.querySelectorAll('#target-fields input').length > 0")
     assert not page.locator("#new-walk-key").is_visible()
     page.requests, page.errors = requests, errors
     yield page
@@ -100,7 +101,7 @@ def test_upload_start_follow_preview_download_and_cancel(api, page, shared_data)
 
     # 2. the tutor and a small target, from controls built from GET /axes and the OpenAPI document
     assert page.eval_on_selector_all("#tutor-character option", "os => os.map(o => o.value)") == ["halfboy", "fullbody"]
-    axes = [a["name"] for a in api.anon.get("/axes").json()["axes"]]
+    axes = [a["name"] for a in api.a.get("/axes").json()["axes"]]
     assert page.eval_on_selector_all("#target-fields input", "is => is.map(i => i.name)") == axes
     page.select_option("#tutor-character", "halfboy")
     page.fill("#tutor-fps", "15")
@@ -194,7 +195,7 @@ def test_upload_start_follow_preview_download_and_cancel(api, page, shared_data)
     page.check('input[name="start-mode"][value="library"]')
     assert not page.locator("#target-fields").is_visible()
     assert page.eval_on_selector_all("#grid-fields input", "is => is.map(i => i.name)") == \
-        [a["name"] for a in api.anon.get("/axes").json()["axes"] if a["grid"]]
+        [a["name"] for a in api.a.get("/axes").json()["axes"] if a["grid"]]
     page.fill("#grid-slope_deg", "3, 6")
     assert page.text_content("#grid-cells").startswith("2 cells")
     page.click("#start-button")

@@ -105,13 +105,14 @@ const fmt = (x, digits = 3) => (typeof x === 'number' && Number.isFinite(x) ? St
 const sci = (x) => (typeof x === 'number' && Number.isFinite(x) ? (x === 0 ? '0' : x.toExponential(1)) : '–');
 const clock = (iso) => (iso ? new Date(iso).toLocaleString([], { dateStyle: 'short', timeStyle: 'medium' }) : '');
 
-// the homotopy axes (GET /axes, the solver's registry): names, units, words, defaults
-let AXES = [];
+// the homotopy axes (GET /axes, the solver's registry): names, units, words, defaults; like every
+// API call it needs the key (without one the forms are built once a key is given)
+const AXES = [];
 
-async function loadAxes() {
+async function loadAxes(key) {
   try {
-    const res = await fetch('/axes');
-    if (res.ok) AXES = (await res.json()).axes;
+    const res = await fetch('/axes', { headers: key ? { 'X-API-Key': key } : {} });
+    if (res.ok) AXES.splice(0, AXES.length, ...(await res.json()).axes);  // in place: the form holds this array
   } catch (err) {
     noteError('axes', err);
   }
@@ -278,6 +279,8 @@ function useKey(key) {
   if (newWalk) newWalk.reset();
   setKeyStatus('none');
   refreshLists();
+  // the forms were built without the axes (no key at start): build them again with this key
+  if (apiKey && !AXES.length && newWalk) loadAxes(apiKey).then(() => { if (AXES.length) newWalk.renderAxes(); });
 }
 
 function keyFromFragment() {
@@ -1179,7 +1182,7 @@ function start() {
   // the target words and grid labels come from GET /axes, the forms and the export formats from
   // the OpenAPI document; a key entered meanwhile is kept
   const before = keyToken;
-  Promise.all([loadAxes(), loadSchema()]).finally(() => {
+  Promise.all([loadAxes(key), loadSchema()]).finally(() => {
     renderDownloadButtons();
     newWalk = initNewWalk({
       api, ApiError, h, state, axes: AXES, schema: SCHEMA, noteError, refreshLists, selectMotion,
@@ -1190,6 +1193,7 @@ function start() {
       },
     });
     if (keyToken === before) useKey(key);
+    else if (apiKey && !AXES.length) loadAxes(apiKey).then(() => { if (AXES.length) newWalk.renderAxes(); });
   });
   setInterval(() => {
     if (!document.hidden) refreshLists();

@@ -268,19 +268,24 @@ export function initNewWalk(ctx) {
   $('source-select').addEventListener('change', renderSourceNote);
 
   const range = (a) => `${a.exclusive_minimum ? '(' : '['}${a.minimum}, ${a.maximum}${a.exclusive_maximum ? ')' : ']'}`;
+  // the axes' fields: built again when the axes arrive later (GET /axes needs the key)
+  let gridAxes = [];
+  function renderAxes() {
   $('target-fields').replaceChildren(...axes.map((a) => h('label', { class: 'field axis', title: a.doc },
     h('span', { class: 'name' }, a.label),
     h('span', { class: 'with-unit' }, h('input', { type: 'number', step: 'any', id: `target-${a.name}`, name: a.name,
       min: a.minimum, max: a.maximum, placeholder: a.default === null ? "tutor's" : String(a.default) }),
     h('span', { class: 'unit' }, a.unit)),
     h('small', { class: 'hint' }, `${a.name} ${range(a)}`))));
-  if (!axes.length) $('target-fields').append(h('p', { class: 'hint' }, 'no axes (GET /axes did not answer)'));
-  const gridAxes = axes.filter((a) => a.grid);
+  if (!axes.length) $('target-fields').append(h('p', { class: 'hint' }, 'the targets come with your API key (GET /axes)'));
+  gridAxes = axes.filter((a) => a.grid);
   $('grid-fields').replaceChildren(...gridAxes.map((a) => h('label', { class: 'field axis wide', title: a.doc },
     h('span', { class: 'name' }, `${a.label} values`),
     h('span', { class: 'with-unit' }, h('input', { type: 'text', id: `grid-${a.name}`, name: a.name,
       placeholder: 'values, comma separated', spellcheck: 'false' }), h('span', { class: 'unit' }, a.unit)),
     h('small', { class: 'hint' }, `${a.name} ${range(a)}`))));
+  }
+  renderAxes();
   $('grid-fields').addEventListener('input', () => {
     const grid = readGrid();
     $('grid-cells').textContent = grid.error || `${grid.cells} cell${grid.cells === 1 ? '' : 's'} (at most ${MAX_GRID_CELLS})`;
@@ -408,7 +413,7 @@ export function initNewWalk(ctx) {
     renderSources();
   }
 
-  return { renderSources, reset };
+  return { renderSources, reset, renderAxes };
 }
 
 function sizeText(bytes) {

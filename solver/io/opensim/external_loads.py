@@ -59,8 +59,8 @@ def external_loads(xml: str | Path) -> list[ForceSpec]:
         raise OpenSimError(f"ExternalLoads file not found: {p}")
     try:
         root = ET.parse(p).getroot()
-    except ET.ParseError as e:
-        raise OpenSimError(f"{p}: not valid XML ({e})") from None
+    except ET.ParseError:
+        raise OpenSimError(f"{p.name}: not valid XML") from None
     specs = []
     for k, ef in enumerate(root.iter("ExternalForce")):
         def txt(tag: str, default: str = "", ef=ef) -> str:
