@@ -47,7 +47,8 @@ SCALE = 0.97  # make_glb.py: the character is the CMU subject x0.97
 
 @pytest.fixture(scope="module")
 def runs(shared_data):
-    """The glTF character's tutor, its 10° slope and 90° curve optima (λ = 1)."""
+    """The glTF character's tutor, its 10° slope optimum (λ = 1) and its curve toward 90° (its last
+    natural λ)."""
     t0 = time.perf_counter()
     capture = solver.load_trial([shared_data / TRIAL], mass=MASS)
     tutor = solver.make_tutor(capture, character="halfboy", fps=15.0)
@@ -55,7 +56,9 @@ def runs(shared_data):
     t1 = time.perf_counter()
     slope = solver.extrapolate(tutor.motion, solver.Target(slope_deg=10))
     curve = solver.extrapolate(tutor.motion, solver.Target(curve_deg=90))
-    assert slope.lam_reached == 1.0 and curve.lam_reached == 1.0
+    # HalfBoy's tight curve may end at an impasse at its last natural λ (docs/naturalness.md): the exports
+    # carry a curve of λ × 90°
+    assert slope.lam_reached == 1.0 and curve.lam_reached > 0.4 and curve.steps[-1].motion.report["natural"]
     print(f"\nglTF character: import + tutor {t1 - t0:.1f} s, slope and curve {time.perf_counter() - t1:.1f} s")
     return capture, {"tutor": tutor.motion, "slope10": slope.steps[-1].motion, "curve90": curve.steps[-1].motion}
 
