@@ -2,7 +2,8 @@
 of every shared trial and of the other labs' walks — the joints against the capture (overall, per
 coordinate, the simplified's, the closed cycle's), the ground reactions against the force plates (RMS,
 peaks, mid-stance valley), every naturalness check with the capture's own figure, the time — and the
-λ = 1 optima of slope ±20°, curve 90°, speed ×0.8 and ×1.2 and stairs, judged by the same checks.
+λ = 1 optima of slope ±20°, curve 90°, speed ×0.8 and ×1.2 and stairs (0.17 m rise, 0.28 m going,
+up and down), judged by the same checks (or the impasse at the last natural λ).
 
 ``MOTIONX_BENCH_FIDELITY_TRIALS`` (comma-separated names) and ``MOTIONX_BENCH_FIDELITY_TARGETS``
 restrict a run; the extrapolations run on the trials named in ``EXTRAPOLATED`` (a full-body
@@ -23,7 +24,8 @@ TARGETS = {
     "uphill_20": Target(slope_deg=20.0), "downhill_20": Target(slope_deg=-20.0),
     "curve_90": Target(curve_deg=90.0),
     "speed_0.8": Target(speed_scale=0.8), "speed_1.2": Target(speed_scale=1.2),
-    "stairs_up_0.10": Target(step_height_m=0.10),
+    "stairs_up_0.17": Target(step_height_m=0.17, step_going_m=0.28),
+    "stairs_down_0.17": Target(step_height_m=-0.17, step_going_m=0.28),
 }
 #: the trials whose default tutors are extrapolated (both OpenSim walks: the issue's fidelity figures)
 EXTRAPOLATED = ("opensim_treadmill", "opensim_overground")

@@ -25,7 +25,7 @@ from solver.pipeline import DEFAULT_CHARACTER, make_tutor
 
 TRIALS = ("deepmimic_walk", "opensim_overground")
 TARGETS = {"uphill_20": Target(slope_deg=20.0), "downhill_20": Target(slope_deg=-20.0),
-           "curve_90": Target(curve_deg=90.0), "stairs_up_0.10": Target(step_height_m=0.10)}
+           "curve_90": Target(curve_deg=90.0), "stairs_up_0.17": Target(step_height_m=0.17, step_going_m=0.28)}
 
 
 def capture_cycle(capture, fps: float) -> Motion:

@@ -38,8 +38,9 @@ import numpy as np
 import quadprog
 
 from mjcf.builder import ContactOptions, Tread, build_spec, sole_corners
-from solver.environment import body_weight, environment_of, flight_of, ground_of
+from solver.environment import body_weight, environment_of, ground_of
 from solver.motion import FEET, Motion
+from solver.stairs import flight_of
 from solver.trajectory import ROOT_XY, ROOT_YAW, cycle_turn, dynamics_samples, spline_velocities
 
 ROOT_Z = 2
@@ -217,7 +218,7 @@ def _mean_stance_roll(motion: Motion, model: mujoco.MjModel, qpos_index: np.ndar
 
 
 def _treads(motion: Motion, cycles: int) -> tuple[Tread, ...]:
-    """Stairs: one block per tread of the motion's flight (``solver.environment.flight_of``: the
+    """Stairs: one block per tread of the motion's flight (``solver.stairs.flight_of``: the
     geometry the optimizer and the checks used), its top at the tread's height, as deep as the
     going along the flight, spanning the width of the walk, from the cycle before the first to the
     cycle after the last simulated one. Its front face is the riser of the next tread."""

@@ -436,10 +436,11 @@ def filmstrip_figure(motion, *, title: str | None = None, max_frames: int = 16):
     reaction force as an arrow at its centre of pressure (1 BW = the standing leg length). The
     views are turned so that gravity points down: a slope shows as an inclined ground. Top: the
     cycle in the ground plane — the pelvis path and heading, and the soles of the stance feet."""
-    from solver.environment import environment_of, flight_of, ground_of
+    from solver.environment import environment_of, ground_of
     from solver.kinematics import standing_leg_length
     from solver.motion import FEET, Motion
     from solver.naturalness import has_two_point_feet, path_heading, sole_corners
+    from solver.stairs import flight_of
 
     if not isinstance(motion, Motion):
         raise PlotError(f"expected a motion (solver.motion.Motion), got {type(motion).__name__}")

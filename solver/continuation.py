@@ -19,12 +19,13 @@ import numpy as np
 from solver import native
 from solver.axes import Target, environment_at, guide_at, nlp_at
 from solver.axes.terrain import stairs_base, stairs_target
-from solver.environment import Environment, environment_of, flight_for
+from solver.environment import Environment, environment_of
 from solver.jsonable import jsonable
 from solver.motion import Motion
 from solver.naturalness import has_two_point_feet, motion_figures
 from solver.outputs import progress_csv, step_stem
 from solver.spacetime import SolveResult, SpacetimeProblem, Weights
+from solver.stairs import flight_for
 from solver.status import Status
 
 __all__ = ["CancelCheck", "ExtrapolationResult", "ProgressCallback", "ProgressRecord", "StepCallback", "StepControl",

@@ -283,28 +283,3 @@ def ground_of(motion: Any) -> np.ndarray:
         return np.zeros((2, motion.T))
     return stair_heights(motion.foot_contact(), env.step_height_m)
 
-
-def flight_for(character: Any, q: np.ndarray, foot_contact: np.ndarray, env: Environment) -> Flight | None:
-    """The stairs of a walk ``q`` of ``character`` in ``env`` (:func:`stair_flight`: the rise, the
-    going — the walker's own step when ``env`` has none — and the placement ``env.stairs_at``, else
-    fitted to the walk's stance feet); None on flat ground. The one geometry of stairs: the
-    optimizer's rows, the checks, the simulation's treads and the plots read it."""
-    if not env.step_height_m:
-        return None
-    B = np.asarray(foot_contact, dtype=bool)
-    going = env.step_going_m or walker_going(q, B)
-    feet = None
-    if env.stairs_at is None:
-        from solver.kinematics import contact_points
-
-        cp = contact_points(character, np.asarray(q, dtype=float))
-        feet = np.stack([cp[[j for j, c in enumerate(character.contacts) if c.side == side], :2].mean(axis=0)
-                         for side in ("right", "left")])
-    return stair_flight(feet, B, env.step_height_m, going, env.stairs_at, q)
-
-
-def flight_of(motion: Any) -> Flight | None:
-    """The stairs of a motion (:func:`flight_for` in its own environment); None on flat ground."""
-    if motion.contacts is None:
-        return None
-    return flight_for(motion.character, motion.q, motion.foot_contact(), environment_of(motion))

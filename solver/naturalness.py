@@ -33,10 +33,11 @@ from typing import Any
 import numpy as np
 
 from solver.checks import Check, Context, SectionResult, register_check
-from solver.environment import STANDARD_GRAVITY_VECTOR, Flight, body_weight, environment_of, flight_of, ground_of
+from solver.environment import STANDARD_GRAVITY_VECTOR, Flight, body_weight, environment_of, ground_of
 from solver.jsonable import jsonable
 from solver.kinematics import centre_of_mass, contact_points, points_world, segment_frames, standing_leg_length
 from solver.motion import FEET, Motion, foot_schedule_of
+from solver.stairs import flight_of
 
 
 @dataclass(frozen=True)
@@ -58,7 +59,10 @@ class NaturalnessLimits:
     crossover_load: float = 0.1  # BW: "loaded"
     shared_load: float = 0.1  # BW: both feet carry at least this at some frame of a change of support
     fore_aft: float = 0.35  # BW per foot on level ground
-    fore_aft_band: float = 0.03  # BW: a fore-aft force changes sign when it crosses ±this
+    #: BW: a fore-aft force changes sign when it crosses ±this (mid-stance, where the force crosses zero
+    #: slowly, a walk at 15 frames/s wiggles by a few hundredths: the issue is braking again after
+    #: propelling, 0.1-0.2 BW each way)
+    fore_aft_band: float = 0.05
     fore_aft_changes: int = 1  # braking → propulsion: sign changes per stance, level ground
     fore_aft_load: float = 0.1  # BW: a foot carrying less neither brakes nor propels (heel strike, toe-off)
     lateral: float = 0.15  # BW per foot on level ground (warning)
@@ -581,7 +585,7 @@ def gait_figures(character, q: np.ndarray, fps: float, contacts: np.ndarray, *, 
     ``contacts`` (P, T), ``forces`` (2, 3, T) each foot's ground reaction force in the world
     frame (NaN where unknown: incomplete plates) or None (kinematic figures only), ``ground``
     (2, T) the ground height under each foot (stairs), ``flight`` the stairs' geometry
-    (``solver.environment.flight_of``: nosings and treads). Figures are taken over the cycle's
+    (``solver.stairs.flight_of``: nosings and treads). Figures are taken over the cycle's
     distinct frames (0 .. T−3 for a cycle)."""
     q = np.asarray(q, dtype=float)
     T = q.shape[1]

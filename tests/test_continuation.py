@@ -228,8 +228,9 @@ def test_stairs_continuation_keeps_the_feet_on_their_treads_and_clears_every_nos
     """Every accepted λ is plausible and natural (the stairs checks included); the last optimum
     stands each stance foot on its own tread, one going per step, and its swinging feet clear
     every nosing by 2 cm along the spline (docs/naturalness.md, "Stairs": measured figures)."""
-    from solver.environment import environment_of, flight_of
+    from solver.environment import environment_of
     from solver.naturalness import naturalness_report
+    from solver.stairs import flight_of
 
     res, _ = stairs[way]
     # measured (docs/naturalness.md, "Stairs"): up and down reach λ = 1 natural

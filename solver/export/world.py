@@ -33,10 +33,11 @@ from typing import Any
 
 import numpy as np
 
-from solver.environment import environment_of, flight_of, ground_of, stair_rise, stances
+from solver.environment import environment_of, ground_of, stair_rise, stances
 from solver.export import AXES_Y_UP, AXES_Z_UP, DEFAULT_WORLD, Y_UP, ExportError, LocalTransforms, local_transforms
 from solver.formats import EXPORT_WORLDS
 from solver.motion import FEET, Motion
+from solver.stairs import flight_of
 
 log = logging.getLogger(__name__)
 
@@ -338,7 +339,7 @@ def _path(motion: Motion) -> np.ndarray:
 def ground_of_motion(motion: Motion, world: str | World = DEFAULT_WORLD) -> Ground:
     """The ground under ``motion`` in ``world``: a strip along its path as wide as its feet need
     (plus :data:`MARGIN_M`), one level (a plane: level ground, or a ramp on a slope in the
-    gravity world) or, on stairs, the flight the solver climbed (``solver.environment.flight_of``:
+    gravity world) or, on stairs, the flight the solver climbed (``solver.stairs.flight_of``:
     treads a going deep, the risers where it stood them; a motion without its flight's placement:
     one tread per stance, the risers half-way between consecutive stances)."""
     from solver import kinematics

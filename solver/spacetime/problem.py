@@ -39,7 +39,7 @@ import casadi as ca
 import numpy as np
 
 from solver.character import Character
-from solver.environment import flight_for, stair_heights, stair_rise
+from solver.environment import stair_heights, stair_rise
 from solver.motion import FEET
 from solver.naturalness import path_heading
 from solver.spacetime.callback import STOP, STOP_CALLBACK
@@ -57,6 +57,7 @@ from solver.spacetime.types import (
     Weights,
     weight_slots,
 )
+from solver.stairs import flight_for
 from solver.trajectory import spline_velocities
 
 log = logging.getLogger(__name__)

@@ -26,6 +26,7 @@ import httpx
 import numpy as np
 import pytest
 
+from solver.character import FULL_SUPERFLUOUS
 from solver.motion import motion_from_dict
 
 PNG = b"\x89PNG\r\n\x1a\n"
@@ -280,7 +281,8 @@ def test_the_fullbody_job_comes_out_on_the_deepmimic_character(demo_run, shared_
     for mf in motions:
         stem = mf.name[: -len(".motion.json")]
         m = motion_from_dict(json.loads(mf.read_text()))
-        assert m.character.name == "fullbody" and m.n == 43
+        kept = [c for c in m.character.coordinate_names if c in FULL_SUPERFLUOUS]  # those the capture uses
+        assert m.character.name == "fullbody" and m.n == 43 + len(kept) and kept  # (DeepMimic: its ankles)
         # the DeepMimic motion: the character's frame layout, looping, read back by the importer
         text = (d / f"{stem}.deepmimic.txt").read_text()
         dm = json.loads(text)

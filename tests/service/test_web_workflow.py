@@ -100,7 +100,9 @@ def test_upload_start_follow_preview_download_and_cancel(api, page, shared_data)
     assert page.eval_on_selector("#source-select", "s => s.value") == uploaded
 
     # 2. the tutor and a small target, from controls built from GET /axes and the OpenAPI document
-    assert page.eval_on_selector_all("#tutor-character option", "os => os.map(o => o.value)") == ["halfboy", "fullbody"]
+    assert page.eval_on_selector_all("#tutor-character option", "os => os.map(o => o.value)") == ["fullbody", "halfboy"]
+    assert page.eval_on_selector("#tutor-character", "s => s.value") == "fullbody"  # the service's default
+    assert page.eval_on_selector("#tutor-fps", "i => i.value") == ""  # its default for the character
     axes = [a["name"] for a in api.a.get("/axes").json()["axes"]]
     assert page.eval_on_selector_all("#target-fields input", "is => is.map(i => i.name)") == axes
     page.select_option("#tutor-character", "halfboy")

@@ -233,13 +233,19 @@ export function initNewWalk(ctx) {
   // ------------------------------------------------------------ source, tutor, target, control
 
   const tutorProps = (schema && schema.tutor && schema.tutor.properties) || {};
+  // an optional field's schema is anyOf [its type, null]: the branch that is not null
+  const branch = (p) => (p && (p.anyOf || []).find((x) => x.type !== 'null')) || p || {};
   const character = $('tutor-character');
-  const chars = (tutorProps.character && tutorProps.character.enum) || [];
+  const chars = branch(tutorProps.character).enum || [];
   character.replaceChildren(...chars.map((c) => h('option', { value: c }, c)));
-  if (tutorProps.character && tutorProps.character.default) character.value = tutorProps.character.default;
+  // the service's default (null in the schema): the first listed, the full body
+  if (chars.length) character.value = (tutorProps.character && tutorProps.character.default) || chars[0];
   const fps = $('tutor-fps');
   if (tutorProps.fps) {
-    Object.assign(fps, { min: tutorProps.fps.minimum, max: tutorProps.fps.maximum, value: tutorProps.fps.default });
+    const f = branch(tutorProps.fps);
+    // no value: the service's default for the character (30 frames/s for the full body, 15 for HalfBoy)
+    Object.assign(fps, { min: f.minimum, max: f.maximum, value: tutorProps.fps.default ?? '',
+                         placeholder: 'default' });
     fps.title = tutorProps.fps.description || '';
   }
 
