@@ -6,7 +6,7 @@ peaks, mid-stance valley), every naturalness check with the capture's own figure
 up and down), judged by the same checks (or the impasse at the last natural λ).
 
 ``MOTIONX_BENCH_FIDELITY_TRIALS`` (comma-separated names) and ``MOTIONX_BENCH_FIDELITY_TARGETS``
-restrict a run; the extrapolations run on the trials named in ``EXTRAPOLATED`` (a full-body
+(``none``: the tutors only) restrict a run; the extrapolations run on the trials named in ``EXTRAPOLATED`` (a full-body
 continuation takes minutes)."""
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ def tutor_row(res, seconds: float) -> dict:
         "iterations": [a["iterations"] for a in st["correct"]["attempts"]],
         "joint_rms_to_capture_deg": st["joint_rms_to_capture_deg"],
         "joint_rms_simplified_to_capture_deg": st["joint_rms_simplified_to_capture_deg"],
-        "joint_rms_to_closed_cycle_deg": st["joint_rms_to_closed_cycle_deg"],
+        "joint_rms_to_closed_cycle_deg": st.get("joint_rms_to_closed_cycle_deg"),
         "marker_distance_to_capture_mm": st["marker_distance_to_capture_mm"],
         "grf_against_plates": st.get("grf_against_plates"),
         "vertical_force_shape": valleys(m),
@@ -68,6 +68,7 @@ def tutor_row(res, seconds: float) -> dict:
 def run() -> dict:
     only = [t for t in os.environ.get("MOTIONX_BENCH_FIDELITY_TRIALS", "").split(",") if t]
     targets = [t for t in os.environ.get("MOTIONX_BENCH_FIDELITY_TARGETS", "").split(",") if t] or list(TARGETS)
+    targets = [] if targets == ["none"] else targets
     out: dict = {"load_average": os.getloadavg()}
     for name, (files, opts) in {**shared_trials(), **other_labs()}.items():
         if only and name not in only:

@@ -115,11 +115,85 @@ def front_door_table(res: dict) -> str:
     return "\n".join(rows)
 
 
+def _f(x, fmt: str = "{:.2f}") -> str:
+    return "–" if x is None else fmt.format(x)
+
+
+def fidelity_table(res: dict) -> str:
+    """The tutors (issue: true to the subject): joints against the capture, naturalness, time."""
+    rows = ["| trial | character | joints' RMS to the capture (simplified) | pelvis | worst joint | natural (failed; "
+            "warnings) | mid-swing clearance | fit marker RMS | time (IPOPT its) |",
+            "|---|---|---|---|---|---|---|---|---|"]
+    for trial, row in res.items():
+        if not isinstance(row, dict) or trial.startswith("load"):
+            continue
+        for kind in ("fullbody", "halfboy"):
+            r = row.get(kind) or {}
+            if "joint_rms_to_capture_deg" not in r:
+                rows.append(f"| {trial} | {kind} | {r.get('status', '–')} | | | | | | |")
+                continue
+            jr, js = r["joint_rms_to_capture_deg"], r["joint_rms_simplified_to_capture_deg"]
+            worst = max(jr["per_coordinate"].items(), key=lambda kv: kv[1])
+            c = r["checks"]
+            clr = (c.get("values") or {}).get("swing_clearance")
+            fit = (row.get("fit") or {}).get("marker_rms_mm")
+            rows.append(
+                f"| {trial} | {kind} | {jr['overall']:.2f}° ({js['overall']:.2f}°) | {_f(jr.get('pelvis'))}° | "
+                f"{worst[0]} {worst[1]:.1f}° | {'yes' if c['natural'] else 'NO'} "
+                f"({', '.join(c['failed'] or []) or '–'}; "
+                f"{', '.join(c['warnings'] or []) or '–'}) | {_f(None if clr is None else 1e3 * clr, '{:.1f}')} mm | "
+                f"{_f(fit, '{:.1f}')} mm | {r['time_s']:.0f} s ({'/'.join(str(i) for i in r['iterations'])}) |")
+    return "\n".join(rows)
+
+
+def plates_table(res: dict) -> str:
+    """The tutors' ground reactions against the force plates they never saw (BW)."""
+    rows = ["| trial | character | foot | vertical RMS | fore-aft RMS | vertical peak (plates) | "
+            "loading peak / valley / push-off (each stance) |", "|---|---|---|---|---|---|---|"]
+    for trial, row in res.items():
+        if not isinstance(row, dict) or trial.startswith("load"):
+            continue
+        for kind in ("fullbody", "halfboy"):
+            r = row.get(kind) or {}
+            pl = r.get("grf_against_plates")
+            if not pl:
+                continue
+            shapes = r.get("vertical_force_shape") or []
+            for side, d in pl.items():
+                sh = [s for s in shapes if s.get("foot") == side]
+                hump = "; ".join(f"{s['loading_peak_bw']:.2f} / {s['valley_bw']:.2f} / {s['push_off_peak_bw']:.2f}"
+                                 for s in sh) or "–"
+                rows.append(f"| {trial} | {kind} | {side} | {d['vertical']['rms_bw']:.3f} | "
+                            f"{d['fore_aft']['rms_bw']:.3f} | {d['vertical']['max_bw']:.2f} "
+                            f"({d['vertical']['plates_max_bw']:.2f}) | {hump} |")
+    return "\n".join(rows)
+
+
+def optima_table(res: dict) -> str:
+    """The default tutors' extrapolations: where each ended, natural, the figures near a limit."""
+    rows = ["| trial | target | status, λ | every step natural | failed at the impasse | swing clearance | "
+            "crossover | joint speed | time |", "|---|---|---|---|---|---|---|---|---|"]
+    for trial, row in res.items():
+        if not isinstance(row, dict) or trial.startswith("load"):
+            continue
+        for label, t in ((row.get("fullbody") or {}).get("targets") or {}).items():
+            v = ((t.get("last") or {}).get("values")) or {}
+            rej = sorted({x.split(": ", 1)[1] for x in t.get("rejections") or [] if ": " in x})
+            rows.append(f"| {trial} | {label} | {t['status']}, {t['lambda_reached']:.3f} | "
+                        f"{'yes' if t['every_step_natural'] else 'NO'} | {'; '.join(rej) or '–'} | "
+                        f"{_f(None if v.get('swing_clearance') is None else 1e3 * v['swing_clearance'], '{:.1f}')}"
+                        " mm | "
+                        f"{_f(None if v.get('crossover') is None else 1e3 * v['crossover'], '{:.0f}')} mm | "
+                        f"{_f(v.get('joint_speed'), '{:.0f}')}°/s | {t['time_s']:.0f} s |")
+    return "\n".join(rows)
+
+
 FILL = {"tutor": ("docs/spacetime.md", tutor_table), "continuation": ("docs/continuation.md", continuation_table),
         "compiled": ("docs/spacetime.md", compiled_table), "blas": ("docs/spacetime.md", blas_table),
         "front_door": ("docs/api.md", front_door_table),
         "rig_export": ("docs/export.md", rig_export_table),
-        "simulation": ("docs/simulation.md", simulation_table)}
+        "simulation": ("docs/simulation.md", simulation_table),
+        "fidelity": ("docs/naturalness.md", fidelity_table)}
 
 
 def fill(sec: dict, only: list[str] | None = None) -> None:
