@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -57,11 +58,24 @@ def shared_trials() -> dict[str, tuple[list[Path], dict]]:
     }
 
 
+def other_labs_dir() -> Path | None:
+    """Where the other labs' walks are kept (not in this repository: fetched material is not committed
+    here, the tool library's rule): ``$MOTIONX_OTHER_LABS_DATA``; None when it is not set or does not
+    hold them."""
+    d = os.environ.get("MOTIONX_OTHER_LABS_DATA")
+    if d and (Path(d) / "c3d_motion_analysis_helen_hayes").is_dir() and (Path(d) / "c3d_opensim_walking5").is_dir():
+        return Path(d)
+    return None
+
+
 def other_labs() -> dict[str, tuple[list[Path], dict]]:
     """Public walks from other labs and marker sets than ``shared_trials`` (issue: true to the subject),
-    each in data/ with its origin and licence: a Motion Analysis Helen Hayes set with medial markers, a
-    Vicon Nexus cluster set (opensim-core's walking5), with the masses their plates imply."""
-    d = data_dir()
+    each with its origin and licence (``other_labs_dir``): a Motion Analysis Helen Hayes set with medial
+    markers, a Vicon Nexus cluster set (opensim-core's walking5), with the masses their plates imply;
+    none when they are not there."""
+    d = other_labs_dir()
+    if d is None:
+        return {}
     return {
         "c3d_motion_analysis": ([d / "c3d_motion_analysis_helen_hayes" / "Gait.c3d"], {"mass": 64.4}),
         "c3d_opensim_walking5": ([d / "c3d_opensim_walking5" / "walking5.c3d"], {"mass": 56.1}),

@@ -19,6 +19,27 @@ enable_native_code(Settings())
 SHARED_DATA = data_dir()  # the repository's data/ (or $MOTIONX_DATA)
 
 
+#: public trials fetched from other labs (docs/c3d.md "Fit quality"): fetched material is not committed to
+#: this repository (the tool library's rule), so they are read where ``$MOTIONX_OTHER_LABS_DATA`` says;
+#: the tests that need them skip without it
+OTHER_LABS = ("c3d_motion_analysis_helen_hayes", "c3d_opensim_walking5", "c3d_bts_davis")
+
+
+def other_labs_dir() -> Path | None:
+    """Where the other labs' trials are (``OTHER_LABS``), or None."""
+    d = os.environ.get("MOTIONX_OTHER_LABS_DATA")
+    return Path(d) if d and all((Path(d) / f).is_dir() for f in OTHER_LABS) else None
+
+
+@pytest.fixture(scope="session")
+def other_labs_data() -> Path:
+    d = other_labs_dir()
+    if d is None:
+        pytest.skip("the other labs' C3D walks (c3d_motion_analysis_helen_hayes, c3d_opensim_walking5, c3d_bts_davis) "
+                    "are not committed here: set $MOTIONX_OTHER_LABS_DATA to the folder that holds them")
+    return d
+
+
 @pytest.fixture(scope="session")
 def shared_data() -> Path:
     if not SHARED_DATA.is_dir():

@@ -2,9 +2,11 @@
 labs' trials (fitted or refused), and broken marker mappings refused naming the markers."""
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import OTHER_LABS
 
 from solver.io import load_trial
 from solver.io.c3d import C3DError, load_c3d
@@ -30,15 +32,22 @@ FITTED = {
 _CACHE: dict = {}
 
 
-def _capture(shared_data, name):
+def _where(request, name) -> Path:
+    """The folder holding ``name``: the repository's data/, or the other labs' (tests/conftest.py)."""
+    if name.split("/")[0] in OTHER_LABS:
+        return request.getfixturevalue("other_labs_data")
+    return request.getfixturevalue("shared_data")
+
+
+def _capture(request, name):
     if name not in _CACHE:
-        _CACHE[name] = load_c3d(shared_data / name)
+        _CACHE[name] = load_c3d(_where(request, name) / name)
     return _CACHE[name]
 
 
 @pytest.mark.parametrize("name", sorted(FITTED))
-def test_c3d_trials_fit_within_the_marker_noise_with_a_plausible_anatomy(shared_data, name):
-    cap = _capture(shared_data, name)
+def test_c3d_trials_fit_within_the_marker_noise_with_a_plausible_anatomy(request, name):
+    cap = _capture(request, name)
     fit = cap.source["fit"]
     marker_set, bound = FITTED[name]
     assert cap.source["marker_set"]["name"] == marker_set
@@ -63,11 +72,11 @@ def test_c3d_trials_fit_within_the_marker_noise_with_a_plausible_anatomy(shared_
     assert anat["both"]["pelvis_from_vertical"] < 25 and anat["path_from"] == "pelvis travel"
 
 
-def test_medial_markers_under_the_lateral_labels_are_told_apart(shared_data):
+def test_medial_markers_under_the_lateral_labels_are_told_apart(request):
     """Motion Analysis' four-character labels: the medial knee and ankle markers are a second
     RKNE/RANK. Read as such, the fit is plausible (it was: knees bending sideways, hips rotated
     60-80°, knees hyperextended 20°)."""
-    cap = _capture(shared_data, "c3d_motion_analysis_helen_hayes/Gait.c3d")
+    cap = _capture(request, "c3d_motion_analysis_helen_hayes/Gait.c3d")
     mk = cap.source["markers"]
     for s in "RL":
         assert (mk[f"{s}KNE"], mk[f"{s}KNM"], mk[f"{s}ANK"], mk[f"{s}MED"]) == (
@@ -79,19 +88,19 @@ def test_medial_markers_under_the_lateral_labels_are_told_apart(shared_data):
     assert lateral < -0.04 and medial > 0.04 and 0.08 < medial - lateral < 0.15  # knee width + two marker radii
 
 
-def test_a_forward_thigh_wand_is_not_used_for_the_knee_centre(shared_data):
+def test_a_forward_thigh_wand_is_not_used_for_the_knee_centre(other_labs_data):
     """Without the medial markers, the Helen Hayes thigh and shank wands stand forward of the leg:
     PiG's chord would put the knee centre behind the knee; the reader shifts medially instead."""
-    cap = load_c3d(shared_data / "c3d_motion_analysis_helen_hayes/Gait.c3d", markers="RKNM=,LKNM=,RMED=,LMED=")
+    cap = load_c3d(other_labs_data / "c3d_motion_analysis_helen_hayes/Gait.c3d", markers="RKNM=,LKNM=,RMED=,LMED=")
     notes = [n for n in cap.source["notes"] if "not used for the" in n]
     assert {n.split()[0] for n in notes} >= {"RTHI", "LTHI"}
     v = cap.source["fit"]["verdict"]
     assert v["ok"] and v["marker_rms_mm"] < 8.0
 
 
-def test_a_trial_without_heel_markers_is_refused_naming_them(shared_data):
+def test_a_trial_without_heel_markers_is_refused_naming_them(other_labs_data):
     with pytest.raises(C3DError) as e:
-        load_trial([shared_data / "c3d_bts_davis" / "type1.C3D"])
+        load_trial([other_labs_data / "c3d_bts_davis" / "type1.C3D"])
     msg = str(e.value)
     assert "marker set 'Davis (BTS SMART / Elite)'" in msg
     for role in ("RHEE", "LHEE", "RTOE", "LTOE"):
@@ -137,10 +146,10 @@ def test_a_poor_fit_is_imported_only_when_asked(shared_data):
         load_c3d(path, fit_tolerance_mm=-5)
 
 
-def test_marker_figures_measure_what_moves_on_its_segment(shared_data):
+def test_marker_figures_measure_what_moves_on_its_segment(request):
     """Markers made from the fitted motion itself: rigid on a segment -> 0 mm; sliding ±10 mm
     sinusoidally along the segment -> its RMS about the median, 10/√2 mm."""
-    cap = _capture(shared_data, "qualisys_ior_walk/Qualisys.c3d")
+    cap = _capture(request, "qualisys_ior_walk/Qualisys.c3d")
     ch, q = cap.character, cap.q
     T = q.shape[1]
     rigid = points_world(ch, q, [("shank_r", np.array([0.01, -0.05, -0.2]))])[0]
@@ -156,8 +165,8 @@ def test_marker_figures_measure_what_moves_on_its_segment(shared_data):
     assert "C" in fig["markers_not_fitted"]
 
 
-def test_feet_off_the_path_and_knees_sideways_fail_however_small_the_rms(shared_data):
-    cap = _capture(shared_data, "qualisys_ior_walk/Qualisys.c3d")
+def test_feet_off_the_path_and_knees_sideways_fail_however_small_the_rms(request):
+    cap = _capture(request, "qualisys_ior_walk/Qualisys.c3d")
     ch, q = cap.character, cap.q.copy()
     good = anatomy(ch, q, cap.times)
     q[ch.index("ankle_rotation_r")] += math.radians(90)  # right foot turned 90° inwards
