@@ -131,7 +131,7 @@ default: a slope walk climbs a ramp, stairs rise, a curve keeps its path) with i
 it (the GLB's "ground" node, the clip's "ground", FILE.ground.json beside a BVH); --world ground
 keeps the solver's frame (level ground, a slope as tilted gravity). solver.export.reimport
 reads the JSON clip, glTF and BVH back.""")
-    s.add_argument("motion", metavar="MOTION.json", help="motion file v1 (JSON), e.g. a tutor or a λ optimum")
+    s.add_argument("motion", metavar="MOTION.json", help="motion file v2 (JSON), e.g. a tutor or a λ optimum")
     s.add_argument("--format", required=True, choices=CHOICES,
                    help="json: motionx clip; gltf (alias glb): binary glTF 2.0 (.glb); bvh; opensim: a folder on "
                         "the OpenSim trial's own model (checked by OpenSim's inverse dynamics)")
