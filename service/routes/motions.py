@@ -52,7 +52,9 @@ UPLOAD_BODY = {
                         "mass": {"type": "number", "minimum": 1, "maximum": 500,
                                  "description": "subject mass (kg): C3D without it, BVH"},
                         "belt_speed": {"type": "number", "minimum": 0, "maximum": 20,
-                                       "description": "treadmill belt speed (m/s, 0 to 20)"},
+                                       "description": "treadmill belt speed (m/s, 0 to 20); for a BVH or glTF clip "
+                                                      "that walks in place (no root motion), its walking speed "
+                                                      "(default: detected from the stance foot; 0: not in place)"},
                         "lower_only": {"type": "boolean",
                                        "description": "fit the lower body only (default: the whole body when the "
                                                       "data allow)"},
