@@ -74,7 +74,7 @@ def extract_cycle(
     cycle). Returns the cycle's Capture (its ``contacts`` set) and its (P, T) contacts.
     """
     if start == "auto":
-        errors = []
+        errors: list[tuple[str, str | None]] = []
         for st in ("right_heel_strike", "left_heel_strike", "best_loop"):
             try:
                 return extract_cycle(capture, fps, start=st, contacts=contacts, cycle=cycle)
