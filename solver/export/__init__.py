@@ -287,8 +287,8 @@ def export_options(fmt: str) -> tuple[str, ...]:
 
 
 #: the rig formats each format writes a motion on with ``rig="source"`` (solver.rig.RIG_FORMATS)
-ON_RIG = {"bvh": ("bvh",), "gltf": ("bvh", "gltf", "deepmimic"),
-          "glb": ("bvh", "gltf", "deepmimic"), "deepmimic": ("deepmimic",)}
+ON_RIG = {"bvh": ("bvh",), "gltf": ("bvh", "gltf", "deepmimic", "opensim"),
+          "glb": ("bvh", "gltf", "deepmimic", "opensim"), "deepmimic": ("deepmimic",)}
 #: formats that only a motion from a trial of that kind can be written in (its rig's format)
 NEEDS_RIG = {"deepmimic": "deepmimic", "opensim": "opensim"}
 #: formats that write the same file as another (the alias is left out of the choices)

@@ -6,10 +6,11 @@
   none uploaded from the form, Start asks for one;
 - one download button per distinct file (no "glTF" and "GLB" for one .glb), DeepMimic and OpenSim
   offered only for motions that can have them (a motion from an OpenSim trial gets OpenSim);
-- a motion without a skeleton of its own says its downloads are on its character.
+- a motion without a skeleton of its own says its downloads are on its character;
+- an OpenSim trial is previewed on its model's bodies (gait2354's pelvis, femurs, tibias…).
 
 (The simulated walk framed with the motion: tests/service/test_web_simulation.py; the rig box on
-a DeepMimic walk's optimum: tests/service/test_web_workflow.py.) About 20 s.
+a DeepMimic walk's optimum: tests/service/test_web_workflow.py.) About 30 s.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from __future__ import annotations
 import pytest
 import test_web_page
 from svc_util import KEY_A, halfboy_motion
-from test_web_page import _missing, _open, _state, wait_js
+from test_web_page import SCREENSHOT, _missing, _open, _orange, _pixels, _state, viewer, wait_js
 
 from service.routes.web import THREE_DIR
 
@@ -112,4 +113,20 @@ def test_one_button_per_file_and_only_the_formats_a_motion_can_have(api, page, t
     page.evaluate(f"window.motionx.selectMotion('{osim}')")
     wait_js(page, f"(s => s.motionId === '{osim}' && s.exports !== null)(window.motionx.state)", timeout=60)
     assert "opensim" in _buttons(page) and "deepmimic" not in _buttons(page), _buttons(page)
+
+    # and is previewed on its model's bodies (pelvis, femurs, tibias… of gait2354), not on blobs of our character
+    wait_js(page, f"(s => s.motionId === '{osim}' && (s.previewReady || s.previewError))(window.motionx.state)",
+            timeout=90)
+    s = _state(page)
+    assert s["previewReady"] and s["previewRig"] == "source", s
+    assert page.text_content("#viewer-rig") == "on its OpenSim model's bodies"
+    names = page.evaluate("(() => { const n = []; window.motionx.viewer.model.traverse((o) => n.push(o.name));"
+                          " return n; })()")
+    assert {"pelvis", "femur_r", "tibia_l", "calcn_r", "torso"} <= set(names), names
+    viewer(page, "v.setPlaying(false)")
+    img = _pixels(page.locator("#viewer-canvas").screenshot())
+    viewer(page, "v.setPlaying(true)")
+    assert _orange(img) > 0.003 * img.shape[0] * img.shape[1], "the model's bodies are not drawn"
+    SCREENSHOT.parent.mkdir(parents=True, exist_ok=True)
+    page.locator("#viewer-canvas").screenshot(path=str(SCREENSHOT.with_name("opensim_model.png")))
     assert not page.errors, page.errors

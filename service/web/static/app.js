@@ -732,10 +732,11 @@ async function selectMotion(id) {
       meta.job_id ? `job ${shortId(meta.job_id)}` : null].filter(Boolean).join(' · ');
   }
   const validation = loadValidation(id, token);
-  previewDone = loadPreview(id, token, validation);
+  const exports = loadExports(id, token);
+  previewDone = loadPreview(id, token, validation, exports);
   await Promise.all([
     previewDone,
-    loadExports(id, token),
+    exports,
     loadSimulation(id, token),
     loadImage('grf', `/motions/${id}/plots/grf.png`, token),
     loadImage('residuals', `/motions/${id}/plots/residuals.png`, token),
@@ -838,7 +839,7 @@ function viewerMessage(text) {
   el.textContent = text || '';
 }
 
-async function loadPreview(id, token, validation) {
+async function loadPreview(id, token, validation, exportsLoaded) {
   viewerMessage('');
   let v;
   try {
@@ -851,7 +852,7 @@ async function loadPreview(id, token, validation) {
     return;
   }
   try {
-    const [{ glb, rig }, report] = await Promise.all([previewGlb(id), validation]);
+    const [{ glb, rig }, report, exports] = await Promise.all([previewGlb(id), validation, exportsLoaded]);
     if (token !== motionToken) return;
     const gravity = report && report.environment ? report.environment.gravity : undefined;
     const treads = report && report.environment ? report.environment.treads : undefined; // stairs
@@ -860,8 +861,8 @@ async function loadPreview(id, token, validation) {
     const meta = motionMeta(id);
     state.previewRig = rig;
     state.previewObjects = shown.objects;
-    $('viewer-rig').textContent = rig === 'source' ? "on the input's own rig"
-      : `on the ${meta ? meta.character : "motion's"} character`;
+    $('viewer-rig').textContent = rig !== 'source' ? `on the ${meta ? meta.character : "motion's"} character`
+      : exports && exports.rig === 'opensim' ? "on its OpenSim model's bodies" : "on the input's own rig";
     state.previewReady = true;
   } catch (err) {
     if (token !== motionToken) return;
@@ -873,7 +874,8 @@ async function loadPreview(id, token, validation) {
 /**
  * The GLB queries a motion's preview tries, in order (the first the API answers is shown):
  * the motion on the input's own rig (GET /motions/{id}?format=glb&rig=source: a motion made
- * from a BVH, DeepMimic or glTF trial carries that rig in its provenance), then the motion on
+ * from a BVH, DeepMimic or glTF trial carries that rig in its provenance; one from an OpenSim
+ * trial is shown on its model's bodies), then the motion on
  * its own character (HalfBoy or the full body). A 4xx moves on to the next.
  */
 function previewVariants() {
@@ -1111,8 +1113,10 @@ async function loadExports(id, token) {
     if (token !== motionToken) return;
     state.exports = exports;
     renderDownloadButtons(exports);
+    return exports;
   } catch (err) {
     if (token === motionToken && !(err instanceof ApiError)) noteError('exports', err);
+    return null;
   }
 }
 
