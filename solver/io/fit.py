@@ -178,7 +178,10 @@ def _median_local(R: np.ndarray, origin: np.ndarray, p: np.ndarray, what: str) -
     loc = _local(R, origin, p)
     ok = np.all(np.isfinite(loc), axis=0)
     if not np.any(ok):
-        raise FitError(f"cannot measure {what}: no frame where the landmarks and the segment frame are all known")
+        raise FitError(f"cannot measure {what}: no frame where the landmarks and the segment frame are all known "
+                       "(two of the joints that place them coincide, or one is missing in every frame): name the "
+                       "joints that play the roles in a joint mapping, or import the lower body only",
+                       parameter="joints")
     return np.median(loc[:, ok], axis=1)
 
 
@@ -565,8 +568,8 @@ def _height(track, lm, F, origin, segs, full_geometry) -> float:
     h_leg = leg / HIP_HEIGHT_FRACTION
     if not (np.isfinite(h_leg) and 0.3 < h_leg < 3.0):
         raise FitError(f"the legs (hip -> knee -> ankle -> sole) measure {leg:.2f} m, a subject {h_leg:.2f} m tall: "
-                       "not a person's; check the file's length unit (units=) and which joints are the hips, knees "
-                       "and ankles (joints=)")
+                       "not a person's; check the file's length unit (units) and which joints are the hips, knees "
+                       "and ankles (the joint mapping, joints)", parameter="units")
     if not full_geometry:
         return h_leg
     parts = {"pelvis -> lumbar": np.nanmedian(np.linalg.norm(lm["lumbar"] - lm["pelvis"], axis=0)),
