@@ -1524,12 +1524,16 @@ def model_bodies(motion: Motion, rate: float = 30.0) -> dict[str, Any]:
     except OpenSimError as e:
         raise OpenSimExportError(str(e)) from None
     if trial:
+        t_abs = times
         t = times - times[0]
         W, P = np.asarray(ev["R"], dtype=float), np.asarray(ev["P"], dtype=float)
         posture = (W[0], P[0])
     else:
         t, q, _, D = cycle_samples(motion, 1, float(rate))
+        t_abs = float(motion.provenance["source"]["cycle"]["t_start"]) + t
         W, P = body_poses(motion, q, t, D, cal, frame, blend)
+    # a treadmill trial's model walks on its belt: moved on with it, it walks along its ground
+    P = P + (frame.R @ frame.velocity / frame.unit_m)[None, None, :] * t_abs[:, None, None]
     return {"bodies": list(rig["bodies"]), "parents": dict(zip(ev["joint_child"], ev["joint_parent"])),
             "times": t, "R": W, "P": P, "posture": posture, "com": np.asarray(ev["body_com"], dtype=float),
             "frame": GroundFrame.from_dict(motion.provenance.get("frame"))}
