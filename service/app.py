@@ -121,7 +121,7 @@ def _problem_model():
 
 
 def _openapi(app: FastAPI) -> dict:
-    """OpenAPI 3.1 with the motion file v1 JSON Schema inlined for uploads, and every
+    """OpenAPI 3.1 with the motion file v2 JSON Schema inlined for uploads, and every
     error response typed as application/problem+json."""
     if app.openapi_schema:
         return app.openapi_schema

@@ -105,7 +105,9 @@ IMPORT_FLAGS: dict[str, tuple[str, dict]] = {
                                 "state it, e.g. BVH)"}),
     "belt_speed": ("--belt-speed", {"metavar": "auto|V",
                                     "help": "OpenSim treadmill trials: belt speed in m/s, or 'auto' (adds v·t to the "
-                                            "root: overground-equivalent; default: none, overground)"}),
+                                            "root: overground-equivalent; default: none, overground); BVH and glTF "
+                                            "in-place clips (no root motion): the walking speed in m/s, 'auto' (the "
+                                            "stance foot's) or 0 (not in place; default: detected)"}),
     "markers": ("--markers", {"metavar": "MAP",
                               "help": "C3D: marker mapping for unrecognised marker sets, ROLE=label,... (Plug-in "
                                       "Gait roles, e.g. LASI=L_IAS,RASI=R_IAS) or a file with one ROLE=label per "

@@ -59,7 +59,7 @@ class MotionRow(Base):
     lam: Mapped[float | None] = mapped_column(Float, nullable=True)
     parent_id: Mapped[str | None] = mapped_column(String(40), nullable=True)
     tutor_key: Mapped[str | None] = mapped_column(String(100), nullable=True)
-    data: Mapped[bytes] = mapped_column(LargeBinary, deferred=True)  # zlib-compressed motion file v1 (JSON)
+    data: Mapped[bytes] = mapped_column(LargeBinary, deferred=True)  # zlib-compressed motion file v2 (JSON)
     sha256: Mapped[str] = mapped_column(String(64))  # of the uncompressed JSON
     size: Mapped[int] = mapped_column(Integer, default=0, server_default="0")  # bytes of data (storage quota)
     validation: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True, deferred=True)

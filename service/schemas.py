@@ -146,6 +146,18 @@ class MotionOut(BaseModel):
                           "intervals per foot")
 
 
+class ExportChoices(BaseModel):
+    """What a motion can be downloaded as (solver.export.export_choices): one entry per distinct file."""
+
+    formats: list[str] = Field(description="the formats of GET /motions/{id}?format= that write this motion (glb, "
+                                           "the same file as gltf, left out; deepmimic only for a motion made from a "
+                                           "DeepMimic clip, opensim only for one made from an OpenSim trial — any "
+                                           "other motion with model=generic)")
+    on_rig: list[str] = Field(description="the formats that write it on the input's own skeleton (rig=source)")
+    rig: str | None = Field(description="the format of the input's own skeleton the motion carries, or null")
+    source: str | None = Field(description="the format of the trial the motion was made from, or null")
+
+
 class ProgressPoint(BaseModel):
     seq: int
     phase: Literal["tutor", "extrapolate"]

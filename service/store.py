@@ -101,7 +101,7 @@ def encode_motion(motion: Motion) -> tuple[bytes, str]:
 
 
 def motion_json(row: MotionRow) -> bytes:
-    """The stored motion file v1 (JSON bytes)."""
+    """The stored motion file v2 (JSON bytes)."""
     return zlib.decompress(row.data)
 
 

@@ -51,6 +51,9 @@ BVH_UNITS = ("auto", "cm", "m", "mm", "in", "cmu")
 _COMMON = {"mass": "the subject's mass (kg) when the files do not state it",
            "lower_only": "fit the lower body only (None: the whole body when the data allow)"}
 
+_IN_PLACE = ("an in-place clip (no root motion): its walking speed (m/s), 'auto' (the stance foot's), 0 (not in "
+             "place); default: detected")
+
 READERS: tuple[Reader, ...] = (
     Reader("opensim", _ro({".osim": "OpenSim model", ".mot": "OpenSim motion", ".sto": "OpenSim storage",
                            ".trc": "marker trajectories", ".xml": "OpenSim ExternalLoads"}),
@@ -64,6 +67,7 @@ READERS: tuple[Reader, ...] = (
     Reader("bvh", _ro({".bvh": "BVH"}), ".bvh",
            _ro({**_COMMON, "units": f"length unit of the file ({', '.join(BVH_UNITS)})",
                 "up": "the file's up axis ('y' or 'z')",
+                "belt_speed": _IN_PLACE,
                 "joints": "joint role mapping (role -> joint name, e.g. hip_l=Thigh_L) for unrecognised names"}),
            "solver.io.bvh", "trial_files", "load_bvh"),
     Reader("deepmimic", _ro({".txt": "DeepMimic motion or character", ".json": "DeepMimic motion or character"}),
@@ -73,7 +77,8 @@ READERS: tuple[Reader, ...] = (
            "one skinned, animated .glb or .gltf character (buffers embedded)",
            _ro({**_COMMON,
                 "joints": "joint role mapping (role -> joint name, e.g. hip_l=Thigh_L) for unrecognised names",
-                "animation": "glTF: the animation to read, its name or index (default: the first)"}),
+                "animation": "glTF: the animation to read, its name or index (default: the first)",
+                "belt_speed": _IN_PLACE}),
            "solver.io.gltf", "trial_files", "load_gltf"),
 )
 

@@ -68,7 +68,7 @@ def test_the_main_job_comes_first_in_the_command_list():
     listed = [line.split()[0] for line in r.stdout.split("commands:")[1].splitlines()[2:] if line.startswith("    ")
               and not line.startswith("     ")]
     assert listed[:2] == ["tutor", "extrapolate"], listed
-    assert {"validate", "demo", "grf", "serve", "export", "plot"} <= set(listed)
+    assert {"validate", "demo", "grf", "serve", "export", "plot", "apikey", "simulate"} <= set(listed)
 
 
 def test_every_command_is_described_and_every_option_has_help_with_its_default():
@@ -95,6 +95,10 @@ def test_every_command_is_described_and_every_option_has_help_with_its_default()
     assert "default: $MOTIONX_HOST or 127.0.0.1" in helps["serve"] and "8000" in helps["serve"]
     assert "--fps {15,30}" in helps["tutor"] and "default: 30 for fullbody, 15 for halfboy" in helps["tutor"]
     assert "default: fullbody" in helps["tutor"]
+    # the motion files are v2 (issue 38), and in-place clips have their flag
+    for name in ("tutor", "validate", "export", "plot"):
+        assert "motion file v1" not in helps[name], name
+    assert "motion file v2" in helps["tutor"] and "in-place clips" in helps["tutor"]
 
 
 #: the commands that import a trial (from files, or by uploading them to the service)

@@ -76,12 +76,24 @@ def cmd_export(args: argparse.Namespace) -> int:
             out.write_text(data)
     except OSError as e:
         raise CliError(f"cannot write {out}: {e.strerror or e}") from None
+    frames, fps = _written_frames(motion, options)
     line = {"out": str(out), "format": args.format, "media_type": media_type(fmt, **options),
-            "frames": motion.T, "fps": motion.fps, "character": motion.character.name, "bytes": out.stat().st_size}
+            "frames": frames, "fps": fps, "character": motion.character.name, "bytes": out.stat().st_size}
     if fmt == "bvh":
         line["ground"] = str(_write_ground(motion, out, options))
     print(json.dumps(line))
     return 0
+
+
+def _written_frames(motion, options: dict) -> tuple[int, float]:
+    """The frames and frame rate of the file written: the motion's own, or on the input's rig
+    (``--rig source``) one gait cycle at the input's frame rate (a 60 fps BVH comes back at 60 fps)."""
+    if options.get("rig") != "source":
+        return motion.T, motion.fps
+    from solver.rig import Rig, output_times
+
+    t, _ = output_times(motion, Rig.from_dict(motion.provenance["rig"]).frame_time)
+    return int(t.size), round(float(1.0 / (t[1] - t[0])), 6)
 
 
 def _write_ground(motion, out: Path, options: dict) -> Path:
@@ -131,7 +143,7 @@ default: a slope walk climbs a ramp, stairs rise, a curve keeps its path) with i
 it (the GLB's "ground" node, the clip's "ground", FILE.ground.json beside a BVH); --world ground
 keeps the solver's frame (level ground, a slope as tilted gravity). solver.export.reimport
 reads the JSON clip, glTF and BVH back.""")
-    s.add_argument("motion", metavar="MOTION.json", help="motion file v1 (JSON), e.g. a tutor or a λ optimum")
+    s.add_argument("motion", metavar="MOTION.json", help="motion file v2 (JSON), e.g. a tutor or a λ optimum")
     s.add_argument("--format", required=True, choices=CHOICES,
                    help="json: motionx clip; gltf (alias glb): binary glTF 2.0 (.glb); bvh; opensim: a folder on "
                         "the OpenSim trial's own model (checked by OpenSim's inverse dynamics)")

@@ -55,7 +55,7 @@ plausibility tolerance; filmstrip.png, the cycle seen from the side, from behind
 above (stick figures, the feet's soles as exported, the ground, ground-force arrows: look at
 the walk). Prints a JSON line with the files.""")
     s.add_argument("motion", metavar="MOTION.json",
-                   help="motion file v1 (JSON) with contact wrenches (a tutor or a λ optimum)")
+                   help="motion file v2 (JSON) with contact wrenches (a tutor or a λ optimum)")
     s.add_argument("--kind", choices=[*KINDS, "all"], default="all",
                    help="grf: forces per foot with the contact phases; residuals: root residual per frame, "
                         "ours and MuJoCo's replay; filmstrip: side, rear and top views of the cycle (default: all)")

@@ -120,7 +120,7 @@ def _tutor(args: argparse.Namespace, cancel: cancel_on_signals) -> int:
         res = make_tutor(capture, character=args.character, fps=args.fps, cycle=args.cycle, start=args.start,
                          max_iter=args.max_iter, should_cancel=cancel)
     except (PipelineError, ValueError) as e:
-        raise CliError(str(e)) from None
+        raise CliError(import_message(e)) from None  # an input's error names its flag (--belt-speed, …)
     out = {"status": res.status, "message": res.message, "import_s": round(t_import, 3), "input": described,
            "stats": res.stats}
     if res.status == "canceled" and cancel():
@@ -329,7 +329,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 Import a captured walk, take one gait cycle, reduce the capture skeleton to the synthesis
 character, estimate the contact forces from the kinematics and correct the motion with the
 spacetime NLP (IPOPT) until it obeys the equations of motion: the tutor, written as a motion
-file v1 with its plausibility report (MuJoCo replay included). It is the input of
+file v2 with its plausibility report (MuJoCo replay included). It is the input of
 `motionx extrapolate`. Exit status 1 when the correction fails (nothing is written); Ctrl-C
 or SIGTERM stops the solve at its next IPOPT iteration, writes nothing and exits 130 (143).""")
     s.add_argument("inputs", nargs="+", metavar="INPUT",
@@ -391,7 +391,7 @@ pitch under load, joints at their limits, crossover, shared load at each change 
 force shape, trunk lean on slopes, pelvis ranges), each beside the captured walk's own
 figure. Prints a summary (--json: the report as JSON); exit status 1 when the motion is not
 plausible or not natural.""")
-    s.add_argument("motion", metavar="MOTION.json", help="motion file v1 (JSON)")
+    s.add_argument("motion", metavar="MOTION.json", help="motion file v2 (JSON)")
     s.add_argument("--residual-tol", type=finite("--residual-tol"), default=None, metavar="R",
                    help="root residual tolerance relative to body weight (default: 1e-6)")
     s.add_argument("--json", action="store_true", help="print the report as one JSON object instead of a summary")

@@ -7,6 +7,7 @@ the API's compute processes (:mod:`service.work`), never on the event loop.
 from __future__ import annotations
 
 import hashlib
+import json
 import math
 import re
 import zlib
@@ -26,7 +27,7 @@ from service.deps import QUOTA_429, UNAVAILABLE_503, DatabaseDep, OffsetPageDep,
 from service.limits import clip
 from service.models import MotionRow
 from service.problems import Problem, known_id, not_found
-from service.schemas import MotionOut, MotionPage
+from service.schemas import ExportChoices, MotionOut, MotionPage
 from service.uploads import MAX_FILES, Encoded, ImporterUnavailable, UploadError
 from service.views import motion_out
 from service.work import Compute
@@ -51,7 +52,9 @@ UPLOAD_BODY = {
                         "mass": {"type": "number", "minimum": 1, "maximum": 500,
                                  "description": "subject mass (kg): C3D without it, BVH"},
                         "belt_speed": {"type": "number", "minimum": 0, "maximum": 20,
-                                       "description": "treadmill belt speed (m/s, 0 to 20)"},
+                                       "description": "treadmill belt speed (m/s, 0 to 20); for a BVH or glTF clip "
+                                                      "that walks in place (no root motion), its walking speed "
+                                                      "(default: detected from the stance foot; 0: not in place)"},
                         "lower_only": {"type": "boolean",
                                        "description": "fit the lower body only (default: the whole body when the "
                                                       "data allow)"},
@@ -132,7 +135,7 @@ def _upload_memo(kind: str, *parts: Any) -> tuple[str, str]:
     "/motions",
     status_code=201,
     response_model=MotionOut,
-    summary="upload a motion (motion file v1 JSON) or a mocap trial (multipart)",
+    summary="upload a motion (motion file v2 JSON) or a mocap trial (multipart)",
     description="The upload is parsed and validated in the server's compute processes (time and memory limits). "
                 "Schema-valid uploads are refused with 422 when the data is inconsistent (frame widths, unknown "
                 "joints, a character that is not physical) or beyond the limits of docs/service.md (a capture "
@@ -191,7 +194,7 @@ async def upload_motion(
                                                           sorted(options.items())))
         else:
             raise Problem(415, f"unsupported content type {clip(ctype, 60) or '(none)'!r}: send application/json "
-                          "(motion file v1) or multipart/form-data (mocap trial)")
+                          "(motion file v2) or multipart/form-data (mocap trial)")
     except UploadError as e:
         raise Problem(422, str(e)) from None
     except ImporterUnavailable as e:
@@ -234,7 +237,7 @@ def _option(k: str, v: str) -> Any:
 
 @router.get(
     "/motions/{motion_id}",
-    summary="a motion: JSON clip (default), glTF 2.0 binary (gltf = glb), BVH, or the motion file v1 "
+    summary="a motion: JSON clip (default), glTF 2.0 binary (gltf = glb), BVH, or the motion file v2 "
             "(format=motion)",
     description="Other query parameters are the exporter's options (docs/export.md), e.g. `y_up=true`, "
                 "`decimals=3` (json), `units=m` (bvh), `meshes=false` (gltf, glb), `binary=false` (gltf: "
@@ -339,6 +342,31 @@ def delete_planned(s, plan: store.Deletion, what: str) -> None:
         raise Problem(409, f"{what} has jobs still queued or running ({', '.join(active)}): cancel them "
                       "(POST /jobs/{id}/cancel) and delete it once they have ended")
     store.delete_all(s, plan)
+
+
+@router.get(
+    "/motions/{motion_id}/exports",
+    response_model=ExportChoices,
+    summary="what a motion can be downloaded as: its formats, and those on the input's own skeleton",
+    description="One entry per distinct file (glb is gltf's file); deepmimic and opensim only for a motion made "
+                "from a trial of that kind, rig=source only for a motion that carries the input's skeleton "
+                "(a BVH, glTF or DeepMimic trial). The web page offers exactly these buttons.",
+    responses={404: {"description": "no such motion for this key"}},
+)
+async def get_exports(motion_id: str, owner: OwnerDep, db: DatabaseDep) -> dict:
+    known_id("motion", motion_id)
+    from solver.export import export_choices
+
+    def load() -> dict:
+        with db.read() as s:
+            row = store.get_motion(s, motion_id=motion_id, owner=owner)
+            if row is None:
+                raise not_found("motion", motion_id)
+            data = row.data
+        provenance = json.loads(zlib.decompress(data)).get("provenance") or {}
+        return export_choices(provenance if isinstance(provenance, dict) else {})
+
+    return await run_in_threadpool(load)
 
 
 @router.get(

@@ -52,6 +52,7 @@ __all__ = [
     "ExportError",
     "GroundReaction",
     "LocalTransforms",
+    "export_choices",
     "export_motion",
     "ground_reactions",
     "local_transforms",
@@ -283,6 +284,31 @@ def export_options(fmt: str) -> tuple[str, ...]:
     """The keyword options a format accepts."""
     sig = inspect.signature(_exporter(fmt))
     return tuple(p.name for p in sig.parameters.values() if p.kind is inspect.Parameter.KEYWORD_ONLY)
+
+
+#: the rig formats each format writes a motion on with ``rig="source"`` (solver.rig.RIG_FORMATS)
+ON_RIG = {"bvh": ("bvh",), "gltf": ("bvh", "gltf", "deepmimic", "opensim"),
+          "glb": ("bvh", "gltf", "deepmimic", "opensim"), "deepmimic": ("deepmimic",)}
+#: formats that only a motion from a trial of that kind can be written in (its rig's format)
+NEEDS_RIG = {"deepmimic": "deepmimic", "opensim": "opensim"}
+#: formats that write the same file as another (the alias is left out of the choices)
+ALIASES = {"glb": "gltf"}
+
+
+def export_choices(provenance: Mapping[str, Any]) -> dict[str, Any]:
+    """What a motion of this ``provenance`` can be exported as, for a front end that offers one
+    button per distinct file: ``formats`` (every exporter but aliases — ``glb`` is ``gltf`` — and
+    the formats that need a trial of their own kind: ``deepmimic`` a DeepMimic clip, ``opensim``
+    an OpenSim trial; ``opensim`` with ``model="generic"`` remains possible for any motion),
+    ``on_rig`` (the formats that write it on the input's own skeleton, ``rig="source"``), ``rig``
+    (the format of that skeleton, or None) and ``source`` (the trial's format, or None)."""
+    rig = provenance.get("rig")
+    rig_format = rig.get("format") if isinstance(rig, Mapping) else None
+    src = provenance.get("source")
+    source = src.get("format") if isinstance(src, Mapping) else None
+    formats = [f for f in EXPORTERS if f not in ALIASES and NEEDS_RIG.get(f, rig_format) == rig_format]
+    on_rig = [f for f in formats if rig_format in ON_RIG.get(f, ())]
+    return {"formats": formats, "on_rig": on_rig, "rig": rig_format, "source": source}
 
 
 def export_motion(motion: Motion, fmt: str, path: str | Path | None = None, **options: Any) -> str | bytes:

@@ -170,6 +170,7 @@ def source_bvh(motion: Motion, *, decimals: int = 6, world: str = DEFAULT_WORLD)
             children[p].append(j)
     out = io.StringIO()
     columns: list[np.ndarray] = []
+    absolute = set(rig.extra.get("absolute_positions") or ())  # the input's joints whose channels hold their position
 
     def vec(v: np.ndarray) -> str:
         return " ".join(fmt.format(float(x) + 0.0) for x in v)
@@ -186,9 +187,9 @@ def source_bvh(motion: Motion, *, decimals: int = 6, world: str = DEFAULT_WORLD)
         angles = _channel_values(pose.local[:, j], rot_axes) if rot_axes else np.zeros((pose.times.size, 0))
         k = 0
         for c in chans:
-            if c.lower().endswith("position"):
+            if c.lower().endswith("position"):  # a displacement from the OFFSET, or the position itself
                 a = "XYZ".index(c[0].upper())
-                columns.append((translation[:, a] - rig.offsets[j][a])[:, None])
+                columns.append((translation[:, a] - (0.0 if j in absolute else rig.offsets[j][a]))[:, None])
             else:
                 columns.append(angles[:, k : k + 1])
                 k += 1

@@ -1462,6 +1462,83 @@ def _adjustment_figures(before: np.ndarray, after: np.ndarray, t: np.ndarray, wi
     return out
 
 
+def _calibrated(motion: Motion, rig: Mapping[str, Any], model_path: Path
+                ) -> tuple[dict[str, Any], tuple[np.ndarray, np.ndarray], Calibration, Any]:
+    """OpenSim's evaluation of the model along the captured trial (``model_path``: the model as
+    written), its posture at the cycle's mean coordinates, the calibration of its bodies against
+    the motion's character and the trunk's blend (:func:`calibration`, :func:`trunk_parts`)."""
+    from solver.io.opensim.worker import run_worker
+
+    names = list(rig["coordinates"]["names"])
+    values = np.asarray(rig["coordinates"]["values"], dtype=float)
+    cyc = motion.provenance["source"]["cycle"]
+    times = np.asarray(rig["times"], dtype=float)
+    in_cycle = (times >= float(cyc["t_start"]) - 1e-9) & (times < float(cyc["t_start"]) + float(cyc["period_s"]))
+    mean_row = values[in_cycle].mean(axis=0) if in_cycle.any() else values.mean(axis=0)
+    ev = run_worker(str(model_path), names, np.vstack([values, mean_row]), False)
+    posture = (np.asarray(ev["R"])[-1], np.asarray(ev["P"])[-1])
+    ev = {**ev, "R": np.asarray(ev["R"])[:-1], "P": np.asarray(ev["P"])[:-1]}
+    cal = calibration(rig, motion.character, ev, cyc, posture)
+    torso, parts = trunk_parts(rig, motion.character)
+    blend = None
+    if torso is not None:
+        blend = {torso: [(cal if k == 0 else calibration(rig, motion.character, ev, cyc, posture,
+                                                          override={torso: seg}), m)
+                         for k, (seg, m) in enumerate(parts)]}
+    return ev, posture, cal, blend
+
+
+def model_bodies(motion: Motion, rate: float = 30.0) -> dict[str, Any]:
+    """The motion on its OpenSim trial's model, for a look at it (the web page's preview): one
+    gait cycle at ``rate`` of every body's frame in the model's ground (where gravity points down),
+    placed as :func:`write_opensim` places them for OpenSim's inverse kinematics (no IK run); a
+    capture (no cycle, no ground reactions): the trial itself, the model along its own coordinates. Keys:
+    ``bodies``, ``parents`` (body -> parent body, ``ground`` for the root), ``times``, ``R`` (S, B,
+    3, 3), ``P`` (S, B, 3), ``posture`` (R, P at the cycle's mean coordinates), ``com`` (B, 3:
+    each body's centre of mass in its frame) and ``frame`` (the ground frame without the slope's
+    turn: the model's ground in the world where gravity points down)."""
+    from solver.io.opensim.base import OpenSimError
+    from solver.io.opensim.rig import unpack_model
+    from solver.io.opensim.worker import run_worker
+
+    rig = motion.provenance.get("rig")
+    trial = not (motion.cyclic and motion.wrenches is not None)  # a capture: the trial as the model moved
+    if trial:
+        if not isinstance(rig, Mapping) or rig.get("format") != "opensim":
+            raise OpenSimExportError("the motion was not made from an OpenSim trial: it has no OpenSim model")
+    else:
+        rig = source_rig(motion)
+    text, _ = repaired_model_text(unpack_model(rig["model"]["osim_xz_b64"]))
+    frame, gravity = export_frame(motion)
+    text, _ = with_gravity(text, gravity)
+    try:
+        with tempfile.TemporaryDirectory(prefix="motionx-osim-bodies-") as scratch:
+            path = Path(scratch) / "model.osim"
+            path.write_bytes(text)
+            if trial:
+                times = np.asarray(rig["times"], dtype=float)
+                ev = run_worker(str(path), list(rig["coordinates"]["names"]),
+                                np.asarray(rig["coordinates"]["values"], dtype=float), False)
+            else:
+                ev, posture, cal, blend = _calibrated(motion, rig, path)
+    except OpenSimError as e:
+        raise OpenSimExportError(str(e)) from None
+    if trial:
+        t_abs = times
+        t = times - times[0]
+        W, P = np.asarray(ev["R"], dtype=float), np.asarray(ev["P"], dtype=float)
+        posture = (W[0], P[0])
+    else:
+        t, q, _, D = cycle_samples(motion, 1, float(rate))
+        t_abs = float(motion.provenance["source"]["cycle"]["t_start"]) + t
+        W, P = body_poses(motion, q, t, D, cal, frame, blend)
+    # a treadmill trial's model walks on its belt: moved on with it, it walks along its ground
+    P = P + (frame.R @ frame.velocity / frame.unit_m)[None, None, :] * t_abs[:, None, None]
+    return {"bodies": list(rig["bodies"]), "parents": dict(zip(ev["joint_child"], ev["joint_parent"])),
+            "times": t, "R": W, "P": P, "posture": posture, "com": np.asarray(ev["body_com"], dtype=float),
+            "frame": GroundFrame.from_dict(motion.provenance.get("frame"))}
+
+
 def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, rate: float = RATE_HZ,
                   lowpass: float | None = LOWPASS_HZ, reduce_residuals: bool = True,
                   model: str = "source") -> dict[str, Any]:
@@ -1472,7 +1549,6 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
     the adjustment's size)."""
     from solver.io.opensim.base import OpenSimError
     from solver.io.opensim.rig import unpack_model
-    from solver.io.opensim.worker import run_worker
 
     t_begin = time.perf_counter()
     if model not in ("source", "generic"):
@@ -1513,23 +1589,10 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
     try:
         # the model's bodies along the captured trial, then against our segments
         tk = time.perf_counter()
-        names = list(rig["coordinates"]["names"])
-        values = np.asarray(rig["coordinates"]["values"], dtype=float)
-        cyc = motion.provenance["source"]["cycle"]
-        times = np.asarray(rig["times"], dtype=float)
-        in_cycle = (times >= float(cyc["t_start"]) - 1e-9) & (times < float(cyc["t_start"]) + float(cyc["period_s"]))
-        mean_row = values[in_cycle].mean(axis=0) if in_cycle.any() else values.mean(axis=0)
-        ev = run_worker(str(folder / model_file), names, np.vstack([values, mean_row]), False)
-        posture = (np.asarray(ev["R"])[-1], np.asarray(ev["P"])[-1])
-        ev = {**ev, "R": np.asarray(ev["R"])[:-1], "P": np.asarray(ev["P"])[:-1]}
+        ev, posture, cal, blend = _calibrated(motion, rig, folder / model_file)
         timing["evaluate_capture_s"] = time.perf_counter() - tk
-        cal = calibration(rig, motion.character, ev, cyc, posture)
+        cyc = motion.provenance["source"]["cycle"]
         torso, parts = trunk_parts(rig, motion.character)
-        blend = None
-        if torso is not None:
-            blend = {torso: [(cal if k == 0 else calibration(rig, motion.character, ev, cyc, posture,
-                                                              override={torso: seg}), m)
-                             for k, (seg, m) in enumerate(parts)]}
         t, q, w, D = cycle_samples(motion, cycles, float(rate))
         W, P = body_poses(motion, q, t, D, cal, frame, blend)
         defs, xyz = virtual_markers(list(rig["bodies"]), np.asarray(ev["body_com"], dtype=float), W, P)

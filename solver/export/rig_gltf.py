@@ -462,10 +462,68 @@ def _skeleton_primitives(rig: Rig, world: np.ndarray, children: Mapping[int, lis
 
 # --- the front ------------------------------------------------------------------------------------
 
+def _opensim_document(items: Sequence[tuple[str, Motion]], meshes: bool, world: str) -> tuple[dict, bytes]:
+    """A motion made from an OpenSim trial on its model's bodies (a look at it: the web page's
+    preview): a joint per body under the "rig" node, each body a tapered box from its origin to
+    each child body's (a leaf body: to twice its centre of mass), one gait cycle at 30 frames/s
+    (:func:`solver.export.opensim.model_bodies`), where gravity points down."""
+    from solver.export.opensim import OpenSimExportError, model_bodies
+
+    if world != DEFAULT_WORLD:
+        raise ExportError(f"the OpenSim model is written where gravity points down (world={DEFAULT_WORLD!r})")
+    poses: list[tuple[str, Motion, RigPose]] = []
+    rig = None
+    for name, m in items:
+        _check_motion(m)
+        try:
+            mb = model_bodies(m)
+        except OpenSimExportError as e:
+            raise ExportError(str(e)) from None
+        bodies, parents = mb["bodies"], mb["parents"]
+        order: list[int] = []
+        frontier = [i for i, b in enumerate(bodies) if parents.get(b) not in bodies]
+        while frontier:  # parents first
+            order += frontier
+            frontier = [i for i, b in enumerate(bodies) if parents.get(b) in {bodies[k] for k in frontier}]
+        if len(order) != len(bodies) or sum(parents.get(bodies[i]) not in bodies for i in order) != 1:
+            raise ExportError("the OpenSim model's bodies do not form one tree under the ground")
+        idx = {bodies[i]: k for k, i in enumerate(order)}
+        par = tuple(idx.get(parents.get(bodies[i]), -1) for i in order)
+        R, P = mb["R"][:, order], mb["P"][:, order]
+        Rp, Pp = mb["posture"][0][order], mb["posture"][1][order]
+        J, F = len(order), R.shape[0]
+        offsets = np.array([Rp[p].T @ (Pp[j] - Pp[p]) if p >= 0 else np.zeros(3) for j, p in enumerate(par)])
+        local = np.empty_like(R)
+        positions = np.zeros((F, J, 3))
+        for j, p in enumerate(par):
+            local[:, j] = R[:, j] if p < 0 else np.einsum("fji,fjk->fik", R[:, p], R[:, j])
+            if p >= 0:
+                positions[:, j] = np.einsum("fji,fj->fi", R[:, p], P[:, j] - P[:, p])
+        com = mb["com"][order]
+        leaves = {j: 2.0 * com[j] for j in range(J) if j not in par and np.linalg.norm(com[j]) > 0}
+        this = Rig("opensim", tuple(bodies[i] for i in order), par, offsets,
+                   tuple(("Xposition", "Yposition", "Zposition", "quaternion") for _ in range(J)), {}, mb["times"],
+                   local, P[:, 0], mb["frame"], end_sites=leaves, extra={"frame_time": 1.0 / 30.0})
+        rig = rig or this
+        if this.names != rig.names:
+            raise ExportError(f"{name!r} is on another OpenSim model than {items[0][0]!r}: one GLB holds one model")
+        poses.append((name, m, RigPose(mb["times"], local, P[:, 0], positions, mb["times"],
+                                       np.full((F, 2, 3), np.nan), ())))
+    assert rig is not None
+    return _skeleton_document(rig, poses, meshes, rig.frame, world)
+
+
+def _is_opensim(motion: Motion) -> bool:
+    rig = motion.provenance.get("rig")
+    return isinstance(rig, Mapping) and rig.get("format") == "opensim"
+
+
 def _document(items: Sequence[tuple[str, Motion]], meshes: bool, world: str) -> tuple[dict, bytes]:
     if not isinstance(meshes, bool):
         raise ExportError(f"meshes must be a boolean, got {meshes!r}")
     check_world(world)
+    if items and all(_is_opensim(m) for _, m in items):
+        return _opensim_document(items, meshes, world)
     rig, poses = _poses(items, world)
     if rig.format == "gltf":
         return _source_document(rig, poses, meshes, world)

@@ -74,13 +74,16 @@ def extract_cycle(
     cycle). Returns the cycle's Capture (its ``contacts`` set) and its (P, T) contacts.
     """
     if start == "auto":
-        errors = []
+        errors: list[tuple[str, str | None]] = []
         for st in ("right_heel_strike", "left_heel_strike", "best_loop"):
             try:
                 return extract_cycle(capture, fps, start=st, contacts=contacts, cycle=cycle)
             except GaitError as e:
-                errors.append(str(e))
-        raise GaitError("extract_cycle: no gait cycle found: " + " | ".join(errors))
+                if e.reason not in [r for r, _ in errors]:  # the same reason once, not once per start
+                    errors.append((e.reason, e.parameter))
+        param = next((p for _, p in errors if p), None)
+        raise GaitError("extract_cycle: no gait cycle found: " + " | ".join(r.removeprefix("extract_cycle: ")
+                                                                           for r, _ in errors), parameter=param)
     if start not in ("right_heel_strike", "left_heel_strike", "best_loop"):
         raise GaitError("extract_cycle: start must be 'right_heel_strike', 'left_heel_strike', 'best_loop' "
                               f"or 'auto', not {start!r}")
@@ -109,7 +112,9 @@ def _cycle_of(cap: Capture, start: str, contacts: np.ndarray | None, cycle: int)
     feet = np.stack([contacts[0] | contacts[1], contacts[2] | contacts[3]])
     for k, side in enumerate(("right", "left")):
         if not feet[k].any():
-            raise GaitError(f"extract_cycle: the {side} foot is never on the ground in this clip")
+            raise GaitError(f"extract_cycle: the {side} foot is never on the ground in this clip (a foot is down where "
+                            "it is low and still); a clip that walks in place (no root motion) is a walk on a moving "
+                            "ground: give its walking speed (m/s) or 'auto'", parameter="belt_speed")
     if start == "best_loop":
         return _best_loop_cycle(cap, contacts, feet)
     k = 0 if start.startswith("right") else 1

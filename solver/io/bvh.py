@@ -3,15 +3,20 @@
 Public API::
 
     read_bvh(path) -> BvhClip                        # hierarchy + channels, no interpretation
-    bvh_track(path, *, mass=None, units="auto", up="y", floor_height=None, joints=None) -> SkeletonTrack
+    bvh_track(path, *, mass=None, units="auto", up="y", floor_height=None, joints=None, belt_speed=None)
+        -> SkeletonTrack
     load_bvh(path, *, mass=None, units="auto", up="y", floor_height=None, lower_only=None,
-             joints=None) -> Capture
+             joints=None, belt_speed=None) -> Capture
 
 A small reader of our own (numpy only; the ``bvhio`` package would add PyGLM and
 SpatialTransform for what is ~100 lines here). Rotation channels are applied in the order
 listed, intrinsically (``Zrotation Xrotation Yrotation`` means R = Rz Rx Ry, the BVH
 convention); position channels (root, and any other joint that has them) are added to
-the joint's OFFSET.
+the joint's OFFSET — or replace it, for a joint whose channels repeat its OFFSET (game exporters
+that give every joint six channels: :func:`absolute_position_joints`).
+
+**In-place clips** (no root motion) are walks on a moving ground: detected, or ``belt_speed``
+given, and shifted to the walk overground (:func:`solver.io.joint_track.walk_in_place`).
 
 **Joint roles** (:mod:`solver.io.roles`): from the names (CMU/ASF, Mixamo/MotionBuilder,
 Unreal, Unity, Blender, 3ds Max Biped, DAZ styles; sides as ``Left…``/``L…``/``l…`` prefixes or
@@ -56,7 +61,7 @@ from solver import spatial as sp
 from solver.capture import Capture, GroundFrame
 from solver.errors import InputError
 from solver.io.fit import fit_track
-from solver.io.joint_track import JointPose, ground_landmarks
+from solver.io.joint_track import JointPose, ground_landmarks, walk_in_place
 from solver.io.readers import one_file
 from solver.io.roles import (
     RoleError,
@@ -92,6 +97,9 @@ class BvhClip:
     end_sites: Mapping[int, np.ndarray]  # joint index -> End Site offset
     frame_time: float
     motion: np.ndarray  # (T, total channels)
+    #: joints whose position channels hold their local position (it replaces the OFFSET), not a
+    #: displacement from the OFFSET (:func:`absolute_position_joints`)
+    absolute: frozenset[int] = frozenset()
 
     @property
     def T(self) -> int:
@@ -99,7 +107,8 @@ class BvhClip:
 
     def local(self, j: int, motion: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Joint ``j``'s rotation (T, 3, 3) and position (T, 3) in its parent's frame: its rotation
-        channels applied in the order listed (intrinsic), its position channels added to OFFSET."""
+        channels applied in the order listed (intrinsic), its position channels added to OFFSET
+        (or, for a joint in :attr:`absolute`, in its place)."""
         m = self.motion if motion is None else motion
         T = m.shape[0]
         col = sum(len(c) for c in self.channels[:j])
@@ -110,10 +119,21 @@ class BvhClip:
             col += 1
             axis = "XYZ".index(ch[0].upper())
             if ch.lower().endswith("position"):
-                loc_p[:, axis] += v
+                loc_p[:, axis] = v if j in self.absolute else loc_p[:, axis] + v
             else:
                 loc_R = loc_R @ sp.elementary_rotation(axis, np.radians(v))
         return loc_R, loc_p
+
+    def rest_motion(self) -> np.ndarray:
+        """(1, channels): the rest pose (every rotation 0, every joint at its OFFSET)."""
+        row = np.zeros((1, self.motion.shape[1]))
+        col = 0
+        for j, chans in enumerate(self.channels):
+            for c in chans:
+                if j in self.absolute and c.lower().endswith("position"):
+                    row[0, col] = self.offsets[j]["XYZ".index(c[0].upper())]
+                col += 1
+        return row
 
     def forward(self, motion: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """World rotation (J, T, 3, 3) and position (J, T, 3) of every joint (file axes/units)."""
@@ -251,7 +271,31 @@ def parse_bvh(text: str, where: str = "BVH") -> BvhClip:
         raise BvhError(f"{p}: frame {r} contains NaN/inf")
     if len(set(names)) != len(names):
         raise BvhError(f"{p}: duplicate joint names")
-    return BvhClip(tuple(names), tuple(parents), np.array(offsets, dtype=float), tuple(channels), ends, dt, motion)
+    off = np.array(offsets, dtype=float)
+    return BvhClip(tuple(names), tuple(parents), off, tuple(channels), ends, dt, motion,
+                   absolute_position_joints(off, tuple(channels), motion))
+
+
+def absolute_position_joints(offsets: np.ndarray, channels: tuple[tuple[str, ...], ...],
+                             motion: np.ndarray) -> frozenset[int]:
+    """The joints whose position channels are their local position rather than a displacement
+    from their OFFSET. BVH writers differ: most put the root's position in its channels over a
+    zero OFFSET (the two readings agree), and some game exporters give every joint position
+    channels that repeat its OFFSET (the bone's length, frame after frame): adding them to the
+    OFFSET would double every bone. A joint with a non-zero OFFSET whose channels' median lies
+    nearer its OFFSET than zero is read that way."""
+    out = set()
+    col = 0
+    for j, chans in enumerate(channels):
+        axes = [("XYZ".index(c[0].upper()), col + k) for k, c in enumerate(chans) if c.lower().endswith("position")]
+        col += len(chans)
+        if not axes:
+            continue
+        off = np.array([offsets[j][a] for a, _ in axes])
+        med = np.array([float(np.median(motion[:, c])) for _, c in axes])
+        if np.linalg.norm(off) > 1e-9 and np.linalg.norm(med - off) < np.linalg.norm(med):
+            out.add(j)
+    return frozenset(out)
 
 
 # --- joint roles ------------------------------------------------------------------------------
@@ -301,7 +345,7 @@ def _unit_scale(units: str | float, leg: float, path: str | Path) -> tuple[str |
 
 def _pose(clip: BvhClip, up_v: np.ndarray) -> JointPose:
     """The clip's joints along the motion and in the rest pose (all channels 0), file axes and units."""
-    R_rest, P_rest = clip.forward(np.zeros((1, clip.motion.shape[1])))
+    R_rest, P_rest = clip.forward(clip.rest_motion())
     R, P = clip.forward()
     return JointPose(clip.parents, R_rest[:, 0], P_rest[:, 0], R, P, clip.end_sites, up_v, BvhError)
 
@@ -314,6 +358,7 @@ def bvh_track(
     up: str = "y",
     floor_height: float | None = None,
     joints: str | Path | Mapping[str, str] | None = None,
+    belt_speed: float | str | None = None,
 ) -> SkeletonTrack:
     clip = read_bvh(path)
     roles, spines = _roles(clip, path, joints)
@@ -335,13 +380,16 @@ def bvh_track(
     times = np.arange(clip.T) * clip.frame_time
     frame = GroundFrame(R=A.T, offset=offset_file * scale, unit_m=scale,
                         axes=f"BVH: {up.upper()} up, facing {np.round(x_dir, 3).tolist()} (file axes), units {units}")
-    return SkeletonTrack(
+    track = SkeletonTrack(
         times=times, landmarks=lm, frame=frame, mass=mass,
         source={"format": "bvh", "file": str(Path(path).resolve()), "units": units, "metres_per_unit": scale,
                 "mass_from": "given" if mass is not None else None,
                 "up": up, "joint_roles": {r: clip.names[j] for r, j in roles.items()},
-                "spine_joints": [clip.names[j] for j in spines], "floor_height_file_units": floor_height},
+                "spine_joints": [clip.names[j] for j in spines], "floor_height_file_units": floor_height,
+                "estimated_tips": list(g.estimated),
+                "absolute_position_joints": [clip.names[j] for j in sorted(clip.absolute)]},
     )
+    return walk_in_place(track, belt_speed, BvhError, path)
 
 
 def trial_files(paths: list[Path]) -> dict[str, Path]:
@@ -358,12 +406,16 @@ def load_bvh(
     floor_height: float | None = None,
     lower_only: bool | None = None,
     joints: str | Path | Mapping[str, str] | None = None,
+    belt_speed: float | str | None = None,
 ) -> Capture:
     """Import a BVH clip as a :class:`Capture` (conventions in the module doc), with the file's
     own skeleton as its rig (:func:`bvh_rig`). ``joints``: role -> joint name, for the joints
     whose names are not recognised (``"hip_l=Thigh_L,knee_l=Shin_L"``, a dict or a mapping file;
-    :func:`solver.io.roles.parse_joint_mapping`)."""
-    track = bvh_track(path, mass=mass, units=units, up=up, floor_height=floor_height, joints=joints)
+    :func:`solver.io.roles.parse_joint_mapping`). ``belt_speed``: an in-place clip's walking speed
+    (m/s), ``"auto"`` (the stance foot's), 0 (not in place); None detects an in-place clip
+    (:func:`solver.io.joint_track.walk_in_place`)."""
+    track = bvh_track(path, mass=mass, units=units, up=up, floor_height=floor_height, joints=joints,
+                      belt_speed=belt_speed)
     capture = fit_track(track, lower_only=lower_only)
     return capture.evolve(rig=bvh_rig(read_bvh(path), track))
 
@@ -380,6 +432,8 @@ def bvh_rig(clip: BvhClip, track: SkeletonTrack) -> Rig:
         local[:, j], pos[:, j] = clip.local(j)
     moved = any(ch.lower().endswith("position") for j in range(1, J) for ch in clip.channels[j])
     extra: dict[str, Any] = {"frame_time": clip.frame_time, "units": track.source["units"]}
+    if clip.absolute:  # position channels that hold the joint's position (the writer writes them so)
+        extra["absolute_positions"] = sorted(clip.absolute)
     if moved:
         extra["positions"] = pos.tolist()
     return Rig("bvh", clip.names, clip.parents, clip.offsets, clip.channels, segment_roles(roles),

@@ -178,7 +178,10 @@ def _median_local(R: np.ndarray, origin: np.ndarray, p: np.ndarray, what: str) -
     loc = _local(R, origin, p)
     ok = np.all(np.isfinite(loc), axis=0)
     if not np.any(ok):
-        raise FitError(f"cannot measure {what}: no frame where the landmarks and the segment frame are all known")
+        raise FitError(f"cannot measure {what}: no frame where the landmarks and the segment frame are all known "
+                       "(two of the joints that place them coincide, or one is missing in every frame): name the "
+                       "joints that play the roles in a joint mapping, or import the lower body only",
+                       parameter="joints")
     return np.median(loc[:, ok], axis=1)
 
 
@@ -545,6 +548,10 @@ def _feet(attach, offset, tip, width: float):
     return contacts, feet, foot_report
 
 
+#: the height from legs, trunk and head must agree with the legs' alone (hip height 0.530 H) within this
+HEIGHT_AGREEMENT = 0.3
+
+
 def _height(track, lm, F, origin, segs, full_geometry) -> float:
     if track.height is not None:
         if not (np.isfinite(track.height) and 0.3 < track.height < 3.0):
@@ -558,15 +565,26 @@ def _height(track, lm, F, origin, segs, full_geometry) -> float:
         ah = _median_local(F[f"foot_{s}"], origin[f"foot_{s}"], lm[f"heel_{s}"], f"heel_{s} on foot_{s}")[2]
         legs.append(np.nanmedian(d1) + np.nanmedian(d2) - min(ah, 0.0))
     leg = float(np.mean(legs))
-    if full_geometry:
-        up = np.nanmedian(np.linalg.norm(lm["head_top"] - lm["neck"], axis=0)) + np.nanmedian(
-            np.linalg.norm(lm["neck"] - lm["lumbar"], axis=0)
-        ) + np.nanmedian(np.linalg.norm(lm["lumbar"] - lm["pelvis"], axis=0))
-        h = leg + float(up)
-    else:
-        h = leg / HIP_HEIGHT_FRACTION
-    if not (np.isfinite(h) and 0.3 < h < 3.0):
-        raise FitError(f"estimated subject height {h:.2f} m is not plausible: check the landmark units (metres)")
+    h_leg = leg / HIP_HEIGHT_FRACTION
+    if not (np.isfinite(h_leg) and 0.3 < h_leg < 3.0):
+        raise FitError(f"the legs (hip -> knee -> ankle -> sole) measure {leg:.2f} m, a subject {h_leg:.2f} m tall: "
+                       "not a person's; check the file's length unit (units) and which joints are the hips, knees "
+                       "and ankles (the joint mapping, joints)", parameter="units")
+    if not full_geometry:
+        return h_leg
+    parts = {"pelvis -> lumbar": np.nanmedian(np.linalg.norm(lm["lumbar"] - lm["pelvis"], axis=0)),
+             "lumbar -> neck": np.nanmedian(np.linalg.norm(lm["neck"] - lm["lumbar"], axis=0)),
+             "neck -> head top": np.nanmedian(np.linalg.norm(lm["head_top"] - lm["neck"], axis=0))}
+    h = leg + float(sum(parts.values()))
+    if not (np.isfinite(h) and abs(h / h_leg - 1.0) <= HEIGHT_AGREEMENT):
+        # the trunk and head disagree with the legs (a head mapped to a joint far from the head, a
+        # lumbar joint on the floor): the legs decide, and the figures say which part is off
+        figures = ", ".join(f"{k} {v:.2f} m" for k, v in parts.items())
+        log.warning("estimated height from the trunk and head (%.2f m: legs %.2f m, %s) is not the legs' "
+                    "(%.2f m): the legs' is used; check the joint mapping of lumbar, neck and head", h, leg,
+                    figures, h_leg)
+        return h_leg
+    return h
     return h
 
 

@@ -5,8 +5,8 @@ Public API::
 
     read_gltf(path) -> GltfAsset                 # the document and its one binary buffer
     parse_gltf(data, where) -> GltfAsset         # the same from bytes (GLB or glTF JSON)
-    gltf_track(path, *, mass=None, joints=None, animation=None) -> SkeletonTrack
-    load_gltf(path, *, mass=None, lower_only=None, joints=None, animation=None) -> Capture
+    gltf_track(path, *, mass=None, joints=None, animation=None, belt_speed=None) -> SkeletonTrack
+    load_gltf(path, *, mass=None, lower_only=None, joints=None, animation=None, belt_speed=None) -> Capture
 
 **What is read.** One animation: the first, or ``animation`` (its name, or its index). One
 skin: the one whose joints that animation drives most (the first on a tie). The skeleton is
@@ -62,7 +62,7 @@ from solver.capture import Capture, GroundFrame
 from solver.errors import InputError
 from solver.io.bvh import LEG_RANGE
 from solver.io.fit import fit_track
-from solver.io.joint_track import JointPose, ground_landmarks
+from solver.io.joint_track import JointPose, ground_landmarks, walk_in_place
 from solver.io.readers import TrialError
 from solver.io.roles import (
     RoleError,
@@ -879,7 +879,8 @@ def _roles(sk: _Skeleton, P_rest: np.ndarray, path: str | Path,
 
 
 def _track(asset: GltfAsset, path: str | Path, mass: float | None, joints: str | Path | Mapping[str, str] | None,
-           animation: int | str | None) -> tuple[SkeletonTrack, _Skeleton, dict[str, int]]:
+           animation: int | str | None, belt_speed: float | str | None = None
+           ) -> tuple[SkeletonTrack, _Skeleton, dict[str, int]]:
     sk = _read_skeleton(asset, animation)
     R_rest, P_rest = _forward(sk.parents, sk.rest_local[None], sk.rest_translation[None])
     R, P = _forward(sk.parents, sk.local, sk.translation)
@@ -906,15 +907,16 @@ def _track(asset: GltfAsset, path: str | Path, mass: float | None, joints: str |
                 "frame_time": float(sk.times[1] - sk.times[0]),
                 "mass_from": "given" if mass is not None else None,
                 "joint_roles": {r: sk.names[j] for r, j in roles.items()},
-                "spine_joints": [sk.names[j] for j in spines], "floor_height_file_units": g.floor_height},
+                "spine_joints": [sk.names[j] for j in spines], "floor_height_file_units": g.floor_height,
+                "estimated_tips": list(g.estimated)},
     )
-    return track, sk, roles
+    return walk_in_place(track, belt_speed, GltfError, path), sk, roles
 
 
 def gltf_track(path: str | Path, *, mass: float | None = None, joints: str | Path | Mapping[str, str] | None = None,
-               animation: int | str | None = None) -> SkeletonTrack:
+               animation: int | str | None = None, belt_speed: float | str | None = None) -> SkeletonTrack:
     """The landmarks of a skinned glTF character's animation (conventions in the module doc)."""
-    return _track(read_gltf(path), path, mass, joints, animation)[0]
+    return _track(read_gltf(path), path, mass, joints, animation, belt_speed)[0]
 
 
 def trial_files(paths: list[Path]) -> dict[str, Path]:
@@ -925,13 +927,15 @@ def trial_files(paths: list[Path]) -> dict[str, Path]:
 
 
 def load_gltf(path: str | Path, *, mass: float | None = None, lower_only: bool | None = None,
-              joints: str | Path | Mapping[str, str] | None = None, animation: int | str | None = None) -> Capture:
+              joints: str | Path | Mapping[str, str] | None = None, animation: int | str | None = None,
+              belt_speed: float | str | None = None) -> Capture:
     """Import a skinned glTF character's walk as a :class:`Capture` (conventions in the module
     doc), with the character's own skeleton as its rig (format ``"gltf"``). ``animation``: the
     animation's name or index (default: the first); ``joints``: role -> joint name for joints
-    whose names are not recognised."""
+    whose names are not recognised; ``belt_speed``: an in-place walk's speed (m/s), ``"auto"``, 0 (not
+    in place), None: detected (:func:`solver.io.joint_track.walk_in_place`)."""
     asset = read_gltf(path)
-    track, sk, roles = _track(asset, path, mass, joints, animation)
+    track, sk, roles = _track(asset, path, mass, joints, animation, belt_speed)
     capture = fit_track(track, lower_only=lower_only)
     return capture.evolve(rig=gltf_rig(asset, sk, roles, track))
 

@@ -19,7 +19,22 @@ world rotations and positions along the clip, in its own axes and length unit) h
   joints (else the neck joint, else the mid-point of the shoulders), shoulders, elbows, wrists
   and hand tips.
 
-A joint's *tip* is its End Site, else its first child, in the rest pose.
+A joint's *tip* is its End Site, else its first child, in the rest pose; an End Site or child
+at the joint itself (a zero-length End Site, as some game exporters write them) is no tip. A
+head, hand or toes joint without a tip gets one placed by proportion along its bone (the
+parent -> joint direction; the toes: ahead of the metatarsal heads along the foot): a head
+0.27 × the rest leg (hip -> knee -> ankle) long, a hand 0.22 ×, toes 0.35 × the ankle ->
+toes joint distance (Winter's segment lengths); ``Grounded.estimated`` names them.
+
+**In-place clips** (:func:`walk_in_place`): a game library's walk usually has its root motion
+taken out — the hips stay over the origin and the feet slide back under them. Such a clip is
+a walk on a treadmill whose belt runs at the walking speed: the stance foot moves backwards at
+that speed. Unless told otherwise the clip is taken as in place when its pelvis travels less
+than 0.15 m/s while its stance foot slides back faster than 0.3 m/s; the speed is then the
+stance foot's median backward speed, or the ``belt_speed`` given (m/s), and every landmark is
+shifted by speed × t (:func:`solver.io.track.shift_ground`): the walk overground, with the
+same forces. ``GroundFrame.velocity`` keeps the speed, so results written on the input's own
+rig walk in place again, as the input did.
 
 **Axes** (:func:`ground_landmarks`): our X is the subject's facing direction (horizontal,
 perpendicular to the right -> left hip line, averaged over the clip), Y left, Z up (``up_v``,
@@ -37,9 +52,20 @@ from pathlib import Path
 import numpy as np
 
 from solver.errors import InputError
-from solver.io.track import add_pelvis
+from solver.io.track import SkeletonTrack, add_pelvis, feet_points, shift_ground
 
-__all__ = ["Grounded", "JointPose", "ground_landmarks"]
+__all__ = ["Grounded", "JointPose", "ground_landmarks", "walk_in_place"]
+
+#: a tip closer than this to its joint (input units × metres per unit: 1 mm) is no tip
+TIP_MIN_M = 1e-3
+#: segment lengths placed by proportion, as fractions of the rest leg (hip -> knee -> ankle):
+#: Winter's head (0.130 H) and hand (0.108 H) over his leg (0.491 H)
+HEAD_OF_LEG, HAND_OF_LEG = 0.27, 0.22
+#: the toes beyond the metatarsal heads, as a fraction of the ankle -> toes joint distance
+TOES_OF_FOOT = 0.35
+#: in place: the pelvis travels less than this (m/s) while the stance foot slides back faster
+#: than ``IN_PLACE_FOOT_M_S``
+IN_PLACE_PELVIS_M_S, IN_PLACE_FOOT_M_S = 0.15, 0.3
 
 
 class JointPose:
@@ -60,14 +86,36 @@ class JointPose:
         self.up_v = np.asarray(up_v, dtype=float)
         self.error = error
         self.children = {j: [c for c, p in enumerate(self.parents) if p == j] for j in range(len(self.parents))}
+        self.min_tip = 0.0  # input units: set by ground_landmarks from the metres per unit
+        self.estimated: list[str] = []  # the tips placed by proportion
 
     def tip(self, j: int) -> np.ndarray | None:
-        """Rest-pose position of a joint's tip: its End Site or its first child."""
+        """Rest-pose position of a joint's tip: its End Site or its first child, whichever is
+        first away from the joint (a zero-length End Site is no tip)."""
+        cands = []
         if j in self.end_sites:
-            return self.P_rest[j] + self.R_rest[j] @ self.end_sites[j]
-        if self.children[j]:
-            return self.P_rest[self.children[j][0]]
-        return None
+            cands.append(self.P_rest[j] + self.R_rest[j] @ self.end_sites[j])
+        cands += [self.P_rest[c] for c in self.children[j]]
+        return next((c for c in cands if np.linalg.norm(c - self.P_rest[j]) > self.min_tip), None)
+
+    def leg_length(self, roles: Mapping[str, int]) -> float:
+        """The rest legs' mean hip -> knee -> ankle length (input units)."""
+        P = self.P_rest
+        return float(np.mean([np.linalg.norm(P[roles[f"hip_{s}"]] - P[roles[f"knee_{s}"]])
+                              + np.linalg.norm(P[roles[f"knee_{s}"]] - P[roles[f"ankle_{s}"]]) for s in "rl"]))
+
+    def tip_or_estimate(self, j: int, length: float, what: str) -> np.ndarray | None:
+        """A joint's tip, else a point ``length`` along its bone (parent -> joint) from it, named
+        ``what`` in :attr:`estimated`; None when the bone has no direction either."""
+        t = self.tip(j)
+        if t is not None:
+            return t
+        p = self.parents[j]
+        d = self.P_rest[j] - self.P_rest[p] if p >= 0 else self.up_v
+        if np.linalg.norm(d) <= self.min_tip:
+            return None
+        self.estimated.append(what)
+        return self.P_rest[j] + length * d / np.linalg.norm(d)
 
     def world(self, j: int, local: np.ndarray) -> np.ndarray:
         """A point fixed in joint j's frame (``local``) along the clip, (T, 3)."""
@@ -88,6 +136,12 @@ class JointPose:
             a = roles[f"ankle_{s}"]
             mtp_j = roles.get(f"mtp_{s}")
             toe_rest = self.tip(mtp_j) if mtp_j is not None else self.tip(a)
+            if toe_rest is None and mtp_j is not None:  # a toes joint without a tip: the toes ahead of it
+                fwd_m = P_rest[mtp_j] - P_rest[a]
+                fwd_m = fwd_m - (fwd_m @ up_v) * up_v
+                if np.linalg.norm(fwd_m) > self.min_tip:
+                    toe_rest = P_rest[mtp_j] + TOES_OF_FOOT * fwd_m
+                    self.estimated.append(f"toe_{s}")
             if toe_rest is None:
                 raise self.error(f"{path}: the {'right' if s == 'r' else 'left'} foot has no toe joint nor End "
                                  "Site: cannot place the toes")
@@ -117,7 +171,8 @@ class JointPose:
         upper["lumbar"] = P[roles["lumbar"]]
         head = roles["head"]
         upper["neck"] = P[head]
-        ht = self.tip(head)
+        leg = self.leg_length(roles)
+        ht = self.tip_or_estimate(head, HEAD_OF_LEG * leg, "head_top")
         if ht is None:
             raise KeyError("head top")
         upper["head_top"] = self.attached(head, ht)
@@ -132,7 +187,7 @@ class JointPose:
             upper[f"elbow_{s}"] = P[roles[f"elbow_{s}"]]
             w = roles[f"wrist_{s}"]
             upper[f"wrist_{s}"] = P[w]
-            ht = self.tip(w)
+            ht = self.tip_or_estimate(w, HAND_OF_LEG * leg, f"hand_{s}")
             if ht is None:
                 raise KeyError(f"hand tip {s}")
             upper[f"hand_{s}"] = self.attached(w, ht)
@@ -150,6 +205,7 @@ class Grounded:
     floor_height: float  # input units, along up_v
     upper_body: bool  # whether the upper landmarks could all be placed
     missing_upper: str | None  # what the upper body lacks, when it could not be placed
+    estimated: tuple[str, ...] = ()  # landmarks whose tips were placed by proportion (no End Site, no child)
 
 
 def ground_landmarks(pose: JointPose, roles: Mapping[str, int], scale: float, floor_height: float | None,
@@ -157,6 +213,8 @@ def ground_landmarks(pose: JointPose, roles: Mapping[str, int], scale: float, fl
     """Our landmarks from the joints (see the module doc): the facing direction from the hip line
     averaged over the clip, the floor from the soles unless ``floor_height`` is given."""
     up_v = pose.up_v
+    pose.min_tip = TIP_MIN_M / scale
+    pose.estimated = []
     hl = pose.P[roles["hip_l"]] - pose.P[roles["hip_r"]]  # (T, 3)
     hl = hl - np.outer(hl @ up_v, up_v)
     norms = np.linalg.norm(hl, axis=1, keepdims=True)
@@ -179,4 +237,40 @@ def ground_landmarks(pose: JointPose, roles: Mapping[str, int], scale: float, fl
         floor_height = float(np.percentile(soles, 2))
     offset = floor_height * up_v
     lm = {k: ((v - offset) @ A.T * scale).T for k, v in raw.items()}
-    return Grounded(lm, A, offset, x_dir, float(floor_height), missing is None, missing)
+    return Grounded(lm, A, offset, x_dir, float(floor_height), missing is None, missing, tuple(pose.estimated))
+
+
+def walk_in_place(track: SkeletonTrack, belt_speed: float | str | None, error: type[InputError],
+                  path: str | Path) -> SkeletonTrack:
+    """An in-place clip's track as the walk overground (see the module doc): ``belt_speed`` None
+    detects it, ``"auto"`` takes the stance foot's speed, a number (m/s) is the walking speed, 0
+    leaves the track as it is. The track's source records ``in_place`` and the speed."""
+    from solver.gait.base import GaitError
+    from solver.gait.belt import belt_speed as stance_speed
+
+    if belt_speed is not None and not isinstance(belt_speed, str):
+        v = float(belt_speed)
+        if not (np.isfinite(v) and abs(v) <= 10.0):
+            raise error(f"{path}: belt_speed {belt_speed!r} m/s is not a walking speed", parameter="belt_speed")
+        if v == 0.0:
+            return track
+        return shift_ground(track, v, "given", "an in-place clip: its ground moving at -velocity")
+    if belt_speed is not None and belt_speed != "auto":
+        raise error(f"{path}: belt_speed must be a speed (m/s) or 'auto', got {belt_speed!r}", parameter="belt_speed")
+    t = np.asarray(track.times, dtype=float)
+    duration = float(t[-1] - t[0]) if t.size > 1 else 0.0
+    try:
+        v = stance_speed(t, feet_points(track))
+    except GaitError:
+        if belt_speed == "auto":
+            raise error(f"{path}: no stance foot to measure the walking speed on; pass belt_speed=... (m/s)",
+                        parameter="belt_speed") from None
+        return track
+    pelvis = np.asarray(track.landmarks["pelvis"])
+    travel = float(np.linalg.norm(pelvis[:2, -1] - pelvis[:2, 0]) / duration) if duration > 0 else 0.0
+    if belt_speed is None and not (travel < IN_PLACE_PELVIS_M_S and v > IN_PLACE_FOOT_M_S):
+        return track
+    out = shift_ground(track, v, "the stance foot's backward speed (an in-place clip)",
+                       "an in-place clip: its ground moving at -velocity")
+    return out.evolve(source_update={"in_place": {"pelvis_travel_m_s": round(travel, 4), "speed_m_s": round(v, 4),
+                                                  "detected": belt_speed is None}})

@@ -52,6 +52,11 @@ def reader_for(paths: Sequence[Path]) -> Reader:
     for r in READERS:
         if r.claims is None and exts <= set(r.suffixes):
             return r
+    if ".fbx" in exts:
+        raise TrialError(f"{[p.name for p in paths if p.suffix.lower() == '.fbx']}: FBX is not read (no maintained "
+                         "reader on PyPI); convert it to glTF 2.0 and give the .glb: Blender (File > Import > FBX, "
+                         "then File > Export > glTF 2.0 with Animation on) or FBX2glTF (npx fbx2gltf --binary "
+                         "FILE.fbx); docs/import.md")
     raise TrialError(f"unknown trial format for files {[p.name for p in paths]}; supported: "
                      + "; ".join(f"{r.name}: {r.files}" for r in READERS))
 

@@ -101,6 +101,28 @@ def add_pelvis(lm: dict[str, np.ndarray]) -> None:
     lm["pelvis"] = 0.5 * (lm["hip_r"] + lm["hip_l"])
 
 
+def shift_ground(track: SkeletonTrack, speed: float, how: str, note: str) -> SkeletonTrack:
+    """The track of a walk on a moving ground — a treadmill's belt, or an in-place clip (a game
+    library's walk with its root motion taken out) — as the same walk overground: every landmark
+    gets ``speed·t`` along x (a constant-speed ground is an inertial frame: same forces), and
+    ``GroundFrame.velocity`` records it so that results map back onto the moving ground (an
+    in-place clip's exports walk in place again). ``how``: where the speed came from; ``note``:
+    what the frame's axes say of it."""
+    t = np.asarray(track.times, dtype=float)
+    shift = np.stack([speed * t, np.zeros_like(t), np.zeros_like(t)])
+    lm = {k: np.asarray(p) + shift for k, p in track.landmarks.items()}
+    f = track.frame
+    frame = GroundFrame(R=f.R, offset=f.offset, unit_m=f.unit_m, velocity=np.array([speed, 0.0, 0.0]),
+                        axes=f"{f.axes}; {note}")
+    return track.evolve(landmarks=lm, frame=frame, source_update={"belt_speed_m_s": speed, "belt_speed_from": how})
+
+
+def feet_points(track: SkeletonTrack) -> dict[str, np.ndarray]:
+    """Per side (``"r"``, ``"l"``) the mid-point of the heel and the metatarsal heads (3, T)."""
+    return {s: 0.5 * (np.asarray(track.landmarks[f"heel_{s}"]) + np.asarray(track.landmarks[f"mtp_{s}"]))
+            for s in "rl"}
+
+
 def split_mass(mass: float, ratios: Mapping[str, float], into: dict[str, float] | None = None) -> dict[str, float]:
     """A source body's ``mass`` shared between our segments in the given ratios (added to
     ``into`` when given): one trunk body -> abdomen, thorax, head, clavicles (Winter)."""

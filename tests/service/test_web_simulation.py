@@ -61,11 +61,18 @@ def test_page_simulates_a_motion_and_shows_it_beside_the_motion(api, browser, tu
         # both characters in the preview: orange (the motion) and blue (simulated), side by side
         viewer(page, "v.setPlaying(false)")
         img = _pixels(page.locator("#viewer-canvas").screenshot())
+        # both framed (the camera framed again on the two when the simulated walk came): every corner of each
+        # character's box in view, as the user sees them now and as they start together
+        framed = page.evaluate("(v => [v.inView(v.model), v.inView(v.companion.model)])(window.motionx.viewer)")
+        viewer(page, "v.pairAt(0)")
+        framed0 = page.evaluate("(v => [v.inView(v.model), v.inView(v.companion.model)])(window.motionx.viewer)")
         viewer(page, "v.setPlaying(true)")
+        assert framed == [1, 1] and framed0 == [1, 1], (framed, framed0)
         area = img.shape[0] * img.shape[1]
         assert _orange(img) > 0.005 * area, "no motion character"
         assert _blue(img) > 0.005 * area, "no simulated character"
         assert page.evaluate("window.motionx.viewer.world.getObjectByName('companion') !== undefined")
+
         SCREENSHOT.parent.mkdir(parents=True, exist_ok=True)
         page.screenshot(path=str(SCREENSHOT.with_name("simulation.png")), full_page=True)
         assert not errors, errors

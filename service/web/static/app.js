@@ -49,6 +49,7 @@ const state = {
   previewObjects: 0, // three.js objects of the previewed model
   environmentReached: null, // the followed job's environment at λ reached (axis -> value)
   formats: [], // the export formats (GET /motions/{id}?format=…, from the OpenAPI document)
+  exports: null, // the selected motion's downloads (GET /motions/{id}/exports): formats, on_rig, rig, source
   downloadStatus: null, // ok | error: the last download
   libraries: [],
   libraryId: null,
@@ -709,12 +710,14 @@ async function selectMotion(id) {
   Object.assign(state, {
     motionId: id, previewReady: false, previewError: null, grfLoaded: false, grfError: null,
     residualsLoaded: false, residualsError: null, filmstripLoaded: false, filmstripError: null, validation: null,
-    previewRig: null, previewObjects: 0, downloadStatus: null, simulationStatus: null, simulationReport: null,
+    previewRig: null, previewObjects: 0, downloadStatus: null, exports: null, simulationStatus: null, simulationReport: null,
     simulationShown: false, simulationLoaded: false, simulationError: null,
   });
   $('motion-panel').hidden = false;
   $('download-status').textContent = '';
   $('download-rig-box').hidden = true;
+  $('download-rig-none').hidden = true;
+  renderDownloadButtons(null);
   $('viewer-rig').textContent = '';
   $('motion-id').textContent = id;
   $('motion-facts').textContent = '';
@@ -729,9 +732,11 @@ async function selectMotion(id) {
       meta.job_id ? `job ${shortId(meta.job_id)}` : null].filter(Boolean).join(' · ');
   }
   const validation = loadValidation(id, token);
-  previewDone = loadPreview(id, token, validation);
+  const exports = loadExports(id, token);
+  previewDone = loadPreview(id, token, validation, exports);
   await Promise.all([
     previewDone,
+    exports,
     loadSimulation(id, token),
     loadImage('grf', `/motions/${id}/plots/grf.png`, token),
     loadImage('residuals', `/motions/${id}/plots/residuals.png`, token),
@@ -834,7 +839,7 @@ function viewerMessage(text) {
   el.textContent = text || '';
 }
 
-async function loadPreview(id, token, validation) {
+async function loadPreview(id, token, validation, exportsLoaded) {
   viewerMessage('');
   let v;
   try {
@@ -847,7 +852,7 @@ async function loadPreview(id, token, validation) {
     return;
   }
   try {
-    const [{ glb, rig }, report] = await Promise.all([previewGlb(id), validation]);
+    const [{ glb, rig }, report, exports] = await Promise.all([previewGlb(id), validation, exportsLoaded]);
     if (token !== motionToken) return;
     const gravity = report && report.environment ? report.environment.gravity : undefined;
     const treads = report && report.environment ? report.environment.treads : undefined; // stairs
@@ -856,9 +861,8 @@ async function loadPreview(id, token, validation) {
     const meta = motionMeta(id);
     state.previewRig = rig;
     state.previewObjects = shown.objects;
-    $('viewer-rig').textContent = rig === 'source' ? "on the input's own rig"
-      : `on the ${meta ? meta.character : "motion's"} character`;
-    $('download-rig-box').hidden = rig !== 'source';
+    $('viewer-rig').textContent = rig !== 'source' ? `on the ${meta ? meta.character : "motion's"} character`
+      : exports && exports.rig === 'opensim' ? "on its OpenSim model's bodies" : "on the input's own rig";
     state.previewReady = true;
   } catch (err) {
     if (token !== motionToken) return;
@@ -870,7 +874,8 @@ async function loadPreview(id, token, validation) {
 /**
  * The GLB queries a motion's preview tries, in order (the first the API answers is shown):
  * the motion on the input's own rig (GET /motions/{id}?format=glb&rig=source: a motion made
- * from a BVH, DeepMimic or glTF trial carries that rig in its provenance), then the motion on
+ * from a BVH, DeepMimic or glTF trial carries that rig in its provenance; one from an OpenSim
+ * trial is shown on its model's bodies), then the motion on
  * its own character (HalfBoy or the full body). A 4xx moves on to the next.
  */
 function previewVariants() {
@@ -1063,8 +1068,12 @@ function saveBlob(blob, name) {
 }
 
 /** What a format's button says (a format this table does not know shows its name). */
-const FORMAT_LABELS = { json: 'JSON clip', gltf: 'glTF', glb: 'GLB', bvh: 'BVH', deepmimic: 'DeepMimic',
+const FORMAT_LABELS = { json: 'JSON clip', gltf: 'glTF (.glb)', glb: 'glTF (.glb)', bvh: 'BVH', deepmimic: 'DeepMimic',
   opensim: 'OpenSim (zip)', motion: 'motion file' };
+/** Formats that write the same file as another (one button per distinct file). */
+const FORMAT_ALIASES = { glb: 'gltf' };
+/** The words for the input's own skeleton, by its format (the rig box's label). */
+const RIG_WORDS = { bvh: 'its BVH skeleton', gltf: 'its glTF character', deepmimic: 'its DeepMimic character' };
 
 /** A file name for an export, from its media type: .glb, .gltf, .zip, .FORMAT.json, .bvh … */
 function exportFileName(id, format, mediaType, onRig) {
@@ -1074,12 +1083,41 @@ function exportFileName(id, format, mediaType, onRig) {
   return `${id}${onRig ? '.rig' : ''}.${ext}`;
 }
 
-/** One button per export format of the API (the OpenAPI document's enum of GET /motions/{id}?format=). */
-function renderDownloadButtons() {
-  $('download-buttons').replaceChildren(...state.formats.map((f) => h('button', {
+/**
+ * One button per distinct file the selected motion can be downloaded as: its formats from
+ * GET /motions/{id}/exports (no DeepMimic or OpenSim for a motion that cannot have them), else
+ * the API's enum without aliases (glb is gltf's file); the motion file last. The box "on the
+ * input's own rig" is shown when the motion carries the input's skeleton, and says which; when
+ * it carries none, a note says the downloads are on the motion's own character.
+ */
+function renderDownloadButtons(exports) {
+  const formats = exports ? [...exports.formats, 'motion']
+    : state.formats.filter((f) => !FORMAT_ALIASES[f] || !state.formats.includes(FORMAT_ALIASES[f]));
+  $('download-buttons').replaceChildren(...formats.map((f) => h('button', {
     type: 'button', 'data-format': f, onclick: () => download(f),
   }, FORMAT_LABELS[f] ?? f)));
-  if (!state.formats.length) $('download-buttons').append(h('span', { class: 'hint' }, 'formats unavailable'));
+  if (!formats.length) $('download-buttons').append(h('span', { class: 'hint' }, 'formats unavailable'));
+  const onRig = Boolean(exports && exports.on_rig.length);
+  $('download-rig-box').hidden = !onRig;
+  $('download-rig-words').textContent = onRig ? RIG_WORDS[exports.rig] || exports.rig : '';
+  const none = $('download-rig-none');
+  none.hidden = !exports || onRig;
+  none.textContent = exports && !onRig ? `on the ${motionMeta(state.motionId)?.character || "motion's"} character: `
+    + `the trial${exports.source ? ` (${exports.source})` : ''} has no skeleton of its own to write it on` : '';
+}
+
+/** The selected motion's downloads (GET /motions/{id}/exports), then its buttons. */
+async function loadExports(id, token) {
+  try {
+    const exports = await api(`/motions/${id}/exports`);
+    if (token !== motionToken) return;
+    state.exports = exports;
+    renderDownloadButtons(exports);
+    return exports;
+  } catch (err) {
+    if (token === motionToken && !(err instanceof ApiError)) noteError('exports', err);
+    return null;
+  }
 }
 
 /** The exporter options typed beside the buttons (NAME=VALUE separated by spaces, commas or &) as a query string. */
@@ -1103,7 +1141,9 @@ async function download(format) {
   const id = state.motionId;
   if (!id) return;
   const status = $('download-status');
-  const wantRig = !$('download-rig-box').hidden && $('download-rig').checked && format !== 'motion';
+  const exports = state.exports;
+  const rigTicked = !$('download-rig-box').hidden && $('download-rig').checked && format !== 'motion';
+  const wantRig = rigTicked && exports !== null && exports.on_rig.includes(format);
   const fail = (message) => {
     state.downloadStatus = 'error';
     status.className = 'status-line bad';
@@ -1119,7 +1159,11 @@ async function download(format) {
   state.downloadStatus = 'busy';
   status.className = 'status-line busy';
   status.textContent = `preparing ${FORMAT_LABELS[format] ?? format}…`;
-  let note = '';
+  let note = rigTicked && !wantRig ? ` on the motion's own character (${FORMAT_LABELS[format] ?? format} is not written `
+    + `on ${RIG_WORDS[exports?.rig] || "the input's rig"})` : '';
+  if (!rigTicked && exports && !exports.on_rig.length && format !== 'motion') {
+    note = ` on the motion's own character (the trial has no skeleton of its own)`;
+  }
   try {
     let res = null;
     if (wantRig) {
@@ -1183,7 +1227,7 @@ function start() {
   // the OpenAPI document; a key entered meanwhile is kept
   const before = keyToken;
   Promise.all([loadAxes(key), loadSchema()]).finally(() => {
-    renderDownloadButtons();
+    renderDownloadButtons(state.exports);
     newWalk = initNewWalk({
       api, ApiError, h, state, axes: AXES, schema: SCHEMA, noteError, refreshLists, selectMotion,
       started: (kind, id) => (kind === 'library' ? selectLibrary(id) : selectJob(id, { previewLast: true })),

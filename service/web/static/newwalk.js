@@ -198,7 +198,15 @@ export function initNewWalk(ctx) {
         placeFields();
         $(`opt-${m[1]}`).focus();
       }
-      status(out, 'error', err.message);
+      // a trial the API refused for what the files are: they go, so the next files are a new trial (not a mix
+      // of formats with these); a trial that only needs a field (the mass) keeps them for the retry
+      const keep = Boolean(m && $(`field-${m[1]}`));
+      if (!keep && files.length) {
+        files = [];
+        asked.clear();
+        renderFiles();
+      }
+      status(out, 'error', keep ? err.message : `${err.message} (the files were cleared: choose the trial's files again)`);
       if (!(err instanceof ApiError)) noteError('upload', err);
     } finally {
       button.disabled = false;
@@ -232,20 +240,19 @@ export function initNewWalk(ctx) {
 
   // ------------------------------------------------------------ source, tutor, target, control
 
-  const tutorProps = (schema && schema.tutor && schema.tutor.properties) || {};
-  // an optional field's schema is anyOf [its type, null]: the branch that is not null
-  const branch = (p) => (p && (p.anyOf || []).find((x) => x.type !== 'null')) || p || {};
+  const tutorProps = Object.fromEntries(Object.entries((schema && schema.tutor && schema.tutor.properties) || {})
+    .map(([k, p]) => [k, plain(p)]));
   const character = $('tutor-character');
-  const chars = branch(tutorProps.character).enum || [];
-  character.replaceChildren(...chars.map((c) => h('option', { value: c }, c)));
-  // the service's default (null in the schema): the first listed, the full body
-  if (chars.length) character.value = (tutorProps.character && tutorProps.character.default) || chars[0];
+  const chars = (tutorProps.character && tutorProps.character.enum) || [];
+  // an optional character (null: the service's default) is offered as such, first
+  const serviceDefault = tutorProps.character && tutorProps.character.nullable;
+  character.replaceChildren(...(serviceDefault ? [h('option', { value: '' }, "the service's default")] : []),
+    ...chars.map((c) => h('option', { value: c }, c)));
+  if (tutorProps.character && tutorProps.character.default) character.value = tutorProps.character.default;
   const fps = $('tutor-fps');
   if (tutorProps.fps) {
-    const f = branch(tutorProps.fps);
-    // no value: the service's default for the character (30 frames/s for the full body, 15 for HalfBoy)
-    Object.assign(fps, { min: f.minimum, max: f.maximum, value: tutorProps.fps.default ?? '',
-                         placeholder: 'default' });
+    Object.assign(fps, { min: tutorProps.fps.minimum, max: tutorProps.fps.maximum, value: tutorProps.fps.default ?? '',
+      placeholder: tutorProps.fps.default == null ? "the character's" : '' });
     fps.title = tutorProps.fps.description || '';
   }
 
@@ -256,20 +263,26 @@ export function initNewWalk(ctx) {
     if (shown === sourcesShown && sel.options.length) return; // unchanged: an open list stays open
     sourcesShown = shown;
     const keep = sel.value;
-    sel.replaceChildren(...items.map((m) => h('option', { value: m.id },
-      `${m.name || m.kind} · ${m.kind} · ${m.character} · ${m.frames} frames · ${m.id.slice(0, 10)}`)));
-    if (!items.length) sel.append(h('option', { value: '' }, 'upload a trial first'));
+    // nothing is chosen for the user: the walk just uploaded, or the one picked in the list
+    sel.replaceChildren(h('option', { value: '' }, items.length ? 'choose the walk to start from' : 'upload a trial first'),
+      ...items.map((m) => h('option', { value: m.id }, sourceLabel(m))));
     if (keep && items.some((m) => m.id === keep)) sel.value = keep;
     renderSourceNote();
   }
 
+  const sourceLabel = (m) => `${m.name || m.kind} · ${m.kind} · ${m.character} · ${m.frames} frames · ${m.id.slice(0, 10)}`;
+
+  /** What Start runs on, in words (the source chosen), and what the job does with it. */
   function renderSourceNote() {
     const m = state.motions.find((x) => x.id === $('source-select').value);
     const capture = !m || m.kind === 'capture';
     character.disabled = fps.disabled = !capture;
-    $('source-note').textContent = !m ? ''
-      : capture ? 'A raw capture: the job first makes its tutor, one gait cycle of the character at this fps.'
-        : `A ${m.kind} with contact forces: it is the tutor itself (character and fps are for captures).`;
+    state.startSource = m ? m.id : null;
+    $('start-button').textContent = m ? `Start on ${m.name || m.kind}` : 'Start';
+    $('source-note').textContent = !m ? 'Choose the walk to start from (an uploaded trial, or a motion).'
+      : `Start runs on ${m.name || m.kind} (${m.kind} ${m.id.slice(0, 10)}). `
+        + (capture ? 'A raw capture: the job first makes its tutor, one gait cycle of the character at this fps.'
+          : `A ${m.kind} with contact forces: it is the tutor itself (character and fps are for captures).`);
   }
   $('source-select').addEventListener('change', renderSourceNote);
 
@@ -343,7 +356,7 @@ export function initNewWalk(ctx) {
   }
 
   function requestBody() {
-    const tutor = { character: character.value };
+    const tutor = character.value ? { character: character.value } : {};
     const f = numberOf(fps, 'fps');
     if (f !== undefined) tutor.fps = f;
     const control = {};
@@ -376,7 +389,7 @@ export function initNewWalk(ctx) {
     const kind = mode();
     let body;
     try {
-      if (!source) throw new Error('upload a trial first (or choose a motion)');
+      if (!source) throw new Error('choose the walk to start from (upload a trial first, or pick a motion)');
       body = requestBody();
     } catch (err) {
       state.startStatus = 'error';
@@ -392,7 +405,9 @@ export function initNewWalk(ctx) {
       const made = await api(path, { method: 'POST', json: body });
       state.startedId = made.id;
       state.startStatus = 'ok';
-      status(out, 'ok', `started ${kind === 'library' ? 'library' : 'job'} ${made.id}: follow it below`);
+      const from = state.motions.find((x) => x.id === source);
+      status(out, 'ok', `started ${kind === 'library' ? 'library' : 'job'} ${made.id} on ${from ? from.name || from.kind : source}: `
+        + 'follow it below');
       ctx.refreshLists();
       ctx.started(kind, made.id); // follows it until it ends: not awaited, the form stays usable
       $(kind === 'library' ? 'library-panel' : 'job-panel').scrollIntoView({ block: 'nearest' });
@@ -420,6 +435,13 @@ export function initNewWalk(ctx) {
   }
 
   return { renderSources, reset, renderAxes };
+}
+
+/** A JSON Schema property without its null branch (an optional field is anyOf [schema, null]). */
+function plain(prop) {
+  if (!prop || !Array.isArray(prop.anyOf)) return prop;
+  const branch = prop.anyOf.find((p) => p.type !== 'null') || {};
+  return { ...branch, ...prop, anyOf: undefined, nullable: prop.anyOf.some((p) => p.type === 'null') };
 }
 
 function sizeText(bytes) {

@@ -162,16 +162,36 @@ export class Viewer {
     this.grid.position.copy(n).multiplyScalar((Number.isFinite(lowest) ? lowest : 0) - 0.005);
   }
 
-  /** Points the camera at the character's first pose (in the untilted world's frame). */
+  /** Points the camera at the character's first pose (in the untilted world's frame), and at the
+   * second character's too when one walks beside it (showCompanion). */
   frameCamera() {
+    const q = this.world.quaternion.clone();
     this.world.quaternion.identity();
     this.world.updateMatrixWorld(true);
     const box = new THREE.Box3().setFromObject(this.model, true); // skinned: the posed vertices
+    if (this.companion) box.union(new THREE.Box3().setFromObject(this.companion.model, true));
     const center = box.getCenter(new THREE.Vector3());
     const size = Math.max(box.getSize(new THREE.Vector3()).length(), 0.5);
     const distance = (0.75 * size) / Math.tan(THREE.MathUtils.degToRad(this.camera.fov / 2));
     this.controls.target.copy(center);
     this.camera.position.copy(center).addScaledVector(VIEW_DIRECTION, distance);
+    this.world.quaternion.copy(q);
+    this.world.updateMatrixWorld(true);
+  }
+
+  /** The share (0-1) of `object`'s posed bounding box corners inside the camera's view. */
+  inView(object) {
+    this.scene.updateMatrixWorld(true);
+    this.camera.updateMatrixWorld(true);
+    const box = new THREE.Box3().setFromObject(object, true);
+    if (box.isEmpty()) return 0;
+    let inside = 0;
+    for (let i = 0; i < 8; i += 1) {
+      const p = new THREE.Vector3(i & 1 ? box.max.x : box.min.x, i & 2 ? box.max.y : box.min.y, i & 4 ? box.max.z : box.min.z);
+      p.project(this.camera);
+      if (Math.abs(p.x) <= 1 && Math.abs(p.y) <= 1 && p.z >= -1 && p.z <= 1) inside += 1;
+    }
+    return inside / 8;
   }
 
   /** Stairs: one box per stance, its top at the tread's height (motionx x, y, z → glTF z, x, y). */
@@ -234,6 +254,13 @@ export class Viewer {
     if (clip) mixer.clipAction(clip).play();
     this.companion = { model, mixer, duration: clip ? clip.duration : 0, start: Math.max(0, start || 0), time: 0 };
     this.pairAt(0);
+    // both in view: the camera framed again on the two, looking at them from as far as they need
+    this.frameCamera();
+    this.world.updateMatrixWorld(true);
+    this.world.localToWorld(this.controls.target);
+    this.world.localToWorld(this.camera.position);
+    if (this.pelvis) this.pelvis.getWorldPosition(this.lastPelvis);
+    this.controls.update();
     await this.nextFrame();
     let objects = 0;
     model.traverse(() => { objects += 1; });

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import math
+import warnings
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -18,6 +19,14 @@ log = logging.getLogger("solver.io.c3d")
 
 # ----------------------------------------------------------------------------------------
 # axes
+
+
+def _nanmean(a, axis: int) -> np.ndarray:
+    """``np.nanmean`` without its "Mean of empty slice" warning: a frame where every marker of the
+    set is missing is NaN, as the callers expect."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.nanmean(a, axis=axis)
 
 
 def _snap(v: np.ndarray, deg: float) -> np.ndarray:
@@ -58,10 +67,10 @@ def _detect_axes(raw: _Raw, mk: _Markers, specs: Sequence[PlateSpec], pelvis_rol
                  ) -> tuple[np.ndarray, float, dict[str, Any]]:
     """Rotation lab -> ours (rows: our x, y, z in lab coordinates) and the floor height (m, along up)."""
     info: dict[str, Any] = {}
-    pelvis = np.nanmean(np.stack(list(pelvis_roles.values())), axis=0)  # (3, T)
+    pelvis = _nanmean(np.stack(list(pelvis_roles.values())), axis=0)  # (3, T)
     feet = [mk.get(lbl) for side in ("L", "R") for role in ("HEE", "TOE", "ANK")
             if (lbl := mk.find(role, side)) is not None]
-    foot_c = np.nanmean(np.stack(feet), axis=0) if feet else None
+    foot_c = _nanmean(np.stack(feet), axis=0) if feet else None
     if specs:
         normals: list[np.ndarray] = []
         for s in specs:
@@ -72,10 +81,10 @@ def _detect_axes(raw: _Raw, mk: _Markers, specs: Sequence[PlateSpec], pelvis_rol
     else:
         if foot_c is None:
             raise C3DError(f"{raw.path.name}: cannot find the vertical: no force plates and no foot markers")
-        up = _floor_normal(np.nanmean(pelvis - foot_c, axis=1), feet)
+        up = _floor_normal(_nanmean(pelvis - foot_c, axis=1), feet)
         info["vertical_from"] = "pelvis above feet"
     up = up / np.linalg.norm(up)
-    above = np.nanmean(pelvis - foot_c, axis=1) if foot_c is not None else None
+    above = _nanmean(pelvis - foot_c, axis=1) if foot_c is not None else None
     if above is not None and above @ up < 0:
         up = -up
     up = _snap(up, 3.0 if specs else 10.0)
@@ -86,7 +95,7 @@ def _detect_axes(raw: _Raw, mk: _Markers, specs: Sequence[PlateSpec], pelvis_rol
     travel = _perp(travel, up)
     facing = None
     if "ASI" in pelvis_roles and "PSI" in pelvis_roles:
-        facing = _perp(np.nanmean(pelvis_roles["ASI"] - pelvis_roles["PSI"], axis=1), up)
+        facing = _perp(_nanmean(pelvis_roles["ASI"] - pelvis_roles["PSI"], axis=1), up)
     if np.linalg.norm(travel) > 0.5:
         fwd = travel
         info["forward_from"] = "pelvis travel"

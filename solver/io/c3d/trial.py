@@ -144,7 +144,7 @@ def read_c3d_trial(path: str | Path, *, mass: float | None = None, require_plate
         warn = mass_warning(m, implied)
         if warn:
             source["mass_warning"] = warn
-            log.warning("%s: %s (mass from the %s; pass mass=... to choose)", name, warn, how)
+            log.info("%s: %s (mass from the %s; pass mass=... to choose)", name, warn, how)  # shown by the front ends
     if measured is not None:
         peak = float(np.max(measured.force[:, 2].sum(axis=0)))
         if not 0.5 * m * G < peak < 5.0 * m * G:

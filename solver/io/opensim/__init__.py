@@ -205,7 +205,7 @@ def load_opensim(
             src["mass_implied_from"] = f"plates: {implied.method}"
             warn = mass_warning(cap.character.total_mass, implied)
             if warn:
-                log.warning("%s: %s", Path(grf).name, warn)
+                log.info("%s: %s", Path(grf).name, warn)  # source["mass_warning"]: the front ends show it
                 src["mass_warning"] = warn
         complete = cap.times[measured.valid]
         rig = {**(cap.rig or {}), "plates": {

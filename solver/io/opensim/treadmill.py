@@ -12,12 +12,11 @@ import math
 
 import numpy as np
 
-from solver.capture import GroundFrame
 from solver.gait.base import GaitError
 from solver.gait.belt import belt_speed
 from solver.io.opensim.base import OpenSimError
 from solver.io.opensim.external_loads import read_opensim_grf
-from solver.io.track import SkeletonTrack
+from solver.io.track import SkeletonTrack, feet_points, shift_ground
 
 log = logging.getLogger(__name__)
 
@@ -29,10 +28,8 @@ def estimate_belt_speed(track: SkeletonTrack, *, stance: np.ndarray | None = Non
     (2, T) bool per foot when known, e.g. from force plates); its forward velocity is
     -v_belt. Frames with the foot moving vertically faster than 0.1 m/s are skipped.
     """
-    feet = {s: 0.5 * (np.asarray(track.landmarks[f"heel_{s}"]) + np.asarray(track.landmarks[f"mtp_{s}"]))
-            for s in "rl"}
     try:
-        return belt_speed(track.times, feet, stance=stance)
+        return belt_speed(track.times, feet_points(track), stance=stance)
     except GaitError as e:
         raise OpenSimError(str(e)) from None
 
@@ -52,11 +49,5 @@ def belt_shift(track: SkeletonTrack, belt_speed: float | str, grf, grf_xml) -> S
         if not math.isfinite(v) or abs(v) > 10:
             raise OpenSimError(f"belt_speed {belt_speed!r} m/s is not plausible")
         how = "given"
-    t = np.asarray(track.times, dtype=float)
-    shift = np.stack([v * t, np.zeros_like(t), np.zeros_like(t)])
-    lm = {k: np.asarray(p) + shift for k, p in track.landmarks.items()}
-    f = track.frame
-    frame = GroundFrame(R=f.R, offset=f.offset, unit_m=f.unit_m, velocity=np.array([v, 0.0, 0.0]),
-                        axes=f.axes + "; treadmill frame moving at -velocity")
     log.info("treadmill: belt speed %.3f m/s (%s): root shifted by v*t (overground-equivalent)", v, how)
-    return track.evolve(landmarks=lm, frame=frame, source_update={"belt_speed_m_s": v, "belt_speed_from": how})
+    return shift_ground(track, v, how, "treadmill frame moving at -velocity")
