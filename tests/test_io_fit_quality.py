@@ -6,7 +6,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import OTHER_LABS
 
 from solver.io import load_trial
 from solver.io.c3d import C3DError, load_c3d
@@ -33,10 +32,12 @@ _CACHE: dict = {}
 
 
 def _where(request, name) -> Path:
-    """The folder holding ``name``: the repository's data/, or the other labs' (tests/conftest.py)."""
-    if name.split("/")[0] in OTHER_LABS:
-        return request.getfixturevalue("other_labs_data")
-    return request.getfixturevalue("shared_data")
+    """The folder holding ``name``: the repository's data/, else the other labs' (tests/conftest.py:
+    skipped when ``$MOTIONX_OTHER_LABS_DATA`` is not set)."""
+    shared = request.getfixturevalue("shared_data")
+    if (shared / name).is_file():
+        return shared
+    return request.getfixturevalue("other_labs_data")
 
 
 def _capture(request, name):
