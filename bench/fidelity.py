@@ -6,8 +6,10 @@ peaks, mid-stance valley), every naturalness check with the capture's own figure
 up and down), judged by the same checks (or the impasse at the last natural λ).
 
 ``MOTIONX_BENCH_FIDELITY_TRIALS`` (comma-separated names) and ``MOTIONX_BENCH_FIDELITY_TARGETS``
-(``none``: the tutors only) restrict a run; the extrapolations run on the trials named in ``EXTRAPOLATED`` (a full-body
-continuation takes minutes)."""
+(``none``: the tutors only) restrict a run; ``MOTIONX_BENCH_FIDELITY_SAVE`` (a folder) keeps the
+extrapolated trials' tutors and last optima as motion files (``NAME.tutor.json``, ``NAME.TARGET.json``:
+``python -m bench.filmstrips --motions FOLDER`` draws them); the extrapolations run on the trials
+named in ``EXTRAPOLATED`` (a full-body continuation takes minutes)."""
 
 from __future__ import annotations
 
@@ -69,6 +71,7 @@ def run() -> dict:
     only = [t for t in os.environ.get("MOTIONX_BENCH_FIDELITY_TRIALS", "").split(",") if t]
     targets = [t for t in os.environ.get("MOTIONX_BENCH_FIDELITY_TARGETS", "").split(",") if t] or list(TARGETS)
     targets = [] if targets == ["none"] else targets
+    save = os.environ.get("MOTIONX_BENCH_FIDELITY_SAVE")
     out: dict = {"load_average": os.getloadavg()}
     for name, (files, opts) in {**shared_trials(), **other_labs()}.items():
         if only and name not in only:
@@ -82,6 +85,9 @@ def run() -> dict:
             if res.motion is None or name not in EXTRAPOLATED or kind != "fullbody":
                 continue
             row[kind]["targets"] = {}
+            if save:
+                os.makedirs(save, exist_ok=True)
+                res.motion.save(os.path.join(save, f"{name}.tutor.json"))
             for label in targets:
                 t = time.perf_counter()
                 ext = extrapolate(res.motion, TARGETS[label], StepControl())
@@ -92,6 +98,10 @@ def run() -> dict:
                     "every_step_natural": all(s.motion.report["plausible"] and s.motion.report["natural"]
                                               for s in ext.steps),
                     "last": None if last is None else checks(last.report)}
+                if save and last is not None:
+                    last.save(os.path.join(save, f"{name}.{label}.json"))
+                    with open(os.path.join(save, f"{name}.{label}.status"), "w") as f:
+                        f.write(f"{ext.status}, λ = {ext.lam_reached:.3g}")
         out[name] = row
     out["load_average_end"] = os.getloadavg()
     return out

@@ -5,6 +5,7 @@ docs/img/naturalness/before/ holds the same figures made by the code before the 
 (HalfBoy at 15 frames/s, its features on bounds).
 
     python -m bench.filmstrips [--out docs/img/naturalness] [--character fullbody|halfboy]
+    python -m bench.filmstrips --motions FOLDER   # the tutors and optima the fidelity bench kept
 """
 
 from __future__ import annotations
@@ -50,11 +51,16 @@ def main() -> int:
     p = argparse.ArgumentParser()
     p.add_argument("--out", default="docs/img/naturalness")
     p.add_argument("--character", default=DEFAULT_CHARACTER, choices=["fullbody", "halfboy"])
+    p.add_argument("--motions", default=None,
+                   help="a folder of NAME.tutor.json and NAME.TARGET.json (MOTIONX_BENCH_FIDELITY_SAVE): draw "
+                        "those, with each trial's captured cycle, instead of solving again")
     args = p.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     enable_native_code(get_settings().model_copy(update={"compiled_derivatives": False}))
     trials = shared_trials()
+    if args.motions:
+        return from_folder(Path(args.motions), out, trials)
     for name in TRIALS:
         files, opts = trials[name]
         capture = load_trial(files, **opts)
@@ -69,6 +75,25 @@ def main() -> int:
             title = f"{name}: {label} ({res.status}, λ = {res.lam_reached:.3g})"
             (out / f"{name}.{label}.png").write_bytes(filmstrip_png(last, title=title))
             print(f"[filmstrips] {name} {label}: {res.status} λ = {res.lam_reached:.3f}")
+    return 0
+
+
+def from_folder(folder: Path, out: Path, trials: dict) -> int:
+    """The filmstrips of the motions a fidelity bench run kept (bench/fidelity.py)."""
+    for tutor_file in sorted(folder.glob("*.tutor.json")):
+        name = tutor_file.name.removesuffix(".tutor.json")
+        tutor = Motion.load(tutor_file)
+        files, opts = trials[name]
+        (out / f"{name}.capture.png").write_bytes(
+            filmstrip_png(capture_cycle(load_trial(files, **opts), tutor.fps), title=f"{name}: the captured cycle"))
+        (out / f"{name}.tutor.png").write_bytes(filmstrip_png(tutor, title=f"{name}: the tutor"))
+        for f in sorted(folder.glob(f"{name}.*.json")):
+            label = f.name.removeprefix(f"{name}.").removesuffix(".json")
+            if label == "tutor":
+                continue
+            status = f.with_suffix(".status")
+            title = f"{name}: {label}" + (f" ({status.read_text()})" if status.exists() else "")
+            (out / f"{name}.{label}.png").write_bytes(filmstrip_png(Motion.load(f), title=title))
     return 0
 
 
