@@ -50,6 +50,10 @@ class NaturalnessLimits:
 
     clearance_m: float = 0.009  # mid-swing: heel, toe and sole at least this above the ground (people: 13 ± 4 mm)
     moving_speed: float = 1.0  # m/s: a swing point faster than this is in mid-swing (not lifting off or landing)
+    #: the frames of a swing next to its lift-off and its touchdown are not mid-swing: there the foot
+    #: leaves or meets the ground (its height goes to zero by definition), whatever its speed; Winter's
+    #: minimum toe clearance is the trough of mid-swing
+    swing_edge_frames: int = 1
     pitch_load: float = 0.5  # BW: a foot carrying more than this ...
     pitch_deg: float = 40.0  # ... is pitched (heel up or toe up) at most this
     limit_band_deg: float = 3.0  # a coordinate within this of its model limit is "at" it
@@ -268,8 +272,9 @@ class _Walk:
 
 
 def _clearance(w: _Walk, lim: NaturalnessLimits) -> dict[str, Any]:
-    """Lowest heel, toe or sole corner of a foot in swing moving faster than ``moving_speed``
-    (speeds by central differences), at the interior frames."""
+    """Lowest heel, toe or sole corner of a foot in mid-swing — a swing frame more than
+    ``swing_edge_frames`` from the foot's lift-off and touchdown — moving faster than
+    ``moving_speed`` (speeds by central differences), at the interior frames."""
     worst: dict[str, Any] | None = None
     below = 0
     for k, side in enumerate(FEET):
@@ -278,9 +283,10 @@ def _clearance(w: _Walk, lim: NaturalnessLimits) -> dict[str, Any]:
         labels = [w.character.contacts[j].name for j in idx] + [f"sole {c}" for c in CORNERS]
         h = pts[:, 2] - w.ground[k]
         v = np.linalg.norm(_central_differences(pts[:, :2], w.dt), axis=1)  # (6, T)
+        e = lim.swing_edge_frames
         for t in range(1, w.T - 1):
             moving = v[:, t] > lim.moving_speed
-            if w.B[k, t] or not moving.any():
+            if w.B[k, max(t - e, 0):t + e + 1].any() or not moving.any():
                 continue
             hm = np.where(moving, h[:, t], np.inf)
             i = int(np.argmin(hm))
@@ -641,7 +647,8 @@ def checks_of(fig: Mapping[str, Any], *, reference: Mapping[str, Any] | None = N
             source=SOURCES["fit_quality"]))
     checks.append(Check.measure(
         "swing_clearance", _get(fig, "swing_clearance", "min_m"), lim.clearance_m, "m",
-        f"lowest heel, toe or sole corner of a swing foot moving faster than {lim.moving_speed:g} m/s (mid-swing)",
+        f"lowest heel, toe or sole corner of a swing foot moving faster than {lim.moving_speed:g} m/s in mid-swing "
+        f"(more than {lim.swing_edge_frames} frame from lift-off and touchdown)",
         source=SOURCES["swing_clearance"], at_least=True, capture=_get(cap, "swing_clearance", "min_m")))
     if "foot_pitch_under_load" in fig:
         checks.append(Check.measure(
