@@ -146,10 +146,20 @@ def fidelity_table(res: dict) -> str:
     return "\n".join(rows)
 
 
-def plates_table(res: dict) -> str:
-    """The tutors' ground reactions against the force plates they never saw (BW)."""
+def plates_table(res: dict, before: dict | None = None) -> str:
+    """The tutors' ground reactions against the force plates they never saw (BW); with ``before``
+    (an earlier fidelity run), each RMS and peak as before → after."""
     rows = ["| trial | character | foot | vertical RMS | fore-aft RMS | vertical peak (plates) | "
             "loading peak / valley / push-off (each stance) |", "|---|---|---|---|---|---|---|"]
+
+    def was(trial: str, kind: str, side: str, *path: str) -> str:
+        d = (((before or {}).get(trial) or {}).get(kind) or {}).get("grf_against_plates") or {}
+        d = d.get(side) or {}
+        for k in path:
+            d = d.get(k) or {}
+        return "" if before is None or not isinstance(d, float) else f"{d:.3f} → " if "rms_bw" in path else \
+            f"{d:.2f} → "
+
     for trial, row in res.items():
         if not isinstance(row, dict) or trial.startswith("load"):
             continue
@@ -163,9 +173,10 @@ def plates_table(res: dict) -> str:
                 sh = [s for s in shapes if s.get("foot") == side]
                 hump = "; ".join(f"{s['loading_peak_bw']:.2f} / {s['valley_bw']:.2f} / {s['push_off_peak_bw']:.2f}"
                                  for s in sh) or "–"
-                rows.append(f"| {trial} | {kind} | {side} | {d['vertical']['rms_bw']:.3f} | "
-                            f"{d['fore_aft']['rms_bw']:.3f} | {d['vertical']['max_bw']:.2f} "
-                            f"({d['vertical']['plates_max_bw']:.2f}) | {hump} |")
+                rows.append(f"| {trial} | {kind} | {side} | {was(trial, kind, side, 'vertical', 'rms_bw')}"
+                            f"{d['vertical']['rms_bw']:.3f} | {was(trial, kind, side, 'fore_aft', 'rms_bw')}"
+                            f"{d['fore_aft']['rms_bw']:.3f} | {was(trial, kind, side, 'vertical', 'max_bw')}"
+                            f"{d['vertical']['max_bw']:.2f} ({d['vertical']['plates_max_bw']:.2f}) | {hump} |")
     return "\n".join(rows)
 
 
@@ -185,6 +196,40 @@ def optima_table(res: dict) -> str:
                         " mm | "
                         f"{_f(None if v.get('crossover') is None else 1e3 * v['crossover'], '{:.0f}')} mm | "
                         f"{_f(v.get('joint_speed'), '{:.0f}')}°/s | {t['time_s']:.0f} s |")
+    return "\n".join(rows)
+
+
+#: the joint groups of ``joints_table`` (each the RMS over its coordinates: both sides)
+JOINT_GROUPS = {"hip flexion": ("hip_flexion_r", "hip_flexion_l"),
+                "hip adduction": ("hip_adduction_r", "hip_adduction_l"),
+                "hip rotation": ("hip_rotation_r", "hip_rotation_l"), "knee": ("knee_angle_r", "knee_angle_l"),
+                "ankle": ("ankle_angle_r", "ankle_angle_l"),
+                "lumbar": ("lumbar_flexion", "lumbar_bending", "lumbar_rotation"),
+                "thorax": ("thorax_flexion", "thorax_bending", "thorax_rotation")}
+
+
+def joints_table(before: dict, after: dict,
+                 trials: tuple[str, ...] = ("opensim_treadmill", "opensim_overground")) -> str:
+    """Per joint, the tutors' RMS to the capture (°), before → after (two fidelity runs)."""
+    import math
+
+    def group(r: dict, names: tuple[str, ...]) -> float | None:
+        pc = r["joint_rms_to_capture_deg"]["per_coordinate"]
+        v = [pc[n] for n in names if n in pc]
+        return math.sqrt(sum(x * x for x in v) / len(v)) if v else None
+
+    rows = ["| trial | character | overall | pelvis | " + " | ".join(JOINT_GROUPS) + " |",
+            "|---|---|---|---|" + "---|" * len(JOINT_GROUPS)]
+    for trial in trials:
+        for kind in ("fullbody", "halfboy"):
+            b, a = (before.get(trial) or {}).get(kind) or {}, (after.get(trial) or {}).get(kind) or {}
+            if "joint_rms_to_capture_deg" not in b or "joint_rms_to_capture_deg" not in a:
+                continue
+            jb, ja = b["joint_rms_to_capture_deg"], a["joint_rms_to_capture_deg"]
+            cells = [f"{jb['overall']:.1f} → **{ja['overall']:.2f}**",
+                     f"{_f(jb.get('pelvis'), '{:.1f}')} → {_f(ja.get('pelvis'), '{:.1f}')}"]
+            cells += [f"{_f(group(b, n), '{:.1f}')} → {_f(group(a, n), '{:.1f}')}" for n in JOINT_GROUPS.values()]
+            rows.append(f"| {trial} | {kind} | " + " | ".join(cells) + " |")
     return "\n".join(rows)
 
 
