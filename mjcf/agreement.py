@@ -25,6 +25,8 @@ from solver.motion import FEET, Motion
 
 #: a centre of pressure closer than this to the sole's outline counts as on it (m)
 COP_TOLERANCE = 1e-3
+#: a sole is flat on the ground when its normal is within 2° of the vertical and its corners within 2 mm of it
+FLAT_COS, FLAT_HEIGHT = float(np.cos(np.radians(2.0))), 0.002
 #: stance frames whose stored vertical force is below this (BW) have no meaningful centre of pressure
 COP_MIN_FORCE_BW = 0.02
 
@@ -58,7 +60,12 @@ def sole_agreement(motion: Motion, model: mujoco.MjModel) -> dict[str, Any]:
     ``cop_outside_fraction`` (per foot and overall): the fraction of the cycle's stance frames (stored
     vertical force ≥ 2 % BW) whose centre of pressure, on the plane of the sole's bottom face at the
     reference's pose, is more than 1 mm beyond the sole's outline; ``beyond_heel_or_toe`` and
-    ``beyond_sides`` split it; ``max_beyond_m`` is the largest distance beyond."""
+    ``beyond_sides`` split it; ``max_beyond_m`` is the largest distance beyond.
+    ``cop_outside_fraction_flat``: the same over the frames where the sole lies flat on the ground
+    (``flat_stance_frames``; the optimizer's centre of pressure is bounded in the foot's box, whose
+    height lets it off the sole's outline when the foot is tilted, at heel strike and push-off)."""
+    from mjcf.simulate import _ground_height
+
     ch = motion.character
     qadr = _coordinate_qpos(motion, model)
     d = mujoco.MjData(model)
@@ -67,7 +74,7 @@ def sole_agreement(motion: Motion, model: mujoco.MjModel) -> dict[str, Any]:
     W = np.asarray(motion.wrenches, dtype=float)
     matches = True
     per_foot: dict[str, Any] = {}
-    n_all = n_out_all = 0
+    n_all = n_out_all = n_flat = n_out_flat = 0
     for f, (gid, _bid) in enumerate(_sole_geoms(model)):
         side = FEET[f]
         sole = ch.sole(side)
@@ -99,14 +106,20 @@ def sole_agreement(motion: Motion, model: mujoco.MjModel) -> dict[str, Any]:
             n += 1
             out_len += bx > COP_TOLERANCE
             out_wid += by > COP_TOLERANCE
-            if bx > COP_TOLERANCE or by > COP_TOLERANCE:
-                n_out_all += 1
+            outside = bx > COP_TOLERANCE or by > COP_TOLERANCE
+            n_out_all += outside
+            corners = [c + Rg @ np.array([sx * half[0], sy * half[1], 0.0]) for sx in (-1, 1) for sy in (-1, 1)]
+            if Rg[2, 2] > FLAT_COS and max(float(p[2]) - _ground_height(model, d, p) for p in corners) < FLAT_HEIGHT:
+                n_flat += 1
+                n_out_flat += outside
             beyond = max(beyond, float(bx), float(by))
         n_all += n
-        per_foot[side] = {"stance_frames": n, "beyond_heel_or_toe": out_len / n if n else 0.0,
-                          "beyond_sides": out_wid / n if n else 0.0, "max_beyond_m": max(beyond, 0.0)}
+        per_foot[side] = {"stance_frames": n, "beyond_heel_or_toe": float(out_len / n) if n else 0.0,
+                          "beyond_sides": float(out_wid / n) if n else 0.0, "max_beyond_m": max(beyond, 0.0)}
     return {"sole_matches_character": bool(matches), "per_foot": per_foot,
-            "cop_outside_fraction": n_out_all / n_all if n_all else 0.0, "tolerance_m": COP_TOLERANCE}
+            "cop_outside_fraction": float(n_out_all / n_all) if n_all else 0.0, "stance_frames": n_all,
+            "flat_stance_frames": n_flat, "cop_outside_fraction_flat": float(n_out_flat / n_flat) if n_flat else 0.0,
+            "tolerance_m": COP_TOLERANCE}
 
 
 def swing_clearance(motion: Motion, model: mujoco.MjModel, step: float = 0.002) -> dict[str, Any]:
