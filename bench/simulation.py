@@ -1,9 +1,13 @@
-"""Forward simulation in MuJoCo (``mjcf.simulate.simulate``, docs/simulation.md): the DeepMimic
-walk's tutors, HalfBoy and full body (15 fps), each simulated for 10 gait cycles, stopping at the
-first fall. Per motion: cycles walked, fall (and why), joint tracking RMS, foot force RMS, the
-largest peak-torque ratio to the inverse dynamics' peaks, the wall and CPU time of the
-simulation (``time.process_time``, this process: the controller is single-threaded) and the
-real-time factor in CPU time (simulated s / CPU s) beside the wall-clock one.
+"""Forward simulation in MuJoCo (``mjcf.simulate.simulate``, docs/simulation.md) on every shared
+trial's HalfBoy tutor (15 fps, ``bench.trials.shared_trials``): each simulated for 10 gait cycles
+continuously from mid stance (stopping at the first fall) and, the report's ``resync``, each of
+10 cycles started afresh from the reference's state and tracked to its end with the penalized
+root residual. Per tutor: cycles walked, fall (and why), joint tracking RMS, foot force RMS, the
+largest peak-torque ratio; cycles completed from the reference state and the residual's RMS in
+body weights; the start's vertical force against the stored one over the first 10 ms; the stored
+centres of pressure off the simulated sole (all stance frames; frames with the sole flat); the
+reference's lowest sole corner in swing; and the CPU time per simulated second of each run
+(``time.process_time``, this process: the controller is single-threaded).
 """
 
 from __future__ import annotations
@@ -11,7 +15,7 @@ from __future__ import annotations
 import time
 
 import solver
-from bench.trials import data_dir
+from bench.trials import shared_trials
 from mjcf.simulate import simulate
 
 CYCLES = 10
@@ -19,11 +23,9 @@ FPS = 15
 
 
 def run() -> dict:
-    d = data_dir() / "deepmimic_humanoid3d_walk"
-    trial = solver.load_trial([d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt"])
-    rows = {}
-    for name, character in (("HalfBoy tutor", "halfboy"), ("full-body tutor", "fullbody")):
-        tutor = solver.make_tutor(trial, character=character, fps=FPS)
+    rows: dict[str, dict] = {}
+    for name, (files, opts) in shared_trials().items():
+        tutor = solver.make_tutor(solver.load_trial(files, **opts), character="halfboy", fps=FPS)
         if tutor.status != "succeeded":
             rows[name] = {"error": f"tutor {tutor.status}: {tutor.message}"}
             continue
@@ -31,7 +33,10 @@ def run() -> dict:
         res = simulate(tutor.motion, CYCLES)
         wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
         r = res.report
+        rs, start, agree = r["resync"], r["start"], r["agreement"]
         simulated_s = float(r["simulated_s"])
+        resync_s = sum(c["walked"] for c in rs["per_cycle"]) * float(r["cycle_duration_s"])
+        cpu_continuous = cpu - float(rs["cpu_s"])
         rows[name] = {
             "cycles_requested": CYCLES,
             "cycles_walked": round(float(r["cycles_walked"]), 3),
@@ -40,11 +45,22 @@ def run() -> dict:
             "joint_tracking_rms_deg": round(float(r["joint_tracking_rms_deg"]), 3),
             "foot_force_rms_bw": round(float(r["foot_force_rms_bw"]), 4),
             "peak_torque_ratio_max": round(float(r["peak_torque_ratio_max"]), 3),
+            "resync_cycles": rs["cycles"],
+            "resync_completed": rs["completed"],
+            "residual_root_wrench_rms_bw": round(float(rs["residual_root_wrench_rms_bw"]), 4),
+            "residual_root_wrench_rms_bw_worst_cycle": round(max(c["residual_root_wrench_rms_bw"]
+                                                                 for c in rs["per_cycle"]), 4),
+            "start_stored_vertical_force_bw": round(float(start["stored_vertical_force_bw"]), 3),
+            "start_first_10ms_max_difference_bw": round(float(start["first_10ms_max_difference_bw"]), 3),
+            "start_first_60ms_rms_difference_bw": round(float(start["first_60ms_rms_difference_bw"]), 3),
+            "cop_outside_sole_fraction": round(float(agree["sole"]["cop_outside_fraction"]), 3),
+            "cop_outside_flat_sole_fraction": round(float(agree["sole"]["cop_outside_fraction_flat"]), 3),
+            "swing_min_corner_height_mm": round(1e3 * float(agree["swing_clearance"]["min_corner_height_m"]), 1),
             "simulated_s": round(simulated_s, 3),
             "wall_s": round(wall, 2),
             "cpu_s": round(cpu, 2),
-            "realtime_factor_cpu": round(simulated_s / cpu, 3) if cpu > 0 else None,
-            "realtime_factor_wall": round(simulated_s / wall, 3) if wall > 0 else None,
+            "cpu_per_simulated_s": round(cpu_continuous / simulated_s, 3) if simulated_s > 0 else None,
+            "resync_cpu_per_simulated_s": round(float(rs["cpu_s"]) / resync_s, 3) if resync_s > 0 else None,
         }
     return {"cycles": CYCLES, "fps": FPS, "motions": rows}
 

@@ -277,6 +277,7 @@ class Gains:
     reanchor: bool = True  # re-plant the reference's horizontal position on each touchdown
     anchor_time: float = 0.1  # s
     control_period: int = 1  # control steps every this many simulation steps
+    local_moments: bool = True  # the stored moments tracked about the sole's centre (else about the world origin)
     preload: bool = True  # start with the contacts loaded at the stored vertical force (``_start``)
     residual_weight: float = 1e6  # per BW²: the root residual's cost, on a model with one (the resync runs)
 
@@ -659,7 +660,10 @@ class Tracker:
                 A[:, :nv] = jr_s
                 task(A, alpha_r + kps * rot + kds * (jr_r @ rd.qvel - jr_s @ d.qvel) - jdr_s @ d.qvel,
                      g.swing_orientation_weight)
-        # stored foot wrenches (regularization): force and moment about the origin per foot
+        # stored foot wrenches (regularization): per foot the force, and the moment about the sole's
+        # centre (the stored one about the reference's sole centre, before re-anchoring: the wrench was
+        # stored there), so the centre of pressure is asked where the stored one is on its foot, wherever
+        # the foot is (about the world origin, a force error far from it weighed as a moment error)
         if nb:
             for f in range(2):
                 cols = [i for i, r in enumerate(corner_rows) if r[0] == f]
@@ -667,12 +671,21 @@ class Tracker:
                     continue
                 Af = np.zeros((3, nx))
                 Am = np.zeros((3, nx))
+                _gid, bid, _corners, _owner, centre = self.soles[f]
+                if g.local_moments:
+                    c_sim = d.xpos[bid] + d.xmat[bid].reshape(3, 3) @ centre
+                    c_ref = rd.xpos[bid] + rd.xmat[bid].reshape(3, 3) @ centre
+                    if g.reanchor:
+                        c_ref[:2] -= self.anchor
+                else:
+                    c_sim = c_ref = np.zeros(3)
                 for i in cols:
                     p = corner_rows[i][4]
                     Af[:, nv + 4 * i:nv + 4 * i + 4] = self.edges
-                    Am[:, nv + 4 * i:nv + 4 * i + 4] = np.cross(p, self.edges.T).T
+                    Am[:, nv + 4 * i:nv + 4 * i + 4] = np.cross(p - c_sim, self.edges.T).T
+                m_ref = W[f, :3] - np.cross(c_ref, W[f, 3:])
                 task(Af / self.bw, W[f, 3:] / self.bw, g.force_weight)
-                task(Am / (0.1 * self.bw), W[f, :3] / (0.1 * self.bw), g.moment_weight)
+                task(Am / (0.1 * self.bw), m_ref / (0.1 * self.bw), g.moment_weight)
         # torques: τ = (M q̈ + h − Jf β)_act
         At = np.zeros((len(self.motor), nx))
         At[:, :nv] = M[self.act_v]
