@@ -103,7 +103,7 @@ def simulation_table(res: dict) -> str:
             continue
         fell = f"yes ({r['fall_reason'] or '?'})" if r["fell"] else "no"
         rows.append(f"| {name} | {r['cycles_walked']:.2f} ({r['cycles_requested']}) | {fell} "
-                    f"| {r['resync_completed']} of {r['resync_cycles']} "
+                    f"| {r['resync_completed']} of {r['resync_cycles']} ({r.get('resync_closed', '–')}) "
                     f"| {r['residual_root_wrench_rms_bw']:.3f} ({r['residual_root_wrench_rms_bw_worst_cycle']:.3f}) "
                     f"| {r['joint_tracking_rms_deg']:.1f} | {r['foot_force_rms_bw']:.2f} "
                     f"| {r['start_stored_vertical_force_bw']:.2f} / {r['start_first_10ms_max_difference_bw']:.2f} "

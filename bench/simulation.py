@@ -47,6 +47,8 @@ def run() -> dict:
             "peak_torque_ratio_max": round(float(r["peak_torque_ratio_max"]), 3),
             "resync_cycles": rs["cycles"],
             "resync_completed": rs["completed"],
+            "resync_closed": rs["closed"],
+            "resync_end_error": {k: round(float(v), 3) for k, v in rs["per_cycle"][0]["end_error"].items()},
             "residual_root_wrench_rms_bw": round(float(rs["residual_root_wrench_rms_bw"]), 4),
             "residual_root_wrench_rms_bw_worst_cycle": round(max(c["residual_root_wrench_rms_bw"]
                                                                  for c in rs["per_cycle"]), 4),

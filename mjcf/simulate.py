@@ -815,6 +815,8 @@ class _Run:
     fall_reason: str | None
     wall: float
     start_force: np.ndarray  # (steps in START_WINDOW_S,) total vertical sole force (N) after each step
+    t_ref_end: float = 0.0  # the reference's clock after the last step
+    qvel_end: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 def _rollout(m: mujoco.MjModel, d: mujoco.MjData, ctl: Tracker, ref: Reference, t0: float, steps: int,
@@ -884,7 +886,30 @@ def _rollout(m: mujoco.MjModel, d: mujoco.MjData, ctl: Tracker, ref: Reference, 
                 break
     wall = _time.perf_counter() - wall0
     series = {k: np.array(v) for k, v in S.items()}
-    return _Run(time[:done], ctrl[:done], qpos[:done], series, fell, fall_time, reason, wall, np.array(start_force))
+    return _Run(time[:done], ctrl[:done], qpos[:done], series, fell, fall_time, reason, wall, np.array(start_force),
+                t_ref, d.qvel.copy())
+
+
+#: a resync cycle *closes* when its end state is this near the reference's (joint RMS °, joint velocity
+#: RMS °/s, pelvis height m, root attitude °, root velocity m/s): the next cycle could start from it
+CLOSE_TOLERANCE = {"joint_rms_deg": 5.0, "joint_velocity_rms_deg_s": 50.0, "pelvis_height_m": 0.02,
+                   "root_attitude_deg": 5.0, "root_velocity_m_s": 0.2}
+
+
+def _end_error(run: _Run, ctl: Tracker, ref: Reference) -> dict[str, float]:
+    """How far the state at a run's end is from the reference's at the reference clock's end time: joint
+    angles and velocities (RMS), pelvis height, root attitude (largest of the three angles), root linear
+    velocity (the horizontal position is re-anchored on the feet: not compared)."""
+    if not len(run.qpos):
+        return {}
+    qr, qdr, _ = ref.state(run.t_ref_end)
+    q = run.qpos[-1][ctl.qadr]
+    qd = run.qvel_end[ctl.vadr]
+    return {"joint_rms_deg": float(np.degrees(np.sqrt(np.mean((q[6:] - qr[6:]) ** 2)))),
+            "joint_velocity_rms_deg_s": float(np.degrees(np.sqrt(np.mean((qd[6:] - qdr[6:]) ** 2)))),
+            "pelvis_height_m": float(q[ROOT_Z] - qr[ROOT_Z]),
+            "root_attitude_deg": float(np.degrees(np.max(np.abs(_wrap(q[3:6] - qr[3:6]))))),
+            "root_velocity_m_s": float(np.linalg.norm(qd[:3] - qdr[:3]))}
 
 
 def _start_report(run: _Run, info: dict[str, Any], bw: float, dt: float) -> dict[str, Any]:
@@ -908,7 +933,8 @@ def _resync(motion: Motion, ref: Reference, t0: float, cycles: int, gains: Gains
     (t0 + k × period, preloaded as the continuous run), tracked to its end by the same controller
     with a penalized residual wrench at the root (six motors on the root coordinates, weighted by
     ``gains.residual_weight`` in the QP: a Moco-style residual actuator). A cycle completes when it
-    ends without a fall. The residual's RMS is in body weights: forces / BW and the root hinges'
+    ends without a fall; it *closes* when its end state is also within ``CLOSE_TOLERANCE`` of the
+    reference's (``end_error``). The residual's RMS is in body weights: forces / BW and the root hinges'
     torques / (BW × 1 m), over every simulated step."""
     _xml, m, _ = performable_model(motion, cycles, ref, gains.sole_half_width, gains.inversion, root_residual=True)
     ctl = Tracker(motion, m, ref, gains)
@@ -919,7 +945,7 @@ def _resync(motion: Motion, ref: Reference, t0: float, cycles: int, gains: Gains
     per_cycle = []
     squares: list[np.ndarray] = []
     cpu = _time.process_time()
-    completed = 0
+    completed = closed = 0
     for k in range(cycles):
         ctl.restore(fresh)
         tk = t0 + k * ref.period
@@ -929,9 +955,13 @@ def _resync(motion: Motion, ref: Reference, t0: float, cycles: int, gains: Gains
         sq = np.sum(r**2, axis=1)
         squares.append(sq)
         completed += not run.fell
+        err = _end_error(run, ctl, ref)
+        closes = not run.fell and all(abs(err[key]) <= tol for key, tol in CLOSE_TOLERANCE.items())
+        closed += closes
         per_cycle.append({"cycle": k, "completed": not run.fell,
-                          "walked": float(run.time[-1] / ref.period) if len(run.time) else 0.0,
+                          "walked": min(1.0, float(run.time[-1] / ref.period)) if len(run.time) else 0.0,
                           "fall_reason": run.fall_reason,
+                          "end_error": err, "closes": closes,
                           "residual_root_wrench_rms_bw": float(np.sqrt(np.mean(sq))) if len(sq) else float("nan"),
                           "residual_root_wrench_max_bw": float(np.sqrt(np.max(sq))) if len(sq) else float("nan")})
     cpu = _time.process_time() - cpu
@@ -939,6 +969,8 @@ def _resync(motion: Motion, ref: Reference, t0: float, cycles: int, gains: Gains
     return {
         "cycles": cycles,
         "completed": completed,
+        "closed": closed,
+        "close_tolerance": CLOSE_TOLERANCE,
         "residual_root_wrench_rms_bw": float(np.sqrt(np.mean(allsq))) if len(allsq) else float("nan"),
         "residual_weight": gains.residual_weight,
         "per_cycle": per_cycle,
@@ -1017,7 +1049,9 @@ def _report(res: SimulationResult, motion: Motion, ref: Reference, ctl: Tracker)
         dxy = q[i, list(ROOT_XY)] - qr[i, list(ROOT_XY)]
         drift.append({"cycle": k, "position_m": float(np.linalg.norm(dxy)),
                       "lateral_m": float(dxy @ np.array([-math.sin(qr[i, ROOT_YAW]), math.cos(qr[i, ROOT_YAW])])),
-                      "heading_deg": float(np.degrees(_wrap(q[i, ROOT_YAW] - qr[i, ROOT_YAW])))})
+                      "heading_deg": float(np.degrees(_wrap(q[i, ROOT_YAW] - qr[i, ROOT_YAW]))),
+                      "joint_rms_deg": float(np.degrees(np.sqrt(np.mean((q[i, 6:] - qr[i, 6:]) ** 2)))),
+                      "pelvis_height_m": float(q[i, ROOT_Z] - qr[i, ROOT_Z])})
     peaks_sim = np.max(np.abs(res.ctrl[:, ctl.motor]), axis=0) if len(res.ctrl) else np.zeros(len(ctl.peaks))
     ratio = peaks_sim / np.maximum(ctl.peaks, 1e-9)
     act = [res.actuator_names[a] for a in ctl.motor]
