@@ -23,7 +23,11 @@ move the root) and joint torque limits; the torques follow from the actuated row
 
 The reference loops over cycles under the cycle transform (turn and translation, the rise of
 stairs) of ``solver.trajectory``; the walk starts in mid single support with the reference's
-velocities (no impact).
+velocities (no impact), its contacts preloaded at the stored vertical force (:func:`_start`).
+
+Beside this continuous run, :func:`simulate` starts every cycle afresh from the reference's state
+and tracks it to its end with a penalized residual wrench at the root (:func:`_resync`: the
+report's ``resync``), and measures the model's agreement with the motion (``mjcf.agreement``).
 """
 
 from __future__ import annotations
