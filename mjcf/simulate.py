@@ -748,6 +748,10 @@ def _foot_forces(m: mujoco.MjModel, d: mujoco.MjData, sole_geoms: tuple[int, int
     return out
 
 
+#: the deepest the preloaded start presses the stance sole into the soft contacts (m)
+MAX_PRELOAD_DEPTH = 0.01
+
+
 def _start(m: mujoco.MjModel, ctl: Tracker, ref: Reference, t0: float,
            preload: bool) -> tuple[mujoco.MjData, dict[str, Any]]:
     """The state the simulation starts from at reference time ``t0``: the reference's pose and
@@ -786,13 +790,18 @@ def _start(m: mujoco.MjModel, ctl: Tracker, ref: Reference, t0: float,
 
     if preload and lows:
         z0 = float(d.qpos[zadr]) + 2e-4
-        lo, hi = 0.0, 0.02
-        for _ in range(40):
+        lo, hi = 0.0, MAX_PRELOAD_DEPTH
+        if force(hi) < stored:  # the contacts cannot carry it within the depth: the touching start
+            info.update(preloaded=False, reason=f"less than the stored force {MAX_PRELOAD_DEPTH * 1e3:g} mm deep")
+            lo = hi = 2e-4
+        for _ in range(40 if lo < hi else 0):
             mid = 0.5 * (lo + hi)
             if force(mid) < stored:
                 lo = mid
             else:
                 hi = mid
+        # where the force jumps (the controller's loaded corners change with the depth) the deeper side: it
+        # carries the stored force over the first 10 ms better than the shallower (measured on the tutors)
         info["t0_vertical_force_bw"] = force(hi) / ctl.bw
         info["depth_m"] = hi
     fresh = mujoco.MjData(m)
