@@ -92,18 +92,25 @@ def rig_export_table(res: dict) -> str:
 
 
 def simulation_table(res: dict) -> str:
-    rows = ["| motion | cycles walked (of requested) | fell (reason) | joint RMS (°) | foot force RMS (BW) "
-            "| peak τ / ID peak (max) | wall (s) | CPU (s) | real-time factor, CPU (wall) |",
-            "|---|---|---|---|---|---|---|---|---|"]
+    rows = ["| HalfBoy tutor | cycles walked (of requested) | fell (reason) | resync: cycles completed "
+            "| root residual RMS (BW; worst cycle) | joint RMS (°) | foot force RMS (BW) | start: stored / max "
+            "difference in 10 ms (BW) | CoP off the sole (all / flat stance) | swing: lowest sole corner (mm) "
+            "| CPU s per simulated s (continuous; resync) |",
+            "|---|---|---|---|---|---|---|---|---|---|---|"]
     for name, r in res["motions"].items():
         if "error" in r:
-            rows.append(f"| {name} | {r['error']} |  |  |  |  |  |  |  |")
+            rows.append(f"| {name} | {r['error']} |" + "  |" * 9)
             continue
         fell = f"yes ({r['fall_reason'] or '?'})" if r["fell"] else "no"
         rows.append(f"| {name} | {r['cycles_walked']:.2f} ({r['cycles_requested']}) | {fell} "
+                    f"| {r['resync_completed']} of {r['resync_cycles']} ({r.get('resync_closed', '–')}) "
+                    f"| {r['residual_root_wrench_rms_bw']:.3f} ({r['residual_root_wrench_rms_bw_worst_cycle']:.3f}) "
                     f"| {r['joint_tracking_rms_deg']:.1f} | {r['foot_force_rms_bw']:.2f} "
-                    f"| {r['peak_torque_ratio_max']:.2f} | {r['wall_s']:.1f} | {r['cpu_s']:.1f} "
-                    f"| {r['realtime_factor_cpu']:.2f} ({r['realtime_factor_wall']:.2f}) |")
+                    f"| {r['start_stored_vertical_force_bw']:.2f} / {r['start_first_10ms_max_difference_bw']:.2f} "
+                    f"| {100 * r['cop_outside_sole_fraction']:.0f} % "
+                    f"/ {100 * r['cop_outside_flat_sole_fraction']:.0f} % "
+                    f"| {r['swing_min_corner_height_mm']:.1f} "
+                    f"| {_f(r['cpu_per_simulated_s'])}; {_f(r['resync_cpu_per_simulated_s'])} |")
     return "\n".join(rows)
 
 

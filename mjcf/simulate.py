@@ -23,7 +23,11 @@ move the root) and joint torque limits; the torques follow from the actuated row
 
 The reference loops over cycles under the cycle transform (turn and translation, the rise of
 stairs) of ``solver.trajectory``; the walk starts in mid single support with the reference's
-velocities (no impact).
+velocities (no impact), its contacts preloaded at the stored vertical force (:func:`_start`).
+
+Beside this continuous run, :func:`simulate` starts every cycle afresh from the reference's state
+and tracks it to its end with a penalized residual wrench at the root (:func:`_resync`: the
+report's ``resync``), and measures the model's agreement with the motion (``mjcf.agreement``).
 """
 
 from __future__ import annotations
@@ -44,6 +48,8 @@ from solver.stairs import flight_of
 from solver.trajectory import ROOT_XY, ROOT_YAW, cycle_turn, dynamics_samples, spline_velocities
 
 ROOT_Z = 2
+#: the root residual's actuators are named this followed by the root coordinate
+RESIDUAL_PREFIX = "residual_"
 
 
 class SimulationError(ValueError):
@@ -275,6 +281,9 @@ class Gains:
     reanchor: bool = True  # re-plant the reference's horizontal position on each touchdown
     anchor_time: float = 0.1  # s
     control_period: int = 1  # control steps every this many simulation steps
+    local_moments: bool = True  # the stored moments tracked about the sole's centre (else about the world origin)
+    preload: bool = True  # start with the contacts loaded at the stored vertical force (``_start``)
+    residual_weight: float = 1e6  # per BW²: the root residual's cost, on a model with one (the resync runs)
 
 
 @dataclass(frozen=True, eq=False)
@@ -319,10 +328,12 @@ def id_peaks(motion: Motion) -> np.ndarray:
 
 
 def performable_model(motion: Motion, cycles: int = 10, ref: Reference | None = None,
-                      sole_half_width: float | None = None,
-                      inversion: bool = True) -> tuple[str, mujoco.MjModel, tuple[float, float]]:
+                      sole_half_width: float | None = None, inversion: bool = True, *,
+                      root_residual: bool = False) -> tuple[str, mujoco.MjModel, tuple[float, float]]:
     """The model XML, the model compiled *from that XML* (so a replay from the file is what
-    was simulated) and the soles' roll (rad, right and left) that lays them flat in stance."""
+    was simulated) and the soles' roll (rad, right and left) that lays them flat in stance.
+    ``root_residual``: also a motor on each of the six root coordinates (``residual_<name>``,
+    after the joints' motors): the resync runs' penalized residual wrench."""
     ch = motion.character
     env = environment_of(motion)
     ref = ref or Reference(motion)
@@ -334,6 +345,11 @@ def performable_model(motion: Motion, cycles: int = 10, ref: Reference | None = 
     opts = ContactOptions(sole_roll=roll, friction=env.friction, treads=treads, floor=not treads,
                           sole_half_width=sole_half_width, inversion=inversion)
     spec = build_spec(ch, env.gravity, opts)
+    if root_residual:
+        for nm in ch.coordinate_names[:6]:
+            a = spec.add_actuator(name=f"{RESIDUAL_PREFIX}{nm}", target=nm, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+            a.gear = [1.0, 0, 0, 0, 0, 0]
+            a.ctrllimited = mujoco.mjtLimited.mjLIMITED_FALSE
     spec.compile()
     xml = spec.to_xml()
     return xml, mujoco.MjModel.from_xml_string(xml), roll
@@ -351,7 +367,13 @@ class Tracker:
         self.vadr = np.array([model.jnt_dofadr[i] for i in ids])
         self.root_v = self.vadr[:6]
         self.joint_v = self.vadr[6:]
-        self.act_v = np.array([model.jnt_dofadr[model.actuator_trnid[a, 0]] for a in range(model.nu)])
+        # the motors (joints, inversion hinges) and, on a resync model, the root residual's six actuators
+        act_names = [mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a) or "" for a in range(model.nu)]
+        self.motor = np.array([a for a in range(model.nu) if not act_names[a].startswith(RESIDUAL_PREFIX)], dtype=int)
+        by_name = {nm: a for a, nm in enumerate(act_names)}
+        self.residual = np.array([by_name[RESIDUAL_PREFIX + nm] for nm in ch.coordinate_names[:6]
+                                  if RESIDUAL_PREFIX + nm in by_name], dtype=int)
+        self.act_v = np.array([model.jnt_dofadr[model.actuator_trnid[a, 0]] for a in self.motor])
         env = environment_of(motion)
         self.mu = env.friction * gains.friction_margin
         self.bw = body_weight(motion)
@@ -384,8 +406,8 @@ class Tracker:
         names = list(ch.coordinate_names[6:])
         self.act_is_coordinate = np.array([v in set(self.vadr) for v in self.act_v])
         joint_of_act = []
-        for a in range(model.nu):
-            nm = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a)
+        for a in self.motor:
+            nm = act_names[a]
             if nm in names:
                 joint_of_act.append(names.index(nm))
             else:
@@ -409,6 +431,16 @@ class Tracker:
         self.owner_feet = [[i for i, c in enumerate(ch.contacts) if c.side == side] for side in FEET]
         self.treads = any((mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, i) or "").startswith("tread_")
                           for i in range(model.ngeom))
+
+    def snapshot(self) -> tuple[Any, ...]:
+        """The controller's state (re-anchoring, clock synchronization), for :meth:`restore`."""
+        return (self.anchor.copy(), self.anchor_target.copy(), list(self.was_down), list(self.airborne),
+                list(self.waited))
+
+    def restore(self, state: tuple[Any, ...]) -> None:
+        a, at, wd, ab, wt = state
+        self.anchor, self.anchor_target = a.copy(), at.copy()
+        self.was_down, self.airborne, self.waited = list(wd), list(ab), list(wt)
 
     def _reanchor(self, d: mujoco.MjData, qr: np.ndarray, active: np.ndarray) -> None:
         """When a foot is planted (the reference has it in stance and the simulated sole touches
@@ -555,7 +587,8 @@ class Tracker:
                     point_rows.append((J, jdq, v, *edge_ref[e]))
         nc = len(corner_rows)
         nb = nc * self.n_edges
-        nx = nv + nb
+        nr = len(self.residual)  # the root residual (resync runs): generalized forces on the root's six rows
+        nx = nv + nb + nr
         # f_c = E β_c; generalized force of contacts: Σ J_cᵀ E β_c = Jf β
         Jf = np.zeros((nv, nb))
         for i, (_, J, _, _, _) in enumerate(corner_rows):
@@ -631,7 +664,10 @@ class Tracker:
                 A[:, :nv] = jr_s
                 task(A, alpha_r + kps * rot + kds * (jr_r @ rd.qvel - jr_s @ d.qvel) - jdr_s @ d.qvel,
                      g.swing_orientation_weight)
-        # stored foot wrenches (regularization): force and moment about the origin per foot
+        # stored foot wrenches (regularization): per foot the force, and the moment about the sole's
+        # centre (the stored one about the reference's sole centre, before re-anchoring: the wrench was
+        # stored there), so the centre of pressure is asked where the stored one is on its foot, wherever
+        # the foot is (about the world origin, a force error far from it weighed as a moment error)
         if nb:
             for f in range(2):
                 cols = [i for i, r in enumerate(corner_rows) if r[0] == f]
@@ -639,30 +675,45 @@ class Tracker:
                     continue
                 Af = np.zeros((3, nx))
                 Am = np.zeros((3, nx))
+                _gid, bid, _corners, _owner, centre = self.soles[f]
+                if g.local_moments:
+                    c_sim = d.xpos[bid] + d.xmat[bid].reshape(3, 3) @ centre
+                    c_ref = rd.xpos[bid] + rd.xmat[bid].reshape(3, 3) @ centre
+                    if g.reanchor:
+                        c_ref[:2] -= self.anchor
+                else:
+                    c_sim = c_ref = np.zeros(3)
                 for i in cols:
                     p = corner_rows[i][4]
                     Af[:, nv + 4 * i:nv + 4 * i + 4] = self.edges
-                    Am[:, nv + 4 * i:nv + 4 * i + 4] = np.cross(p, self.edges.T).T
+                    Am[:, nv + 4 * i:nv + 4 * i + 4] = np.cross(p - c_sim, self.edges.T).T
+                m_ref = W[f, :3] - np.cross(c_ref, W[f, 3:])
                 task(Af / self.bw, W[f, 3:] / self.bw, g.force_weight)
-                task(Am / (0.1 * self.bw), W[f, :3] / (0.1 * self.bw), g.moment_weight)
+                task(Am / (0.1 * self.bw), m_ref / (0.1 * self.bw), g.moment_weight)
         # torques: τ = (M q̈ + h − Jf β)_act
-        At = np.zeros((m.nu, nx))
+        At = np.zeros((len(self.motor), nx))
         At[:, :nv] = M[self.act_v]
-        At[:, nv:] = -Jf[self.act_v]
+        At[:, nv:nv + nb] = -Jf[self.act_v]
         bt = h[self.act_v]
         task(At / self.tau_limit[:, None], -bt / self.tau_limit, g.torque_weight)
+        if nr:  # the residual, in body weights (root hinges: per BW × 1 m), used only where it pays
+            A = np.zeros((nr, nx))
+            A[np.arange(nr), nv + nb + np.arange(nr)] = 1.0 / self.bw
+            task(A, np.zeros(nr), g.residual_weight)
 
         Amat = np.vstack([a * math.sqrt(w) for a, w in zip(A_list, w_list, strict=True)])
         bvec = np.concatenate([b * math.sqrt(w) for b, w in zip(b_list, w_list, strict=True)])
         G = Amat.T @ Amat + 1e-8 * np.eye(nx)
-        G[nv:, nv:] += 1e-6 * np.eye(nb)
+        G[nv:nv + nb, nv:nv + nb] += 1e-6 * np.eye(nb)
         a = Amat.T @ bvec
         # equalities: root rows of the equations of motion; inequalities: β ≥ 0, |τ| ≤ limit
         Ceq = np.zeros((6, nx))
         Ceq[:, :nv] = M[self.root_v]
-        Ceq[:, nv:] = -Jf[self.root_v]
+        Ceq[:, nv:nv + nb] = -Jf[self.root_v]
+        if nr:  # M q̈ + h = Jᵀf + r on the root rows
+            Ceq[:, nv + nb:] = -np.eye(6)
         beq = -h[self.root_v]
-        Cin = [np.eye(nx)[nv:], At, -At]
+        Cin = [np.eye(nx)[nv:nv + nb], At, -At]
         bin_ = [np.zeros(nb), -self.tau_limit + bt, -self.tau_limit - bt]
         C = np.vstack([Ceq, *Cin])
         b = np.concatenate([beq, *bin_])
@@ -670,8 +721,11 @@ class Tracker:
             x = quadprog.solve_qp(G, a, C.T, b, 6)[0]
         except ValueError:
             # infeasible within the torque limits (should not happen: q̈ is free): drop them
-            x = quadprog.solve_qp(G, a, np.vstack([Ceq, np.eye(nx)[nv:]]).T, np.concatenate([beq, np.zeros(nb)]), 6)[0]
-        tau = At @ x + bt
+            x = quadprog.solve_qp(G, a, np.vstack([Ceq, np.eye(nx)[nv:nv + nb]]).T,
+                                  np.concatenate([beq, np.zeros(nb)]), 6)[0]
+        tau = np.zeros(m.nu)
+        tau[self.motor] = At @ x + bt
+        tau[self.residual] = x[nv + nb:]
         pred = np.zeros((2, 3))
         for i, r in enumerate(corner_rows):
             pred[r[0]] += self.edges @ x[nv + 4 * i:nv + 4 * i + 4]
@@ -694,22 +748,21 @@ def _foot_forces(m: mujoco.MjModel, d: mujoco.MjData, sole_geoms: tuple[int, int
     return out
 
 
-def simulate(motion: Motion, cycles: int = 10, gains: Gains | None = None, *,
-             stop_on_fall: bool = True) -> SimulationResult:
-    """Simulate ``cycles`` gait cycles of ``motion`` under the tracking controller."""
-    if cycles < 1:
-        raise SimulationError("cycles must be at least 1")
-    gains = gains or Gains()
-    ref = Reference(motion)
-    t0 = mid_stance_time(motion)
-    xml, m, _ = performable_model(motion, cycles, ref, gains.sole_half_width, gains.inversion)
+#: the deepest the preloaded start presses the stance sole into the soft contacts (m)
+MAX_PRELOAD_DEPTH = 0.01
+
+
+def _start(m: mujoco.MjModel, ctl: Tracker, ref: Reference, t0: float,
+           preload: bool) -> tuple[mujoco.MjData, dict[str, Any]]:
+    """The state the simulation starts from at reference time ``t0``: the reference's pose and
+    velocities, the body lowered so the lowest scheduled sole corner touches the ground; with
+    ``preload``, lowered further (the soft contacts' penetration) until MuJoCo's vertical contact
+    force under the controller's first torques equals the stored one (bisection on the depth). A
+    fresh ``MjData`` (a replay from qpos0/qvel0 starts from the same solver state)."""
     d = mujoco.MjData(m)
-    ctl = Tracker(motion, m, ref, gains)
-    ch = motion.character
     qr, qdr, _ = ref.state(t0)
     d.qpos[ctl.qadr] = qr
     d.qvel[ctl.vadr] = qdr
-    # lift or lower the body so the lowest stance sole corner touches the ground
     mujoco.mj_forward(m, d)
     active = ref.active(t0)
     lows = []
@@ -718,31 +771,85 @@ def simulate(motion: Motion, cycles: int = 10, gains: Gains | None = None, *,
             if active[owner[c]]:
                 p = d.xpos[bid] + d.xmat[bid].reshape(3, 3) @ corners[c]
                 lows.append(p[2] - _ground_height(m, d, p))
+    zadr = int(ctl.qadr[ROOT_Z])
     if lows:
-        d.qpos[ctl.qadr[ROOT_Z]] -= min(lows) + 2e-4
-    mujoco.mj_forward(m, d)
-    qpos0, qvel0 = d.qpos.copy(), d.qvel.copy()
+        d.qpos[zadr] -= min(lows) + 2e-4
+    stored = float(ref.wrench(t0)[:, 5].sum())
+    sole_geoms = (ctl.soles[0][0], ctl.soles[1][0])
+    info: dict[str, Any] = {"stored_vertical_force_bw": stored / ctl.bw, "preloaded": bool(preload and lows),
+                            "depth_m": 2e-4 if lows else 0.0}
 
+    def force(depth: float) -> float:
+        d.qpos[zadr] = z0 - depth
+        mujoco.mj_forward(m, d)
+        saved = ctl.snapshot()
+        d.ctrl[:] = ctl.control(d, t0)
+        ctl.restore(saved)
+        mujoco.mj_forward(m, d)
+        return float(_foot_forces(m, d, sole_geoms)[:, 2].sum())
+
+    if preload and lows:
+        z0 = float(d.qpos[zadr]) + 2e-4
+        lo, hi = 0.0, MAX_PRELOAD_DEPTH
+        if force(hi) < stored:  # the contacts cannot carry it within the depth: the touching start
+            info.update(preloaded=False, reason=f"less than the stored force {MAX_PRELOAD_DEPTH * 1e3:g} mm deep")
+            lo = hi = 2e-4
+        for _ in range(40 if lo < hi else 0):
+            mid = 0.5 * (lo + hi)
+            if force(mid) < stored:
+                lo = mid
+            else:
+                hi = mid
+        # where the force jumps (the controller's loaded corners change with the depth) the deeper side: it
+        # carries the stored force over the first 10 ms better than the shallower (measured on the tutors)
+        info["t0_vertical_force_bw"] = force(hi) / ctl.bw
+        info["depth_m"] = hi
+    fresh = mujoco.MjData(m)
+    fresh.qpos[:] = d.qpos
+    fresh.qvel[:] = d.qvel
+    mujoco.mj_forward(m, fresh)
+    return fresh, info
+
+
+#: the first this many seconds of a run are measured every step (the start's vertical force)
+START_WINDOW_S = 0.06
+
+
+@dataclass(eq=False)
+class _Run:
+    """One rollout: per step time, ctrl and qpos; the series sampled every 10 ms; the fall."""
+
+    time: np.ndarray
+    ctrl: np.ndarray
+    qpos: np.ndarray
+    series: dict[str, np.ndarray]
+    fell: bool
+    fall_time: float | None
+    fall_reason: str | None
+    wall: float
+    start_force: np.ndarray  # (steps in START_WINDOW_S,) total vertical sole force (N) after each step
+    t_ref_end: float = 0.0  # the reference's clock after the last step
+    qvel_end: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+
+def _rollout(m: mujoco.MjModel, d: mujoco.MjData, ctl: Tracker, ref: Reference, t0: float, steps: int,
+             stop_on_fall: bool, pelvis: int) -> _Run:
+    """Run the controller from the state in ``d`` (reference time ``t0``) for ``steps`` steps."""
+    gains = ctl.g
     dt = float(m.opt.timestep)
-    steps = int(round(cycles * ref.period / dt))
     time = np.zeros(steps)
     ctrl = np.zeros((steps, m.nu))
     qpos = np.zeros((steps, m.nq))
     sole_geoms = (ctl.soles[0][0], ctl.soles[1][0])
     body_geoms = {i for i in range(m.ngeom) if m.geom_contype[i] == 2}
-    pelvis = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, ch.segments[0].name)
     every = max(1, int(round(0.01 / dt)))  # measures every 10 ms
-    sim_forces: list[np.ndarray] = []
-    ref_forces: list[np.ndarray] = []
-    com_s: list[np.ndarray] = []
-    anchor_s: list[np.ndarray] = []
-    tref_s: list[float] = []
+    n_start = int(round(START_WINDOW_S / dt))
+    start_force: list[float] = []
+    keys = ("foot_force", "foot_force_qp", "stance_corners", "foot_force_ref", "t_ref", "q_ref", "q", "t", "com",
+            "anchor")
+    S: dict[str, list[Any]] = {k: [] for k in keys}
+    qr0 = ref.state(t0)[0]
     t_ref = t0
-    qref_s: list[np.ndarray] = []
-    q_s: list[np.ndarray] = []
-    t_s: list[float] = []
-    pred_forces: list[np.ndarray] = []
-    ncorn: list[list[int]] = []
     pelvis_h0 = float(d.xpos[pelvis][2])
     fell, fall_time, reason = False, None, None
     tau = np.zeros(m.nu)
@@ -754,26 +861,27 @@ def simulate(motion: Motion, cycles: int = 10, gains: Gains | None = None, *,
             tau = ctl.control(d, t_ref)
         d.ctrl[:] = tau
         if s % every == 0:
-            sim_forces.append(_foot_forces(m, d, sole_geoms))
-            pred_forces.append(ctl.predicted.copy())
-            ncorn.append(list(ctl.n_corners))
-            ref_forces.append(ref.wrench(t_ref)[:, 3:])
-            qrr = ref.state(t_ref)[0]
-            tref_s.append(t_ref)
-            qref_s.append(qrr)
-            q_s.append(d.qpos[ctl.qadr].copy())
-            t_s.append(t)
-            com_s.append(d.subtree_com[ctl.com_body].copy())
-            anchor_s.append(ctl.anchor.copy())
+            S["foot_force"].append(_foot_forces(m, d, sole_geoms))
+            S["foot_force_qp"].append(ctl.predicted.copy())
+            S["stance_corners"].append(list(ctl.n_corners))
+            S["foot_force_ref"].append(ref.wrench(t_ref)[:, 3:])
+            S["t_ref"].append(t_ref)
+            S["q_ref"].append(ref.state(t_ref)[0])
+            S["q"].append(d.qpos[ctl.qadr].copy())
+            S["t"].append(t)
+            S["com"].append(d.subtree_com[ctl.com_body].copy())
+            S["anchor"].append(ctl.anchor.copy())
         mujoco.mj_step(m, d)
         time[s] = t + dt
         ctrl[s] = d.ctrl
         qpos[s] = d.qpos
         mujoco.mj_forward(m, d)
+        if s < n_start:
+            start_force.append(float(_foot_forces(m, d, sole_geoms)[:, 2].sum()))
         # a fall: pelvis sunk, or any non-foot body on the ground
         bad = None
         t_ref += dt * ctl.clock_rate(d, t_ref)
-        ph = float(d.xpos[pelvis][2]) - float(ref.state(t_ref)[0][ROOT_Z] - qr[ROOT_Z])
+        ph = float(d.xpos[pelvis][2]) - float(ref.state(t_ref)[0][ROOT_Z] - qr0[ROOT_Z])
         if ph < 0.6 * pelvis_h0:
             bad = f"pelvis height {ph:.3f} m (start {pelvis_h0:.3f} m)"
         for i in range(d.ncon):
@@ -790,20 +898,132 @@ def simulate(motion: Motion, cycles: int = 10, gains: Gains | None = None, *,
                 done = s + 1
                 break
     wall = _time.perf_counter() - wall0
-    time, ctrl, qpos = time[:done], ctrl[:done], qpos[:done]
-    series = {
-        "t": np.array(t_s), "q": np.array(q_s), "q_ref": np.array(qref_s),
-        "foot_force": np.array(sim_forces), "foot_force_ref": np.array(ref_forces),
-        "foot_force_qp": np.array(pred_forces), "stance_corners": np.array(ncorn), "com": np.array(com_s),
-        "anchor": np.array(anchor_s), "t_ref": np.array(tref_s),
+    series = {k: np.array(v) for k, v in S.items()}
+    return _Run(time[:done], ctrl[:done], qpos[:done], series, fell, fall_time, reason, wall, np.array(start_force),
+                t_ref, d.qvel.copy())
+
+
+#: a resync cycle *closes* when its end state is this near the reference's (joint RMS °, joint velocity
+#: RMS °/s, pelvis height m, root attitude °, root velocity m/s): the next cycle could start from it
+CLOSE_TOLERANCE = {"joint_rms_deg": 5.0, "joint_velocity_rms_deg_s": 50.0, "pelvis_height_m": 0.02,
+                   "root_attitude_deg": 5.0, "root_velocity_m_s": 0.2}
+
+
+def _end_error(run: _Run, ctl: Tracker, ref: Reference) -> dict[str, float]:
+    """How far the state at a run's end is from the reference's at the reference clock's end time: joint
+    angles and velocities (RMS), pelvis height, root attitude (largest of the three angles), root linear
+    velocity (the horizontal position is re-anchored on the feet: not compared)."""
+    if not len(run.qpos):
+        return {}
+    qr, qdr, _ = ref.state(run.t_ref_end)
+    q = run.qpos[-1][ctl.qadr]
+    qd = run.qvel_end[ctl.vadr]
+    return {"joint_rms_deg": float(np.degrees(np.sqrt(np.mean((q[6:] - qr[6:]) ** 2)))),
+            "joint_velocity_rms_deg_s": float(np.degrees(np.sqrt(np.mean((qd[6:] - qdr[6:]) ** 2)))),
+            "pelvis_height_m": float(q[ROOT_Z] - qr[ROOT_Z]),
+            "root_attitude_deg": float(np.degrees(np.max(np.abs(_wrap(q[3:6] - qr[3:6]))))),
+            "root_velocity_m_s": float(np.linalg.norm(qd[:3] - qdr[:3]))}
+
+
+def _start_report(run: _Run, info: dict[str, Any], bw: float, dt: float) -> dict[str, Any]:
+    """The start's vertical contact force against the stored one (BW): after the first step, its
+    mean over the first 10 ms and its RMS and largest difference over the first 60 ms."""
+    f = run.start_force / bw
+    stored = float(info["stored_vertical_force_bw"])
+    n10 = max(1, int(round(0.01 / dt)))
+    out = dict(info)
+    if len(f):
+        out.update({"first_step_vertical_force_bw": float(f[0]),
+                    "first_10ms_mean_vertical_force_bw": float(np.mean(f[:n10])),
+                    "first_10ms_max_difference_bw": float(np.max(np.abs(f[:n10] - stored))),
+                    "first_60ms_rms_difference_bw": float(np.sqrt(np.mean((f - stored) ** 2))),
+                    "first_60ms_max_difference_bw": float(np.max(np.abs(f - stored)))})
+    return out
+
+
+def _resync(motion: Motion, ref: Reference, t0: float, cycles: int, gains: Gains) -> dict[str, Any]:
+    """Performability per cycle: every cycle started afresh from the reference's state at its start
+    (t0 + k × period, preloaded as the continuous run), tracked to its end by the same controller
+    with a penalized residual wrench at the root (six motors on the root coordinates, weighted by
+    ``gains.residual_weight`` in the QP: a Moco-style residual actuator). A cycle completes when it
+    ends without a fall; it *closes* when its end state is also within ``CLOSE_TOLERANCE`` of the
+    reference's (``end_error``). The residual's RMS is in body weights: forces / BW and the root hinges'
+    torques / (BW × 1 m), over every simulated step."""
+    _xml, m, _ = performable_model(motion, cycles, ref, gains.sole_half_width, gains.inversion, root_residual=True)
+    ctl = Tracker(motion, m, ref, gains)
+    pelvis = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, motion.character.segments[0].name)
+    steps = int(round(ref.period / float(m.opt.timestep)))
+    fresh = ctl.snapshot()
+    scale = np.array([ctl.bw] * 3 + [ctl.bw * 1.0] * 3)
+    per_cycle = []
+    squares: list[np.ndarray] = []
+    cpu = _time.process_time()
+    completed = closed = 0
+    for k in range(cycles):
+        ctl.restore(fresh)
+        tk = t0 + k * ref.period
+        d, _info = _start(m, ctl, ref, tk, gains.preload)
+        run = _rollout(m, d, ctl, ref, tk, steps, True, pelvis)
+        r = run.ctrl[:, ctl.residual] / scale
+        sq = np.sum(r**2, axis=1)
+        squares.append(sq)
+        completed += not run.fell
+        err = _end_error(run, ctl, ref)
+        closes = not run.fell and all(abs(err[key]) <= tol for key, tol in CLOSE_TOLERANCE.items())
+        closed += closes
+        per_cycle.append({"cycle": k, "completed": not run.fell,
+                          "walked": min(1.0, float(run.time[-1] / ref.period)) if len(run.time) else 0.0,
+                          "fall_reason": run.fall_reason,
+                          "end_error": err, "closes": closes,
+                          "residual_root_wrench_rms_bw": float(np.sqrt(np.mean(sq))) if len(sq) else float("nan"),
+                          "residual_root_wrench_max_bw": float(np.sqrt(np.max(sq))) if len(sq) else float("nan")})
+    cpu = _time.process_time() - cpu
+    allsq = np.concatenate(squares) if squares else np.zeros(0)
+    return {
+        "cycles": cycles,
+        "completed": completed,
+        "closed": closed,
+        "close_tolerance": CLOSE_TOLERANCE,
+        "residual_root_wrench_rms_bw": float(np.sqrt(np.mean(allsq))) if len(allsq) else float("nan"),
+        "residual_weight": gains.residual_weight,
+        "per_cycle": per_cycle,
+        "cpu_s": cpu,
     }
+
+
+def simulate(motion: Motion, cycles: int = 10, gains: Gains | None = None, *,
+             stop_on_fall: bool = True, resync: bool = True) -> SimulationResult:
+    """Simulate ``cycles`` gait cycles of ``motion`` under the tracking controller, continuously
+    from mid stance; with ``resync`` also each cycle from the reference's state at its start with a
+    penalized root residual (the report's ``resync``)."""
+    if cycles < 1:
+        raise SimulationError("cycles must be at least 1")
+    gains = gains or Gains()
+    ref = Reference(motion)
+    t0 = mid_stance_time(motion)
+    xml, m, _ = performable_model(motion, cycles, ref, gains.sole_half_width, gains.inversion)
+    ctl = Tracker(motion, m, ref, gains)
+    d, start_info = _start(m, ctl, ref, t0, gains.preload)
+    qpos0, qvel0 = d.qpos.copy(), d.qvel.copy()
+    dt = float(m.opt.timestep)
+    steps = int(round(cycles * ref.period / dt))
+    pelvis = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, motion.character.segments[0].name)
+    run = _rollout(m, d, ctl, ref, t0, steps, stop_on_fall, pelvis)
     res = SimulationResult(
-        xml=xml, timestep=dt, qpos0=qpos0, qvel0=qvel0, time=time, ctrl=ctrl, qpos=qpos,
+        xml=xml, timestep=dt, qpos0=qpos0, qvel0=qvel0, time=run.time, ctrl=run.ctrl, qpos=run.qpos,
         actuator_names=tuple(mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_ACTUATOR, a) for a in range(m.nu)),
         coordinate_qpos=ctl.qadr, t0=t0, cycle_duration_s=ref.period, cycles_requested=cycles,
-        fell=fell, fall_time=fall_time, fall_reason=reason, wall_time_s=wall, series=series,
+        fell=run.fell, fall_time=run.fall_time, fall_reason=run.fall_reason, wall_time_s=run.wall,
+        series=run.series,
     )
-    return replace(res, report=_report(res, motion, ref, ctl))
+    report = _report(res, motion, ref, ctl)
+    report["start"] = _start_report(run, start_info, ctl.bw, dt)
+    from mjcf.agreement import agreement
+
+    report["agreement"] = agreement(motion, m)
+    if resync:
+        report["resync"] = _resync(motion, ref, t0, cycles, gains)
+    return replace(res, report=report)
 
 
 def _ground_height(m: mujoco.MjModel, d: mujoco.MjData, p: np.ndarray) -> float:
@@ -842,10 +1062,12 @@ def _report(res: SimulationResult, motion: Motion, ref: Reference, ctl: Tracker)
         dxy = q[i, list(ROOT_XY)] - qr[i, list(ROOT_XY)]
         drift.append({"cycle": k, "position_m": float(np.linalg.norm(dxy)),
                       "lateral_m": float(dxy @ np.array([-math.sin(qr[i, ROOT_YAW]), math.cos(qr[i, ROOT_YAW])])),
-                      "heading_deg": float(np.degrees(_wrap(q[i, ROOT_YAW] - qr[i, ROOT_YAW])))})
-    peaks_sim = np.max(np.abs(res.ctrl), axis=0) if len(res.ctrl) else np.zeros(len(ctl.peaks))
+                      "heading_deg": float(np.degrees(_wrap(q[i, ROOT_YAW] - qr[i, ROOT_YAW]))),
+                      "joint_rms_deg": float(np.degrees(np.sqrt(np.mean((q[i, 6:] - qr[i, 6:]) ** 2)))),
+                      "pelvis_height_m": float(q[i, ROOT_Z] - qr[i, ROOT_Z])})
+    peaks_sim = np.max(np.abs(res.ctrl[:, ctl.motor]), axis=0) if len(res.ctrl) else np.zeros(len(ctl.peaks))
     ratio = peaks_sim / np.maximum(ctl.peaks, 1e-9)
-    act = res.actuator_names
+    act = [res.actuator_names[a] for a in ctl.motor]
     return {
         "motion": {"character": motion.character.name, "fps": motion.fps, "frames": motion.T,
                    "environment": environment_of(motion).to_dict()},

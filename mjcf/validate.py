@@ -73,7 +73,7 @@ def simulation_checks(ctx: Context) -> SectionResult:
     from mjcf.simulate import SimulationError, simulate
 
     try:
-        res = simulate(ctx.motion, SIMULATION_CYCLES)
+        res = simulate(ctx.motion, SIMULATION_CYCLES, resync=False)
     except SimulationError as e:
         return SectionResult((), {"error": str(e)}, checked=False, unchecked=None)
     r = res.report

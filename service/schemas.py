@@ -115,7 +115,9 @@ class SimulationOut(BaseModel):
     message: str
     report: dict[str, Any] | None = Field(
         None, description="when succeeded: report.json (cycles_walked, fell, fall, joint_tracking_rms_deg, "
-                          "foot_force_rms_bw, peak_torque_ratio_max, drift_per_cycle, realtime_factor, ...)")
+                          "foot_force_rms_bw, peak_torque_ratio_max, drift_per_cycle, realtime_factor, start, "
+                          "agreement; resync: each cycle from the reference state with a penalized root residual: "
+                          "cycles, completed, residual_root_wrench_rms_bw, ...)")
     files: dict[str, int] = Field(default_factory=dict, description="stored files and their sizes (bytes)")
     created_at: str
     started_at: str | None

@@ -30,7 +30,8 @@ FILES: dict[str, str] = {
     "simulated.glb": "model/gltf-binary",
     "simulation.png": "image/png",
 }
-#: the cycles a request may ask for (CPU: about 1 s per HalfBoy cycle, 1.5 s per full-body cycle)
+#: the cycles a request may ask for (CPU: about 1 s per HalfBoy cycle, 1.5 s per full-body cycle, twice that with
+#: the resync runs every simulation also makes: report.json "resync")
 MIN_CYCLES, MAX_CYCLES, DEFAULT_CYCLES = 1, 100, 10
 #: what the command line prints of the report
 SUMMARY_KEYS = ("cycles_walked", "fell", "joint_tracking_rms_deg", "foot_force_rms_bw", "peak_torque_ratio_max",

@@ -60,6 +60,9 @@ def test_simulation_report_and_files(api, tutor_id, simulated):
     assert 0.0 < rep["foot_force_rms_bw"] < 0.45
     assert rep["peak_torque_ratio_max"] > 0.0 and rep["realtime_factor"] > 0.0
     assert len(rep["drift_per_cycle"]) == 1
+    # beside the continuous run, the cycle started from the reference's state with the root residual
+    assert rep["resync"]["cycles"] == 1 and rep["resync"]["completed"] == 1
+    assert 0.0 <= rep["resync"]["residual_root_wrench_rms_bw"] < 0.05
     assert set(sim["files"]) == set(FILES)
     for name, media_type in FILES.items():
         r = api.a.get(sim["links"][name])

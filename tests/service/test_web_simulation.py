@@ -55,6 +55,7 @@ def test_page_simulates_a_motion_and_shows_it_beside_the_motion(api, browser, tu
         assert state["simulationReport"]["cycles_walked"] > 0.99
         table = page.text_content("#simulation-report")
         assert "cycles walked" in table and "joint tracking RMS" in table and "real-time factor" in table, table
+        assert "cycles completed from the reference state" in table and "1 of 1" in table, table
         assert page.evaluate("document.getElementById('simulation-img').naturalWidth") > 500
         assert page.locator("#simulation-downloads button").count() == 5
 

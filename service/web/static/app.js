@@ -1041,6 +1041,8 @@ function renderSimulation(sim) {
   const row = (label, value) => h('tr', {}, h('th', {}, label), h('td', { class: 'num' }, value));
   table.replaceChildren(h('tbody', {},
     row('cycles walked', `${fmt(r.cycles_walked)} of ${r.cycles_requested ?? sim.cycles}`),
+    ...(r.resync ? [row('cycles completed from the reference state (root residual RMS, body weight)',
+      `${r.resync.completed} of ${r.resync.cycles} (${fmt(r.resync.residual_root_wrench_rms_bw)})`)] : []),
     row('fell', r.fell ? `yes, at ${fmt(r.fall && r.fall.time_s)} s (${(r.fall && r.fall.reason) || ''})` : 'no'),
     row('joint tracking RMS (°)', fmt(r.joint_tracking_rms_deg)),
     row('foot force RMS (body weight)', fmt(r.foot_force_rms_bw)),
