@@ -38,7 +38,7 @@ import numpy as np
 import quadprog
 
 from mjcf.builder import ContactOptions, Tread, build_spec, sole_corners
-from solver.environment import body_weight, environment_of, ground_of
+from solver.environment import body_weight, ground_of
 from solver.motion import FEET, Motion
 from solver.stairs import flight_of
 from solver.trajectory import ROOT_XY, ROOT_YAW, cycle_turn, dynamics_samples, spline_velocities
@@ -306,7 +306,7 @@ def id_peaks(motion: Motion) -> np.ndarray:
     dynamics samples with its stored foot wrenches."""
     from mjcf.replay import MujocoReplay
 
-    env = environment_of(motion)
+    env = motion.environment
     rep = MujocoReplay.create(motion.character, env.gravity)
     s = dynamics_samples(motion)
     fext = {}
@@ -324,7 +324,7 @@ def performable_model(motion: Motion, cycles: int = 10, ref: Reference | None = 
     """The model XML, the model compiled *from that XML* (so a replay from the file is what
     was simulated) and the soles' roll (rad, right and left) that lays them flat in stance."""
     ch = motion.character
-    env = environment_of(motion)
+    env = motion.environment
     ref = ref or Reference(motion)
     base = build_spec(ch, env.gravity).compile()
     ids = [mujoco.mj_name2id(base, mujoco.mjtObj.mjOBJ_JOINT, nm) for nm in ch.coordinate_names]
@@ -352,7 +352,7 @@ class Tracker:
         self.root_v = self.vadr[:6]
         self.joint_v = self.vadr[6:]
         self.act_v = np.array([model.jnt_dofadr[model.actuator_trnid[a, 0]] for a in range(model.nu)])
-        env = environment_of(motion)
+        env = motion.environment
         self.mu = env.friction * gains.friction_margin
         self.bw = body_weight(motion)
         self.ref_data = mujoco.MjData(model)
@@ -848,7 +848,7 @@ def _report(res: SimulationResult, motion: Motion, ref: Reference, ctl: Tracker)
     act = res.actuator_names
     return {
         "motion": {"character": motion.character.name, "fps": motion.fps, "frames": motion.T,
-                   "environment": environment_of(motion).to_dict()},
+                   "environment": motion.environment.to_dict()},
         "cycle_duration_s": ref.period,
         "cycles_requested": res.cycles_requested,
         "cycles_walked": cycles_walked,

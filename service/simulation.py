@@ -78,7 +78,7 @@ def write_simulation(result, motion, out: Path) -> dict[str, Any]:
     import numpy as np
 
     from solver.export import export_motion
-    from solver.motion import Motion
+    from solver.motion import Motion, MotionContext
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -95,8 +95,8 @@ def write_simulation(result, motion, out: Path) -> dict[str, Any]:
     step = max(1, int(round(1.0 / (motion.fps * result.timestep))))
     q = result.qpos[step - 1::step][:, result.coordinate_qpos].T
     if q.shape[1] >= 2:
-        env = dict(motion.provenance.get("environment") or {})
-        sim = Motion(motion.character, motion.fps, q, provenance={"source": "mujoco simulation", "environment": env})
+        sim = Motion(motion.character, motion.fps, q, provenance={"source": "mujoco simulation"},
+                     context=MotionContext(environment=motion.environment))
         export_motion(sim, "gltf", out / "simulated.glb")
     return report
 

@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from solver.checks import Check, Context, SectionResult, register_check
-from solver.environment import STANDARD_GRAVITY_VECTOR, Flight, body_weight, environment_of, ground_of
+from solver.environment import STANDARD_GRAVITY_VECTOR, Flight, body_weight, ground_of
 from solver.jsonable import jsonable
 from solver.kinematics import centre_of_mass, contact_points, points_world, segment_frames, standing_leg_length
 from solver.motion import FEET, Motion, foot_schedule_of
@@ -757,7 +757,7 @@ def checks_of(fig: Mapping[str, Any], *, reference: Mapping[str, Any] | None = N
 
 def motion_figures(motion: Motion, lim: NaturalnessLimits = NaturalnessLimits()) -> dict[str, Any]:
     """``gait_figures`` of a motion (its stored ground reactions, its environment)."""
-    env = environment_of(motion)
+    env = motion.environment
     if motion.contacts is None:
         raise ValueError("naturalness needs a contact schedule")
     forces = None if motion.wrenches is None else np.asarray(motion.wrenches)[:, 3:6]
@@ -769,7 +769,7 @@ def motion_figures(motion: Motion, lim: NaturalnessLimits = NaturalnessLimits())
 def naturalness_report(motion: Motion, reference: Mapping[str, Any] | None = None,
                        lim: NaturalnessLimits = NaturalnessLimits()) -> dict[str, Any]:
     """The naturalness section of the validation report: every check as a figure with its limit,
-    its source and the capture's own figure; ``reference`` defaults to the motion's provenance
+    its source and the capture's own figure; ``reference`` defaults to the motion's context
     ``gait_reference`` ({"capture": …, "tutor": …} figures). ``passed`` is None when the motion
     cannot be checked (no contact schedule, or feet without a heel and a toe point)."""
     return naturalness_checks(motion, reference, lim).to_dict()
@@ -791,8 +791,8 @@ def naturalness_checks(motion: Motion, reference: Mapping[str, Any] | None = Non
         out["time_s"] = time.perf_counter() - t0
         return SectionResult((), out, checked=False, unchecked=None)
     if reference is None:
-        ref = motion.provenance.get("gait_reference")
-        reference = ref if isinstance(ref, Mapping) else None
+        ref = motion.context.gait_reference
+        reference = None if ref is None else ref.to_dict()
     fig = motion_figures(motion, lim)
     checks = checks_of(fig, reference=reference, lim=lim)
     if reference is None or reference.get("capture") is None:

@@ -71,7 +71,7 @@ _MOVED = 1e-6
 
 
 def source_rig(motion: Motion) -> Rig:
-    """The motion's source rig (``provenance["rig"]``); an :class:`ExportError` saying why not."""
+    """The motion's source rig (``motion.context.rig``); an :class:`ExportError` saying why not."""
     return _source_rig(motion, RIG_FORMATS,
                        "rig=source needs a motion made from a skinned glTF, BVH or DeepMimic input")
 
@@ -214,9 +214,8 @@ def _source_document(rig: Rig, poses: list[tuple[str, Motion, RigPose]], meshes:
 def _input_matrix(motion: Motion) -> np.ndarray:
     """(4x4) our world (metres) -> the input's axes and units (the motion's ``GroundFrame``; a
     moving frame, a treadmill's, at time 0)."""
-    from solver.capture import GroundFrame
 
-    frame = GroundFrame.from_dict(motion.provenance.get("frame"))
+    frame = motion.frame
     m = np.eye(4)
     m[:3, :3] = frame.R / frame.unit_m
     m[:3, 3] = frame.offset / frame.unit_m
@@ -514,7 +513,7 @@ def _opensim_document(items: Sequence[tuple[str, Motion]], meshes: bool, world: 
 
 
 def _is_opensim(motion: Motion) -> bool:
-    rig = motion.provenance.get("rig")
+    rig = motion.context.rig
     return isinstance(rig, Mapping) and rig.get("format") == "opensim"
 
 
@@ -527,9 +526,8 @@ def _document(items: Sequence[tuple[str, Motion]], meshes: bool, world: str) -> 
     rig, poses = _poses(items, world)
     if rig.format == "gltf":
         return _source_document(rig, poses, meshes, world)
-    from solver.capture import GroundFrame
 
-    frame = GroundFrame.from_dict(poses[0][1].provenance.get("frame"))
+    frame = poses[0][1].frame
     return _skeleton_document(rig, poses, meshes, frame, world)
 
 
