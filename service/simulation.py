@@ -20,16 +20,11 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from service import store
+from service.simulation_files import FILES
+
 log = logging.getLogger(__name__)
 
-#: the files of a simulation and their media types, in the order the API lists them
-FILES: dict[str, str] = {
-    "report.json": "application/json",
-    "model.xml": "application/xml",
-    "rollout.npz": "application/octet-stream",
-    "simulated.glb": "model/gltf-binary",
-    "simulation.png": "image/png",
-}
 #: the cycles a request may ask for (CPU: about 1 s per HalfBoy cycle, 1.5 s per full-body cycle)
 MIN_CYCLES, MAX_CYCLES, DEFAULT_CYCLES = 1, 100, 10
 #: what the command line prints of the report
@@ -118,8 +113,6 @@ def run_simulation(db, simulation_id: str, *, write_lock=None) -> tuple[str, str
     simulation's final (status, message): ``succeeded`` (also when the character fell: that is a
     result, in the report), or ``failed`` with the reason (e.g. the SimulationError's text)."""
     import contextlib
-
-    from service import store
 
     lock = write_lock or contextlib.nullcontext()
     with db.read() as s:

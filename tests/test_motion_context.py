@@ -113,7 +113,7 @@ def test_context_keys_are_refused_in_provenance():
     for key in CONTEXT_KEYS.values():
         with pytest.raises(MotionError, match="context"):
             m.evolve(provenance={**m.provenance, key: {}})
-    with pytest.raises(MotionError, match="source.cycle"):
+    with pytest.raises(MotionError, match=r"source\.cycle"):
         m.evolve(provenance={"source": {"cycle": {"t_start": 0.0}}})
     with pytest.raises(MotionError, match="MotionContext"):
         m.evolve(context={"environment": {}})

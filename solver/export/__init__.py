@@ -66,6 +66,9 @@ __all__ = [
 Y_UP = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
 Y_UP.setflags(write=False)
 
+#: the length units the BVH and ground exports write (metres -> unit: the factor)
+LENGTH_UNITS = {"cm": 100.0, "m": 1.0}
+
 AXES_Z_UP = {"up": "+z", "forward": "+x", "left": "+y", "handedness": "right"}
 #: the world every exporter writes in unless told otherwise (``solver.export.world``)
 DEFAULT_WORLD = next(iter(EXPORT_WORLDS))
@@ -365,24 +368,6 @@ def source_rig(motion: Motion, formats: tuple[str, ...], what: str):
         return Rig.from_dict(d)
     except RigError as e:
         raise ExportError(str(e)) from None
-
-
-def source_pose(motion: Motion, formats: tuple[str, ...], what: str, world: str = DEFAULT_WORLD):
-    """The motion's source rig (:func:`source_rig`) and the motion retargeted onto it
-    (:func:`solver.rig.retarget`: one cycle at the rig's frame rate), its root placed in
-    ``world`` (:func:`solver.export.world.world_rig_pose`); a rig that cannot take the motion
-    is an :class:`ExportError`."""
-    from solver.export.world import check_world, world_rig_pose
-    from solver.rig import RigError, retarget
-
-    check_world(world)
-    rig = source_rig(motion, formats, what)
-    try:
-        return rig, world_rig_pose(motion, world, rig, retarget(motion, rig))
-    except RigError as e:
-        raise ExportError(str(e)) from None
-
-
 def check_decimals(decimals: object) -> None:
     """Text exporters write 1 to 12 decimals."""
     if isinstance(decimals, bool) or not isinstance(decimals, int) or not 1 <= decimals <= 12:

@@ -34,7 +34,17 @@ from typing import Any
 import numpy as np
 
 from solver.environment import ground_of, stair_rise, stances
-from solver.export import AXES_Y_UP, AXES_Z_UP, DEFAULT_WORLD, Y_UP, ExportError, LocalTransforms, local_transforms
+from solver.export import (
+    AXES_Y_UP,
+    AXES_Z_UP,
+    DEFAULT_WORLD,
+    LENGTH_UNITS,
+    Y_UP,
+    ExportError,
+    LocalTransforms,
+    local_transforms,
+    source_rig,
+)
 from solver.formats import EXPORT_WORLDS
 from solver.motion import FEET, Motion
 from solver.stairs import flight_of
@@ -420,11 +430,9 @@ def ground_json(motion: Motion, *, world: str = DEFAULT_WORLD, y_up: bool = True
     it goes beside — Y up (``y_up``, as :func:`solver.export.bvh.to_bvh` writes) or our Z up, in
     ``units`` "cm" (BVH's default) or "m"; with ``rig="source"``, in the input's own axes and unit (those of
     ``to_bvh(motion, rig="source")``)."""
-    from solver.export import source_rig
-    from solver.export.bvh import UNITS
 
-    if units not in UNITS:
-        raise ExportError(f"units must be one of {sorted(UNITS)}, got {units!r}")
+    if units not in LENGTH_UNITS:
+        raise ExportError(f"units must be one of {sorted(LENGTH_UNITS)}, got {units!r}")
     if not isinstance(y_up, bool):
         raise ExportError(f"y_up must be a boolean, got {y_up!r}")
     if rig not in ("character", "source"):
@@ -441,5 +449,20 @@ def ground_json(motion: Motion, *, world: str = DEFAULT_WORLD, y_up: bool = True
     else:
         A = Y_UP if y_up else np.eye(3)
         doc.update(axes=dict(AXES_Y_UP if y_up else AXES_Z_UP), units={"length": units},
-                   world=g.world.to_json(A, decimals), ground=g.to_json(A, UNITS[units], decimals))
+                   world=g.world.to_json(A, decimals), ground=g.to_json(A, LENGTH_UNITS[units], decimals))
     return json.dumps(doc, allow_nan=False, separators=(",", ":"))
+
+
+def source_pose(motion: Motion, formats: tuple[str, ...], what: str, world: str = DEFAULT_WORLD):
+    """The motion's source rig (:func:`solver.export.source_rig`) and the motion retargeted onto it
+    (:func:`solver.rig.retarget`: one cycle at the rig's frame rate), its root placed in
+    ``world`` (:func:`world_rig_pose`); a rig that cannot take the motion
+    is an :class:`ExportError`."""
+    from solver.rig import RigError, retarget  # lazy: solver.rig only for the input-rig exports
+
+    check_world(world)
+    rig = source_rig(motion, formats, what)
+    try:
+        return rig, world_rig_pose(motion, world, rig, retarget(motion, rig))
+    except RigError as e:
+        raise ExportError(str(e)) from None
