@@ -368,8 +368,8 @@ class Tracker:
             pos = model.geom_pos[gid]
             corners = np.array([pos + R @ np.array([sx * size[0], sy * size[1], -size[2]])
                                 for sx in (-1, 1) for sy in (1, -1)])  # heel ±, toe ±
-            pts = sorted([(float(c.position[0]), i) for i, c in enumerate(ch.contacts) if c.side == side])
-            owner = [pts[0][1], pts[0][1], pts[1][1], pts[1][1]]
+            heel, toe = ch.sole_indices(side)  # the sole's heel and toe points, by name
+            owner = [heel, heel, toe, toe]
             self.soles.append((gid, bid, corners, owner, R @ np.array([0, 0, -1.0]) * size[2] + pos))
         self.n_edges = 4
         s = 1.0 / math.sqrt(1 + self.mu**2)

@@ -436,9 +436,9 @@ def filmstrip_figure(motion, *, title: str | None = None, max_frames: int = 16):
     views are turned so that gravity points down: a slope shows as an inclined ground. Top: the
     cycle in the ground plane — the pelvis path and heading, and the soles of the stance feet."""
     from solver.environment import ground_of
-    from solver.kinematics import standing_leg_length
+    from solver.kinematics import sole_corners, standing_leg_length
     from solver.motion import FEET, Motion
-    from solver.naturalness import has_two_point_feet, path_heading, sole_corners
+    from solver.naturalness import path_heading
     from solver.stairs import flight_of
 
     if not isinstance(motion, Motion):
@@ -461,7 +461,7 @@ def filmstrip_figure(motion, *, title: str | None = None, max_frames: int = 16):
 
     Ds = np.stack([display(t) for t in range(T)])  # (T, 3, 3)
     lines = np.einsum("tij,sejt->seit", Ds, _stick_lines(ch, q))
-    has_soles = has_two_point_feet(ch)
+    has_soles = ch.has_soles
     world_soles = sole_corners(ch, q) if has_soles else np.zeros((2, 4, 3, T))  # (2, 4, 3, T)
     soles = np.einsum("tij,kcjt->kcit", Ds, world_soles)
     root = np.einsum("tij,jt->it", Ds, q[:3])

@@ -22,7 +22,7 @@ from solver.axes.terrain import stairs_base, stairs_target
 from solver.environment import Environment
 from solver.jsonable import jsonable
 from solver.motion import GaitReference, Motion
-from solver.naturalness import has_two_point_feet, motion_figures
+from solver.naturalness import motion_figures
 from solver.outputs import progress_csv, step_stem
 from solver.spacetime import SolveResult, SpacetimeProblem, Weights
 from solver.stairs import flight_for
@@ -165,7 +165,7 @@ def gait_reference(tutor: Motion) -> GaitReference:
     """What a λ optimum's naturalness is judged against besides the published limits: the
     captured walk's figures (recorded in the tutor) and the tutor's own."""
     ref = tutor.context.gait_reference or GaitReference()
-    if tutor.contacts is None or not has_two_point_feet(tutor.character):
+    if tutor.contacts is None or not tutor.character.has_soles:
         return GaitReference(ref.capture, None, ref.fit)
     return GaitReference(ref.capture, jsonable(motion_figures(tutor)), ref.fit)
 

@@ -24,7 +24,7 @@ import numpy as np
 
 from solver import native
 from solver.capture import Capture, GroundFrame
-from solver.character import FULL_SUPERFLUOUS, LOWER_SUPERFLUOUS, Character, merge_segments
+from solver.character import FULL_SUPERFLUOUS, LOWER_SUPERFLUOUS, Character, CharacterError, merge_segments
 from solver.contact import estimate_contact_wrenches
 from solver.environment import STANDARD_GRAVITY, STANDARD_GRAVITY_VECTOR
 from solver.gait import close_loop, ensure_double_support, extract_cycle, periodic_lowpass, tighten_contacts
@@ -363,11 +363,9 @@ def sole_calibration(character: Character, q: np.ndarray, contacts: np.ndarray) 
     feet = list(character.feet)
     moved: dict[str, float] = {}
     for side in ("right", "left"):
-        idx = sorted((j for j, c in enumerate(pts) if c.side == side), key=lambda j: float(pts[j].position[0]))
-        if len(idx) != 2:
-            continue
-        heel, toe = idx
-        if pts[heel].segment != pts[toe].segment:
+        try:
+            heel, toe = character.sole_indices(side)  # by name (``Character.sole``)
+        except CharacterError:  # not a heel and a toe point on one segment
             continue
         flat = A[heel, :N] & A[toe, :N]
         if flat.sum() < 2:

@@ -62,7 +62,6 @@ from solver.export.gltf_parts import (
 from solver.export.rig_gltf import rig_glb, rig_gltf_embedded
 from solver.export.world import DEFAULT_WORLD, check_world, ground_of_motion, world_of, world_transforms
 from solver.motion import Motion
-from solver.naturalness import heel_toe
 
 log = logging.getLogger(__name__)
 
@@ -84,11 +83,12 @@ def sole_mesh(bottom: np.ndarray, top: np.ndarray) -> tuple[np.ndarray, np.ndarr
 
 def foot_shape(character, side: str) -> tuple[np.ndarray, np.ndarray]:
     """The drawn foot of a side (foot segment frame): its sole is the rectangle through the heel
-    and toe contact points as wide as the foot box (``solver.naturalness.sole_corners``: the foot
+    and toe contact points as wide as the foot box (``Character.sole``, ``solver.kinematics.sole_corners``: the foot
     stands on the ground where its contact points do), its top the foot box's top face.
     Returns (bottom (4, 3), top (4, 3)), corners (heel-right, heel-left, toe-right, toe-left)."""
     foot = character.foot(side)
-    heel, toe = heel_toe(character, side)
+    sole = character.sole(side)
+    heel, toe = sole.heel, sole.toe
     w = float(foot.half[1])
     lo_x, hi_x = float(foot.center[0] - foot.half[0]), float(foot.center[0] + foot.half[0])
     top_z = float(foot.center[2] + foot.half[2])

@@ -1272,11 +1272,7 @@ def generic_rig(motion: Motion, scratch: str | Path) -> dict[str, Any]:
                                  f"{ch.name!r} has {names}")
     R0, P0 = segment_frames(ch, np.zeros(ch.n))
     ours = {n: P0[names.index(n)] for n in need}
-    heel_toe = {}
-    for side in ("right", "left"):
-        pts = sorted((c for c in ch.contacts if c.side == side), key=lambda c: float(c.position[0]))
-        heel_toe[side] = float(np.linalg.norm(np.asarray(pts[-1].position) - np.asarray(pts[0].position))) \
-            if len(pts) >= 2 else None
+    heel_toe = {side: ch.sole(side).length if ch.has_soles else None for side in ("right", "left")}
     # the generic model's own default geometry (OpenSim ground)
     base = run_worker(str(GENERIC_MODEL), ["pelvis_ty"], np.array([[0.0]]), False)
     jc = {c: np.asarray(base["JC"])[0, k] for k, c in enumerate(base["joint_child"])}
