@@ -278,9 +278,7 @@ def test_stairs_checks_see_a_foot_off_its_tread(stairs):
     env = m.environment
     x, y, heading = env.stairs_at
     g = env.step_going_m
-    moved = dict(m.provenance)
-    moved["environment"] = env.with_(stairs_at=(x + 0.5 * g * math.cos(heading), y + 0.5 * g * math.sin(heading),
-                                                heading)).to_dict()
-    rep = naturalness_report(m.evolve(provenance=moved))
+    moved = env.with_(stairs_at=(x + 0.5 * g * math.cos(heading), y + 0.5 * g * math.sin(heading), heading))
+    rep = naturalness_report(m.evolve(context=m.context.with_(environment=moved)))
     assert not rep["passed"]
     assert {"stance_over_nosing", "stance_into_riser"} & set(rep["failed"])
