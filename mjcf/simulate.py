@@ -42,7 +42,7 @@ import numpy as np
 import quadprog
 
 from mjcf.builder import ContactOptions, Tread, build_spec, sole_corners
-from solver.environment import body_weight, environment_of, ground_of
+from solver.environment import body_weight, ground_of
 from solver.motion import FEET, Motion
 from solver.stairs import flight_of
 from solver.trajectory import ROOT_XY, ROOT_YAW, cycle_turn, dynamics_samples, spline_velocities
@@ -315,7 +315,7 @@ def id_peaks(motion: Motion) -> np.ndarray:
     dynamics samples with its stored foot wrenches."""
     from mjcf.replay import MujocoReplay
 
-    env = environment_of(motion)
+    env = motion.environment
     rep = MujocoReplay.create(motion.character, env.gravity)
     s = dynamics_samples(motion)
     fext = {}
@@ -335,7 +335,7 @@ def performable_model(motion: Motion, cycles: int = 10, ref: Reference | None = 
     ``root_residual``: also a motor on each of the six root coordinates (``residual_<name>``,
     after the joints' motors): the resync runs' penalized residual wrench."""
     ch = motion.character
-    env = environment_of(motion)
+    env = motion.environment
     ref = ref or Reference(motion)
     base = build_spec(ch, env.gravity).compile()
     ids = [mujoco.mj_name2id(base, mujoco.mjtObj.mjOBJ_JOINT, nm) for nm in ch.coordinate_names]
@@ -374,7 +374,7 @@ class Tracker:
         self.residual = np.array([by_name[RESIDUAL_PREFIX + nm] for nm in ch.coordinate_names[:6]
                                   if RESIDUAL_PREFIX + nm in by_name], dtype=int)
         self.act_v = np.array([model.jnt_dofadr[model.actuator_trnid[a, 0]] for a in self.motor])
-        env = environment_of(motion)
+        env = motion.environment
         self.mu = env.friction * gains.friction_margin
         self.bw = body_weight(motion)
         self.ref_data = mujoco.MjData(model)
@@ -390,8 +390,8 @@ class Tracker:
             pos = model.geom_pos[gid]
             corners = np.array([pos + R @ np.array([sx * size[0], sy * size[1], -size[2]])
                                 for sx in (-1, 1) for sy in (1, -1)])  # heel ±, toe ±
-            pts = sorted([(float(c.position[0]), i) for i, c in enumerate(ch.contacts) if c.side == side])
-            owner = [pts[0][1], pts[0][1], pts[1][1], pts[1][1]]
+            heel, toe = ch.sole_indices(side)  # the sole's heel and toe points, by name
+            owner = [heel, heel, toe, toe]
             self.soles.append((gid, bid, corners, owner, R @ np.array([0, 0, -1.0]) * size[2] + pos))
         self.n_edges = 4
         s = 1.0 / math.sqrt(1 + self.mu**2)
@@ -1070,7 +1070,7 @@ def _report(res: SimulationResult, motion: Motion, ref: Reference, ctl: Tracker)
     act = [res.actuator_names[a] for a in ctl.motor]
     return {
         "motion": {"character": motion.character.name, "fps": motion.fps, "frames": motion.T,
-                   "environment": environment_of(motion).to_dict()},
+                   "environment": motion.environment.to_dict()},
         "cycle_duration_s": ref.period,
         "cycles_requested": res.cycles_requested,
         "cycles_walked": cycles_walked,

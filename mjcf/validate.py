@@ -15,7 +15,6 @@ import numpy as np
 
 from mjcf.replay import MujocoReplay
 from solver.checks import Check, Context, SectionResult, register_check
-from solver.environment import environment_of
 from solver.motion import FEET, Motion
 from solver.plausibility import Tolerances, about_root, report, root_residual
 from solver.trajectory import dynamics_samples
@@ -24,7 +23,7 @@ from solver.trajectory import dynamics_samples
 def mujoco_residual(motion: Motion) -> np.ndarray:
     """(6, S) residual root wrench from MuJoCo at the dynamics samples, moment about the root position."""
     ch = motion.character
-    replay = MujocoReplay.create(ch, environment_of(motion).gravity)
+    replay = MujocoReplay.create(ch, motion.environment.gravity)
     s = dynamics_samples(motion)
     fext = None
     if s.wrenches is not None:

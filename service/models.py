@@ -183,7 +183,7 @@ class SimulationRow(Base):
 
 
 class SimulationFileRow(Base):
-    """One file of a simulation (service.simulation.FILES), stored as it was written."""
+    """One file of a simulation (service.simulation_files.FILES), stored as it was written."""
 
     __tablename__ = "simulation_files"
 

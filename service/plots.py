@@ -258,7 +258,7 @@ def motion_caption(motion) -> str:
     parts = [f"{motion.character.name}, {motion.T} frames at {motion.fps:g} fps"]
     if prov.get("lambda") is not None:
         parts.append(f"λ = {number_text(prov['lambda'])}")
-    env = prov.get("environment_values") or {}
+    env = motion.context.axis_values
     for k in TARGET_KEYS:
         ax = registry.axis(k)
         if ax.default is not None and env.get(k) is not None and ax.changes(env[k]):
@@ -362,12 +362,11 @@ class ResidualSeries:
 def residual_series(motion) -> ResidualSeries:
     """The per-frame root residuals that :func:`residuals_png` draws (ours and MuJoCo's)."""
     from mjcf.validate import mujoco_residual
-    from solver.environment import environment_of
     from solver.kinematics import standing_leg_length
     from solver.plausibility import root_residual
 
     motion = _motion_with_wrenches(motion)
-    ours = root_residual(motion, environment_of(motion).gravity)
+    ours = root_residual(motion, motion.environment.gravity)
     mj = mujoco_residual(motion)
     from solver.trajectory import dynamics_samples
 
@@ -436,10 +435,10 @@ def filmstrip_figure(motion, *, title: str | None = None, max_frames: int = 16):
     reaction force as an arrow at its centre of pressure (1 BW = the standing leg length). The
     views are turned so that gravity points down: a slope shows as an inclined ground. Top: the
     cycle in the ground plane — the pelvis path and heading, and the soles of the stance feet."""
-    from solver.environment import environment_of, ground_of
-    from solver.kinematics import standing_leg_length
+    from solver.environment import ground_of
+    from solver.kinematics import sole_corners, standing_leg_length
     from solver.motion import FEET, Motion
-    from solver.naturalness import has_two_point_feet, path_heading, sole_corners
+    from solver.naturalness import path_heading
     from solver.stairs import flight_of
 
     if not isinstance(motion, Motion):
@@ -447,7 +446,7 @@ def filmstrip_figure(motion, *, title: str | None = None, max_frames: int = 16):
     ch, q, T = motion.character, motion.q, motion.T
     N = T - 2 if motion.cyclic else T
     frames = np.arange(N) if max_frames >= N else np.unique(np.linspace(0, N - 1, max_frames).round().astype(int))
-    env = environment_of(motion)
+    env = motion.environment
     g = np.asarray(env.gravity, dtype=float)
     up = -g / max(float(np.linalg.norm(g)), 1e-12)
     path = path_heading(q, N) if motion.cyclic else np.full(T, float(q[3, 0]))
@@ -462,7 +461,7 @@ def filmstrip_figure(motion, *, title: str | None = None, max_frames: int = 16):
 
     Ds = np.stack([display(t) for t in range(T)])  # (T, 3, 3)
     lines = np.einsum("tij,sejt->seit", Ds, _stick_lines(ch, q))
-    has_soles = has_two_point_feet(ch)
+    has_soles = ch.has_soles
     world_soles = sole_corners(ch, q) if has_soles else np.zeros((2, 4, 3, T))  # (2, 4, 3, T)
     soles = np.einsum("tij,kcjt->kcit", Ds, world_soles)
     root = np.einsum("tij,jt->it", Ds, q[:3])

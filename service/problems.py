@@ -43,6 +43,11 @@ TITLES = {
 }
 
 
+class ClientGone(Exception):
+    """The client of a heavy request closed its connection: its work was cancelled (raised by
+    ``service.work``, answered 499 here)."""
+
+
 class Problem(Exception):
     def __init__(
         self,
@@ -148,8 +153,6 @@ def install(app: FastAPI) -> None:
             headers["Allow"] = allow
             detail = f"{_short(request.method, 20)} is not allowed here; allowed: {allow}"
         return problem_response(exc.status_code, detail, instance=request.url.path, headers=headers or None)
-
-    from service.work import ClientGone  # the compute layer's exception (service.work imports this module)
 
     @app.exception_handler(ClientGone)
     async def _gone(request: Request, exc: ClientGone):  # nobody reads it: the client has closed its connection

@@ -20,16 +20,11 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from service import store
+from service.simulation_files import FILES
+
 log = logging.getLogger(__name__)
 
-#: the files of a simulation and their media types, in the order the API lists them
-FILES: dict[str, str] = {
-    "report.json": "application/json",
-    "model.xml": "application/xml",
-    "rollout.npz": "application/octet-stream",
-    "simulated.glb": "model/gltf-binary",
-    "simulation.png": "image/png",
-}
 #: the cycles a request may ask for (CPU: about 1 s per HalfBoy cycle, 1.5 s per full-body cycle, twice that with
 #: the resync runs every simulation also makes: report.json "resync")
 MIN_CYCLES, MAX_CYCLES, DEFAULT_CYCLES = 1, 100, 10
@@ -79,7 +74,7 @@ def write_simulation(result, motion, out: Path) -> dict[str, Any]:
     import numpy as np
 
     from solver.export import export_motion
-    from solver.motion import Motion
+    from solver.motion import Motion, MotionContext
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -96,8 +91,8 @@ def write_simulation(result, motion, out: Path) -> dict[str, Any]:
     step = max(1, int(round(1.0 / (motion.fps * result.timestep))))
     q = result.qpos[step - 1::step][:, result.coordinate_qpos].T
     if q.shape[1] >= 2:
-        env = dict(motion.provenance.get("environment") or {})
-        sim = Motion(motion.character, motion.fps, q, provenance={"source": "mujoco simulation", "environment": env})
+        sim = Motion(motion.character, motion.fps, q, provenance={"source": "mujoco simulation"},
+                     context=MotionContext(environment=motion.environment))
         export_motion(sim, "gltf", out / "simulated.glb")
     return report
 
@@ -119,8 +114,6 @@ def run_simulation(db, simulation_id: str, *, write_lock=None) -> tuple[str, str
     simulation's final (status, message): ``succeeded`` (also when the character fell: that is a
     result, in the report), or ``failed`` with the reason (e.g. the SimulationError's text)."""
     import contextlib
-
-    from service import store
 
     lock = write_lock or contextlib.nullcontext()
     with db.read() as s:

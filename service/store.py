@@ -35,6 +35,7 @@ from service.models import (
     SimulationRow,
     TutorClaimRow,
 )
+from service.simulation_files import FILES
 from solver.motion import Motion
 
 
@@ -889,8 +890,6 @@ def set_simulation_status(session: Session, *, simulation_id: str, status: str, 
 def finish_simulation(session: Session, *, simulation_id: str, report: dict, files: dict[str, bytes],
                       message: str) -> None:
     """Store a simulation's report and files (replacing an earlier attempt's) and mark it succeeded."""
-    from service.simulation import FILES
-
     session.execute(delete(SimulationFileRow).where(SimulationFileRow.simulation_id == simulation_id))
     sim = session.get(SimulationRow, simulation_id)
     if sim is not None:  # the motion's earlier simulations are superseded: their files go (the rows stay)

@@ -37,7 +37,6 @@ from typing import Any
 from service import limits
 from service.limits import LimitError, clip, refusal_text
 from solver import axes as registry
-from solver.environment import environment_of
 from solver.formats import BVH_UNITS, reader_suffixes
 from solver.motion import FORMAT as MOTION_FORMAT
 from solver.motion import Motion, MotionError, motion_from_dict
@@ -168,9 +167,10 @@ def check_motion(motion: Motion) -> None:
 
 
 def _check_rig_asset(motion: Motion) -> None:
-    """A glTF rig's asset (``provenance.rig.extra.asset``, a GLB the ``rig=source`` exports carry
-    into what they write) is checked like an imported glTF file: never passed on unchecked."""
-    rig = (motion.provenance or {}).get("rig")
+    """A glTF rig's asset (``provenance.rig.extra.asset`` in the file, the motion's ``context.rig``;
+    a GLB the ``rig=source`` exports carry into what they write) is checked like an imported glTF
+    file: never passed on unchecked."""
+    rig = motion.context.rig
     if not isinstance(rig, dict) or rig.get("format") != "gltf":
         return
     from solver.io.gltf import GltfError, parse_gltf  # lazy: runs in a compute process
@@ -201,11 +201,9 @@ def _check_capture(motion: Motion) -> None:
 def _check_environment(motion: Motion) -> None:
     """The motion's environment (``provenance.environment``) within the axes' domains: gravity
     magnitude, friction and riser height a job can start from (a stored motion whose environment
-    no solve, plot or export can use would answer errors later)."""
-    try:
-        env = environment_of(motion)
-    except (ValueError, TypeError, AttributeError, OverflowError) as e:
-        raise UploadError(clip(f"provenance.environment: {e}", 300)) from None
+    no solve, plot or export can use would answer errors later; one of the wrong kind is refused
+    when the file is read, ``MotionContext.split``)."""
+    env = motion.environment
     for name, value in (("gravity", env.gravity_magnitude), ("friction", env.friction),
                         ("step_height_m", env.step_height_m)):
         try:
@@ -406,7 +404,9 @@ def motion_from_trial(files: list[tuple[str, bytes]], *, mass: float | None, bel
                                                           "format (the server's log has the reader's error)")
             raise UploadError(clip(f"could not import the trial: {why}", 500)) from None
         summary = input_summary(capture, tmp)
-        motion = motion.evolve(provenance={**_hide_paths(dict(motion.provenance), tmp), "input": summary})
+        rig = motion.context.rig
+        motion = motion.evolve(provenance={**_hide_paths(dict(motion.provenance), tmp), "input": summary},
+                               context=motion.context.with_(rig=None if rig is None else _hide_paths(dict(rig), tmp)))
     check_motion(motion)
     return motion
 

@@ -34,7 +34,7 @@ from fastapi.concurrency import run_in_threadpool
 
 from service.cache import BytesLRU
 from service.config import Settings
-from service.problems import Problem
+from service.problems import ClientGone, Problem
 from service.procpool import Abandoned, ProcPool, RemoteError, TaskTimeout, WorkerLost
 
 log = logging.getLogger(__name__)
@@ -150,10 +150,6 @@ def progress_plot(points: list[dict], target: dict) -> bytes:
 
 #: how often a request waiting for a compute process checks whether its client is still there
 DISCONNECT_POLL_S = 0.5
-
-
-class ClientGone(Exception):
-    """The client of a heavy request closed its connection: its work was cancelled."""
 
 
 def busy(detail: str, quota: str, retry_after: int) -> Problem:

@@ -19,10 +19,10 @@ import numpy as np
 from solver import native
 from solver.axes import Target, environment_at, guide_at, nlp_at
 from solver.axes.terrain import stairs_base, stairs_target
-from solver.environment import Environment, environment_of
+from solver.environment import Environment
 from solver.jsonable import jsonable
-from solver.motion import Motion
-from solver.naturalness import has_two_point_feet, motion_figures
+from solver.motion import GaitReference, Motion
+from solver.naturalness import motion_figures
 from solver.outputs import progress_csv, step_stem
 from solver.spacetime import SolveResult, SpacetimeProblem, Weights
 from solver.stairs import flight_for
@@ -161,48 +161,44 @@ def _is_tutor(motion: Motion) -> None:
                          "(run the tutor pipeline first)")
 
 
-def gait_reference(tutor: Motion) -> dict[str, Any]:
+def gait_reference(tutor: Motion) -> GaitReference:
     """What a λ optimum's naturalness is judged against besides the published limits: the
     captured walk's figures (recorded in the tutor) and the tutor's own."""
-    ref = tutor.provenance.get("gait_reference")
-    capture = ref.get("capture") if isinstance(ref, Mapping) else None
-    fit = {"fit": ref["fit"]} if isinstance(ref, Mapping) and isinstance(ref.get("fit"), Mapping) else {}
-    if tutor.contacts is None or not has_two_point_feet(tutor.character):
-        return {"capture": capture, "tutor": None, **fit}
-    return {"capture": capture, "tutor": jsonable(motion_figures(tutor)), **fit}
+    ref = tutor.context.gait_reference or GaitReference()
+    if tutor.contacts is None or not tutor.character.has_soles:
+        return GaitReference(ref.capture, None, ref.fit)
+    return GaitReference(ref.capture, jsonable(motion_figures(tutor)), ref.fit)
 
 
 def _motion(tutor: Motion, lam: float, target: Target, env: Environment, values: Mapping[str, float],
             res: SolveResult, control: StepControl, step: int, fps: float,
-            reference: Mapping[str, Any] | None = None) -> Motion:
+            reference: GaitReference | None = None) -> Motion:
     from solver.plausibility import report
 
     prov = {
         "step": "extrapolate",
         "source": tutor.provenance.get("source"),
-        "frame": tutor.provenance.get("frame"),
-        **({"rig": tutor.provenance["rig"]} if "rig" in tutor.provenance else {}),
         "lambda": float(lam),
-        "environment": env.to_dict(),
-        "environment_values": dict(values),
         "target": target.to_dict(),
         "continuation": {"method": control.method, "step": step},
         "solver": {"name": "ipopt", "status": res.status, "iterations": res.iterations,
                    "time_s": round(res.wall_time, 6), "marker_rms_to_guide_mm": 1e3 * res.marker_rms},
     }
-    prov["heading_change_deg"] = math.degrees(res.heading_change)
-    prov["tutor_heading_change_deg"] = math.degrees(tutor_heading_change(tutor))
-    prov["gait_reference"] = dict(reference) if reference is not None else gait_reference(tutor)
+    ctx = tutor.context.with_(
+        environment=env, axis_values=dict(values), heading_change_deg=math.degrees(res.heading_change),
+        tutor_heading_change_deg=math.degrees(tutor_heading_change(tutor)),
+        heading_change_requested_deg=None,
+        gait_reference=reference if reference is not None else gait_reference(tutor))
     m = Motion(tutor.character, fps, res.q, contacts=tutor.contacts, wrenches=res.wrenches, provenance=prov,
-               interpolation="cubic-spline", cyclic=True)
+               context=ctx, interpolation="cubic-spline", cyclic=True)
     return m.evolve(report=report(m))
 
 
 def tutor_heading_change(tutor: Motion) -> float:
     """The tutor's heading change over its cycle (rad), as its optimizer imposed it."""
-    deg = tutor.provenance.get("heading_change_deg")
-    if isinstance(deg, (int, float)) and math.isfinite(deg):
-        return math.radians(float(deg))
+    deg = tutor.context.heading_change_deg
+    if deg is not None:
+        return math.radians(deg)
     return float(tutor.q[3, -2] - tutor.q[3, 0])
 
 
@@ -232,7 +228,7 @@ class _Walk:
         self.tutor, self.target, self.control, self.prob = tutor, target, control, prob
         self.weights = weights
         self.on_progress, self.on_step, self.should_cancel = on_progress, on_step, should_cancel
-        self.env0 = environment_of(tutor)
+        self.env0 = tutor.environment
         if target.step_height_m:  # the going starts from the walker's own step
             self.env0 = stairs_base(self.env0, tutor.q, tutor.foot_contact())
         self.t0 = time.perf_counter()

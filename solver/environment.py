@@ -3,9 +3,8 @@ terrain (stairs: treads of a rise and a going along the walker's direction of tr
 step; :func:`stair_flight` is the one geometry the optimizer, the checks, the simulation and the
 plots read).
 
-One home for standard gravity (``STANDARD_GRAVITY``) and for reading a motion's environment
-from its provenance (:func:`environment_of`): nothing else spells out 9.81 or digs in
-``provenance["environment"]``.
+One home for standard gravity (``STANDARD_GRAVITY``): nothing else spells out 9.81. A motion
+carries its environment in its context (``Motion.environment``, ``solver.motion.MotionContext``).
 """
 
 from __future__ import annotations
@@ -95,16 +94,9 @@ class Environment:
         return replace(self, **changes)
 
 
-def environment_of(motion: Any) -> Environment:
-    """The typed environment of a motion (its provenance's ``environment``; standard gravity
-    and μ = 1 when the motion does not say)."""
-    prov = getattr(motion, "provenance", None) or {}
-    return Environment.from_dict(prov.get("environment"))
-
-
 def body_weight(motion: Any) -> float:
     """Body weight (N) in the motion's own environment (standard gravity when it has none)."""
-    g = environment_of(motion).gravity_magnitude
+    g = motion.environment.gravity_magnitude
     return float(motion.character.total_mass) * (g if g > 0 else STANDARD_GRAVITY)
 
 
@@ -278,7 +270,7 @@ def stair_flight(feet_xy: np.ndarray | None, foot_contact: np.ndarray, rise: flo
 
 def ground_of(motion: Any) -> np.ndarray:
     """(2, T) ground height under each foot per frame of a motion (zeros on flat ground)."""
-    env = environment_of(motion)
+    env = motion.environment
     if not env.step_height_m or motion.contacts is None:
         return np.zeros((2, motion.T))
     return stair_heights(motion.foot_contact(), env.step_height_m)

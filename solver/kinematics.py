@@ -161,3 +161,16 @@ def joint_screws(character: Character, q: Any) -> Any:
     if sp.is_symbolic(arr):
         return arr
     return arr.reshape((model.n, 6) + arr.shape[1:])
+
+
+def sole_corners(character: Character, q: np.ndarray) -> np.ndarray:
+    """(2, 4, 3, T) the corners of each foot's sole (``Character.sole``): the rectangle through its
+    heel and toe contact points (the plane the foot stands on), as wide as its foot box; feet (right,
+    left), corners (heel-right, heel-left, toe-right, toe-left) in the foot's axes."""
+    pts = []
+    for side in ("right", "left"):
+        sole = character.sole(side)
+        c = sole.corners()  # heel +w, heel −w, toe +w, toe −w
+        pts += [(sole.segment, c[k]) for k in (1, 0, 3, 2)]  # right edge first
+    out = np.asarray(points_world(character, q, pts))  # (8, 3[, T])
+    return out.reshape((2, 4) + out.shape[1:])

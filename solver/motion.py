@@ -13,6 +13,12 @@ Version 2 adds ``trajectory``: how the motion continues between its frames (see
 ``solver.trajectory``): the optimizer's motions are C² cubic splines through their frames
 (periodic for a gait cycle), whose equations of motion hold at the frames and midpoints;
 version 1 files mean central differences.
+
+A motion's physical context (:class:`MotionContext`: environment, the axes' values, the input's
+ground frame, the source rig, the captured cycle, heading changes, the gait reference) is a typed
+field, written where motions are made and read by attribute; ``provenance`` holds only where the
+motion came from. The file keeps both in its ``provenance`` object under the keys the earlier
+versions wrote (:data:`CONTEXT_KEYS`, and ``source.cycle``), so every file reads back unchanged.
 """
 
 from __future__ import annotations
@@ -28,7 +34,9 @@ from typing import Any
 
 import numpy as np
 
+from solver.capture import GroundFrame
 from solver.character import REFERENCE, Character, CharacterError, character_from_dict, character_to_dict, reference
+from solver.environment import Environment
 
 FORMAT = "motionx.motion"
 VERSION = 2
@@ -49,6 +57,191 @@ MAX_MOMENT_NM = 1.0e10
 
 class MotionError(ValueError):
     """A motion (or motion file) is malformed; the message names the problem."""
+
+
+#: the motion file's ``provenance`` keys that hold the motion's context (:class:`MotionContext`),
+#: by its field names; the captured cycle is ``provenance.source.cycle``
+CONTEXT_KEYS = {"environment": "environment", "axis_values": "environment_values", "frame": "frame",
+                "rig": "rig", "heading_change_deg": "heading_change_deg",
+                "tutor_heading_change_deg": "tutor_heading_change_deg",
+                "heading_change_requested_deg": "heading_change_requested_deg", "gait_reference": "gait_reference"}
+
+
+def _number(v: Any) -> float | None:
+    return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) else None
+
+
+@dataclass(frozen=True)
+class Cycle:
+    """The captured gait cycle a motion stands for (the importer's record, ``source.cycle`` in the
+    file): its start on the capture's clock and its period (s), None when not recorded; ``record``
+    everything the importer wrote (start foot, frames, overlap, loop, …), as written."""
+
+    t_start: float | None = None
+    period_s: float | None = None
+    record: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "t_start", _number(self.t_start))
+        object.__setattr__(self, "period_s", _number(self.period_s))
+        object.__setattr__(self, "record", dict(self.record))
+
+    def to_dict(self) -> dict[str, Any]:
+        out = dict(self.record)
+        for k in ("t_start", "period_s"):
+            if getattr(self, k) is not None:
+                out[k] = getattr(self, k)
+        return out
+
+    @staticmethod
+    def from_dict(d: Mapping[str, Any]) -> Cycle:
+        return Cycle(d.get("t_start"), d.get("period_s"), d)
+
+
+@dataclass(frozen=True)
+class GaitReference:
+    """What a motion's naturalness is judged against besides the published limits: the captured
+    walk's gait figures, the tutor's, and the capture's skeleton fit (``solver.naturalness``)."""
+
+    capture: Mapping[str, Any] | None = None
+    tutor: Mapping[str, Any] | None = None
+    fit: Mapping[str, Any] | None = None
+
+    def __post_init__(self) -> None:
+        for k in ("capture", "tutor", "fit"):
+            v = getattr(self, k)
+            object.__setattr__(self, k, dict(v) if isinstance(v, Mapping) else None)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"capture": self.capture, **({"tutor": self.tutor} if self.tutor is not None else {}),
+                **({"fit": self.fit} if self.fit is not None else {})}
+
+    @staticmethod
+    def from_dict(d: Mapping[str, Any]) -> GaitReference:
+        return GaitReference(d.get("capture"), d.get("tutor"), d.get("fit"))
+
+
+@dataclass(frozen=True)
+class MotionContext:
+    """The physical context a motion lives in, typed (docs/architecture.md, "The motion's context"):
+
+    - ``environment``: gravity, friction, terrain (None: not stated; :attr:`Motion.environment` is then
+      standard gravity and μ = 1);
+    - ``axis_values``: the homotopy axes' values at the motion (``solver.axes``: slope, curve, …; a
+      λ optimum's, empty otherwise);
+    - ``frame``: the input's ground frame, the way back to the capture's axes, units and clock;
+    - ``rig``: the input's own rig as the exporters read it (a :class:`solver.rig.Rig`'s dict, or an
+      OpenSim trial's mapping, ``solver.io.opensim.rig``);
+    - ``cycle``: the captured gait cycle the motion stands for;
+    - ``heading_change_deg``: the heading change over the cycle the optimizer imposed,
+      ``tutor_heading_change_deg`` its tutor's, ``heading_change_requested_deg`` an explicit request;
+    - ``gait_reference``: the figures naturalness is judged against.
+
+    Written once where a motion is made (capture import, tutor, continuation), read by attribute.
+    In the motion file it is stored in ``provenance`` under the keys :data:`CONTEXT_KEYS` (and
+    ``source.cycle``), the keys earlier versions wrote."""
+
+    environment: Environment | None = None
+    axis_values: Mapping[str, float] = field(default_factory=dict)
+    frame: GroundFrame | None = None
+    rig: Mapping[str, Any] | None = None
+    cycle: Cycle | None = None
+    heading_change_deg: float | None = None
+    tutor_heading_change_deg: float | None = None
+    heading_change_requested_deg: float | None = None
+    gait_reference: GaitReference | None = None
+
+    def __post_init__(self) -> None:
+        for k, kind in (("environment", Environment), ("frame", GroundFrame), ("cycle", Cycle),
+                        ("gait_reference", GaitReference)):
+            v = getattr(self, k)
+            if v is not None and not isinstance(v, kind):
+                raise MotionError(f"context.{k} must be a {kind.__name__} or None, got {type(v).__name__}")
+        if self.rig is not None and not isinstance(self.rig, Mapping):
+            raise MotionError(f"context.rig must be a mapping or None, got {type(self.rig).__name__}")
+        object.__setattr__(self, "rig", None if self.rig is None else dict(self.rig))
+        object.__setattr__(self, "axis_values", {str(k): float(v) for k, v in self.axis_values.items()})
+        for k in ("heading_change_deg", "tutor_heading_change_deg", "heading_change_requested_deg"):
+            v = getattr(self, k)
+            if v is not None and _number(v) is None:
+                raise MotionError(f"context.{k} must be a finite number or None, got {v!r}")
+            object.__setattr__(self, k, _number(v))
+
+    def with_(self, **changes: Any) -> MotionContext:
+        """A new context with some fields replaced."""
+        return replace(self, **changes)
+
+    def to_provenance(self) -> dict[str, Any]:
+        """The context as the motion file's ``provenance`` keys (``source.cycle`` aside)."""
+        out: dict[str, Any] = {}
+        values = {"environment": None if self.environment is None else self.environment.to_dict(),
+                  "axis_values": dict(self.axis_values) or None,
+                  "frame": None if self.frame is None else self.frame.to_dict(), "rig": self.rig,
+                  "heading_change_deg": self.heading_change_deg,
+                  "tutor_heading_change_deg": self.tutor_heading_change_deg,
+                  "heading_change_requested_deg": self.heading_change_requested_deg,
+                  "gait_reference": None if self.gait_reference is None else self.gait_reference.to_dict()}
+        for name, key in CONTEXT_KEYS.items():
+            if values[name] is not None:
+                out[key] = values[name]
+        return out
+
+    @staticmethod
+    def split(provenance: Mapping[str, Any]) -> tuple[MotionContext, dict[str, Any]]:
+        """A motion file's ``provenance`` (any version) -> (its context, the provenance proper).
+        Files written before the continuation recorded ``environment_values`` give the curve from
+        ``target.curve_deg`` × ``lambda``. A value of the wrong kind is a :class:`MotionError` naming it."""
+        rest = dict(provenance)
+        raw = {name: rest.pop(key, None) for name, key in CONTEXT_KEYS.items()}
+        kw: dict[str, Any] = {}
+        try:
+            where = "environment"
+            if raw["environment"] is not None:
+                kw["environment"] = Environment.from_dict(raw["environment"])
+            where = "environment_values"
+            if isinstance(raw["axis_values"], Mapping):
+                kw["axis_values"] = {k: float(v) for k, v in raw["axis_values"].items() if _number(v) is not None}
+            elif raw["axis_values"] is not None:
+                raise ValueError("must be an object of numbers")
+            tgt, lam = rest.get("target"), _number(rest.get("lambda"))
+            if ("curve_deg" not in kw.get("axis_values", {}) and isinstance(tgt, Mapping)
+                    and _number(tgt.get("curve_deg")) is not None and lam is not None):
+                kw["axis_values"] = {**kw.get("axis_values", {}), "curve_deg": float(tgt["curve_deg"]) * lam}
+            where = "frame"
+            if raw["frame"] is not None:
+                kw["frame"] = GroundFrame.from_dict(raw["frame"])
+            where = "rig"
+            if raw["rig"] is not None:
+                if not isinstance(raw["rig"], Mapping):
+                    raise ValueError("must be an object")
+                kw["rig"] = raw["rig"]
+            for name in ("heading_change_deg", "tutor_heading_change_deg", "heading_change_requested_deg"):
+                where = name
+                kw[name] = _number(raw[name])
+            where = "gait_reference"
+            if isinstance(raw["gait_reference"], Mapping):
+                kw["gait_reference"] = GaitReference.from_dict(raw["gait_reference"])
+            where = "source.cycle"
+            src = rest.get("source")
+            if isinstance(src, Mapping) and "cycle" in src:
+                src = dict(src)
+                cyc = src.pop("cycle")
+                if isinstance(cyc, Mapping):
+                    kw["cycle"] = Cycle.from_dict(cyc)
+                elif cyc is not None:
+                    raise ValueError("must be an object")
+                rest["source"] = src
+        except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as e:
+            raise MotionError(f"provenance.{where}: {e}") from None
+        return MotionContext(**kw), rest
+
+    def into(self, provenance: Mapping[str, Any]) -> dict[str, Any]:
+        """``provenance`` with the context written back under the file's keys (inverse of :meth:`split`)."""
+        out = {**provenance, **self.to_provenance()}
+        if self.cycle is not None:
+            src = out.get("source")
+            out["source"] = {**(src if isinstance(src, Mapping) else {}), "cycle": self.cycle.to_dict()}
+        return out
 
 
 def foot_schedule_of(character: Character, contacts: np.ndarray) -> np.ndarray:
@@ -74,13 +267,14 @@ class Motion:
     q: np.ndarray  # (n, T)
     contacts: np.ndarray | None = None  # (P, T) bool, P = len(character.contacts), same order
     wrenches: np.ndarray | None = None  # (2, 6, T): feet (right, left) x (moment about origin; force)
-    provenance: Mapping[str, Any] = field(default_factory=dict)
+    provenance: Mapping[str, Any] = field(default_factory=dict)  # where it came from (history, not physics)
     report: Mapping[str, Any] | None = None
     reference_name: str | None = None  # set when ``character`` is an unmodified reference character
     #: how the motion continues between frames (``solver.trajectory``): "central-differences"
     #: (file v1, captures) or "cubic-spline" (the spacetime optimizer's C² spline)
     interpolation: str = "central-differences"
     cyclic: bool = False  # a gait cycle: frames T-2, T-1 repeat frames 0, 1 (under the cycle's transform)
+    context: MotionContext = field(default_factory=MotionContext)  # the physical context (typed)
 
     def __post_init__(self) -> None:
         if not (isinstance(self.fps, (int, float)) and math.isfinite(self.fps) and self.fps > 0):
@@ -127,7 +321,19 @@ class Motion:
         if self.cyclic and T < 5:
             raise MotionError(f"a cyclic motion needs at least 5 frames, got {T}")
         object.__setattr__(self, "cyclic", bool(self.cyclic))
-        object.__setattr__(self, "provenance", dict(self.provenance))
+        if not isinstance(self.context, MotionContext):
+            raise MotionError(f"context must be a MotionContext, got {type(self.context).__name__}")
+        prov = dict(self.provenance)
+        held = [k for k in CONTEXT_KEYS.values() if k in prov]
+        src = prov.get("source")
+        if isinstance(src, Mapping) and "cycle" in src:
+            held.append("source.cycle")
+        if held:
+            raise MotionError(f"provenance keys {held} are the motion's context: pass them as "
+                              "context=MotionContext(...) (MotionContext.split reads a file's provenance)")
+        if self.context.cycle is not None and src is not None and not isinstance(src, Mapping):
+            raise MotionError("a motion with a captured cycle needs provenance.source to be an object")
+        object.__setattr__(self, "provenance", prov)
         if self.report is not None:
             object.__setattr__(self, "report", dict(self.report))
 
@@ -150,6 +356,16 @@ class Motion:
     @property
     def coordinate_names(self) -> tuple[str, ...]:
         return self.character.coordinate_names
+
+    @property
+    def environment(self) -> Environment:
+        """The environment the motion lives in (standard gravity and μ = 1 when it does not say)."""
+        return self.context.environment if self.context.environment is not None else Environment()
+
+    @property
+    def frame(self) -> GroundFrame:
+        """The input's ground frame (the identity when the motion does not say)."""
+        return self.context.frame if self.context.frame is not None else GroundFrame()
 
     def coordinate(self, name: str) -> np.ndarray:
         return self.q[self.character.index(name)]
@@ -195,7 +411,7 @@ class Motion:
                 "units": {"moment": "N*m", "force": "N"},
                 "feet": {foot: self.wrenches[i].T.tolist() for i, foot in enumerate(FEET)},
             }
-        prov = dict(self.provenance)
+        prov = self.context.into(self.provenance)
         prov.setdefault("created", datetime.now(UTC).isoformat(timespec="seconds"))
         d["provenance"] = prov
         if self.report is not None:
@@ -337,8 +553,9 @@ def motion_from_dict(d: Any) -> Motion:
         except ValueError:
             raise MotionError("wrenches.feet must hold one 6-vector per frame for each foot") from None
     traj = (d.get("trajectory") or {}) if d.get("version") == 2 else {}
+    context, provenance = MotionContext.split(d.get("provenance", {}))
     return Motion(
         character=ch, fps=float(d["fps"]), q=q, contacts=contacts, wrenches=wrenches,
-        provenance=d.get("provenance", {}), report=d.get("report"), reference_name=ref,
+        provenance=provenance, context=context, report=d.get("report"), reference_name=ref,
         interpolation=traj.get("interpolation", "central-differences"), cyclic=bool(traj.get("cyclic", False)),
     )

@@ -33,9 +33,9 @@ from typing import Any
 import numpy as np
 
 from solver.checks import Check, Context, SectionResult, register_check
-from solver.environment import STANDARD_GRAVITY_VECTOR, Flight, body_weight, environment_of, ground_of
+from solver.environment import STANDARD_GRAVITY_VECTOR, Flight, body_weight, ground_of
 from solver.jsonable import jsonable
-from solver.kinematics import centre_of_mass, contact_points, points_world, segment_frames, standing_leg_length
+from solver.kinematics import centre_of_mass, contact_points, segment_frames, sole_corners, standing_leg_length
 from solver.motion import FEET, Motion, foot_schedule_of
 from solver.stairs import flight_of
 
@@ -160,31 +160,6 @@ SOURCES = {
 CORNERS = ("heel-right", "heel-left", "toe-right", "toe-left")
 
 
-def sole_corners(character, q: np.ndarray) -> np.ndarray:
-    """(2, 4, 3, T) the corners of each foot's sole (``Character.sole``): the rectangle through its
-    heel and toe contact points (the plane the foot stands on), as wide as its foot box; feet (right,
-    left), corners (heel-right, heel-left, toe-right, toe-left) in the foot's axes."""
-    pts = []
-    for side in FEET:
-        sole = character.sole(side)
-        c = sole.corners()  # heel +w, heel −w, toe +w, toe −w
-        pts += [(sole.segment, c[k]) for k in (1, 0, 3, 2)]  # right edge first
-    out = np.asarray(points_world(character, q, pts))  # (8, 3[, T])
-    return out.reshape((2, 4) + out.shape[1:])
-
-
-def has_two_point_feet(character) -> bool:
-    """Two feet, each a box with exactly two contact points (a heel and a toe): the feet the
-    naturalness checks (sole, pitch, heading) and the drawn shoes are defined on."""
-    return len(character.feet) == 2 and all(sum(c.side == side for c in character.contacts) == 2 for side in FEET)
-
-
-def heel_toe(character, side: str) -> tuple:
-    """The (heel, toe) contact points of a foot (``Character.sole``: by name)."""
-    sole = character.sole(side)
-    return sole.heel, sole.toe
-
-
 def trunk_axis(character) -> tuple[str, np.ndarray]:
     """(segment, unit axis in its frame) whose lean against gravity is the trunk's: the thorax's
     bone; without a trunk segment (HalfBoy, whose pelvis carries the head, arms and trunk), the
@@ -303,7 +278,7 @@ def _foot_pitch(w: _Walk, lim: NaturalnessLimits) -> tuple[np.ndarray, dict[str,
     ``pitch_load`` BW (None without forces)."""
     pitch = np.zeros((2, w.T))
     for k, side in enumerate(FEET):
-        heel, toe = (w.character.contacts.index(c) for c in heel_toe(w.character, side))
+        heel, toe = w.character.sole_indices(side)
         d = w.contacts_xyz[toe] - w.contacts_xyz[heel]
         pitch[k] = np.degrees(np.arctan2(-d[2], np.linalg.norm(d[:2], axis=0)))
     if w.fz is None:
@@ -387,7 +362,7 @@ def _placement(w: _Walk, lim: NaturalnessLimits) -> dict[str, Any]:
               for k in range(2) for a, _ in _runs(w.B[k, : w.N]) if w.B[1 - k, a % w.N]]
     heading = np.zeros((2, w.T))
     for k, side in enumerate(FEET):
-        heel, toe = (w.character.contacts.index(c) for c in heel_toe(w.character, side))
+        heel, toe = w.character.sole_indices(side)
         d = w.contacts_xyz[toe, :2] - w.contacts_xyz[heel, :2]
         heading[k] = np.degrees(np.angle(np.exp(1j * (np.arctan2(d[1], d[0]) - yaw))))
     path, pelvis = far_side(w.left), far_side(pelvis_left)
@@ -764,7 +739,7 @@ def checks_of(fig: Mapping[str, Any], *, reference: Mapping[str, Any] | None = N
 
 def motion_figures(motion: Motion, lim: NaturalnessLimits = NaturalnessLimits()) -> dict[str, Any]:
     """``gait_figures`` of a motion (its stored ground reactions, its environment)."""
-    env = environment_of(motion)
+    env = motion.environment
     if motion.contacts is None:
         raise ValueError("naturalness needs a contact schedule")
     forces = None if motion.wrenches is None else np.asarray(motion.wrenches)[:, 3:6]
@@ -776,7 +751,7 @@ def motion_figures(motion: Motion, lim: NaturalnessLimits = NaturalnessLimits())
 def naturalness_report(motion: Motion, reference: Mapping[str, Any] | None = None,
                        lim: NaturalnessLimits = NaturalnessLimits()) -> dict[str, Any]:
     """The naturalness section of the validation report: every check as a figure with its limit,
-    its source and the capture's own figure; ``reference`` defaults to the motion's provenance
+    its source and the capture's own figure; ``reference`` defaults to the motion's context
     ``gait_reference`` ({"capture": …, "tutor": …} figures). ``passed`` is None when the motion
     cannot be checked (no contact schedule, or feet without a heel and a toe point)."""
     return naturalness_checks(motion, reference, lim).to_dict()
@@ -792,14 +767,14 @@ def naturalness_checks(motion: Motion, reference: Mapping[str, Any] | None = Non
     """The naturalness checks of a motion (and the section's limits, notes and figures)."""
     t0 = time.perf_counter()
     out: dict[str, Any] = {"limits": asdict(lim), "notes": []}
-    if motion.contacts is None or not has_two_point_feet(motion.character):
+    if motion.contacts is None or not motion.character.has_soles:
         out["notes"].append("no contact schedule, or feet without a heel and a toe contact point: "
                             "naturalness not checked")
         out["time_s"] = time.perf_counter() - t0
         return SectionResult((), out, checked=False, unchecked=None)
     if reference is None:
-        ref = motion.provenance.get("gait_reference")
-        reference = ref if isinstance(ref, Mapping) else None
+        ref = motion.context.gait_reference
+        reference = None if ref is None else ref.to_dict()
     fig = motion_figures(motion, lim)
     checks = checks_of(fig, reference=reference, lim=lim)
     if reference is None or reference.get("capture") is None:

@@ -24,7 +24,7 @@ import numpy as np
 
 from solver import native
 from solver.capture import Capture, GroundFrame
-from solver.character import FULL_SUPERFLUOUS, LOWER_SUPERFLUOUS, Character, merge_segments
+from solver.character import FULL_SUPERFLUOUS, LOWER_SUPERFLUOUS, Character, CharacterError, merge_segments
 from solver.contact import estimate_contact_wrenches
 from solver.environment import STANDARD_GRAVITY, STANDARD_GRAVITY_VECTOR
 from solver.gait import close_loop, ensure_double_support, extract_cycle, periodic_lowpass, tighten_contacts
@@ -33,7 +33,7 @@ from solver.gait.cycles import LEAD_S
 from solver.io.fit import CONTACT_INSET
 from solver.jsonable import jsonable
 from solver.kinematics import centre_of_mass, contact_points, markers, segment_frames
-from solver.motion import Motion, foot_schedule_of
+from solver.motion import Cycle, GaitReference, Motion, MotionContext, foot_schedule_of
 from solver.naturalness import against_plates, capture_figures, joint_rms_deg
 from solver.plausibility import report
 from solver.rig import RIG_FORMATS, Rig, calibrate, unroll
@@ -117,39 +117,46 @@ def capture_motion(capture: Capture) -> Motion:
     dt = np.diff(capture.times)
     if np.max(np.abs(dt - 1.0 / fps)) > 0.05 / fps:
         raise PipelineError("capture times are not uniformly sampled; resample first")
+    source, cycle = _source_and_cycle(capture.source)
     return Motion(
         character=capture.character,
         fps=fps,
         q=capture.q,
         contacts=capture.contacts,
-        provenance=jsonable({
-            "step": "capture",
-            "source": capture.source,
-            "frame": capture.frame.to_dict(),
-            "t0": float(capture.times[0]),
-            "lambda": None,
-            **({"rig": rig_to_dict(capture.rig)} if capture.rig is not None else {}),
-        }),
+        provenance=jsonable({"step": "capture", "source": source, "t0": float(capture.times[0]), "lambda": None}),
+        context=MotionContext(frame=capture.frame, cycle=cycle,
+                              rig=None if capture.rig is None else jsonable(rig_to_dict(capture.rig))),
     )
 
 
 def motion_capture(motion: Motion) -> Capture:
     """Inverse of :func:`capture_motion`."""
-    prov = motion.provenance
+    prov, ctx = motion.provenance, motion.context
     t0 = float(prov.get("t0") or 0.0)
+    source = prov.get("source") or {}
+    if ctx.cycle is not None:
+        source = {**source, "cycle": ctx.cycle.to_dict()}
     return Capture(
         character=motion.character,
         q=motion.q,
         times=t0 + motion.times,
-        frame=GroundFrame.from_dict(prov.get("frame")),
-        source=prov.get("source") or {},
+        frame=motion.frame,
+        source=source,
         contacts=motion.contacts,
-        rig=rig_from_dict(prov.get("rig")),
+        rig=rig_from_dict(ctx.rig),
     )
 
 
+def _source_and_cycle(source: Mapping[str, Any]) -> tuple[dict[str, Any], Cycle | None]:
+    """A capture's source record without its cycle, and the cycle (the motion's context)."""
+    src = dict(source)
+    cyc = src.pop("cycle", None)
+    return src, Cycle.from_dict(jsonable(cyc)) if isinstance(cyc, Mapping) else None
+
+
 def rig_to_dict(rig: Any) -> dict[str, Any]:
-    """A capture's source rig as motion provenance: a :class:`Rig`'s dict, or a format's own mapping."""
+    """A capture's source rig as a motion's context holds it (``MotionContext.rig``): a
+    :class:`Rig`'s dict, or a format's own mapping."""
     return rig.to_dict() if isinstance(rig, Rig) else dict(rig)
 
 
@@ -163,7 +170,7 @@ def rig_from_dict(d: Any) -> Any:
 def tutor_rig(capture: Capture, cyc: Capture, syn: Character, q_sim: np.ndarray, fps: float,
               stats: dict[str, Any]) -> dict[str, Any] | None:
     """The capture's rig calibrated against the simplified cycle (``solver.rig.calibrate``), as
-    the tutor's provenance carries it; a rig that cannot be calibrated costs only the rig export
+    the tutor's context carries it; a rig that cannot be calibrated costs only the rig export
     (noted in ``stats``)."""
     rig = capture.rig
     if rig is None:
@@ -356,11 +363,9 @@ def sole_calibration(character: Character, q: np.ndarray, contacts: np.ndarray) 
     feet = list(character.feet)
     moved: dict[str, float] = {}
     for side in ("right", "left"):
-        idx = sorted((j for j, c in enumerate(pts) if c.side == side), key=lambda j: float(pts[j].position[0]))
-        if len(idx) != 2:
-            continue
-        heel, toe = idx
-        if pts[heel].segment != pts[toe].segment:
+        try:
+            heel, toe = character.sole_indices(side)  # by name (``Character.sole``)
+        except CharacterError:  # not a heel and a toe point on one segment
             continue
         flat = A[heel, :N] & A[toe, :N]
         if flat.sum() < 2:
@@ -453,14 +458,18 @@ def fit_figures(capture: Capture) -> dict[str, Any] | None:
     return None if rms is None else {"marker_rms_mm": float(rms)}
 
 
-def _source_provenance(capture: Capture, cyc: Capture) -> dict[str, Any]:
-    return {"format": capture.source.get("format"), "files": capture.source.get("files"),
-            "subject": capture.source.get("subject"), "cycle": capture.source.get("cycle") or cyc.source.get("cycle")}
+def _source_provenance(capture: Capture, cyc: Capture) -> tuple[dict[str, Any], Cycle | None]:
+    """Where a tutor comes from (the trial's format, files, subject) and the captured cycle it stands for."""
+    cycle = capture.source.get("cycle") or cyc.source.get("cycle")
+    return ({"format": capture.source.get("format"), "files": capture.source.get("files"),
+             "subject": capture.source.get("subject")},
+            Cycle.from_dict(jsonable(cycle)) if isinstance(cycle, Mapping) else None)
 
 
-def _simplified(prep: PreparedCycle, q: np.ndarray, source: Mapping[str, Any]) -> Motion:
-    return Motion(prep.synthesis, prep.fps, q, contacts=prep.contacts, provenance=jsonable({
-        "step": "simplify", "source": source, "lambda": None}))
+def _simplified(prep: PreparedCycle, q: np.ndarray, source: tuple[dict[str, Any], Cycle | None]) -> Motion:
+    return Motion(prep.synthesis, prep.fps, q, contacts=prep.contacts,
+                  provenance=jsonable({"step": "simplify", "source": source[0], "lambda": None}),
+                  context=MotionContext(cycle=source[1]))
 
 
 def closed_cycle(prep: PreparedCycle, character: Character | None = None) -> np.ndarray:
@@ -636,19 +645,23 @@ def make_tutor(
         stats["grf_against_plates"] = plates
     tutor = Motion(
         syn, fps, res.q, contacts=contacts, wrenches=res.wrenches, interpolation="cubic-spline", cyclic=True,
+        context=MotionContext(
+            environment=env,
+            frame=_shifted_frame(capture.frame, stats.get("contact_plane_shift_mm", 0.0) / 1e3),
+            rig=None if (rig := tutor_rig(capture, cyc, syn, q_sim, fps, stats)) is None else jsonable(rig),
+            cycle=src_prov[1],
+            heading_change_deg=math.degrees(dpsi),
+            gait_reference=GaitReference(
+                capture=jsonable(capture_figures(cap_char, q_cap, fps, contacts, cyc.measured)),
+                fit=jsonable(fit_figures(capture))),
+        ),
         provenance=jsonable({
             "step": "tutor",
-            "source": src_prov,
-            "frame": _shifted_frame(capture.frame, stats.get("contact_plane_shift_mm", 0.0) / 1e3).to_dict(),
+            "source": src_prov[0],
             "lambda": 0.0,
-            "environment": env.to_dict(),
-            "heading_change_deg": math.degrees(dpsi),
             "solver": {"name": "ipopt", "status": res.status, "iterations": res.iterations,
                        "time_s": res.wall_time},
             "pipeline": stats,
-            "gait_reference": {"capture": capture_figures(cap_char, q_cap, fps, contacts, cyc.measured),
-                               **({"fit": fit} if (fit := fit_figures(capture)) else {})},
-            **({"rig": rig} if (rig := tutor_rig(capture, cyc, syn, q_sim, fps, stats)) is not None else {}),
         }),
     )
     tutor = tutor.evolve(report=report(tutor))

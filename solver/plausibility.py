@@ -18,7 +18,7 @@ import numpy as np
 import solver.naturalness  # noqa: F401  (registers the naturalness section)
 from solver.checks import Check, Context, sections
 from solver.dynamics import rnea
-from solver.environment import body_weight, environment_of, ground_of, stances
+from solver.environment import body_weight, ground_of, stances
 from solver.kinematics import contact_points, segment_frames, standing_leg_length
 from solver.motion import FEET, Motion
 from solver.realism import RealismLimits
@@ -58,7 +58,7 @@ def report(motion: Motion, tol: Tolerances = Tolerances(), realism: RealismLimit
     ``mjcf.validate`` names its MuJoCo replay). ``plausible``: no failed check of the residual,
     the contacts, and the sections deciding it; ``natural``: the naturalness section's verdict."""
     ch = motion.character
-    env = environment_of(motion)
+    env = motion.environment
     g = np.asarray(env.gravity, dtype=float)
     mu = env.friction
     weight = body_weight(motion)
@@ -140,7 +140,7 @@ def report(motion: Motion, tol: Tolerances = Tolerances(), realism: RealismLimit
 def _terrain(motion: Motion) -> dict:
     """Stairs: the riser height and one tread per stance (foot, frames, centre (x, y, ground
     height) under the foot's contact points) — what a preview draws as steps."""
-    step = environment_of(motion).step_height_m
+    step = motion.environment.step_height_m
     if not step or motion.contacts is None:
         return {}
     B, G = motion.foot_contact(), ground_of(motion)

@@ -37,7 +37,7 @@ from scipy.spatial.transform import Rotation
 
 from solver.checks import Check, Context, SectionResult, register_check
 from solver.dynamics import rnea
-from solver.environment import environment_of, ground_of
+from solver.environment import ground_of
 from solver.kinematics import segment_frames
 from solver.motion import FEET, Motion
 
@@ -127,7 +127,7 @@ def cycle_of(motion: Motion) -> tuple[Cycle | None, str]:
     c, s = math.cos(dpsi), math.sin(dpsi)
     p0 = q[[ROOT_X, ROOT_Y], 0]
     d2 = q[[ROOT_X, ROOT_Y], T - 2] - np.array([c * p0[0] - s * p0[1], s * p0[0] + c * p0[1]])
-    rise = float(q[ROOT_Z, T - 2] - q[ROOT_Z, 0]) if environment_of(motion).step_height_m else 0.0
+    rise = float(q[ROOT_Z, T - 2] - q[ROOT_Z, 0]) if motion.environment.step_height_m else 0.0
     cyc = Cycle(T - 2, dpsi, np.array([d2[0], d2[1], rise]))
     err = float(np.max(np.abs(cyc.apply_q(q[:, :2], 1) - q[:, T - 2:])))
     if err > CYCLE_TOL:
@@ -364,27 +364,21 @@ def foot_spin(motion: Motion, weight: float, lim: RealismLimits) -> dict[str, An
 
 def requested_heading(motion: Motion) -> tuple[float | None, str]:
     """Heading change over the cycle the motion was asked for (deg, left positive) and where the
-    request was read, first found of: ``provenance.heading_change_requested_deg``; the
-    continuation's ``environment_values.curve_deg`` (λ·curve) plus the tutor's own heading change
-    ``tutor_heading_change_deg`` when both are recorded; ``heading_change_deg`` (the heading the
-    optimizer was asked for: a tutor's, or the tutor's + λ·curve of a λ optimum); the
-    continuation's λ·curve alone (``environment_values.curve_deg``, else ``target.curve_deg`` ×
-    ``lambda``), which assumes a straight tutor."""
-    prov = motion.provenance
-    ev_raw, tgt_raw = prov.get("environment_values"), prov.get("target")
-    ev: dict = ev_raw if isinstance(ev_raw, dict) else {}
-    tgt: dict = tgt_raw if isinstance(tgt_raw, dict) else {}
-    curve, where = None, ""
-    if ev.get("curve_deg") is not None:
-        curve, where = float(ev["curve_deg"]), "provenance.environment_values.curve_deg"
-    elif tgt.get("curve_deg") is not None and prov.get("lambda") is not None:
-        curve, where = float(tgt["curve_deg"]) * float(prov["lambda"]), "provenance.target.curve_deg × lambda"
-    if prov.get("heading_change_requested_deg") is not None:
-        return float(prov["heading_change_requested_deg"]), "provenance.heading_change_requested_deg"
-    if curve is not None and prov.get("tutor_heading_change_deg") is not None:
-        return curve + float(prov["tutor_heading_change_deg"]), where + " + tutor_heading_change_deg"
-    if prov.get("heading_change_deg") is not None:
-        return float(prov["heading_change_deg"]), "provenance.heading_change_deg"
+    request was read (the motion's context, ``solver.motion.MotionContext``; named by the motion
+    file's keys), first found of: ``heading_change_requested_deg``; the continuation's λ·curve
+    (``environment_values.curve_deg``; in files that predate it ``target.curve_deg`` × ``lambda``)
+    plus the tutor's own heading change ``tutor_heading_change_deg`` when both are recorded;
+    ``heading_change_deg`` (the heading the optimizer was asked for: a tutor's, or the tutor's +
+    λ·curve of a λ optimum); the continuation's λ·curve alone, which assumes a straight tutor."""
+    ctx = motion.context
+    curve = ctx.axis_values.get("curve_deg")
+    where = "environment_values.curve_deg"
+    if ctx.heading_change_requested_deg is not None:
+        return ctx.heading_change_requested_deg, "heading_change_requested_deg"
+    if curve is not None and ctx.tutor_heading_change_deg is not None:
+        return curve + ctx.tutor_heading_change_deg, where + " + tutor_heading_change_deg"
+    if ctx.heading_change_deg is not None:
+        return ctx.heading_change_deg, "heading_change_deg"
     if curve is not None:
         return curve, where + " (a straight tutor assumed)"
     return None, ""

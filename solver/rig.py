@@ -4,7 +4,7 @@ A trial read from a BVH, a skinned glTF or a DeepMimic clip has a skeleton of it
 names, hierarchy, offsets, channels, rest pose. The importer keeps it beside the capture as a
 :class:`Rig` (the joints' local rotations and the root's translation at the capture's times)
 and names, per segment of the capture skeleton, the joint that moves it (its *role*, e.g.
-``thigh_r`` → ``RightUpLeg``). Motions carry it in ``provenance["rig"]``, so every tutor,
+``thigh_r`` → ``RightUpLeg``). Motions carry it in their context (``Motion.context.rig``), so every tutor,
 λ optimum and library cell can be written on the user's own skeleton.
 
 **Calibration** (when the tutor is made, :func:`calibrate`). At every rig frame of the
@@ -226,7 +226,7 @@ class Rig:
     def evolve(self, **changes: Any) -> Rig:
         return replace(self, **changes)
 
-    # --- JSON (motion provenance) -------------------------------------------------------
+    # --- JSON (the motion context) -------------------------------------------------------
     def to_dict(self, *, animation: bool = True) -> dict[str, Any]:
         d: dict[str, Any] = {
             "format": self.format, "names": list(self.names), "parents": list(self.parents),
@@ -543,7 +543,7 @@ def retarget(motion: Any, rig: Rig, *, frame_time: float | None = None) -> RigPo
     seg = {s.name: i for i, s in enumerate(ch.segments)}
     if "pelvis" not in seg:
         raise RigError("the motion's character has no pelvis segment")
-    frame = GroundFrame.from_dict(motion.provenance.get("frame"))
+    frame = motion.frame
     t, D = output_times(motion, frame_time or rig.frame_time)
     tc = cal.t_start + t / D * cal.period
     local_c, root_c, C, root_in_pelvis, ankle_in_foot = cal.at(tc)
@@ -653,7 +653,7 @@ def feet_report(motion: Any, rig: Rig, pose: RigPose) -> dict[str, Any]:
 
     if motion.contacts is None:
         return {}
-    frame = GroundFrame.from_dict(motion.provenance.get("frame"))
+    frame = motion.frame
     W, P = rig.forward(pose.local, pose.root, pose.positions)
     Wo = np.einsum("ji,fkjl->fkil", frame.R, W)
     Po = frame.point_from_input(P, pose.capture_time[:, None])

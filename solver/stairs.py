@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from solver.environment import Environment, Flight, environment_of, stair_flight, walker_going
+from solver.environment import Environment, Flight, stair_flight, walker_going
 from solver.kinematics import contact_points
 
 
@@ -34,4 +34,4 @@ def flight_of(motion: Any) -> Flight | None:
     """The stairs of a motion (:func:`flight_for` in its own environment); None on flat ground."""
     if motion.contacts is None:
         return None
-    return flight_for(motion.character, motion.q, motion.foot_contact(), environment_of(motion))
+    return flight_for(motion.character, motion.q, motion.foot_contact(), motion.environment)

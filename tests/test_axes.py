@@ -128,7 +128,7 @@ def test_a_faster_walk_is_realistic_with_a_shorter_cycle_and_a_longer_stride(tut
     assert all(st.motion.report["plausible"] and st.motion.report["realism"]["passed"] for st in res.steps)
     m = res.steps[-1].motion
     assert m.T == tutor.T and m.fps == pytest.approx(tutor.fps * math.sqrt(s))  # frame count kept
-    assert m.provenance["environment_values"]["speed_scale"] == pytest.approx(s)
+    assert m.context.axis_values["speed_scale"] == pytest.approx(s)
     assert m.provenance["target"]["speed_scale"] == s
 
     def speed(q, fps):
@@ -169,7 +169,7 @@ def test_stair_heights_put_successive_stances_on_successive_treads():
 
 def test_a_small_stair_is_climbed_realistically_with_every_contact_on_its_tread(tutor):
     from solver.continuation import StepControl, extrapolate
-    from solver.environment import environment_of, ground_of
+    from solver.environment import ground_of
     from solver.kinematics import contact_points
     from solver.motion import FEET
 
@@ -178,7 +178,7 @@ def test_a_small_stair_is_climbed_realistically_with_every_contact_on_its_tread(
     assert res.status == "succeeded" and res.lam_reached == 1.0, res.message
     assert all(st.motion.report["plausible"] and st.motion.report["realism"]["passed"] for st in res.steps)
     m = res.steps[-1].motion
-    assert environment_of(m).step_height_m == pytest.approx(step)  # the motion stores its terrain
+    assert m.environment.step_height_m == pytest.approx(step)  # the motion stores its terrain
     G = ground_of(m)
     assert np.ptp(G) >= step - 1e-12  # the ground is not flat
     cp = contact_points(m.character, m.q)

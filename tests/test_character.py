@@ -121,3 +121,47 @@ def test_merge_in_a_posture_keeps_the_whole_body_com():
     assert np.allclose(com(merged, q_low), com(ch, q), atol=1e-12)
     flat = C.merge_segments(ch, ["abdomen"])
     assert not np.allclose(com(flat, q_low), com(ch, q), atol=1e-3)  # the posture matters
+
+
+def test_the_sole_is_found_by_name_whatever_the_contact_order():
+    """``Character.sole_indices``: the heel and toe points by name, in any order of ``contacts``;
+    ``has_soles`` for two feet of two points each."""
+    ch = C.reference("halfboy")
+    assert ch.has_soles
+    for side in ("right", "left"):
+        h, t = ch.sole_indices(side)
+        assert ch.contacts[h].name.startswith("heel") and ch.contacts[t].name.startswith("toe")
+    flipped = dataclasses.replace(ch, contacts=tuple(reversed(ch.contacts)))
+    for side in ("right", "left"):
+        h, t = flipped.sole_indices(side)
+        assert flipped.contacts[h] is ch.sole(side).heel and flipped.contacts[t] is ch.sole(side).toe
+    one_point = dataclasses.replace(ch, contacts=tuple(c for c in ch.contacts if not c.name.startswith("toe")))
+    assert not one_point.has_soles
+
+
+def test_foot_geometry_is_read_from_the_character_only():
+    """No module sorts contact points by their x to find a heel or a toe (the character's sole
+    names them, ``solver/character/base.py``), and the optimizer, exporters and MuJoCo take no foot
+    geometry from the naturalness checks."""
+    import ast
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    sorts, imports = [], []
+    for path in sorted([*(root / "solver").rglob("*.py"), *(root / "mjcf").rglob("*.py")]):
+        rel = str(path.relative_to(root))
+        tree = ast.parse(path.read_text())
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Call) and getattr(node.func, "id", getattr(node.func, "attr", "")) in (
+                    "sorted", "min", "max", "sort"):
+                text = " ".join(ast.unparse(k.value) for k in node.keywords if k.arg == "key")
+                text += " ".join(ast.unparse(a) for a in node.args)  # sorted([(c.position[0], i), ...])
+                if "position[0]" in text and rel != "solver/character/base.py":
+                    sorts.append(f"{rel}:{node.lineno}")
+            if isinstance(node, ast.ImportFrom) and node.module == "solver.naturalness" and (
+                    rel.startswith(("solver/spacetime/", "solver/export/", "mjcf/"))):
+                feet = {a.name for a in node.names} & {"sole_corners", "heel_toe", "has_two_point_feet"}
+                if feet:
+                    imports.append(f"{rel}:{node.lineno} {sorted(feet)}")
+    assert not sorts, f"contact points sorted by x (use Character.sole): {sorts}"
+    assert not imports, f"foot geometry from the naturalness checks (use Character.sole): {imports}"

@@ -51,7 +51,7 @@ def test_uphill_slope_reaches_the_target_and_every_step_is_plausible(tutor):
         assert rep["plausible"], rep["problems"]
         assert rep["root_residual"]["max_force_rel_weight"] <= 1e-6
     final = res.steps[-1].motion
-    g = np.array(final.provenance["environment"]["gravity"])
+    g = np.array(final.environment.to_dict()["gravity"])
     th = math.radians(11.25)
     assert np.allclose(g, [-9.81 * math.sin(th), 0.0, -9.81 * math.cos(th)], atol=1e-12)
     # walking uphill against tilted gravity: over a cycle the ground pushes forward by m g sin θ
@@ -73,7 +73,7 @@ def test_curve_bends_the_walk(tutor, method):
 def test_friction_and_gravity_targets_change_the_environment(tutor):
     res = extrapolate(tutor, Target(friction=0.4, gravity=7.0), StepControl())
     assert res.status == "succeeded"
-    env = res.steps[-1].motion.provenance["environment"]
+    env = res.steps[-1].motion.environment.to_dict()
     assert env["friction"] == pytest.approx(0.4) and np.linalg.norm(env["gravity"]) == pytest.approx(7.0)
     w = res.steps[-1].motion.wrenches
     B = res.steps[-1].motion.foot_contact()
@@ -228,7 +228,6 @@ def test_stairs_continuation_keeps_the_feet_on_their_treads_and_clears_every_nos
     """Every accepted λ is plausible and natural (the stairs checks included); the last optimum
     stands each stance foot on its own tread, one going per step, and its swinging feet clear
     every nosing by 2 cm along the spline (docs/naturalness.md, "Stairs": measured figures)."""
-    from solver.environment import environment_of
     from solver.naturalness import naturalness_report
     from solver.stairs import flight_of
 
@@ -240,7 +239,7 @@ def test_stairs_continuation_keeps_the_feet_on_their_treads_and_clears_every_nos
         assert rep["plausible"] and rep["natural"], rep["naturalness"].get("failed")
     m = res.steps[-1].motion
     lam = res.lam_reached
-    env = environment_of(m)
+    env = m.environment
     going = tutor_going = float(np.linalg.norm(tutor.q[:2, -2] - tutor.q[:2, 0])) / 2
     going = tutor_going + lam * (0.28 - tutor_going)  # the going shortens from the level step
     assert env.step_going_m == pytest.approx(going) and env.step_height_m == pytest.approx(lam * (0.17 if way == "up"
@@ -273,16 +272,13 @@ def test_stairs_continuation_keeps_the_feet_on_their_treads_and_clears_every_nos
 def test_stairs_checks_see_a_foot_off_its_tread(stairs):
     """The same optimum with its flight moved half a going: stance feet over the nosings, and the
     checks fail it."""
-    from solver.environment import environment_of
     from solver.naturalness import naturalness_report
 
     m = stairs["up"][0].steps[-1].motion
-    env = environment_of(m)
+    env = m.environment
     x, y, heading = env.stairs_at
     g = env.step_going_m
-    moved = dict(m.provenance)
-    moved["environment"] = env.with_(stairs_at=(x + 0.5 * g * math.cos(heading), y + 0.5 * g * math.sin(heading),
-                                                heading)).to_dict()
-    rep = naturalness_report(m.evolve(provenance=moved))
+    moved = env.with_(stairs_at=(x + 0.5 * g * math.cos(heading), y + 0.5 * g * math.sin(heading), heading))
+    rep = naturalness_report(m.evolve(context=m.context.with_(environment=moved)))
     assert not rep["passed"]
     assert {"stance_over_nosing", "stance_into_riser"} & set(rep["failed"])

@@ -27,7 +27,6 @@ from scipy.spatial.transform import Rotation
 from test_gltf_threejs import NODE, SCRIPT, THREE, khronos_report
 
 import solver
-from solver.capture import GroundFrame
 from solver.errors import InputError
 from solver.export import Y_UP, ExportError
 from solver.export.rig_gltf import rig_glb, rig_glb_library
@@ -119,7 +118,7 @@ def feet_from_fk(motion: Motion, rig: Rig, pose, W: dict[int, np.ndarray], to_in
     """From the GLB's own node matrices: the ankle joints' largest distance from where the motion's
     feet carry them in stance, and the largest slide of a contact point carried by the rig's foot
     (heel) or toe joint over its contact interval (as ``feet_report``, on the written file)."""
-    frame = GroundFrame.from_dict(motion.provenance["frame"])
+    frame = motion.frame
 
     def ours(name: str) -> tuple[np.ndarray, np.ndarray]:
         M = np.einsum("ij,fjk->fik", to_input, W[node_of[name]])  # input (rig) space
@@ -337,7 +336,7 @@ def test_walks_come_out_on_the_input_character(runs, shared_data, name, tmp_path
     # (c) our own forward kinematics of the written nodes: one cycle at the input's 30 fps, the feet planted
     g, times, W = glb_fk(data)
     (anim,) = g.animations
-    rig = Rig.from_dict(motion.provenance["rig"])
+    rig = Rig.from_dict(motion.context.rig)
     pose = retarget(motion, rig)
     assert np.allclose(times, pose.times, atol=1e-6) and times[0] == 0.0
     assert times[1] == pytest.approx(1 / 30, rel=1e-4)
@@ -391,7 +390,7 @@ def test_library_glb_has_one_animation_per_motion(runs, tmp_path):
     assert [m.name for m in g.meshes] == ["Body", *(f"ground {n}" for n in motions)] and len(g.skins) == 1
     for k, (name, motion) in enumerate(items):
         g, times, W = glb_fk(data, animation=k)
-        rig = Rig.from_dict(motion.provenance["rig"])
+        rig = Rig.from_dict(motion.context.rig)
         pose = retarget(motion, rig)
         node_of = {n.name: i for i, n in enumerate(g.nodes)}
         fk = feet_from_fk(motion, rig, pose, W, np.linalg.inv(W[node_of["Armature"]][0]), node_of)
@@ -416,7 +415,7 @@ def test_bvh_and_deepmimic_rigs_come_out_as_their_own_skeletons(shared_data, tmp
         path.write_bytes(data)
         report = khronos_report(path)
         assert report["errors"] == 0 and report["warnings"] == 0, (fmt, report["messages"])
-        rig = Rig.from_dict(motion.provenance["rig"])
+        rig = Rig.from_dict(motion.context.rig)
         g, times, W = glb_fk(data)
         names = [n.name for n in g.nodes]
         assert names[1:1 + rig.J] == list(rig.names) and len(g.skins[0].joints) == rig.J
@@ -434,7 +433,7 @@ def test_bvh_and_deepmimic_rigs_come_out_as_their_own_skeletons(shared_data, tmp
         # the scene is our world turned Y up (the "rig" node maps the input onto it): the file's joints
         # are the rig's own forward kinematics there, and its ankles are where the tutor's feet are in stance
         pose = retarget(motion, rig)
-        frame = GroundFrame.from_dict(motion.provenance["frame"])
+        frame = motion.frame
         _, P = rig.forward(pose.local, pose.root, pose.positions)
         P_ours = frame.point_from_input(P, pose.capture_time[:, None])
         node_of = {n: i for i, n in enumerate(names)}
@@ -515,7 +514,7 @@ def test_bad_options_and_sizes_are_refused(shared_data, tmp_path):
 def test_rig_source_refusals(runs, shared_data):
     capture, motions = runs
     tutor = motions["tutor"]
-    bare = tutor.evolve(provenance={k: v for k, v in tutor.provenance.items() if k != "rig"})
+    bare = tutor.evolve(context=tutor.context.with_(rig=None))
     with pytest.raises(ExportError, match="has no source rig"):
         solver.export_motion(bare, "gltf", rig="source")
     with pytest.raises(ExportError, match="rig must be 'character'"):
@@ -524,8 +523,8 @@ def test_rig_source_refusals(runs, shared_data):
         rig_glb_library([("a", tutor), ("a", motions["slope10"])])
     with pytest.raises(ExportError, match="at least one"):
         rig_glb_library([])
-    rig = tutor.provenance["rig"]
-    other = tutor.evolve(provenance={**tutor.provenance, "rig": {**rig, "names": list(reversed(rig["names"]))}})
+    rig = tutor.context.rig
+    other = tutor.evolve(context=tutor.context.with_(rig={**rig, "names": list(reversed(rig["names"]))}))
     with pytest.raises(ExportError, match="another source rig"):
         rig_glb_library([("a", tutor), ("b", other)])
     assert rig_glb(tutor)[:4] == b"glTF"

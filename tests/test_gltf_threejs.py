@@ -126,7 +126,7 @@ def test_three_draws_the_feet_standing_where_their_contact_points_stand(loaded):
     (``solver.export.gltf.foot_shape``): three.js's lowest skinned vertex of each foot mesh is our
     lowest sole corner (forward kinematics), which stands on the ground with the contact points
     (tests/test_naturalness.py)."""
-    from solver.naturalness import sole_corners
+    from solver.kinematics import sole_corners
 
     motion, frames, out = loaded
     ch = motion.character

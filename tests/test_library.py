@@ -122,7 +122,7 @@ def test_cli_library_writes_the_glb_clips_and_manifest(tutor, tmp_path):
     # the neutral cell is the base problem's optimum: the tutor's ground, level
     assert cells["slope0"]["cycle"]["slope_deg"] == pytest.approx(0.0, abs=1e-12)
     print("seconds per cell:", {k: e["wall_time_s"] for k, e in cells.items()}, man["summary"])
-    from solver.export.gltf import GLB_MAGIC
+    from solver.export.gltf_parts import GLB_MAGIC
 
     glb = (out / "library.glb").read_bytes()
     assert int.from_bytes(glb[:4], "little") == GLB_MAGIC

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from solver.character.reference import REFERENCE
-from solver.kinematics import contact_points, standing_leg_length
+from solver.kinematics import contact_points, sole_corners, standing_leg_length
 from solver.motion import FEET, Motion
-from solver.naturalness import NaturalnessLimits, checks_of, gait_figures, naturalness_report, sole_corners
+from solver.naturalness import NaturalnessLimits, checks_of, gait_figures, naturalness_report
 
 FPS = 15.0
 N = 8  # distinct frames of the synthetic cycles; T = N + 2

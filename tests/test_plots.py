@@ -118,8 +118,8 @@ def test_numbers_in_titles_keep_the_decimals_they_need(tutor, continuation):
         ["-11.25", "90", "0.7", "1.62", "0", "2.8125", "0.3333"]
     assert describe_target({"slope_deg": -11.25, "curve_deg": 0.0}) == "slope -11.25°"
     last = continuation[1].steps[-1].motion
-    env = dict(last.provenance["environment_values"], slope_deg=-11.25)
-    caption = motion_caption(last.evolve(provenance={**last.provenance, "environment_values": env}))
+    env = dict(last.context.axis_values, slope_deg=-11.25)
+    caption = motion_caption(last.evolve(context=last.context.with_(axis_values=env)))
     assert "slope -11.25°" in caption and "λ = 1" in caption and "-11.2°" not in caption
 
 

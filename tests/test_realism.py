@@ -20,7 +20,7 @@ import pytest
 from solver.character import Character, Segment, reference, root_dofs
 from solver.dynamics import rnea
 from solver.kinematics import finite_differences, standing_leg_length
-from solver.motion import Motion
+from solver.motion import Motion, MotionContext
 from solver.plausibility import report
 from solver.realism import RealismLimits, cycle_of, momentum_from_positions, newton_euler, realism_report, refinement
 
@@ -30,7 +30,8 @@ G = np.array([0.0, 0.0, -9.81])
 def smooth_walk(N: int = 30, fps: float = 15.0, curve_deg: float = 45.0, speed: float = 0.5,
                 provenance: dict | None = None) -> Motion:
     """A cyclic 'gliding walk' of HalfBoy (both feet loaded, half the wrench each): N distinct
-    frames (T = N + 2), the root on a circular arc turning ``curve_deg`` per cycle."""
+    frames (T = N + 2), the root on a circular arc turning ``curve_deg`` per cycle; ``provenance``
+    as a motion file's (its context keys read as the file loader reads them)."""
     ch = reference("halfboy")
     T, P = N + 2, N / fps
     t = np.arange(T) / fps
@@ -61,9 +62,10 @@ def smooth_walk(N: int = 30, fps: float = 15.0, curve_deg: float = 45.0, speed: 
         sine(ch.index(f"knee_angle_{side}"), 0.3, 1, ph - 1.2, off=0.4)
         sine(ch.index(f"ankle_angle_{side}"), 0.15, 1, ph + 0.7)
     h0 = rnea(ch, q, qd, qdd, G).h0
-    prov = {"environment_values": {"curve_deg": curve_deg}} if provenance is None else provenance
+    ctx, prov = MotionContext.split({"environment_values": {"curve_deg": curve_deg}} if provenance is None
+                                    else provenance)
     return Motion(ch, fps, q, contacts=np.ones((len(ch.contacts), T), bool), wrenches=np.stack([0.5 * h0] * 2),
-                  provenance=prov)
+                  provenance=prov, context=ctx)
 
 
 def zigzag(m: Motion, eps_deg: float = 3.0) -> Motion:
@@ -163,7 +165,7 @@ def test_real_walk_smoothed_passes_the_dynamics_checks_and_its_zigzag_fails(shar
     W = np.zeros((2, 6, m.T))
     W[:, :, frames] = B[:, None, :] * h0[None]
     W[:, :, 0] = cyc.apply_wrench(W[:, :, -2:-1], -1)[:, :, 0]
-    smooth = m.evolve(wrenches=W, provenance={})
+    smooth = m.evolve(wrenches=W, context=MotionContext())
     dynamics = ("newton_force", "newton_moment", "cycle_impulse", "cycle_angular_impulse", "refined_force",
                 "refined_moment", "total_ground_force", "ground_force_rate", "foot_spin")
     rs = realism(smooth)
@@ -286,6 +288,13 @@ def test_heading_change_is_checked_against_the_request():
     assert r["failed"] == ["heading"] and "tutor_heading_change_deg" in r["checks"]["heading"]["what"]
     r = realism(smooth_walk(curve_deg=45.0, provenance={"heading_change_deg": 44.5}))  # what the optimizer was asked
     assert r["passed"] and r["checks"]["heading"]["value"] == pytest.approx(0.5, abs=1e-9)
+    # the typed context, as the continuation writes it: an explicit request comes first
+    m = smooth_walk(curve_deg=45.0, provenance={})
+    asked = m.evolve(context=MotionContext(axis_values={"curve_deg": 40.0}, tutor_heading_change_deg=5.0,
+                                           heading_change_requested_deg=30.0))
+    r = realism(asked)
+    assert r["failed"] == ["heading"] and r["checks"]["heading"]["value"] == pytest.approx(15.0, abs=1e-9)
+    assert "heading_change_requested_deg" in r["checks"]["heading"]["what"]
 
 
 def test_ground_force_limits():

@@ -89,7 +89,7 @@ def test_walks_come_out_on_the_input_rig(runs, name, tmp_path):
     text = solver.export_motion(motion, "bvh", rig="source", world="ground")  # the solver's frame, as retarget's
     src, out = read_bvh(path), parse_bvh(text)  # (the default world, gravity down: tests/test_world_export.py)
     _same_hierarchy(out, src)
-    rig = Rig.from_dict(motion.provenance["rig"])
+    rig = Rig.from_dict(motion.context.rig)
     pose = retarget(motion, rig)
     assert pose.times.size == out.T and abs(out.frame_time - (pose.times[1] - pose.times[0])) < 1e-6
     # bvhio's forward kinematics of the file against the rig's own
@@ -100,7 +100,7 @@ def test_walks_come_out_on_the_input_rig(runs, name, tmp_path):
     assert np.max(np.abs(P - P_ours[:, feet])) < 0.05  # file units (cm): rounding only
     # the feet on the ground, from bvhio's joints: each contact point of the motion, carried by
     # the rig's foot (heel) or toe joint from the start of its contact interval, must not slide
-    frame = solver.capture.GroundFrame.from_dict(motion.provenance["frame"])
+    frame = motion.frame
     Pw = frame.point_from_input(P, pose.capture_time[:, None])
     Rw = np.einsum("ji,fkjl->fkil", frame.R, R)
     q = sample(motion.q, motion.fps, pose.times, cyclic=True, interpolation=motion.interpolation)
@@ -144,7 +144,7 @@ def test_locked_joints_carry_the_capture_at_the_same_phase(runs, name):
     motion = motions[name]
     src = read_bvh(path)
     out = parse_bvh(solver.export_motion(motion, "bvh", rig="source"))
-    rig = Rig.from_dict(motion.provenance["rig"])
+    rig = Rig.from_dict(motion.context.rig)
     pose = retarget(motion, rig)
     legs = set()
     for j in range(len(src.names)):
@@ -175,7 +175,7 @@ def test_library_cells_come_out_on_the_input_rig(runs, tmp_path):
     for key, m in cells.items():
         out = parse_bvh(solver.export_motion(m, "bvh", rig="source"))
         _same_hierarchy(out, src)
-        rig = Rig.from_dict(m.provenance["rig"])
+        rig = Rig.from_dict(m.context.rig)
         rep = feet_report(m, rig, retarget(m, rig))
         for side in ("right", "left"):
             assert rep[side]["ankle_error_m"] <= 0.02 and rep[side]["slide_m"] <= 0.01, (key, rep)
@@ -209,7 +209,7 @@ def test_deepmimic_motion_on_its_own_character(shared_data, tmp_path):
     f.write_text(text)
     back = solver.load_trial([f, files[1]])
     assert len(d["Frames"]) == back.T
-    rig = Rig.from_dict(tutor.provenance["rig"])
+    rig = Rig.from_dict(tutor.context.rig)
     rep = feet_report(tutor, rig, retarget(tutor, rig))
     for side in ("right", "left"):
         assert rep[side]["ankle_error_m"] <= 0.02 and rep[side]["slide_m"] <= 0.01, rep
@@ -221,7 +221,7 @@ def test_source_rig_export_refuses_what_it_cannot_do(runs, shared_data):
         solver.export_motion(motions["tutor"], "deepmimic")
     with pytest.raises(ExportError, match="rig must be"):
         solver.export_motion(motions["tutor"], "bvh", rig="theirs")
-    no_rig = motions["tutor"].evolve(provenance={k: v for k, v in motions["tutor"].provenance.items() if k != "rig"})
+    no_rig = motions["tutor"].evolve(context=motions["tutor"].context.with_(rig=None))
     with pytest.raises(ExportError, match="no source rig"):
         solver.export_motion(no_rig, "bvh", rig="source")
 
@@ -232,7 +232,7 @@ def test_a_z_up_metre_rig_comes_out_on_itself(shared_data):
     tutor = solver.make_tutor(solver.load_trial([path], mass=MASS, up="z"), character="halfboy", fps=15.0).motion
     text = solver.export_motion(tutor, "bvh", rig="source")
     _same_hierarchy(parse_bvh(text), read_bvh(path))
-    rig = Rig.from_dict(tutor.provenance["rig"])
+    rig = Rig.from_dict(tutor.context.rig)
     rep = feet_report(tutor, rig, retarget(tutor, rig))
     for side in ("right", "left"):
         assert rep[side]["ankle_error_m"] <= 0.02 and rep[side]["slide_m"] <= 0.01, rep

@@ -194,9 +194,9 @@ def _trunk_tilt(P: np.ndarray, lumbar: int, top: int, up: np.ndarray) -> np.ndar
 def _figures(name, made) -> dict:
     files, capture, tutor, seconds = made[name]
     motion = tutor.motion
-    rig = Rig.from_dict(motion.provenance["rig"])
+    rig = Rig.from_dict(motion.context.rig)
     pose = retarget(motion, rig)
-    frame = GroundFrame.from_dict(motion.provenance["frame"])
+    frame = motion.frame
     feet = [rig.roles[s] if s in rig.roles else rig.roles[s.replace("toes", "foot")]
             for s in ("foot_r", "foot_l", "toes_r", "toes_l")]
     rep = feet_report(motion, rig, pose)

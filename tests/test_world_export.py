@@ -30,7 +30,6 @@ from test_gltf_rig import _accessor, glb_fk
 
 import solver
 from solver import kinematics as K
-from solver.capture import GroundFrame
 from solver.environment import ground_of
 from solver.export import Y_UP, ExportError, export_motion, game
 from solver.export import reimport as RI
@@ -312,7 +311,7 @@ def _ankle_heights(motion: Motion, rig: Rig, pose) -> tuple[np.ndarray, np.ndarr
 @pytest.mark.parametrize("name", ["up10", "stairs"])
 def test_source_rig_glb_and_bvh_climb_their_ground(walks, name, tmp_path):
     motion = walks[name]
-    rig = Rig.from_dict(motion.provenance["rig"])
+    rig = Rig.from_dict(motion.context.rig)
     pose = retarget(motion, rig)
     stance, height = _ankle_heights(motion, rig, pose)
     ankles = [rig.names[rig.roles[f"foot_{s}"]] for s in "rl"]
@@ -329,7 +328,7 @@ def test_source_rig_glb_and_bvh_climb_their_ground(walks, name, tmp_path):
     text = export_motion(motion, "bvh", rig="source")
     ground = json.loads(ground_json(motion, rig="source"))
     P, _ = bvhio_frames(text, tmp_path, ankles + [root])
-    frame = GroundFrame.from_dict(motion.provenance["frame"])
+    frame = motion.frame
     bvh = np.array([[description_distance(ground["ground"], P[f, k]) * frame.unit_m for k in range(2)]
                     for f in range(P.shape[0])])
     assert P.shape[0] == times.size and not np.isnan(bvh[stance]).any()

@@ -92,7 +92,7 @@ def _written_frames(motion, options: dict) -> tuple[int, float]:
         return motion.T, motion.fps
     from solver.rig import Rig, output_times
 
-    t, _ = output_times(motion, Rig.from_dict(motion.provenance["rig"]).frame_time)
+    t, _ = output_times(motion, Rig.from_dict(motion.context.rig or {}).frame_time)
     return int(t.size), round(float(1.0 / (t[1] - t[0])), 6)
 
 

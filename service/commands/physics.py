@@ -18,9 +18,8 @@ def cmd_mjcf(args: argparse.Namespace) -> int:
     if args.motion is not None:
         motion = load_motion(args.motion)
         ch = motion.character
-        from solver.environment import environment_of
 
-        env = environment_of(motion).gravity
+        env = motion.environment.gravity
         xml = to_xml(ch, env)
     else:
         ch = reference_character(args.character)

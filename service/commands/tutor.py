@@ -312,7 +312,7 @@ def cmd_extrapolate(args: argparse.Namespace) -> int:
                  "mujoco_root_residual_rel_weight": rep["mujoco_replay"]["max_force_rel_weight"],
                  "mujoco_agreement_rel_weight": rep["mujoco_replay"]["agreement_force_rel_weight"],
                  "realism_failed": (rep.get("realism") or {}).get("failed", []),
-                 "environment": last.motion.provenance.get("environment_values"),
+                 "environment": dict(last.motion.context.axis_values) or None,
                  "plots": list(write_motion_plots(last.motion, out).values())}
     summary = {**res.summary(), "control": control.summary(), "final": final}  # motions: the files on_step wrote
     if cancel() and res.status == "canceled":

@@ -356,6 +356,7 @@ def delete_planned(s, plan: store.Deletion, what: str) -> None:
 async def get_exports(motion_id: str, owner: OwnerDep, db: DatabaseDep) -> dict:
     known_id("motion", motion_id)
     from solver.export import export_choices
+    from solver.motion import MotionContext
 
     def load() -> dict:
         with db.read() as s:
@@ -364,7 +365,8 @@ async def get_exports(motion_id: str, owner: OwnerDep, db: DatabaseDep) -> dict:
                 raise not_found("motion", motion_id)
             data = row.data
         provenance = json.loads(zlib.decompress(data)).get("provenance") or {}
-        return export_choices(provenance if isinstance(provenance, dict) else {})
+        context, provenance = MotionContext.split(provenance if isinstance(provenance, dict) else {})
+        return export_choices(context, provenance)
 
     return await run_in_threadpool(load)
 

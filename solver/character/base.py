@@ -326,6 +326,19 @@ class Character:
             raise CharacterError(f"the {side} heel and toe contact points are on different segments")
         return Sole(side, heel.segment, heel, toe, float(self.foot(side).half[1]))
 
+    @cached_property
+    def has_soles(self) -> bool:
+        """Two feet, each a box with exactly two contact points (a heel and a toe): the feet
+        :meth:`sole` is defined on (the naturalness checks, the optimizer's sole, the drawn shoes)."""
+        return len(self.feet) == 2 and all(sum(c.side == side for c in self.contacts) == 2
+                                           for side in ("right", "left"))
+
+    def sole_indices(self, side: str) -> tuple[int, int]:
+        """(heel, toe): the indices in ``contacts`` of the ``side`` foot's sole points (:meth:`sole`)."""
+        sole = self.sole(side)
+        return (next(i for i, c in enumerate(self.contacts) if c is sole.heel),
+                next(i for i, c in enumerate(self.contacts) if c is sole.toe))
+
     def sole_box(self, side: str) -> tuple[np.ndarray, np.ndarray]:
         """(centre, half extents) in the foot segment's axes of the box the centre of pressure stays
         in: the sole (heel to toe, as wide as the foot box) and the foot box's height (a foot not flat

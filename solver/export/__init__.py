@@ -43,7 +43,7 @@ import numpy as np
 from solver import spatial as sp
 from solver.character import Character
 from solver.formats import EXPORT_WORLDS, EXPORTERS
-from solver.motion import Motion
+from solver.motion import Motion, MotionContext
 
 __all__ = [
     "DEFAULT_WORLD",
@@ -65,6 +65,9 @@ __all__ = [
 #: x_out = y (left), y_out = z (up), z_out = x (forward).
 Y_UP = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
 Y_UP.setflags(write=False)
+
+#: the length units the BVH and ground exports write (metres -> unit: the factor)
+LENGTH_UNITS = {"cm": 100.0, "m": 1.0}
 
 AXES_Z_UP = {"up": "+z", "forward": "+x", "left": "+y", "handedness": "right"}
 #: the world every exporter writes in unless told otherwise (``solver.export.world``)
@@ -295,15 +298,15 @@ NEEDS_RIG = {"deepmimic": "deepmimic", "opensim": "opensim"}
 ALIASES = {"glb": "gltf"}
 
 
-def export_choices(provenance: Mapping[str, Any]) -> dict[str, Any]:
-    """What a motion of this ``provenance`` can be exported as, for a front end that offers one
+def export_choices(context: MotionContext, provenance: Mapping[str, Any]) -> dict[str, Any]:
+    """What a motion of this ``context`` and ``provenance`` can be exported as (a motion file's
+    ``provenance`` object gives both: :meth:`MotionContext.split`), for a front end that offers one
     button per distinct file: ``formats`` (every exporter but aliases — ``glb`` is ``gltf`` — and
     the formats that need a trial of their own kind: ``deepmimic`` a DeepMimic clip, ``opensim``
     an OpenSim trial; ``opensim`` with ``model="generic"`` remains possible for any motion),
     ``on_rig`` (the formats that write it on the input's own skeleton, ``rig="source"``), ``rig``
     (the format of that skeleton, or None) and ``source`` (the trial's format, or None)."""
-    rig = provenance.get("rig")
-    rig_format = rig.get("format") if isinstance(rig, Mapping) else None
+    rig_format = context.rig.get("format") if context.rig is not None else None
     src = provenance.get("source")
     source = src.get("format") if isinstance(src, Mapping) else None
     formats = [f for f in EXPORTERS if f not in ALIASES and NEEDS_RIG.get(f, rig_format) == rig_format]
@@ -351,12 +354,12 @@ def write_folder(archive: bytes, path: str | Path) -> Path:
 
 
 def source_rig(motion: Motion, formats: tuple[str, ...], what: str):
-    """The motion's source rig (``provenance["rig"]``, a :class:`solver.rig.Rig`) when its format
+    """The motion's source rig (``motion.context.rig``, a :class:`solver.rig.Rig`) when its format
     is one of ``formats``; otherwise an :class:`ExportError` naming ``what`` it needs and where the
     motion came from."""
     from solver.rig import Rig, RigError
 
-    d = motion.provenance.get("rig")
+    d = motion.context.rig
     if not isinstance(d, Mapping) or d.get("format") not in formats:
         src = d.get("format") if isinstance(d, Mapping) else None
         why = f"this one came from {src}" if src else "this one has no source rig"
@@ -365,24 +368,6 @@ def source_rig(motion: Motion, formats: tuple[str, ...], what: str):
         return Rig.from_dict(d)
     except RigError as e:
         raise ExportError(str(e)) from None
-
-
-def source_pose(motion: Motion, formats: tuple[str, ...], what: str, world: str = DEFAULT_WORLD):
-    """The motion's source rig (:func:`source_rig`) and the motion retargeted onto it
-    (:func:`solver.rig.retarget`: one cycle at the rig's frame rate), its root placed in
-    ``world`` (:func:`solver.export.world.world_rig_pose`); a rig that cannot take the motion
-    is an :class:`ExportError`."""
-    from solver.export.world import check_world, world_rig_pose
-    from solver.rig import RigError, retarget
-
-    check_world(world)
-    rig = source_rig(motion, formats, what)
-    try:
-        return rig, world_rig_pose(motion, world, rig, retarget(motion, rig))
-    except RigError as e:
-        raise ExportError(str(e)) from None
-
-
 def check_decimals(decimals: object) -> None:
     """Text exporters write 1 to 12 decimals."""
     if isinstance(decimals, bool) or not isinstance(decimals, int) or not 1 <= decimals <= 12:

@@ -33,14 +33,14 @@ import warnings
 
 import numpy as np
 
-from solver.export import Y_UP, ExportError, _check_motion, change_axes, check_decimals
-from solver.export.world import DEFAULT_WORLD, check_world, world_transforms
+from solver.export import LENGTH_UNITS, Y_UP, ExportError, _check_motion, change_axes, check_decimals
+from solver.export.world import DEFAULT_WORLD, check_world, source_pose, world_transforms
 from solver.motion import Motion
 
 log = logging.getLogger(__name__)
 
 ORDERS = ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX")
-UNITS = {"cm": 100.0, "m": 1.0}
+UNITS = LENGTH_UNITS
 _BAD_NAME = re.compile(r"[\s{}]")
 
 
@@ -159,8 +159,6 @@ def source_bvh(motion: Motion, *, decimals: int = 6, world: str = DEFAULT_WORLD)
     """``motion`` on the skeleton of the BVH it came from: the input's hierarchy, joint names,
     offsets, channels (order and count), End Sites and units, one gait cycle at the input's
     frame rate (``solver.rig.retarget``), its root in ``world``."""
-    from solver.export import source_pose
-
     check_decimals(decimals)
     rig, pose = source_pose(motion, ("bvh",), "rig=source needs a motion made from a BVH trial", world)
     fmt = f"{{:.{decimals}f}}"

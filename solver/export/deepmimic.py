@@ -18,7 +18,8 @@ import json
 
 import numpy as np
 
-from solver.export import DEFAULT_WORLD, ExportError, _check_motion, check_decimals, source_pose
+from solver.export import DEFAULT_WORLD, ExportError, _check_motion, check_decimals
+from solver.export.world import source_pose
 from solver.motion import Motion
 from solver.rig import matrices_to_quats
 

@@ -47,7 +47,7 @@ from typing import Any
 import numpy as np
 
 from solver import kinematics
-from solver.environment import STANDARD_GRAVITY_VECTOR, environment_of, stair_rise
+from solver.environment import STANDARD_GRAVITY_VECTOR, stair_rise
 from solver.motion import FEET, Motion
 
 #: a loop closes when the segment origins at frame P match the loop transform of frame 0 within
@@ -80,7 +80,7 @@ def loop_frames(motion: Motion) -> int:
 
 def rise(motion: Motion) -> float:
     """Height the walk gains over one cycle in its ground frame: the stairs' (stances × riser), else 0."""
-    step = environment_of(motion).step_height_m
+    step = motion.environment.step_height_m
     if not step or motion.contacts is None or loop_frames(motion) != motion.T - 2:
         return 0.0
     return stair_rise(motion.foot_contact(), step)
@@ -176,7 +176,7 @@ def game_data(motion: Motion, *, axes: np.ndarray | None = None, frames: int | N
     chord = float(np.linalg.norm(xy[P] - xy[0]))
     dpsi = float(psi[P] - psi[0])
     arc = chord if abs(dpsi) < 1e-9 else chord * (dpsi / 2.0) / math.sin(dpsi / 2.0)
-    env = environment_of(motion).to_dict()
+    env = motion.environment.to_dict()
     g = env["gravity"]
     root_pos = np.c_[xy, h] @ A.T
     q = motion.q

@@ -1,8 +1,8 @@
 """A motion written on an OpenSim model: coordinates, ground reactions, ExternalLoads, the
 model, an inverse-dynamics setup, checked by OpenSim's own tools.
 
-A motion made from an OpenSim trial is written on the trial's own model (its
-``provenance["rig"]``, see :mod:`solver.io.opensim.rig`, holds the model and the trial); a
+A motion made from an OpenSim trial is written on the trial's own model (its context's
+``rig``, see :mod:`solver.io.opensim.rig`, holds the model and the trial); a
 motion of another source, with ``model="generic"``, on OpenSim's gait2354 model scaled to its
 character (:func:`generic_rig`). The folder holds:
 
@@ -31,7 +31,7 @@ the capture skeleton's fit gives our segments' poses: the rigid map between a bo
 *calibration*, a smooth periodic function of the gait phase (:class:`Calibration`). It holds
 what our character does not model (subtalar, knee translations, toes…) as the trial had it
 at that phase. A motion time ``t`` is at phase ``φ = t / D`` (``D`` the motion's cycle) and
-so at capture time ``t_start + φ · period`` (``provenance["source"]["cycle"]``): each body is
+so at capture time ``t_start + φ · period`` (the motion's ``context.cycle``): each body is
 placed at the motion's anchor pose composed with the calibration there. Bodies whose segment
 the character merged (the torso and arms of a HalfBoy, lumped into its pelvis) stay rigid on
 it, in the model's own posture at the cycle's mean coordinates; a torso shared by our
@@ -148,23 +148,30 @@ def exportable(motion: Motion) -> Motion:
     if not motion.cyclic:
         raise OpenSimExportError("the OpenSim export writes gait cycles: this motion is not a cycle "
                                  "(motion.cyclic is false)")
-    cycle = (motion.provenance.get("source") or {}).get("cycle") or {}
-    if not all(isinstance(cycle.get(k), (int, float)) for k in ("t_start", "period_s")):
+    cycle = motion.context.cycle
+    if cycle is None or cycle.t_start is None or cycle.period_s is None:
         raise OpenSimExportError("the motion does not record the captured gait cycle it stands for "
-                                 "(provenance['source']['cycle'] with t_start and period_s)")
+                                 "(its context's cycle, source.cycle in the motion file, with t_start and period_s)")
     return motion
 
 
+def _cycle(motion: Motion) -> tuple[float, float]:
+    """(t_start, period_s) of the captured cycle an :func:`exportable` motion stands for."""
+    cycle = motion.context.cycle
+    assert cycle is not None and cycle.t_start is not None and cycle.period_s is not None  # exportable
+    return cycle.t_start, cycle.period_s
+
+
 def source_rig(motion: Motion) -> Mapping[str, Any]:
-    """The OpenSim rig a motion carries (``provenance["rig"]``), checked; refused otherwise."""
+    """The OpenSim rig a motion carries (``motion.context.rig``), checked; refused otherwise."""
     exportable(motion)
-    rig = motion.provenance.get("rig")
+    rig = motion.context.rig
     fmt = (motion.provenance.get("source") or {}).get("format")
     if not isinstance(rig, Mapping) or rig.get("format") != "opensim":
         have = f"its source is {fmt!r}" if fmt else "it records no source"
         raise OpenSimExportError(
             f"the OpenSim export writes a motion on the OpenSim model of the trial it was made from; this motion "
-            f"carries no OpenSim model ({have}; provenance['rig'] is "
+            f"carries no OpenSim model ({have}; its rig is "
             f"{'absent' if rig is None else repr(rig.get('format')) if isinstance(rig, Mapping) else 'not a mapping'})."
             " Make the tutor from an OpenSim trial (.osim + coordinates or markers), or pass model='generic' "
             "(motionx export --generic-model) to write it on the generic gait2354 model scaled to its character")
@@ -333,7 +340,7 @@ class Calibration:
 
 
 def calibration(rig: Mapping[str, Any], character: Character, evaluation: Mapping[str, Any],
-                cycle: Mapping[str, Any], posture: tuple[np.ndarray, np.ndarray],
+                cycle: tuple[float, float], posture: tuple[np.ndarray, np.ndarray],
                 cutoff_hz: float = CALIBRATION_CUTOFF_HZ, override: Mapping[str, str] | None = None
                 ) -> Calibration:
     """The model's bodies against the motion's character at the captured cycle's frames (our
@@ -354,7 +361,7 @@ def calibration(rig: Mapping[str, Any], character: Character, evaluation: Mappin
     anchors = _anchors(rig, character, parents, override)
     frame = GroundFrame.from_dict(rig["frame"])
     times = np.asarray(rig["times"], dtype=float)
-    t_start, period = float(cycle["t_start"]), float(cycle["period_s"])
+    t_start, period = cycle
     inside = (times >= t_start - 1e-9) & (times < t_start + period - 1e-9)
     if inside.sum() < 8:
         raise OpenSimExportError(f"the captured cycle {t_start:.3f}+{period:.3f} s holds {int(inside.sum())} frames "
@@ -433,7 +440,7 @@ def body_poses(motion: Motion, q: np.ndarray, t: np.ndarray, D: float, cal: Cali
             for s_ in range(t.size):
                 W[s_, i] = Rotation.from_matrix(np.stack([pp[0][s_, i] for pp in poses])).mean(weights=w).as_matrix()
         return W, P
-    t_start = float(motion.provenance["source"]["cycle"]["t_start"])
+    t_start = _cycle(motion)[0]
     C, d = cal.at(t / D)
     Rs, Ps = segment_frames(motion.character, q)
     names = [s.name for s in motion.character.segments]
@@ -518,10 +525,9 @@ def export_frame(motion: Motion) -> tuple[GroundFrame, np.ndarray]:
     treadmill's belt velocity with it) so that its gravity points down, then mapped by its
     ``GroundFrame``: the written ground is the inclined plane. Returns that frame and the
     gravity vector in OpenSim ground (the motion's own magnitude)."""
-    from solver.environment import environment_of
 
-    frame = GroundFrame.from_dict(motion.provenance.get("frame"))
-    g = np.asarray(environment_of(motion).gravity, dtype=float)
+    frame = motion.frame
+    g = np.asarray(motion.environment.gravity, dtype=float)
     gn = float(np.linalg.norm(g))
     down = np.array([0.0, 0.0, -1.0])
     u = g / gn if gn > 0 else down
@@ -1200,7 +1206,7 @@ def capture_residuals(model: str | Path, coordinates: str | Path, grf: str | Pat
         raise OpenSimExportError(str(e)) from None
 
 
-def _capture_reference(rig: Mapping[str, Any], model_path: Path, cycle: Mapping[str, Any],
+def _capture_reference(rig: Mapping[str, Any], model_path: Path, cycle: tuple[float, float],
                        rotational: Mapping[str, bool]) -> dict[str, Any]:
     """The trial's own residuals over the captured cycle where the plates are complete, when the
     trial's GRF file is still where it was imported from; otherwise why not (``rotational``:
@@ -1213,7 +1219,7 @@ def _capture_reference(rig: Mapping[str, Any], model_path: Path, cycle: Mapping[
     xml = plates.get("external_loads")
     if xml and not Path(xml).is_file():
         return {"available": False, "why": "the trial's ExternalLoads file is not available"}
-    t0, t1 = float(cycle["t_start"]), float(cycle["t_start"]) + float(cycle["period_s"])
+    t0, t1 = cycle[0], cycle[0] + cycle[1]
     span = plates.get("complete_s")
     if span:
         t0, t1 = max(t0, float(span[0])), min(t1, float(span[1]))
@@ -1266,11 +1272,7 @@ def generic_rig(motion: Motion, scratch: str | Path) -> dict[str, Any]:
                                  f"{ch.name!r} has {names}")
     R0, P0 = segment_frames(ch, np.zeros(ch.n))
     ours = {n: P0[names.index(n)] for n in need}
-    heel_toe = {}
-    for side in ("right", "left"):
-        pts = sorted((c for c in ch.contacts if c.side == side), key=lambda c: float(c.position[0]))
-        heel_toe[side] = float(np.linalg.norm(np.asarray(pts[-1].position) - np.asarray(pts[0].position))) \
-            if len(pts) >= 2 else None
+    heel_toe = {side: ch.sole(side).length if ch.has_soles else None for side in ("right", "left")}
     # the generic model's own default geometry (OpenSim ground)
     base = run_worker(str(GENERIC_MODEL), ["pelvis_ty"], np.array([[0.0]]), False)
     jc = {c: np.asarray(base["JC"])[0, k] for k, c in enumerate(base["joint_child"])}
@@ -1350,8 +1352,8 @@ def generic_rig(motion: Motion, scratch: str | Path) -> dict[str, Any]:
     massed = Path(scratch) / "generic_massed.osim"
     run_child({"job": "masses", "model": str(scaled), "bodies": props, "out": str(massed)})
     scaled = massed
-    cyc = motion.provenance["source"]["cycle"]
-    times = float(cyc["t_start"]) + float(cyc["period_s"]) * np.arange(_GENERIC_FRAMES) / _GENERIC_FRAMES
+    t_start, period = _cycle(motion)
+    times = t_start + period * np.arange(_GENERIC_FRAMES) / _GENERIC_FRAMES
     return {
         "format": "opensim",
         "generic": {"model": GENERIC_MODEL.name, "scale_factors": {b: round(f[0], 4) for b, f in factors.items()},
@@ -1471,13 +1473,14 @@ def _calibrated(motion: Motion, rig: Mapping[str, Any], model_path: Path
 
     names = list(rig["coordinates"]["names"])
     values = np.asarray(rig["coordinates"]["values"], dtype=float)
-    cyc = motion.provenance["source"]["cycle"]
+    t_start, period = _cycle(motion)
     times = np.asarray(rig["times"], dtype=float)
-    in_cycle = (times >= float(cyc["t_start"]) - 1e-9) & (times < float(cyc["t_start"]) + float(cyc["period_s"]))
+    in_cycle = (times >= t_start - 1e-9) & (times < t_start + period)
     mean_row = values[in_cycle].mean(axis=0) if in_cycle.any() else values.mean(axis=0)
     ev = run_worker(str(model_path), names, np.vstack([values, mean_row]), False)
     posture = (np.asarray(ev["R"])[-1], np.asarray(ev["P"])[-1])
     ev = {**ev, "R": np.asarray(ev["R"])[:-1], "P": np.asarray(ev["P"])[:-1]}
+    cyc = (t_start, period)
     cal = calibration(rig, motion.character, ev, cyc, posture)
     torso, parts = trunk_parts(rig, motion.character)
     blend = None
@@ -1501,7 +1504,7 @@ def model_bodies(motion: Motion, rate: float = 30.0) -> dict[str, Any]:
     from solver.io.opensim.rig import unpack_model
     from solver.io.opensim.worker import run_worker
 
-    rig = motion.provenance.get("rig")
+    rig = motion.context.rig
     trial = not (motion.cyclic and motion.wrenches is not None)  # a capture: the trial as the model moved
     if trial:
         if not isinstance(rig, Mapping) or rig.get("format") != "opensim":
@@ -1530,13 +1533,13 @@ def model_bodies(motion: Motion, rate: float = 30.0) -> dict[str, Any]:
         posture = (W[0], P[0])
     else:
         t, q, _, D = cycle_samples(motion, 1, float(rate))
-        t_abs = float(motion.provenance["source"]["cycle"]["t_start"]) + t
+        t_abs = _cycle(motion)[0] + t
         W, P = body_poses(motion, q, t, D, cal, frame, blend)
     # a treadmill trial's model walks on its belt: moved on with it, it walks along its ground
     P = P + (frame.R @ frame.velocity / frame.unit_m)[None, None, :] * t_abs[:, None, None]
     return {"bodies": list(rig["bodies"]), "parents": dict(zip(ev["joint_child"], ev["joint_parent"])),
             "times": t, "R": W, "P": P, "posture": posture, "com": np.asarray(ev["body_com"], dtype=float),
-            "frame": GroundFrame.from_dict(motion.provenance.get("frame"))}
+            "frame": motion.frame}
 
 
 def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, rate: float = RATE_HZ,
@@ -1564,7 +1567,7 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
         except _OpenSimError as e:
             raise OpenSimExportError(str(e)) from None
         # written in OpenSim's own axes: the source's ground frame (BVH's y up, centimetres…) is not the model's
-        motion = motion.evolve(provenance={**motion.provenance, "rig": generic, "frame": generic["frame"]})
+        motion = motion.evolve(context=motion.context.with_(rig=generic, frame=GroundFrame.from_dict(generic["frame"])))
     rig = source_rig(motion)
     if not (isinstance(cycles, int) and not isinstance(cycles, bool) and 1 <= cycles <= 10):
         raise OpenSimExportError(f"cycles must be an integer from 1 to 10, got {cycles!r}")
@@ -1591,7 +1594,8 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
         tk = time.perf_counter()
         ev, posture, cal, blend = _calibrated(motion, rig, folder / model_file)
         timing["evaluate_capture_s"] = time.perf_counter() - tk
-        cyc = motion.provenance["source"]["cycle"]
+        cyc = motion.context.cycle
+        assert cyc is not None and cyc.t_start is not None  # exportable
         torso, parts = trunk_parts(rig, motion.character)
         t, q, w, D = cycle_samples(motion, cycles, float(rate))
         W, P = body_poses(motion, q, t, D, cal, frame, blend)
@@ -1606,10 +1610,10 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
                             "out": str((folder / COORDINATES_FILE).resolve()), "scratch": scratch})
             timing["inverse_kinematics_s"] = time.perf_counter() - tk
         # ground reactions in the model's ground frame, on the motion's ground plane there
-        t_abs = float(cyc["t_start"]) + t
+        t_abs = cyc.t_start + t
         # the motion stands its contact points on z = 0, the capture's soles were that much lower:
         # the floor (the trial's plates) is z = -shift in the motion's world
-        m_frame, c_frame = GroundFrame.from_dict(motion.provenance.get("frame")), GroundFrame.from_dict(rig["frame"])
+        m_frame, c_frame = motion.frame, GroundFrame.from_dict(rig["frame"])
         shift = float((m_frame.R.T @ (m_frame.offset - c_frame.offset))[2]) * m_frame.unit_m
         normal = frame.R @ np.array([0.0, 0.0, 1.0])
         origin = frame.point_to_input(np.tile([0.0, 0.0, -shift], (t.size, 1)), t_abs)
@@ -1677,7 +1681,7 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
         for name in (ID_OUTPUT_FILE, "opensim.log"):  # outputs of running the setup, not part of the export
             (folder / name).unlink(missing_ok=True)
         tk = time.perf_counter()
-        reference = _capture_reference(rig, folder / model_file, cyc,
+        reference = _capture_reference(rig, folder / model_file, _cycle(motion),
                                        dict(zip(ev["coord_names"], (bool(r) for r in ev["coord_rotational"]))))
         timing["capture_inverse_dynamics_s"] = time.perf_counter() - tk
     except OpenSimError as e:
@@ -1691,7 +1695,7 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
         "version": 1,
         "motion": {"step": motion.provenance.get("step"), "lambda": motion.provenance.get("lambda"),
                    "character": motion.character.name, "fps": motion.fps, "frames": motion.T,
-                   "cycle_s": D, "source_cycle": dict(cyc)},
+                   "cycle_s": D, "source_cycle": cyc.to_dict()},
         "model": {"file": model_file, "name": model_info.get("name"), "sha256_source": model_info.get("sha256"),
                   "socket_paths_repaired": repaired, "gravity_changed": model_gravity,
                   "generic": rig.get("generic")},

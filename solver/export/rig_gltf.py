@@ -44,7 +44,7 @@ from scipy.spatial.transform import Rotation
 
 from solver.export import DEFAULT_WORLD, Y_UP, ExportError, _check_motion, continuous_quaternions
 from solver.export import source_rig as _source_rig
-from solver.export.gltf import (
+from solver.export.gltf_parts import (
     ARRAY_BUFFER,
     ELEMENT_ARRAY_BUFFER,
     FLOAT,
@@ -53,9 +53,9 @@ from solver.export.gltf import (
     UNSIGNED_BYTE,
     UNSIGNED_INT,
     UNSIGNED_SHORT,
-    _Buffer,
-    _glb,
+    Buffer,
     ellipsoid_mesh,
+    glb,
     ground_nodes,
     hexahedron,
 )
@@ -71,7 +71,7 @@ _MOVED = 1e-6
 
 
 def source_rig(motion: Motion) -> Rig:
-    """The motion's source rig (``provenance["rig"]``); an :class:`ExportError` saying why not."""
+    """The motion's source rig (``motion.context.rig``); an :class:`ExportError` saying why not."""
     return _source_rig(motion, RIG_FORMATS,
                        "rig=source needs a motion made from a skinned glTF, BVH or DeepMimic input")
 
@@ -148,7 +148,7 @@ def _motion_extras(motion: Motion, rig: Rig, pose: RigPose) -> dict[str, Any]:
     return json.loads(json.dumps(out, allow_nan=False, default=str))
 
 
-def _animation(buf: _Buffer, name: str, motion: Motion, rig: Rig, pose: RigPose, nodes: Sequence[int],
+def _animation(buf: Buffer, name: str, motion: Motion, rig: Rig, pose: RigPose, nodes: Sequence[int],
                rest_translation: np.ndarray, to_node: np.ndarray) -> dict[str, Any]:
     """One animation: rotation channels for every joint node, translation channels for the root
     and the joints whose translation is not their node's. ``to_node`` (J,): input units per node
@@ -194,7 +194,7 @@ def _source_document(rig: Rig, poses: list[tuple[str, Motion, RigPose]], meshes:
             del node["matrix"]
             node.update(translation=t.tolist(), rotation=q.tolist(), scale=s.tolist())
         rest[j] = t
-    buf = _Buffer(data=bytearray(asset.bin), views=doc.setdefault("bufferViews", []),
+    buf = Buffer(data=bytearray(asset.bin), views=doc.setdefault("bufferViews", []),
                   accessors=doc.setdefault("accessors", []))
     doc["animations"] = [_animation(buf, name, m, rig, pose, nodes, rest, to_node) for name, m, pose in poses]
     if meshes:  # the ground, in the scene: the nodes above the skeleton (at rest) after the input's frame
@@ -214,18 +214,17 @@ def _source_document(rig: Rig, poses: list[tuple[str, Motion, RigPose]], meshes:
 def _input_matrix(motion: Motion) -> np.ndarray:
     """(4x4) our world (metres) -> the input's axes and units (the motion's ``GroundFrame``; a
     moving frame, a treadmill's, at time 0)."""
-    from solver.capture import GroundFrame
 
-    frame = GroundFrame.from_dict(motion.provenance.get("frame"))
+    frame = motion.frame
     m = np.eye(4)
     m[:3, :3] = frame.R / frame.unit_m
     m[:3, 3] = frame.offset / frame.unit_m
     return m
 
 
-def _add_ground(doc: dict[str, Any], buf: _Buffer, poses: list[tuple[str, Motion, RigPose]], to_scene: np.ndarray,
+def _add_ground(doc: dict[str, Any], buf: Buffer, poses: list[tuple[str, Motion, RigPose]], to_scene: np.ndarray,
                 world: str) -> None:
-    """The motions' ground (``solver.export.gltf.ground_nodes``) at the root of the document's scene."""
+    """The motions' ground (``solver.export.gltf_parts.ground_nodes``) at the root of the document's scene."""
     materials = doc.setdefault("materials", [])
     materials.append(dict(GROUND_MATERIAL))
     meshes = doc.setdefault("meshes", [])
@@ -343,7 +342,7 @@ def _body_shape(body: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray, np.nda
 def _skeleton_document(rig: Rig, poses: list[tuple[str, Motion, RigPose]], meshes: bool,
                        frame: Any, in_world: str) -> tuple[dict, bytes]:
     J = rig.J
-    buf = _Buffer()
+    buf = Buffer()
     children: dict[int, list[int]] = {j: [] for j in range(J)}
     for j, p in enumerate(rig.parents):
         if p >= 0:
@@ -403,7 +402,7 @@ def _skeleton_document(rig: Rig, poses: list[tuple[str, Motion, RigPose]], meshe
 
 
 def _skeleton_primitives(rig: Rig, world: np.ndarray, children: Mapping[int, list[int]],
-                         buf: _Buffer) -> list[tuple[dict, list[float]]]:
+                         buf: Buffer) -> list[tuple[dict, list[float]]]:
     """Mesh primitives (one per colour) of the rig's bones, in the bind pose (scene metres),
     each vertex bound to its joint."""
     J = rig.J
@@ -514,7 +513,7 @@ def _opensim_document(items: Sequence[tuple[str, Motion]], meshes: bool, world: 
 
 
 def _is_opensim(motion: Motion) -> bool:
-    rig = motion.provenance.get("rig")
+    rig = motion.context.rig
     return isinstance(rig, Mapping) and rig.get("format") == "opensim"
 
 
@@ -527,9 +526,8 @@ def _document(items: Sequence[tuple[str, Motion]], meshes: bool, world: str) -> 
     rig, poses = _poses(items, world)
     if rig.format == "gltf":
         return _source_document(rig, poses, meshes, world)
-    from solver.capture import GroundFrame
 
-    frame = GroundFrame.from_dict(poses[0][1].provenance.get("frame"))
+    frame = poses[0][1].frame
     return _skeleton_document(rig, poses, meshes, frame, world)
 
 
@@ -538,7 +536,7 @@ def rig_glb(motion: Motion, *, meshes: bool = True, world: str = DEFAULT_WORLD) 
     the motion as its one animation, or the BVH / DeepMimic skeleton (``meshes``: with its bone
     shapes) animated; in ``world``, with its ground when ``meshes``."""
     _check_motion(motion)
-    return _glb(*_document([(animation_name(motion), motion)], meshes, world))
+    return glb(*_document([(animation_name(motion), motion)], meshes, world))
 
 
 def rig_glb_library(items: Sequence[tuple[str, Motion]], *, meshes: bool = True, world: str = DEFAULT_WORLD) -> bytes:
@@ -546,7 +544,7 @@ def rig_glb_library(items: Sequence[tuple[str, Motion]], *, meshes: bool = True,
     λ optima, one per cell. Every motion must come from the same input rig."""
     if isinstance(items, (str, bytes)) or not isinstance(items, Sequence):
         raise ExportError("items must be a sequence of (name, motion) pairs")
-    return _glb(*_document(list(items), meshes, world))
+    return glb(*_document(list(items), meshes, world))
 
 
 def rig_gltf_embedded(motion: Motion, *, meshes: bool = True, world: str = DEFAULT_WORLD) -> str:

@@ -33,8 +33,18 @@ from typing import Any
 
 import numpy as np
 
-from solver.environment import environment_of, ground_of, stair_rise, stances
-from solver.export import AXES_Y_UP, AXES_Z_UP, DEFAULT_WORLD, Y_UP, ExportError, LocalTransforms, local_transforms
+from solver.environment import ground_of, stair_rise, stances
+from solver.export import (
+    AXES_Y_UP,
+    AXES_Z_UP,
+    DEFAULT_WORLD,
+    LENGTH_UNITS,
+    Y_UP,
+    ExportError,
+    LocalTransforms,
+    local_transforms,
+    source_rig,
+)
 from solver.formats import EXPORT_WORLDS
 from solver.motion import FEET, Motion
 from solver.stairs import flight_of
@@ -100,7 +110,7 @@ def _values(a: np.ndarray, decimals: int | None) -> list:
 def world_of(motion: Motion, world: str = DEFAULT_WORLD) -> World:
     """The :class:`World` of ``motion`` exported with ``world`` ("gravity" or "ground")."""
     check_world(world)
-    g = np.array(environment_of(motion).gravity, dtype=float)
+    g = np.array(motion.environment.gravity, dtype=float)
     norm = float(np.linalg.norm(g))
     R = np.eye(3)
     if world == "gravity" and norm > 0:
@@ -140,12 +150,11 @@ def world_transforms(motion: Motion, world: str | World = DEFAULT_WORLD, frames:
 def world_rig_pose(motion: Motion, world: str | World, rig: Any, pose: Any) -> Any:
     """A :class:`solver.rig.RigPose` of ``motion`` on ``rig`` (in the rig's own axes and units)
     with its root placed in ``world``, as :func:`world_transforms` places the character's."""
-    from solver.capture import GroundFrame
 
     w = resolve(motion, world)
     if w.identity:
         return pose
-    frame = GroundFrame.from_dict(motion.provenance.get("frame"))
+    frame = motion.frame
     t = pose.capture_time  # (F,): the input frame's clock (a treadmill belt's)
     root = frame.point_to_input(w.points(frame.point_from_input(pose.root, t)), t)
     local = np.array(pose.local, dtype=float, copy=True)
@@ -364,7 +373,7 @@ def ground_of_motion(motion: Motion, world: str | World = DEFAULT_WORLD) -> Grou
     t1 = (centre[-1] - centre[-2]) / np.linalg.norm(centre[-1] - centre[-2])
     centre = np.vstack([centre[0] + start * t0, centre[1:-1], centre[-1] + (end - arc_end) * t1])
     length = end - start
-    env = environment_of(motion)
+    env = motion.environment
     if not env.step_height_m or motion.contacts is None or not ch.contacts:
         return Ground("plane", w, centre, half, (Tread(0.0, length, 0.0),))
     flight = flight_of(motion)  # the flight the solver climbed: treads a going deep, risers where it put them
@@ -421,11 +430,9 @@ def ground_json(motion: Motion, *, world: str = DEFAULT_WORLD, y_up: bool = True
     it goes beside — Y up (``y_up``, as :func:`solver.export.bvh.to_bvh` writes) or our Z up, in
     ``units`` "cm" (BVH's default) or "m"; with ``rig="source"``, in the input's own axes and unit (those of
     ``to_bvh(motion, rig="source")``)."""
-    from solver.export import source_rig
-    from solver.export.bvh import UNITS
 
-    if units not in UNITS:
-        raise ExportError(f"units must be one of {sorted(UNITS)}, got {units!r}")
+    if units not in LENGTH_UNITS:
+        raise ExportError(f"units must be one of {sorted(LENGTH_UNITS)}, got {units!r}")
     if not isinstance(y_up, bool):
         raise ExportError(f"y_up must be a boolean, got {y_up!r}")
     if rig not in ("character", "source"):
@@ -433,15 +440,29 @@ def ground_json(motion: Motion, *, world: str = DEFAULT_WORLD, y_up: bool = True
     g = ground_of_motion(motion, world)
     doc: dict[str, Any] = {"format": "motionx.ground", "version": 1}
     if rig == "source":
-        from solver.capture import GroundFrame
         from solver.rig import RIG_FORMATS
 
         source_rig(motion, RIG_FORMATS, "rig=source needs a motion made from a BVH, skinned glTF or DeepMimic input")
-        frame = GroundFrame.from_dict(motion.provenance.get("frame"))
+        frame = motion.frame
         doc.update(axes=frame.axes, units={"length": f"{frame.unit_m:g} m"}, world=g.world.to_json(frame.R, decimals),
                    ground=g.to_json(frame.R, 1.0 / frame.unit_m, decimals, origin=frame.offset / frame.unit_m))
     else:
         A = Y_UP if y_up else np.eye(3)
         doc.update(axes=dict(AXES_Y_UP if y_up else AXES_Z_UP), units={"length": units},
-                   world=g.world.to_json(A, decimals), ground=g.to_json(A, UNITS[units], decimals))
+                   world=g.world.to_json(A, decimals), ground=g.to_json(A, LENGTH_UNITS[units], decimals))
     return json.dumps(doc, allow_nan=False, separators=(",", ":"))
+
+
+def source_pose(motion: Motion, formats: tuple[str, ...], what: str, world: str = DEFAULT_WORLD):
+    """The motion's source rig (:func:`solver.export.source_rig`) and the motion retargeted onto it
+    (:func:`solver.rig.retarget`: one cycle at the rig's frame rate), its root placed in
+    ``world`` (:func:`world_rig_pose`); a rig that cannot take the motion
+    is an :class:`ExportError`."""
+    from solver.rig import RigError, retarget  # lazy: solver.rig only for the input-rig exports
+
+    check_world(world)
+    rig = source_rig(motion, formats, what)
+    try:
+        return rig, world_rig_pose(motion, world, rig, retarget(motion, rig))
+    except RigError as e:
+        raise ExportError(str(e)) from None

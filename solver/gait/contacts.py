@@ -258,12 +258,12 @@ def ensure_double_support(character: Character, q: np.ndarray, contacts: np.ndar
     A = np.array(contacts, dtype=bool, copy=True)
     T = A.shape[1]
     N = T - 2
-    if N < 4 or A.shape[0] != len(character.contacts):
+    if N < 4 or A.shape[0] != len(character.contacts) or not character.has_soles:
         return A, []
     cp = contact_points(character, q)
     rows = {s: [i for i, c in enumerate(character.contacts) if c.side == s] for s in ("right", "left")}
-    heel = {s: min(r, key=lambda i: character.contacts[i].position[0]) for s, r in rows.items()}
-    toe = {s: max(r, key=lambda i: character.contacts[i].position[0]) for s, r in rows.items()}
+    heel = {s: character.sole_indices(s)[0] for s in rows}  # by name (``Character.sole``)
+    toe = {s: character.sole_indices(s)[1] for s in rows}
 
     def foot(s: str) -> np.ndarray:
         return np.asarray(A[rows[s], :N].any(axis=0))

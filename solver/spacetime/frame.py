@@ -24,7 +24,7 @@ from solver.character import Character
 from solver.dynamics import casadi_functions
 from solver.kinematics import forward_kinematics, marker_points, markers, point_world, standing_leg_length
 from solver.motion import FEET
-from solver.naturalness import heel_toe, trunk_axis
+from solver.naturalness import trunk_axis
 from solver.spacetime import compiled
 from solver.spacetime.derivatives import jacobian, lagrangian_hessian
 from solver.spacetime.types import STANDARD_GRAVITY, Naturalness, Realism
@@ -140,8 +140,7 @@ class FrameFunctions:
         self.heel_of: dict[str, int] = {}
         self.toe_of: dict[str, int] = {}
         for side in FEET:
-            heel, toe = heel_toe(ch, side)
-            self.heel_of[side], self.toe_of[side] = ch.contacts.index(heel), ch.contacts.index(toe)
+            self.heel_of[side], self.toe_of[side] = ch.sole_indices(side)
 
     def _contact_functions(self, q: ca.SX, pose, pts: list) -> None:
         ch = self.character
@@ -151,7 +150,7 @@ class FrameFunctions:
         self._rest_points = np.asarray(self.kin(np.zeros(ch.n))[1]).reshape(-1, 3)  # contact points at q = 0
         gnd = ca.SX.sym("ground", self.P)
         self.z = ca.Function("z", [q, gnd], [ca.vertcat(*[p[2] for p in pts]) - gnd])  # height above the ground
-        # the sole's corners (``Character.sole``, in ``solver.naturalness.sole_corners``' order: heel −w,
+        # the sole's corners (``Character.sole``, in ``solver.kinematics.sole_corners``' order: heel −w,
         # heel +w, toe −w, toe +w): heights above the ground under each foot (its heel point's),
         # SOLE_CORNERS rows per foot
         corners = []

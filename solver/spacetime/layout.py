@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from solver.kinematics import centre_of_mass, contact_points, markers
+from solver.kinematics import centre_of_mass, contact_points, markers, sole_corners
 from solver.motion import FEET, foot_schedule_of
 from solver.naturalness import limited_coordinates
 from solver.spacetime.types import STANDARD_GRAVITY, WEIGHT_SLOTS, Environment, Weights
@@ -288,8 +288,6 @@ class Layout:
         in swing, scaled by how fast the foot's sole moves in ``q`` (its fastest corner, central
         differences at frame interval ``h``) between ``Naturalness.clearance_speed``; none in contact
         (−1)."""
-        from solver.naturalness import sole_corners
-
         nat = self.ff.naturalness
         out = np.full((2, self.T), -1.0)
         if not self.ff.has_contacts:

@@ -39,7 +39,6 @@ from solver.character import Character
 from solver.environment import Flight
 from solver.kinematics import forward_kinematics, point_world
 from solver.motion import FEET
-from solver.naturalness import heel_toe
 from solver.spacetime.derivatives import jacobian, lagrangian_hessian
 
 #: per frame: the flight (6), then per foot the tread extent (2) and the nosing slots (4 each)
@@ -54,7 +53,7 @@ CROSSED = 2
 SLOT_PARAMS = 4  # a nosing slot: s, height, the margin over it, the lead-in (m) of the approach slope
 FOOT_PARAMS = 2 + SLOT_PARAMS * NOSING_SLOTS
 STAIRS_PARAMS = FLIGHT_PARAMS + 2 * FOOT_PARAMS
-CORNERS = 4  # heel-right, heel-left, toe-right, toe-left (``solver.naturalness.sole_corners``)
+CORNERS = 4  # heel-right, heel-left, toe-right, toe-left (``solver.kinematics.sole_corners``)
 TREAD_ROWS = 2 * CORNERS  # per frame: each foot's four corners against its tread's extent
 #: per frame: each foot's corners out of the step of each nosing slot, and over the crossed nosings
 STEP_ROWS = 2 * CORNERS * (NOSING_SLOTS + CROSSED)
@@ -108,7 +107,8 @@ class StairsFunctions:
         corners: list[Any] = []  # per foot: 4 corners (world x, y, z)
         for side in FEET:
             half_w = float(ch.foot(side).half[1])
-            for c in heel_toe(ch, side):
+            sole = ch.sole(side)
+            for c in (sole.heel, sole.toe):
                 for sgn in (-1.0, 1.0):
                     b, pb = model.point_on_body(c.segment, np.asarray(c.position) + np.array([0.0, sgn * half_w, 0.0]))
                     corners.append(ca.vertcat(*point_world(pose, b, pb)))

@@ -208,7 +208,7 @@ def test_demo_files_are_what_they_claim(demo_run):
             assert rep["plausible"] is True and rep["natural"] is True
         assert lams == sorted(lams) and max(lams) == pytest.approx(1.0)
         # the last λ motion of the job stands on the target ground
-        env = m.provenance["environment_values"]
+        env = m.context.axis_values
         want = next(j["target"] for j in summary["jobs"] if j["name"] == job)
         for k, v in want.items():
             assert env[k] == pytest.approx(v)

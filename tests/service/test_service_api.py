@@ -134,12 +134,13 @@ def test_world_option_puts_a_slope_walk_on_its_ramp(api):
     ``world=ground`` in the solver's frame, as uploaded; an unknown world is a 422 naming both."""
     import numpy as np
 
+    from solver.environment import Environment
     from solver.export.reimport import motion_from_bvh, motion_from_gltf
 
     m = halfboy_motion(seed=11)
     a = math.radians(10.0)
-    env = {"gravity": [-9.81 * math.sin(a), 0.0, -9.81 * math.cos(a)], "friction": 1.0}
-    m = m.evolve(provenance={**m.provenance, "environment": env})
+    env = Environment((-9.81 * math.sin(a), 0.0, -9.81 * math.cos(a)), 1.0)
+    m = m.evolve(context=m.context.with_(environment=env))
     mid = upload(api.a, m.to_dict()).json()["id"]
     level = motion_from_gltf(api.a.get(f"/motions/{mid}", params={"format": "glb", "world": "ground"}).content,
                              m.character)
@@ -299,7 +300,8 @@ def test_extrapolate_202_location_and_idempotency(api, motion_id):
     got = api.a.get(f"/jobs/{job['id']}").json()
     assert got["id"] == job["id"] and got["target"]["slope_deg"] == 4.0
     page = api.a.get(f"/jobs/{job['id']}/motions").json()
-    assert len(page["items"]) == min(page["total"], page["limit"]) and all(m["job_id"] == job["id"] for m in page["items"])
+    assert len(page["items"]) == min(page["total"], page["limit"])
+    assert all(m["job_id"] == job["id"] for m in page["items"])
 
 
 def test_unknown_ids_are_404_problems(api):

@@ -153,3 +153,69 @@ def test_no_cycle_between_solver_and_mjcf_subpackages():
     edges = {k: v for k, v in _module_graph(2).items() if k.split(".")[0] in ("solver", "mjcf")}
     assert "solver.character" in edges.get("solver.pipeline", set())  # the parser sees the real imports
     assert not _cycles(edges), _cycles(edges)
+
+
+# --- the module graph --------------------------------------------------------------------------
+
+
+def _our_modules() -> dict[str, Path]:
+    """Every module of the four packages by its dotted name (a package by its ``__init__``)."""
+    out = {}
+    for pkg in PACKAGES:
+        for path in sorted((ROOT / pkg).rglob("*.py")):
+            if "migrations" in path.parts:
+                continue
+            parts = list(path.relative_to(ROOT).with_suffix("").parts)
+            out[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
+    return out
+
+
+def _import_edges(name: str, source: str, modules: set[str]) -> set[str]:
+    """The modules of ours that module ``name`` imports, from every import statement (those inside
+    functions too): ``from pkg import sub`` is an edge to the module ``pkg.sub`` when there is one,
+    to the package ``pkg`` otherwise; relative imports resolved."""
+    parts = name.split(".")
+    is_pkg = name in modules and any(m.startswith(name + ".") for m in modules)
+    out = set()
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            targets = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = parts[: len(parts) - node.level + (1 if is_pkg else 0)]
+                mod = ".".join(base + ([node.module] if node.module else []))
+            else:
+                mod = node.module or ""
+            targets = [f"{mod}.{a.name}" if f"{mod}.{a.name}" in modules else mod for a in node.names]
+        else:
+            continue
+        for t in targets:
+            while t and t not in modules:  # an attribute of a module: the module
+                t = t.rpartition(".")[0]
+            if t and t != name:
+                out.add(t)
+    return out
+
+
+def _modules_graph() -> dict[str, set[str]]:
+    modules = _our_modules()
+    return {name: _import_edges(name, path.read_text(), set(modules)) for name, path in modules.items()}
+
+
+def test_the_module_graph_sees_every_import():
+    """The parser sees imports inside functions and submodules imported from their package, and
+    ``_cycles`` finds a circle hidden behind a function-level import."""
+    edges = _modules_graph()
+    assert "service.simulation" in edges["service.jobs"]  # ``from service.simulation import`` inside a function
+    assert "service.store" in edges["service.simulation"]  # ``from service import store``
+    src = "def f():\n    from service import simulation\n"
+    mods = {"service", "service.store", "service.simulation"}
+    fake = {**edges, "service.store": _import_edges("service.store", src, mods)}
+    assert ["service.simulation", "service.store"] in _cycles(fake)
+
+
+def test_no_import_cycle_between_modules():
+    """No module of ours imports, even inside a function, a module that imports it back (directly
+    or through others): a piece two modules share lives in a module of its own."""
+    cycles = _cycles(_modules_graph())
+    assert not cycles, f"import circles between modules: {cycles}"

@@ -1,7 +1,7 @@
 """What an OpenSim trial keeps for writing results back on the subject's own model.
 
 The importer fills ``Capture.rig`` with a JSON-able mapping (``format: "opensim"``) that
-every motion made from the capture carries in ``provenance["rig"]`` (tutor, λ optima,
+every motion made from the capture carries in its context (``Motion.context.rig``) (tutor, λ optima,
 library cells), so :mod:`solver.export.opensim` can write any of them on the model the
 trial came with:
 
