@@ -15,6 +15,7 @@ Measured on the reference alone (no controller), with the performable model of
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import mujoco
@@ -64,8 +65,6 @@ def sole_agreement(motion: Motion, model: mujoco.MjModel) -> dict[str, Any]:
     ``cop_outside_fraction_flat``: the same over the frames where the sole lies flat on the ground
     (``flat_stance_frames``; the optimizer's centre of pressure is bounded in the foot's box, whose
     height lets it off the sole's outline when the foot is tilted, at heel strike and push-off)."""
-    from mjcf.simulate import _ground_height
-
     ch = motion.character
     qadr = _coordinate_qpos(motion, model)
     d = mujoco.MjData(model)
@@ -109,7 +108,7 @@ def sole_agreement(motion: Motion, model: mujoco.MjModel) -> dict[str, Any]:
             outside = bx > COP_TOLERANCE or by > COP_TOLERANCE
             n_out_all += outside
             corners = [c + Rg @ np.array([sx * half[0], sy * half[1], 0.0]) for sx in (-1, 1) for sy in (-1, 1)]
-            if Rg[2, 2] > FLAT_COS and max(float(p[2]) - _ground_height(model, d, p) for p in corners) < FLAT_HEIGHT:
+            if Rg[2, 2] > FLAT_COS and max(float(p[2]) - ground_height(model, d, p) for p in corners) < FLAT_HEIGHT:
                 n_flat += 1
                 n_out_flat += outside
             beyond = max(beyond, float(bx), float(by))
@@ -122,14 +121,12 @@ def sole_agreement(motion: Motion, model: mujoco.MjModel) -> dict[str, Any]:
             "tolerance_m": COP_TOLERANCE}
 
 
-def swing_clearance(motion: Motion, model: mujoco.MjModel, step: float = 0.002) -> dict[str, Any]:
+def swing_clearance(motion: Motion, model: mujoco.MjModel, ref: Any, step: float = 0.002) -> dict[str, Any]:
     """The reference's sole corners above the ground through each foot's swing (the reference's
     frames before and after without a contact of that foot), sampled every ``step`` s over one cycle
-    on the reference's spline: per foot the lowest corner (m), where in the swing it is (0 lift-off,
-    1 touchdown) and the fraction of the swing with a corner below the ground."""
-    from mjcf.simulate import Reference, _ground_height
-
-    ref = Reference(motion)
+    on the reference's spline (``ref``: the simulation's ``mjcf.simulate.Reference``): per foot the
+    lowest corner (m), where in the swing it is (0 lift-off, 1 touchdown) and the fraction of the
+    swing with a corner below the ground."""
     qadr = _coordinate_qpos(motion, model)
     d = mujoco.MjData(model)
     owners = [[i for i, c in enumerate(motion.character.contacts) if c.side == side] for side in FEET]
@@ -144,7 +141,7 @@ def swing_clearance(motion: Motion, model: mujoco.MjModel, step: float = 0.002) 
         for f, (bid, corners) in enumerate(sole_corners):
             if sp[f] is None:
                 continue
-            h = min(float(p[2]) - _ground_height(model, d, p)
+            h = min(float(p[2]) - ground_height(model, d, p)
                     for p in (d.xpos[bid] + d.xmat[bid].reshape(3, 3) @ c for c in corners))
             lows[f].append((h, float(sp[f] or 0.0)))
     out: dict[str, Any] = {}
@@ -162,6 +159,21 @@ def swing_clearance(motion: Motion, model: mujoco.MjModel, step: float = 0.002) 
     return out
 
 
-def agreement(motion: Motion, model: mujoco.MjModel) -> dict[str, Any]:
+def agreement(motion: Motion, model: mujoco.MjModel, ref: Any) -> dict[str, Any]:
     """Both measures, as ``report.json``'s ``agreement``."""
-    return {"sole": sole_agreement(motion, model), "swing_clearance": swing_clearance(motion, model)}
+    return {"sole": sole_agreement(motion, model), "swing_clearance": swing_clearance(motion, model, ref)}
+
+
+def ground_height(m: mujoco.MjModel, d: mujoco.MjData, p: np.ndarray) -> float:
+    """Height of the ground (floor or the tread below) at a world point."""
+    best = 0.0 if m.geom_contype[0] else -math.inf
+    for i in range(m.ngeom):
+        nm = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, i) or ""
+        if not nm.startswith("tread_"):
+            continue
+        R = d.geom_xmat[i].reshape(3, 3)
+        loc = R.T @ (p - d.geom_xpos[i])
+        hs = m.geom_size[i]
+        if abs(loc[0]) <= hs[0] and abs(loc[1]) <= hs[1]:
+            best = max(best, float(d.geom_xpos[i][2] + hs[2]))
+    return best if np.isfinite(best) else 0.0

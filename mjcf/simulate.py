@@ -41,6 +41,7 @@ import mujoco
 import numpy as np
 import quadprog
 
+from mjcf.agreement import agreement, ground_height
 from mjcf.builder import ContactOptions, Tread, build_spec, sole_corners
 from solver.environment import body_weight, ground_of
 from solver.motion import FEET, Motion
@@ -486,7 +487,7 @@ class Tracker:
         return rate
 
     def ground(self, d: mujoco.MjData, p: np.ndarray) -> float:
-        return _ground_height(self.m, d, p) if self.treads else 0.0
+        return ground_height(self.m, d, p) if self.treads else 0.0
 
     def _point(self, d: mujoco.MjData, bid: int,
                local: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -770,7 +771,7 @@ def _start(m: mujoco.MjModel, ctl: Tracker, ref: Reference, t0: float,
         for c in range(4):
             if active[owner[c]]:
                 p = d.xpos[bid] + d.xmat[bid].reshape(3, 3) @ corners[c]
-                lows.append(p[2] - _ground_height(m, d, p))
+                lows.append(p[2] - ground_height(m, d, p))
     zadr = int(ctl.qadr[ROOT_Z])
     if lows:
         d.qpos[zadr] -= min(lows) + 2e-4
@@ -1018,27 +1019,10 @@ def simulate(motion: Motion, cycles: int = 10, gains: Gains | None = None, *,
     )
     report = _report(res, motion, ref, ctl)
     report["start"] = _start_report(run, start_info, ctl.bw, dt)
-    from mjcf.agreement import agreement
-
-    report["agreement"] = agreement(motion, m)
+    report["agreement"] = agreement(motion, m, ref)
     if resync:
         report["resync"] = _resync(motion, ref, t0, cycles, gains)
     return replace(res, report=report)
-
-
-def _ground_height(m: mujoco.MjModel, d: mujoco.MjData, p: np.ndarray) -> float:
-    """Height of the ground (floor or the tread below) at a world point."""
-    best = 0.0 if m.geom_contype[0] else -math.inf
-    for i in range(m.ngeom):
-        nm = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, i) or ""
-        if not nm.startswith("tread_"):
-            continue
-        R = d.geom_xmat[i].reshape(3, 3)
-        loc = R.T @ (p - d.geom_xpos[i])
-        hs = m.geom_size[i]
-        if abs(loc[0]) <= hs[0] and abs(loc[1]) <= hs[1]:
-            best = max(best, float(d.geom_xpos[i][2] + hs[2]))
-    return best if np.isfinite(best) else 0.0
 
 
 def _wrap(a: np.ndarray) -> np.ndarray:

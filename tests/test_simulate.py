@@ -91,7 +91,8 @@ def test_tutor_walks_and_report(simulated):
 def test_stairs_treads_hold_the_feet_and_clear_the_swing(simulated):
     """The treads built for a flight of stairs hold every stance foot of the reference on its
     tread top, and each riser stands where the reference's swing foot passes above it."""
-    from mjcf.simulate import Gains, Reference, Tracker, _ground_height, performable_model
+    from mjcf.agreement import ground_height
+    from mjcf.simulate import Gains, Reference, Tracker, performable_model
 
     tutor, _, _ = simulated
     res = solver.extrapolate(tutor, solver.Target(step_height_m=0.08))
@@ -112,7 +113,7 @@ def test_stairs_treads_hold_the_feet_and_clear_the_swing(simulated):
         for _gid, bid, corners, owner, _c in ctl.soles:
             for c in range(4):
                 p = d.xpos[bid] + d.xmat[bid].reshape(3, 3) @ corners[c]
-                h = p[2] - _ground_height(model, d, p)
+                h = p[2] - ground_height(model, d, p)
                 (stance if contacts_now[owner[c]] else swing if not active[owner].any() else []).append(h)
     # stance heel/toe edges on their tread (the sole's width rolls them by a few mm)
     assert min(stance) > -0.02 and np.median(np.abs(stance)) < 0.01
