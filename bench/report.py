@@ -245,10 +245,7 @@ FILL = {"tutor": ("docs/spacetime.md", tutor_table), "continuation": ("docs/cont
         "front_door": ("docs/api.md", front_door_table),
         "rig_export": ("docs/export.md", rig_export_table),
         "simulation": ("docs/simulation.md", simulation_table),
-        "fidelity": ("docs/naturalness.md", fidelity_table),
-        "fidelity_optima": ("docs/naturalness.md", optima_table)}
-#: blocks filled from another section's results
-SOURCE = {"fidelity_optima": "fidelity"}
+        "fidelity": ("docs/naturalness.md", fidelity_table)}
 
 
 def fill(sec: dict, only: list[str] | None = None) -> None:
@@ -257,12 +254,11 @@ def fill(sec: dict, only: list[str] | None = None) -> None:
     import re
 
     for name, (doc, fn) in FILL.items():
-        src = SOURCE.get(name, name)
-        if src not in sec or (only and src not in only and name not in only):
+        if name not in sec or (only and name not in only):
             continue
         p = Path(doc)
         text = p.read_text()
-        block = f"<!-- bench:{name} -->\n{fn(sec[src]['results'])}\n<!-- /bench:{name} -->"
+        block = f"<!-- bench:{name} -->\n{fn(sec[name]['results'])}\n<!-- /bench:{name} -->"
         text = re.sub(rf"<!-- bench:{name} -->.*?<!-- /bench:{name} -->", lambda _: block, text, flags=re.S)
         p.write_text(text)
 
