@@ -127,7 +127,7 @@ def _f(x, fmt: str = "{:.2f}") -> str:
 
 
 def fidelity_table(res: dict) -> str:
-    """The tutors (issue: true to the subject): joints against the capture, naturalness, time."""
+    """The tutors: joints against the capture, naturalness, time."""
     rows = ["| trial | character | joints' RMS to the capture (simplified) | pelvis | worst joint | natural (failed; "
             "warnings) | mid-swing clearance | fit marker RMS | time (IPOPT its) |",
             "|---|---|---|---|---|---|---|---|---|"]

@@ -8,7 +8,7 @@ body weights; the start's vertical force against the stored one over the first 1
 centres of pressure off the simulated sole (all stance frames; frames with the sole flat); the
 reference's lowest sole corner in swing; and the CPU time per simulated second of each run
 (``time.process_time``, this process: the controller is single-threaded). The same for the
-DeepMimic tutor's λ = 1 optima of issue 40's must-reach (slope ±11.25°, curve 90°, stairs
+DeepMimic tutor's λ = 1 optima of the performability targets (slope ±11.25°, curve 90°, stairs
 ±0.10 m, speed ×0.8 and ×1.2).
 """
 
@@ -26,7 +26,7 @@ CYCLES = 10
 FPS = 15
 
 
-#: the λ = 1 optima of issue 40's must-reach, simulated for the DeepMimic walk's tutor
+#: the λ = 1 optima of the performability targets, simulated for the DeepMimic walk's tutor
 OPTIMA = {"uphill_11.25": Target(slope_deg=11.25), "downhill_11.25": Target(slope_deg=-11.25),
           "curve_90": Target(curve_deg=90.0), "stairs_up_0.10": Target(step_height_m=0.10),
           "stairs_down_0.10": Target(step_height_m=-0.10), "speed_0.8": Target(speed_scale=0.8),

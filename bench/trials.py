@@ -69,7 +69,7 @@ def other_labs_dir() -> Path | None:
 
 
 def other_labs() -> dict[str, tuple[list[Path], dict]]:
-    """Public walks from other labs and marker sets than ``shared_trials`` (issue: true to the subject),
+    """Public walks from other labs and marker sets than ``shared_trials``,
     each with its origin and licence (``other_labs_dir``): a Motion Analysis Helen Hayes set with medial
     markers, a Vicon Nexus cluster set (opensim-core's walking5), with the masses their plates imply;
     none when they are not there."""

@@ -95,7 +95,7 @@ def test_every_command_is_described_and_every_option_has_help_with_its_default()
     assert "default: $MOTIONX_HOST or 127.0.0.1" in helps["serve"] and "8000" in helps["serve"]
     assert "--fps {15,30}" in helps["tutor"] and "default: 30 for fullbody, 15 for halfboy" in helps["tutor"]
     assert "default: fullbody" in helps["tutor"]
-    # the motion files are v2 (issue 38), and in-place clips have their flag
+    # the motion files are v2, and in-place clips have their flag
     for name in ("tutor", "validate", "export", "plot"):
         assert "motion file v1" not in helps[name], name
     assert "motion file v2" in helps["tutor"] and "in-place clips" in helps["tutor"]

@@ -1,4 +1,4 @@
-"""The page without traps (issue 38), in headless Chromium against ``motionx serve``:
+"""The page without traps, in headless Chromium against ``motionx serve``:
 
 - a failed upload clears its files, so the next files are a trial of their own (not refused as
   a mix of formats with the failed ones); an upload that only lacks a field (the mass) keeps them;
