@@ -32,7 +32,8 @@ def mujoco_residual(motion: Motion) -> np.ndarray:
     return about_root(h0, s.q)
 
 
-@register_check(section="mujoco_replay", verdict="plausible", flags="all", nested=False, optional=True, order=30)
+@register_check(section="mujoco_replay", verdict="plausible", flags="all", optional=True, order=30,
+                title="MuJoCo replay")
 def replay_checks(ctx: Context) -> SectionResult:
     """The MuJoCo replay's figures and its two checks: its root residual vanishes
     (``mujoco_root``) and agrees with ours (``mujoco_agrees``), within the residual tolerance."""

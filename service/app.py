@@ -15,7 +15,7 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.openapi.utils import get_openapi
 
 from service import problems
-from service.config import Settings, get_settings
+from service.config import Settings, find_check_modules, get_settings
 from service.db import get_database, upgrade
 from service.deps import GuessGuard, OwnerCache
 from service.middleware import BodyLimitMiddleware, SecurityHeadersMiddleware, page_csp
@@ -52,6 +52,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @asynccontextmanager
     async def lifespan(app: FastAPI):
         s: Settings = app.state.settings
+        find_check_modules(s)
         if s.auto_migrate:
             await run_in_threadpool(upgrade, s.sqlalchemy_url)
         app.state.db = get_database(s.sqlalchemy_url)

@@ -11,6 +11,8 @@ database also answers to ``DATABASE_URL`` and the broker to ``REDIS_URL``.
 
 from __future__ import annotations
 
+import importlib
+import importlib.util
 import os
 from collections.abc import Mapping
 from functools import lru_cache
@@ -105,6 +107,10 @@ class Settings(BaseSettings):
     optimized_blas: bool = Field(
         True, description="run IPOPT's linear solver (MUMPS) on scipy-openblas32's kernels for this CPU instead of "
         "CasADi's generic OpenBLAS (each IPOPT iteration 1.3-1.8x faster; needs a C compiler once)")
+    check_modules: str = Field(
+        "", description="comma-separated Python modules that register extra sections of the validation report "
+        "(solver.checks.register_check); the compute and job processes import them, the report and the page show "
+        "their checks")
     default_tutor_fps: float | None = Field(
         None, ge=5, le=30, description="the frame rate of a tutor a request does not give (default: 30 frames/s "
         "for the full body, 15 for HalfBoy: solver.pipeline.DEFAULT_FPS)")
@@ -201,6 +207,18 @@ class Settings(BaseSettings):
         return self.redispatch_after_s if self.redispatch_after_s is not None else self.visibility_timeout_s + 300.0
 
     @property
+    def check_module_names(self) -> tuple[str, ...]:
+        return tuple(m.strip() for m in self.check_modules.split(",") if m.strip())
+
+    @field_validator("check_modules")
+    @classmethod
+    def _module_names(cls, v: str) -> str:
+        for name in (m.strip() for m in v.split(",") if m.strip()):
+            if not all(part.isidentifier() for part in name.split(".")):
+                raise ValueError(f"check module {name!r} is not a Python module name (dotted identifiers)")
+        return v
+
+    @property
     def static_api_keys(self) -> tuple[str, ...]:
         return tuple(k.strip() for k in self.api_keys.split(",") if k.strip())
 
@@ -213,6 +231,27 @@ def enable_native_code(settings: Settings) -> None:
 
     native.enable(compiled=settings.compiled_derivatives, blas=settings.optimized_blas,
                   cache_dir=settings.compiled_dir)
+
+
+def load_check_modules(settings: Settings) -> None:
+    """Import the modules that register extra check sections (``check_modules``) in this process,
+    where reports are made (job processes, the CLI; the API's compute processes import them at
+    start)."""
+    for name in settings.check_module_names:
+        importlib.import_module(name)
+
+
+def find_check_modules(settings: Settings) -> None:
+    """Refuse, naming it, a check module this interpreter cannot find (without importing it: the
+    API process does not load the solver)."""
+    for name in settings.check_module_names:
+        try:
+            found = importlib.util.find_spec(name) is not None
+        except ImportError:
+            found = False
+        if not found:
+            raise RuntimeError(f"MOTIONX_CHECK_MODULES names {name!r}, which is not importable here "
+                               "(install it or put its folder on PYTHONPATH)")
 
 
 @lru_cache(maxsize=1)

@@ -35,7 +35,7 @@ from sqlalchemy.exc import DBAPIError
 from tenacity import Retrying, retry_if_result, stop_after_delay, wait_fixed
 
 from service import limits, store
-from service.config import Settings, enable_native_code
+from service.config import Settings, enable_native_code, load_check_modules
 from service.db import Database, get_database
 from service.limits import LimitError
 
@@ -187,6 +187,7 @@ def execute_job(job_id: str, settings: Settings) -> str:
         return claim.outcome
     log.info("job %s: attempt %d (%s)", job_id, claim.attempt, token)
     enable_native_code(settings)
+    load_check_modules(settings)
     deadline = time.monotonic() + settings.job_time_limit_s
     with Heartbeat(db, job_id, token, settings.job_lease_s, deadline=deadline, grace=settings.job_stop_grace_s,
                    time_limit_s=settings.job_time_limit_s) as hb:

@@ -196,7 +196,7 @@ class Compute:
         s = self.settings
         if s.compute_workers > 0:
             self.pool = ProcPool("compute", s.compute_workers, memory_mb=s.compute_memory_mb,
-                                 warm=COMPUTE_MODULES, lane_limit=s.lane_running).start()
+                                 warm=COMPUTE_MODULES + s.check_module_names, lane_limit=s.lane_running).start()
 
     def close(self) -> None:
         pool, self.pool = self.pool, None

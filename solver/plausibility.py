@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 import solver.naturalness  # noqa: F401  (registers the naturalness section)
-from solver.checks import Check, Context, sections
+from solver.checks import Check, Context, SectionResult, register_check, sections
 from solver.dynamics import rnea
 from solver.environment import body_weight, ground_of, stances
 from solver.kinematics import contact_points, segment_frames, standing_leg_length
@@ -51,84 +51,99 @@ def about_root(wrench: np.ndarray, q: np.ndarray) -> np.ndarray:
     return out
 
 
+@register_check(section="residual", verdict="plausible", flags="all", flatten=True, order=0,
+                title="root residual")
+def _residual_section(ctx: Context) -> SectionResult:
+    """The root residual: what the six root coordinates still need once the ground wrenches are
+    applied, force / weight and moment / (weight × leg), within the residual tolerance."""
+    motion, tol, weight, leg = ctx.motion, ctx.tolerances, ctx.weight, ctx.leg
+    res = root_residual(motion, ctx.gravity)
+    rr = {
+        "max_force_N": float(np.abs(res[3:]).max()),
+        "max_moment_Nm": float(np.abs(res[:3]).max()),
+        "rms_force_N": float(np.sqrt((res[3:] ** 2).sum(axis=0).mean())),
+        "max_force_rel_weight": float(np.abs(res[3:]).max() / weight),
+        "max_moment_rel_weight_leg": float(np.abs(res[:3]).max() / (weight * leg)),
+        "about": "root position of each frame",
+        "frames": ("frames and midpoints (C2 cubic spline)" if motion.interpolation == "cubic-spline"
+                   else "interior (central differences)"),
+    }
+    checks = [Check.measure("root_force", rr["max_force_rel_weight"], tol.residual, "BW", "root residual force"),
+              Check.measure("root_moment", rr["max_moment_rel_weight_leg"], tol.residual, "BW·leg",
+                            "root residual moment")]
+    if motion.wrenches is None:
+        checks.append(Check("wrenches", None, 0.0, "", "the motion stores its contact wrenches", False,
+                            missing="no contact wrenches: the ground reaction is unknown"))
+    return SectionResult(tuple(checks), {"root_residual": rr})
+
+
+@register_check(section="contacts", verdict="plausible", flags="all", flatten=True, order=1)
+def _contacts_section(ctx: Context) -> SectionResult:
+    """The contacts: active points on the ground without slip or penetration; with wrenches, the
+    friction cone, unilateral normal force, no wrench on a foot in the air, the centre of pressure
+    on the sole."""
+    motion, tol, weight = ctx.motion, ctx.tolerances, ctx.weight
+    if motion.contacts is None or not motion.character.contacts:
+        return SectionResult((Check("contacts", None, 0.0, "", "the motion stores its contact schedule", False,
+                                    missing="no contact schedule"),))
+    kin = _contact_checks(motion, ctx.friction, weight)
+    checks = [Check.measure("slip", kin["slip_mm"], tol.slip_mm, "mm", "slip of a contact point"),
+              Check.measure("penetration", kin["penetration_mm"], tol.penetration_mm, "mm", "ground penetration"),
+              Check.measure("contact_height", kin["contact_height_error_mm"], tol.contact_height_mm, "mm",
+                            "height of an active contact point above the ground")]
+    if motion.wrenches is not None:
+        f_tol = tol.friction * weight
+        checks += [Check.measure("friction", kin["friction_cone_excess_N"], f_tol, "N", "friction cone excess"),
+                   Check.measure("normal_force", kin["min_normal_force_N"], -f_tol, "N", "least normal force",
+                                 at_least=True),
+                   Check.measure("air_wrench", kin["max_wrench_in_air"], f_tol, "N", "wrench of a foot in the air"),
+                   Check.measure("cop", kin["cop_outside_mm"], tol.cop_mm, "mm",
+                                 "centre of pressure outside the sole (heel to toe, as wide as the foot)")]
+    return SectionResult(tuple(checks), kin)
+
+
 def report(motion: Motion, tol: Tolerances = Tolerances(), realism: RealismLimits = RealismLimits(),
-           include: tuple[str, ...] = ()) -> dict:
-    """The validation report: the root residual and contact checks, then every registered check
-    section (``solver.checks``: realism, naturalness; the optional ones named in ``include``, as
-    ``mjcf.validate`` names its MuJoCo replay). ``plausible``: no failed check of the residual,
-    the contacts, and the sections deciding it; ``natural``: the naturalness section's verdict."""
-    ch = motion.character
+           include: tuple[str, ...] = (), limits: Mapping[str, Any] | None = None) -> dict:
+    """The validation report: every registered check section (``solver.checks``) in its order —
+    the root residual and the contacts (here), realism, naturalness, and the optional ones named in
+    ``include`` (``mjcf.validate``'s MuJoCo replay and simulation). ``limits``: a section's limits
+    by its name (``realism``: the ``realism`` argument unless given here). ``plausible``: no
+    failed check of the sections deciding it; ``natural``: the naturalness section's verdict
+    (None when it could not check the motion). ``sections`` lists what ran, in order."""
     env = motion.environment
     g = np.asarray(env.gravity, dtype=float)
-    mu = env.friction
     weight = body_weight(motion)
-    leg = standing_leg_length(ch)
-    res = root_residual(motion, g)
+    leg = standing_leg_length(motion.character)
     out: dict[str, Any] = {
-        "character": ch.name,
+        "character": motion.character.name,
         "frames": motion.T,
         "fps": motion.fps,
         "body_weight_N": weight,
         "leg_length_m": leg,
-        "environment": {"gravity": g.tolist(), "friction": mu, **_terrain(motion)},
+        "environment": {"gravity": g.tolist(), "friction": env.friction, **_terrain(motion)},
         "has_wrenches": motion.wrenches is not None,
         "has_contacts": motion.contacts is not None,
-        "root_residual": {
-            "max_force_N": float(np.abs(res[3:]).max()),
-            "max_moment_Nm": float(np.abs(res[:3]).max()),
-            "rms_force_N": float(np.sqrt((res[3:] ** 2).sum(axis=0).mean())),
-            "max_force_rel_weight": float(np.abs(res[3:]).max() / weight),
-            "max_moment_rel_weight_leg": float(np.abs(res[:3]).max() / (weight * leg)),
-            "about": "root position of each frame",
-            "frames": ("frames and midpoints (C2 cubic spline)" if motion.interpolation == "cubic-spline"
-                       else "interior (central differences)"),
-        },
         "tolerances": asdict(tol),
     }
-    rr = out["root_residual"]
-    checks = [Check.measure("root_force", rr["max_force_rel_weight"], tol.residual, "BW", "root residual force"),
-              Check.measure("root_moment", rr["max_moment_rel_weight_leg"], tol.residual, "BW·leg",
-                            "root residual moment")]
-    problems = []
-    if motion.wrenches is None:
-        problems.append("no contact wrenches: the ground reaction is unknown")
-        checks.append(Check("wrenches", None, 0.0, "", "the motion stores its contact wrenches", False))
-    if motion.contacts is not None and ch.contacts:
-        kin = _contact_checks(motion, mu, weight)
-        out.update(kin)
-        checks += [Check.measure("slip", kin["slip_mm"], tol.slip_mm, "mm", "slip of a contact point"),
-                   Check.measure("penetration", kin["penetration_mm"], tol.penetration_mm, "mm", "ground penetration"),
-                   Check.measure("contact_height", kin["contact_height_error_mm"], tol.contact_height_mm, "mm",
-                                 "height of an active contact point above the ground")]
-        if motion.wrenches is not None:
-            f_tol = tol.friction * weight
-            checks += [Check.measure("friction", kin["friction_cone_excess_N"], f_tol, "N", "friction cone excess"),
-                       Check.measure("normal_force", kin["min_normal_force_N"], -f_tol, "N", "least normal force",
-                                     at_least=True),
-                       Check.measure("air_wrench", kin["max_wrench_in_air"], f_tol, "N", "wrench of a foot in the air"),
-                       Check.measure("cop", kin["cop_outside_mm"], tol.cop_mm, "mm",
-                                     "centre of pressure outside the sole (heel to toe, as wide as the foot)")]
-    else:
-        problems.append("no contact schedule")
-        checks.append(Check("contacts", None, 0.0, "", "the motion stores its contact schedule", False))
-    problems += [f"{c.name} out of tolerance" for c in checks if c.failed and c.name not in ("wrenches", "contacts")]
-    flags = {c.name: c.passed for c in checks}
-    verdicts: dict[str, list[bool | None]] = {"plausible": [not c.failed for c in checks], "natural": []}
-    # the registered sections (solver.checks): realism (physics between the frames: Newton–Euler
-    # from positions, inverse dynamics between the frames, torsional friction, foot spin, ranges;
-    # its failures are part of ``plausible``), naturalness (the gait's human features against
-    # published limits and the captured walk's own figures; its failures make the motion not
-    # ``natural``), and the optional ones the caller includes (the MuJoCo replay)
-    ctx = Context(motion, g, mu, weight, leg, tol, realism)
-    for section in sections(include):
+    flags: dict[str, bool] = {}
+    problems: list[str] = []
+    verdicts: dict[str, list[bool | None]] = {"plausible": [], "natural": []}
+    ctx = Context(motion, g, env.friction, weight, leg, tol, {"realism": realism, **(limits or {})})
+    run = sections(include)
+    for section in run:
         result = section.produce(ctx)
-        out[section.name] = result.to_dict() if section.nested else dict(result.extra)
+        if section.flatten:
+            out.update(result.extra)
+            out[section.name] = SectionResult(result.checks, {}, result.checked, result.unchecked).to_dict()
+        else:
+            out[section.name] = result.to_dict()
         flags.update(section.flag_checks(result))
         problems += section.problems(result)
         if section.flags != "none":
             verdicts[section.verdict] += [not c.failed for c in result.checks]
         else:
             verdicts[section.verdict].append(result.passed)
+    out["sections"] = [s.describe() for s in run]
     out["checks"] = flags
     out["problems"] = problems
     out["plausible"] = all(verdicts["plausible"])

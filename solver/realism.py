@@ -395,7 +395,8 @@ def realism_report(motion: Motion, gravity: Any, mu: float, weight: float, leg: 
 
 @register_check(section="realism", verdict="plausible", flags="failures", prefix="realism_", order=10)
 def _realism_section(ctx: Context) -> SectionResult:
-    return realism_checks(ctx.motion, ctx.gravity, ctx.friction, ctx.weight, ctx.leg, ctx.realism_limits)
+    return realism_checks(ctx.motion, ctx.gravity, ctx.friction, ctx.weight, ctx.leg,
+                          ctx.limits_for("realism", RealismLimits()))
 
 
 def realism_checks(motion: Motion, gravity: Any, mu: float, weight: float, leg: float,

@@ -411,15 +411,21 @@ def test_optimizer_bounds_lie_strictly_inside_the_checks_limits():
 
 
 def test_the_report_runs_the_registered_check_sections():
-    """The report's sections are the registered ones (solver.checks): realism and naturalness
-    always, the MuJoCo replay when its caller includes it; an unknown section is refused."""
+    """The report's sections are the registered ones (solver.checks): the root residual, the
+    contacts, realism and naturalness always, the MuJoCo replay when its caller includes it; an
+    unknown section is refused. A check without a figure fails unless its producer says why."""
     import mjcf.validate  # noqa: F401  (registers the MuJoCo replay's section)
     from solver.checks import Check, sections
 
-    assert [s.name for s in sections()] == ["realism", "naturalness"]
-    assert [s.name for s in sections(("mujoco_replay",))] == ["realism", "naturalness", "mujoco_replay"]
+    core = ["residual", "contacts", "realism", "naturalness"]
+    assert [s.name for s in sections()] == core
+    assert [s.name for s in sections(("mujoco_replay",))] == [*core, "mujoco_replay"]
     with pytest.raises(ValueError, match="unknown check section"):
         sections(("forward_simulation",))
     low = Check.measure("root_height", 0.4, 0.5, "leg", "lowest root height", warning=True, at_least=True)
     assert not low.passed and not low.failed and low.to_dict()["bound"] == "min"
     assert Check.measure("x", 2.0, 1.0, "BW", "x", applies=False).passed
+    unmeasured = Check.measure("x", None, 1.0, "BW", "x")  # a misspelt figure reads as None
+    assert unmeasured.failed and "not measured" in unmeasured.problem("s")
+    nothing = Check.measure("x", None, 1.0, "BW", "x", missing="no swing phase")
+    assert nothing.passed and nothing.to_dict()["missing"] == "no swing phase"

@@ -13,7 +13,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from service.cli import CliError, add_command, cancel_on_signals, finite_list, load_motion
-from service.config import enable_native_code, get_settings
+from service.config import enable_native_code, get_settings, load_check_modules
 from solver import axes as registry
 from solver.formats import EXPORT_WORLDS
 
@@ -64,6 +64,7 @@ def _library(args: argparse.Namespace, cancel: cancel_on_signals) -> int:
     from solver.continuation import StepControl
 
     enable_native_code(get_settings())
+    load_check_modules(get_settings())
     axes = {}
     for name in L.AXES:
         vals = getattr(args, name)

@@ -23,7 +23,7 @@ from service.cli import (
     warn_input,
 )
 from service.commands.outputs import prepare_output_dir
-from service.config import enable_native_code, get_settings
+from service.config import enable_native_code, get_settings, load_check_modules
 from solver import axes as registry
 from solver.outputs import progress_csv, step_stem
 
@@ -103,6 +103,7 @@ def _tutor(args: argparse.Namespace, cancel: cancel_on_signals) -> int:
     from solver.pipeline import PipelineError, make_tutor
 
     enable_native_code(get_settings())
+    load_check_modules(get_settings())
     t0 = time.perf_counter()
     try:
         capture = load_trial(args.inputs, **import_options(args))
@@ -147,6 +148,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
     from mjcf.validate import validate
     from solver.plausibility import Tolerances
 
+    load_check_modules(get_settings())
     motion = load_motion(args.motion)
     tol = Tolerances(residual=args.residual_tol) if args.residual_tol else Tolerances()
     rep = validate(motion, tol)
@@ -268,6 +270,7 @@ def cmd_extrapolate(args: argparse.Namespace) -> int:
     from solver.continuation import StepControl, Target, extrapolate
 
     enable_native_code(get_settings())
+    load_check_modules(get_settings())
 
     try:  # the target first: a wrong value is told before any file is read
         target = Target(**{ax.name: getattr(args, ax.name) for ax in registry.axes()})

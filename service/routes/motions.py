@@ -389,7 +389,7 @@ async def get_validation(motion_id: str, request: Request, owner: OwnerDep, db: 
             row = store.get_motion(s, motion_id=motion_id, owner=owner)
             if row is None:
                 raise not_found("motion", motion_id)
-            if row.validation is not None:
+            if row.validation is not None and "sections" in row.validation:  # a report with its sections listed
                 return row.validation, None
             return None, row.data
 

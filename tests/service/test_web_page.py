@@ -23,9 +23,11 @@ from urllib.parse import urljoin, urlparse
 
 import numpy as np
 import pytest
+from conftest import start_api_process
 from svc_util import CHEAP, KEY_A, halfboy_motion, wait_job
 
 from service.routes.web import STATIC_DIR, THREE_DIR
+from solver.motion import Motion
 
 REPO = Path(__file__).resolve().parents[2]
 SCREENSHOT = REPO / "out" / "web" / "screenshot.png"
@@ -423,3 +425,72 @@ def test_page_shows_a_library_grid_and_previews_a_cell(api, browser, tutor_id):
         assert not _state(page)["errors"]
     finally:
         context.close()
+
+
+#: a check section from outside the project, in one module: the walk's mean speed, a warning
+SPEED_CHECK = '''
+"""The walk's mean speed over the clip (a check section registered from outside motionx)."""
+import numpy as np
+
+from solver.checks import Check, SectionResult, register_check
+
+
+@register_check(section="walking_speed", verdict="natural", order=25, title="walking speed (added)")
+def walking_speed(ctx):
+    m = ctx.motion
+    speed = float(np.linalg.norm(m.q[:2, -1] - m.q[:2, 0]) * m.fps / (m.T - 1))
+    return SectionResult((Check.measure("mean_speed", speed, 0.3, "m/s", "root travel over the clip's duration",
+                                        warning=True, at_least=True),), {"frames": m.T})
+'''
+
+
+def test_a_check_section_added_in_one_module_reaches_the_report_and_the_page(tmp_path_factory, browser,
+                                                                              tutor_motion_json):
+    """A module that registers a check section, named in MOTIONX_CHECK_MODULES: its section is in
+    the API's validation report (computed in a compute process) and rendered on the page, with no
+    other edit."""
+    plugins = tmp_path_factory.mktemp("plugins")
+    (plugins / "speed_check.py").write_text(SPEED_CHECK)
+    path = os.pathsep.join(p for p in (str(plugins), os.environ.get("PYTHONPATH", "")) if p)
+    a = start_api_process(tmp_path_factory.mktemp("api_plugin"), {"MOTIONX_CHECK_MODULES": "speed_check",
+                                                                  "PYTHONPATH": path})
+    try:
+        r = a.a.post("/motions?name=tutor", content=tutor_motion_json, headers={"Content-Type": "application/json"})
+        assert r.status_code == 201, r.text
+        motion_id = r.json()["id"]
+        rep = a.a.get(f"/motions/{motion_id}/validation", timeout=120).json()
+        names = [s["name"] for s in rep["sections"]]
+        assert names == ["residual", "contacts", "realism", "naturalness", "walking_speed", "mujoco_replay"], names
+        check = rep["walking_speed"]["checks"]["mean_speed"]
+        m = Motion.from_dict(json.loads(tutor_motion_json))
+        q = m.q
+        assert check["value"] == pytest.approx(np.linalg.norm(q[:2, -1] - q[:2, 0]) * m.fps / (q.shape[1] - 1))
+        assert check["passed"] and 0.8 < check["value"] < 2.0 and rep["walking_speed"]["frames"] == q.shape[1]
+
+        context, page, _requests, errors = _open(browser, 1200, 900)
+        try:
+            page.goto(f"{a.base_url}/ui/")
+            page.fill("#key-input", KEY_A)
+            page.click("#key-form button[type=submit]")
+            page.click(f'#motion-list button[data-id="{motion_id}"]')
+            wait_js(page, "window.motionx.state.validation", timeout=60)
+            section = page.locator('#validation tr[data-section="walking_speed"]')
+            assert section.text_content().startswith("walking speed (added)")
+            row = page.locator('#validation tr[data-check="mean_speed"]')
+            assert row.text_content().startswith("mean speed (m/s)") and "≥ 0.3" in row.text_content()
+            assert row.locator("td").last.text_content() == "✓"
+            assert not errors, errors
+        finally:
+            context.close()
+    finally:
+        a.close()
+        a.proc.stop()
+
+
+def test_a_check_module_that_cannot_be_found_stops_the_server_naming_it(tmp_path):
+    """A misspelt module in MOTIONX_CHECK_MODULES is refused at start, named (not a compute
+    process failing on every request)."""
+    with pytest.raises(Exception) as e:
+        start_api_process(tmp_path, {"MOTIONX_CHECK_MODULES": "no_such_check_module"})
+    log = (tmp_path / "api.log").read_text()
+    assert "no_such_check_module" in log and "not importable" in log, (str(e.value), log[-2000:])

@@ -760,19 +760,21 @@ async function loadValidation(id, token) {
   }
 }
 
+/** A figure as the report table shows it: scientific notation for the residual-sized ones. */
+const figure = (x) => (typeof x === 'number' && x !== 0 && Math.abs(x) < 1e-2 ? sci(x) : fmt(x));
+
+/** The report's sections in order: its `sections` list, or (a report without one) every
+ * top-level object with `checks`. */
+function reportSections(r) {
+  if (Array.isArray(r.sections)) return r.sections.filter((s) => r[s.name] && r[s.name].checks);
+  return Object.keys(r).filter((k) => r[k] && typeof r[k] === 'object' && r[k].checks)
+    .map((name) => ({ name, title: name.replaceAll('_', ' ') }));
+}
+
+/** Every registered check section of the report (solver.checks), each check with its value,
+ * limit, the captured walk's own figure where the check has one, and its verdict; a section the
+ * page has never heard of renders the same way. Warnings (!) do not fail. */
 function renderValidation(r) {
-  const checks = r.checks || {};
-  const tol = r.tolerances || {};
-  const rr = r.root_residual || {};
-  const mj = r.mujoco_replay || {};
-  const mark = (...names) => {
-    const known = names.filter((n) => n in checks);
-    if (!known.length) return h('td', {}, '');
-    const ok = known.every((n) => checks[n]);
-    return h('td', { class: ok ? 'check-yes' : 'check-no' }, ok ? '✓' : '✗');
-  };
-  const row = (label, value, limit, check) => h('tr', {}, h('th', {}, label), h('td', { class: 'num' }, value),
-    h('td', { class: 'num' }, limit), check);
   const rows = [
     h('tr', { class: 'verdict' }, h('th', {}, 'plausible'),
       h('td', { colspan: 3 }, plausibleBadge(r.plausible === undefined ? null : r.plausible))),
@@ -780,45 +782,27 @@ function renderValidation(r) {
       h('td', { colspan: 3 }, naturalBadge(r.natural === undefined ? null : r.natural))),
   ];
   if (r.error) rows.push(h('tr', { class: 'problems' }, h('td', { colspan: 4 }, r.error)));
-  rows.push(
-    h('tr', {}, h('th', {}, ''), h('th', {}, 'value'), h('th', {}, 'tolerance'), h('th', {}, '')),
-    row('root residual, force / weight', sci(rr.max_force_rel_weight), sci(tol.residual), mark('root_force')),
-    row('root residual, moment / (weight·leg)', sci(rr.max_moment_rel_weight_leg), sci(tol.residual), mark('root_moment')),
-    row('MuJoCo replay, force / weight', sci(mj.max_force_rel_weight), sci(tol.residual), mark('mujoco_root')),
-    row('MuJoCo agreement', sci(Math.max(mj.agreement_force_rel_weight ?? NaN, mj.agreement_moment_rel_weight_leg ?? NaN)),
-      sci(tol.residual), mark('mujoco_agrees')),
-    row('slip (mm)', sci(r.slip_mm), fmt(tol.slip_mm), mark('slip')),
-    row('penetration (mm)', sci(r.penetration_mm), fmt(tol.penetration_mm), mark('penetration')),
-    row('contact height error (mm)', sci(r.contact_height_error_mm), fmt(tol.contact_height_mm), mark('contact_height')),
-    row('friction cone excess (N)', sci(r.friction_cone_excess_N), fmt(tol.friction), mark('friction')),
-    row('min normal force (N)', fmt(r.min_normal_force_N), '', mark('normal_force')),
-    row('CoP outside the foot (mm)', sci(r.cop_outside_mm), fmt(tol.cop_mm), mark('cop')),
-  );
-  // realism checks (solver.realism): physics between the frames, each with its limit; warnings do not fail
-  for (const [name, c] of Object.entries((r.realism && r.realism.checks) || {})) {
-    const warn = c.severity === 'warning';
-    rows.push(row(`realism: ${name.replaceAll('_', ' ')} (${c.unit})`, fmt(c.value),
-      `${c.bound === 'min' ? '≥' : '≤'} ${fmt(c.limit)}`,
-      h('td', { class: c.passed ? 'check-yes' : (warn ? '' : 'check-no'), title: c.what },
-        c.passed ? '✓' : (warn ? '!' : '✗'))));
+  for (const sec of reportSections(r)) {
+    const checks = Object.entries(r[sec.name].checks).filter(([, c]) => c.applies !== false);
+    if (!checks.length) continue;
+    rows.push(h('tr', { class: 'section', 'data-section': sec.name }, h('th', {}, sec.title || sec.name),
+      h('th', {}, 'value'), h('th', {}, 'limit'), h('th', {}, '')));
+    for (const [name, c] of checks) {
+      const warn = c.severity === 'warning';
+      const capture = c.capture !== undefined && c.capture !== null ? ` (capture ${figure(c.capture)})` : '';
+      const value = c.value === null ? (c.missing || '–') : `${figure(c.value)}${capture}`;
+      const unit = c.unit ? ` (${c.unit})` : '';
+      const title = [c.what, c.source ? `Source: ${c.source}` : ''].filter(Boolean).join('. ');
+      rows.push(h('tr', { 'data-check': name }, h('th', {}, `${name.replaceAll('_', ' ')}${unit}`),
+        h('td', { class: 'num' }, value), h('td', { class: 'num' }, `${c.bound === 'min' ? '≥' : '≤'} ${figure(c.limit)}`),
+        h('td', { class: c.passed ? 'check-yes' : (warn ? '' : 'check-no'), title },
+          c.passed ? '✓' : (warn ? '!' : '✗'))));
+    }
   }
-  // naturalness checks (solver.naturalness): the gait's human features against published limits, with the
-  // captured walk's own figure beside each (capture column); warnings do not fail
-  const nat = Object.entries((r.naturalness && r.naturalness.checks) || {}).filter(([, c]) => c.applies !== false);
-  if (nat.length) {
-    rows.push(h('tr', {}, h('th', {}, 'naturalness'), h('th', {}, 'value'), h('th', {}, 'limit'), h('th', {}, '')));
-  }
-  for (const [name, c] of nat) {
-    const warn = c.severity === 'warning';
-    const capture = c.capture !== undefined ? ` (capture ${fmt(c.capture)})` : '';
-    rows.push(row(`${name.replaceAll('_', ' ')} (${c.unit})`, c.value === null ? '–' : `${fmt(c.value)}${capture}`,
-      `${c.bound === 'min' ? '≥' : '≤'} ${fmt(c.limit)}`,
-      h('td', { class: c.passed ? 'check-yes' : (warn ? '' : 'check-no'), title: `${c.what}. Source: ${c.source}` },
-        c.passed ? '✓' : (warn ? '!' : '✗'))));
-  }
+  const row = (label, value) => h('tr', {}, h('th', {}, label), h('td', { class: 'num' }, value), h('td'), h('td'));
   const env = r.environment || {};
-  if (env.gravity) rows.push(row('gravity (m/s²)', env.gravity.map((g) => fmt(g)).join(', '), '', h('td')));
-  if (env.friction !== undefined) rows.push(row('friction', fmt(env.friction), '', h('td')));
+  if (env.gravity) rows.push(row('gravity (m/s²)', env.gravity.map((g) => fmt(g)).join(', ')));
+  if (env.friction !== undefined) rows.push(row('friction', fmt(env.friction)));
   if (r.problems && r.problems.length) rows.push(h('tr', { class: 'problems' }, h('td', { colspan: 4 }, r.problems.join('; '))));
   $('validation').replaceChildren(h('tbody', {}, rows));
 }
