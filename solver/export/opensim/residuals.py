@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from solver.checks import Check
 from solver.export.opensim.base import CAPTURE_LOWPASS_HZ, EXTERNAL_LOADS_FILE, SETUP_FILE, OpenSimExportError
 from solver.export.opensim.child import run_child
 from solver.export.opensim.files import external_loads_xml, id_setup_xml, repaired_model_text, write_mot
@@ -72,6 +73,15 @@ def residual_figures(labels: Sequence[str], data: np.ndarray, root_coordinates: 
     peak_f = max((v["peak_N"] for v in forces.values()), default=float("nan"))
     peak_fvec = float(np.max(np.linalg.norm(np.stack(fvec, axis=1), axis=1))) if fvec else float("nan")
     peak_m = max((v["peak_Nm"] for v in moments.values()), default=float("nan"))
+    source = "Hicks et al. 2015 (J Biomech Eng 137(2):020905), Table 2"
+    checks = (
+        Check.measure("hicks_force", None if np.isnan(peak_fvec) else peak_fvec, f_lim, "N",
+                      "peak magnitude of the pelvis residual force vector, against 5 % of the peak net external force",
+                      source=source),
+        Check.measure("hicks_moment", None if np.isnan(peak_m) else peak_m, m_lim, "N·m",
+                      "peak rotational pelvis generalised force, against 1 % of centre-of-mass height x the peak "
+                      "net external force", source=source),
+    )
     return {
         "forces": forces, "moments": moments,
         "peak_net_external_force_N": peak_ext, "com_height_m": com_height,
@@ -81,7 +91,8 @@ def residual_figures(labels: Sequence[str], data: np.ndarray, root_coordinates: 
         "force_percent_of_peak_external": 100.0 * peak_fvec / peak_ext if peak_ext else float("nan"),
         "moment_percent_of_com_height_x_peak_external": 100.0 * peak_m / (com_height * peak_ext)
         if peak_ext and com_height else float("nan"),
-        "meets_hicks_2015": bool(peak_fvec <= f_lim and peak_m <= m_lim),
+        "checks": {c.name: c.to_dict() for c in checks},
+        "meets_hicks_2015": not any(c.failed for c in checks),
         "criteria": "Hicks et al. 2015 (J Biomech Eng 137(2):020905), Table 2: peak residual force <= 5 % of the "
                     "peak net external force (here the largest magnitude of the pelvis residual force vector); "
                     "peak residual moment <= 1 % of centre-of-mass height x peak net external force (each "
