@@ -1,7 +1,7 @@
 """Does the simulated model agree with the motion it performs? (docs/simulation.md, "Agreement")
 
-Measured on the reference alone (no controller), with the performable model of
-``mjcf.simulate`` (:func:`mjcf.simulate.performable_model`):
+Measured on the reference alone (no controller), with the simulation's performable model
+(:func:`mjcf.performable.performable_model`):
 
 * **The sole.** The simulated sole is the character's (``Character.sole``: the rectangle whose back
   and front edges have the heel and toe contact points as midpoints, as wide as the foot box), turned
@@ -124,7 +124,7 @@ def sole_agreement(motion: Motion, model: mujoco.MjModel) -> dict[str, Any]:
 def swing_clearance(motion: Motion, model: mujoco.MjModel, ref: Any, step: float = 0.002) -> dict[str, Any]:
     """The reference's sole corners above the ground through each foot's swing (the reference's
     frames before and after without a contact of that foot), sampled every ``step`` s over one cycle
-    on the reference's spline (``ref``: the simulation's ``mjcf.simulate.Reference``): per foot the
+    on the reference's spline (``ref``: the simulation's ``mjcf.reference.Reference``): per foot the
     lowest corner (m), where in the swing it is (0 lift-off, 1 touchdown) and the fraction of the
     swing with a corner below the ground."""
     qadr = _coordinate_qpos(motion, model)

@@ -31,7 +31,8 @@ from solver.errors import InputError
 from solver.export import Y_UP, ExportError
 from solver.export.rig_gltf import rig_glb, rig_glb_library
 from solver.io.bvh import bvh_track
-from solver.io.gltf import GltfError, _sample_channel, gltf_track, parse_gltf
+from solver.io.gltf import GltfError, gltf_track, parse_gltf
+from solver.io.gltf.animation import _sample_channel
 from solver.kinematics import contact_points
 from solver.motion import Motion
 from solver.rig import Rig, feet_report, retarget
@@ -215,7 +216,7 @@ def test_every_interpolation_reads_the_same_keys(shared_data, interp):
     g.buffers[0].byteLength = len(blob)
     g.set_binary_blob(bytes(blob))
     asset = parse_gltf(b"".join(g.save_to_bytes()), "variant")
-    from solver.io.gltf import _track
+    from solver.io.gltf.trial import _track
 
     variant, _, _ = _track(asset, "variant", MASS, None, None)
     base = gltf_track(shared_data / TRIAL, mass=MASS)
@@ -255,7 +256,7 @@ def test_nodes_above_the_skeleton_are_folded_into_the_frame(shared_data):
     arm.translation = [3.0, 0.2, -1.0]
     arm.scale = [0.011] * 3
     asset = parse_gltf(b"".join(g.save_to_bytes()), "turned")
-    from solver.io.gltf import _track
+    from solver.io.gltf.trial import _track
 
     turned, _, _ = _track(asset, "turned", MASS, None, None)
     base = gltf_track(shared_data / TRIAL, mass=MASS)

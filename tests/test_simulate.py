@@ -92,7 +92,9 @@ def test_stairs_treads_hold_the_feet_and_clear_the_swing(simulated):
     """The treads built for a flight of stairs hold every stance foot of the reference on its
     tread top, and each riser stands where the reference's swing foot passes above it."""
     from mjcf.agreement import ground_height
-    from mjcf.simulate import Gains, Reference, Tracker, performable_model
+    from mjcf.performable import performable_model
+    from mjcf.reference import Reference
+    from mjcf.tracker import Gains, Tracker
 
     tutor, _, _ = simulated
     res = solver.extrapolate(tutor, solver.Target(step_height_m=0.08))
@@ -150,7 +152,10 @@ def test_simulated_sole_is_the_characters_and_the_reference_clears_it(simulated)
 def test_start_is_preloaded_at_the_stored_vertical_force(simulated):
     """The start's contacts carry the stored vertical force from the first step (the body pressed into
     the soft contacts), where the unloaded start has none and oscillates."""
-    from mjcf.simulate import Gains, Reference, Tracker, _rollout, _start, mid_stance_time, performable_model
+    from mjcf.performable import performable_model
+    from mjcf.reference import Reference, mid_stance_time
+    from mjcf.rollout import _rollout, _start
+    from mjcf.tracker import Gains, Tracker
 
     motion, out, _ = simulated
     start = json.loads((out / "report.json").read_text())["start"]
@@ -172,7 +177,9 @@ def test_start_is_preloaded_at_the_stored_vertical_force(simulated):
 def test_cycle_completes_from_the_reference_state_without_root_help(simulated):
     """Priced out of the QP, the root residual stays below 10⁻⁴ BW and the tutor's cycle still completes
     from the reference's state (docs/simulation.md: on the shipped tutors the root help is not needed)."""
-    from mjcf.simulate import Gains, Reference, _resync, mid_stance_time
+    from mjcf.reference import Reference, mid_stance_time
+    from mjcf.simulate import _resync
+    from mjcf.tracker import Gains
 
     motion, _, _ = simulated
     ref = Reference(motion)

@@ -289,7 +289,8 @@ _CTYPE = {5126: np.dtype("<f4"), 5121: np.dtype("u1"), 5123: np.dtype("<u2"), 51
 
 
 def _parse_glb(data: bytes) -> tuple[dict, bytes | None]:
-    from solver.io.gltf import GltfError, split_glb
+    from solver.io.gltf import GltfError
+    from solver.io.gltf.container import split_glb
 
     try:
         return split_glb(data, "GLB")

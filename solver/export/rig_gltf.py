@@ -174,7 +174,8 @@ def _animation(buf: Buffer, name: str, motion: Motion, rig: Rig, pose: RigPose, 
 
 def _source_document(rig: Rig, poses: list[tuple[str, Motion, RigPose]], meshes: bool,
                      world: str) -> tuple[dict, bytes]:
-    from solver.io.gltf import GltfError, _matrix, node_parents, node_trs, parse_gltf
+    from solver.io.gltf import GltfError, parse_gltf
+    from solver.io.gltf.nodes import _matrix, node_parents, node_trs
 
     try:
         asset = parse_gltf(base64.b64decode(str(rig.extra["asset"])), "the source glTF")
