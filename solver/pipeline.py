@@ -8,6 +8,9 @@
 
 A solver failure is a status (``TutorResult.status == "failed"``) with the last iterate kept
 apart in ``last_iterate`` — never returned as the tutor.
+
+The solves and their weights are in ``solver.pipeline_solves``, the cycle's ground calibration in
+``solver.pipeline_calibration``; every name is importable from here.
 """
 
 from __future__ import annotations
@@ -16,7 +19,7 @@ import logging
 import math
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -24,21 +27,41 @@ import numpy as np
 
 from solver import native
 from solver.capture import Capture, GroundFrame
-from solver.character import FULL_SUPERFLUOUS, LOWER_SUPERFLUOUS, Character, CharacterError, merge_segments
-from solver.contact import estimate_contact_wrenches
-from solver.environment import STANDARD_GRAVITY, STANDARD_GRAVITY_VECTOR
+from solver.character import FULL_SUPERFLUOUS, LOWER_SUPERFLUOUS, Character, merge_segments
+from solver.environment import STANDARD_GRAVITY
 from solver.gait import close_loop, ensure_double_support, extract_cycle, periodic_lowpass, tighten_contacts
 from solver.gait.arms import arm_swing, arms_still
 from solver.gait.cycles import LEAD_S
-from solver.io.fit import CONTACT_INSET
 from solver.jsonable import jsonable
-from solver.kinematics import centre_of_mass, contact_points, markers, segment_frames
-from solver.motion import Cycle, GaitReference, Motion, MotionContext, foot_schedule_of
+from solver.kinematics import centre_of_mass, markers
+from solver.motion import Cycle, GaitReference, Motion, MotionContext
 from solver.naturalness import against_plates, capture_figures, joint_rms_deg
+from solver.pipeline_calibration import SOLE_LEVEL_TOL, contact_plane_calibration, sole_calibration
+from solver.pipeline_solves import (
+    STRAIGHT_WALK_DEG,
+    TUTOR_WEIGHTS,
+    TUTOR_WEIGHTS_OF,
+    _select,
+    correct,
+    estimate_wrenches,
+    heading_change_to_impose,
+    problem_for,
+    simplify,
+    tutor_weights,
+)
 from solver.plausibility import report
 from solver.rig import RIG_FORMATS, Rig, calibrate, unroll
-from solver.spacetime import Environment, SolveResult, SpacetimeProblem, Weights
+from solver.spacetime import Environment, SolveResult, Weights
 from solver.status import Status
+
+__all__ = [
+    "DEFAULT_CHARACTER", "DEFAULT_FPS", "KEEP_WHEN_USED", "SOLE_LEVEL_TOL", "STRAIGHT_WALK_DEG", "SYNTHESIS",
+    "TUTOR_WEIGHTS", "TUTOR_WEIGHTS_OF", "UPPER_ROOT_SEGMENTS", "USED_DEG", "PipelineError", "PreparedCycle",
+    "TutorResult", "capture_com", "capture_motion", "closed_cycle", "contact_plane_calibration", "correct",
+    "default_fps", "estimate_wrenches", "fit_figures", "heading_change_to_impose", "make_tutor",
+    "motion_capture", "prepare_cycle", "problem_for", "rig_from_dict", "rig_to_dict", "simplified_motion",
+    "simplify", "sole_calibration", "synthesis_character", "tutor_rig", "tutor_weights", "used_coordinates",
+]
 
 log = logging.getLogger(__name__)
 
@@ -55,27 +78,6 @@ def default_fps(character: str) -> float:
     """The frame rate a tutor of ``character`` is made at unless asked (``DEFAULT_FPS``)."""
     return DEFAULT_FPS.get(character, 15.0)
 UPPER_ROOT_SEGMENTS = ("abdomen",)  # merging it lumps trunk, head and arms into the pelvis
-
-
-#: the tutor's weights: the simplification and the correction track the capture's own joint
-#: angles and pelvis rotations (1° weighs like 3 mm of marker distance, as MocoTrack tracks the
-#: coordinates of its IK), the motion of its whole-body centre of mass (1 cm like 3 cm of marker
-#: distance) and the ground force that moves it (``Weights.force_track``: the capture's kinematic
-#: forces match the plates within ~0.05 BW), where the extrapolation's weak prior (``Weights()``:
-#: 0.1 rad like 1 mm) only steadies what its guide's markers leave unobserved
-TUTOR_WEIGHTS = Weights(coordinates=300.0, root_rotation=300.0, com_track=10.0)
-#: per synthesis character: HalfBoy, whose trunk, head and arms are welded to its pelvis, cannot keep
-#: both the subject's joints and the subject's centre of mass: it keeps the joints and the force's
-#: shape (one braking → propulsion change per stance) at a tenth of the full body's force weight, not the
-#: centre of mass's path, which made it crouch further (the overground walk's stance knees 23/20° where
-#: the capture's are 10/14°; 18/17° with these weights)
-TUTOR_WEIGHTS_OF = {"fullbody": TUTOR_WEIGHTS,
-                    "halfboy": Weights(coordinates=300.0, root_rotation=300.0, com_track=0.0, force_track=100.0)}
-
-
-def tutor_weights(character: str) -> Weights:
-    """The tutor's cost weights for a synthesis character (``TUTOR_WEIGHTS_OF``)."""
-    return TUTOR_WEIGHTS_OF.get(character, TUTOR_WEIGHTS)
 
 
 class PipelineError(ValueError):
@@ -243,153 +245,6 @@ def synthesis_character(capture_character: Character, kind: str,
         locked = [c for c in FULL_SUPERFLUOUS if c in capture_character.coordinate_names and c not in keep]
         return capture_character.reduce(locked, name="fullbody"), capture_character
     raise PipelineError(f"unknown synthesis character {kind!r}; use one of {SYNTHESIS}")
-
-
-def _select(src: Character, q: np.ndarray, dst: Character) -> np.ndarray:
-    return np.stack([q[src.index(nm)] for nm in dst.coordinate_names])
-
-
-def simplify(capture_character: Character, q_capture: np.ndarray, synthesis: Character, fps: float,
-             *, weights: Weights = TUTOR_WEIGHTS, max_iter: int = 500,
-             should_cancel: Callable[[], bool] | None = None, com: np.ndarray | None = None) -> SolveResult:
-    """docs/method.md (M5.15), thesis Table 5.2: the synthesis character's motion closest to the capture's markers
-    (superfluous coordinates locked at 0 = removed), cyclic, no forces. ``should_cancel()`` is
-    polled at every IPOPT iteration (true: the solve ends with ``User_Requested_Stop``)."""
-    T = q_capture.shape[1]
-    problem = problem_for(synthesis, T, fps, None, dynamics=False)
-    gm = markers(capture_character, q_capture).reshape(-1, T)
-    init = _select(capture_character, q_capture, synthesis)
-    return problem.solve(None, guide_markers=gm, init_q=init, weights=weights, max_iter=max_iter,
-                         should_stop=should_cancel, guide_com=com)
-
-
-def correct(synthesis: Character, q_sim: np.ndarray, contacts: np.ndarray, fps: float, *,
-            init_wrenches: np.ndarray | None, env: Environment = Environment(),
-            weights: Weights = TUTOR_WEIGHTS, max_iter: int = 1000, heading_change: float | None = None,
-            prior_q: np.ndarray | None = None, should_cancel: Callable[[], bool] | None = None,
-            com: np.ndarray | None = None) -> SolveResult:
-    """Table 5.3: physically plausible motion closest to the simplified one (the tutor);
-    ``prior_q``: the joint angles the coordinates prior keeps it near (default: the simplified's);
-    ``com``: the centre of mass ``Weights.com_track`` keeps it near (default: the simplified's);
-    ``should_cancel()``: polled at every IPOPT iteration, as in :func:`simplify`."""
-    problem = problem_for(synthesis, q_sim.shape[1], fps, contacts)
-    return problem.solve(q_sim, init_q=q_sim, init_wrenches=init_wrenches, env=env, weights=weights,
-                         max_iter=max_iter, heading_change=heading_change, prior_q=prior_q,
-                         should_stop=should_cancel, guide_com=com)
-
-
-def heading_change_to_impose(q_capture: np.ndarray, q_simplified: np.ndarray) -> float:
-    """The heading change over its cycle (rad) the tutor's optimizer is asked for: the
-    simplified motion's (the cyclic fit to the capture's markers), or exactly 0 when the captured cycle turns less than
-    ``STRAIGHT_WALK_DEG`` (a straight walk's drift is not a curve)."""
-    if abs(math.degrees(float(q_capture[3, -2] - q_capture[3, 0]))) < STRAIGHT_WALK_DEG:
-        return 0.0
-    return float(q_simplified[3, -2] - q_simplified[3, 0])
-
-
-#: a captured cycle turning less than this (degrees) becomes a straight tutor
-STRAIGHT_WALK_DEG = 10.0
-
-_PROBLEMS: dict[tuple, SpacetimeProblem] = {}
-_MAX_CACHED = 8
-
-
-def problem_for(character: Character, T: int, fps: float, contacts: np.ndarray | None, *,
-                dynamics: bool = True, cyclic: bool = True, rising: bool = False) -> SpacetimeProblem:
-    """Build (or reuse) the NLP of a structure: built once, re-solved with new parameters."""
-    key = (id(character), T, float(fps), None if contacts is None else np.asarray(contacts, bool).tobytes(),
-           dynamics, cyclic, rising)
-    prob = _PROBLEMS.get(key)
-    if prob is None or prob.character is not character or prob.stale:
-        prob = SpacetimeProblem(character, T, fps, contacts, dynamics=dynamics, cyclic=cyclic, rising=rising)
-        if len(_PROBLEMS) >= _MAX_CACHED:
-            _PROBLEMS.pop(next(iter(_PROBLEMS)))
-        _PROBLEMS[key] = prob
-    return prob
-
-
-def estimate_wrenches(character: Character, q: np.ndarray, fps: float, contacts: np.ndarray,
-                      gravity=STANDARD_GRAVITY_VECTOR) -> tuple[np.ndarray, dict]:
-    """EFC (docs/method.md (M4)) on the simplified motion: initial contact wrenches for the correction."""
-
-    B = foot_schedule_of(character, contacts)
-    est = estimate_contact_wrenches(character, q, fps, B, gravity=gravity)
-    w = np.nan_to_num(np.asarray(est.wrenches), nan=0.0)
-    # frames 0 and T-1 repeat T-2 and 1 in a cycle with two overlap frames
-    w[:, :, 0] = w[:, :, -2]
-    w[:, :, -1] = w[:, :, 1]
-    return w, est.summary()
-
-
-def contact_plane_calibration(character: Character, q: np.ndarray, contacts: np.ndarray) -> tuple[np.ndarray, float]:
-    """Lower the motion so the active contact points rest on z = 0 (median over stance).
-
-    The model's contact points sit inside the foot box (docs/method.md (M1)), above the sole, so a
-    capture whose soles touch the floor has them hovering; without this the correction
-    would pull the whole body down. Returns the shifted motion and the shift (m).
-    """
-
-    cp = contact_points(character, q)
-    z = cp[:, 2, :][np.asarray(contacts, dtype=bool)]
-    if z.size == 0:
-        return q, 0.0
-    h = float(np.median(z))
-    out = np.array(q, copy=True)
-    out[2] -= h
-    return out, h
-
-
-#: a foot's heel and toe contact points more than this apart in height at flat foot are levelled (m)
-SOLE_LEVEL_TOL = 0.003
-
-
-def sole_calibration(character: Character, q: np.ndarray, contacts: np.ndarray) -> tuple[Character, dict]:
-    """Level each foot's sole: heel and toe contact points at the same height while the foot is
-    flat on the ground (the frames where both are in contact).
-
-    The capture skeleton's sole is the line through its heel and toe landmarks (foot frame
-    ``x``); where the landmarks sit at different heights above the real sole (a retargeted
-    skeleton, markers on the shoe), a flat foot stands on its heel or toe point alone, and
-    heel rise and toe clearance mean nothing. The two points are moved in opposite directions
-    along the foot's vertical axis (by half the median difference each) and the foot box
-    follows (its bottom stays 1 cm below the lower point). Returns the character and what was
-    moved, per foot (mm)."""
-    A = np.asarray(contacts, dtype=bool)
-    N = A.shape[1] - 2 if A.shape[1] > 4 else A.shape[1]
-    cp = contact_points(character, q)
-    rots, _ = segment_frames(character, q)
-    names = [sg.name for sg in character.segments]
-    pts = list(character.contacts)
-    feet = list(character.feet)
-    moved: dict[str, float] = {}
-    for side in ("right", "left"):
-        try:
-            heel, toe = character.sole_indices(side)  # by name (``Character.sole``)
-        except CharacterError:  # not a heel and a toe point on one segment
-            continue
-        flat = A[heel, :N] & A[toe, :N]
-        if flat.sum() < 2:
-            continue
-        dz = float(np.median(cp[heel, 2, :N][flat] - cp[toe, 2, :N][flat]))
-        if abs(dz) < SOLE_LEVEL_TOL:
-            continue
-        seg = pts[heel].segment
-        kz = float(np.median(rots[names.index(seg), 2, 2, :N][flat]))  # world z of the segment's z axis
-        if kz < 0.5:
-            continue
-        s_ = 0.5 * dz / kz
-        pts[heel] = replace(pts[heel], position=np.asarray(pts[heel].position) - np.array([0.0, 0.0, s_]))
-        pts[toe] = replace(pts[toe], position=np.asarray(pts[toe].position) + np.array([0.0, 0.0, s_]))
-        for i, f in enumerate(feet):
-            if f.side == side:
-                top = float(f.center[2] + f.half[2])
-                bottom = min(float(pts[heel].position[2]), float(pts[toe].position[2])) - CONTACT_INSET
-                feet[i] = replace(f, center=np.array([f.center[0], f.center[1], 0.5 * (top + bottom)]),
-                                  half=np.array([f.half[0], f.half[1], 0.5 * (top - bottom)]))
-        moved[side] = 1e3 * dz
-    if not moved:
-        return character, {}
-    return replace(character, contacts=tuple(pts), feet=tuple(feet)), {"heel_above_toe_mm": moved}
 
 
 @dataclass(frozen=True, eq=False)

@@ -26,252 +26,67 @@ rig's ankle joint lands where the motion's foot frame carries it: the feet stay 
 the rig's own bones even where its bone lengths differ from the fitted segments.
 
 Pure numpy/scipy; rotations stored as unit quaternions (w, x, y, z) in :meth:`Rig.to_dict`.
+
+The rig as a value is in ``solver.rig_skeleton``, the retargeting in ``solver.rig_retarget``;
+this module calibrates a rig and names the whole API.
 """
 
 from __future__ import annotations
 
-import math
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation, Slerp
+from scipy.spatial.transform import Rotation
 
 from solver.capture import GroundFrame
-from solver.errors import InputError
 from solver.kinematics import segment_frames
+from solver.rig_retarget import (
+    PIN_RELEASE_S,
+    RigPose,
+    feet_report,
+    foot_pins,
+    hinge_axes,
+    locked_joint_rms,
+    output_times,
+    retarget,
+)
+from solver.rig_skeleton import (
+    LEG_SEGMENTS,
+    MAX_JOINTS,
+    RIG_FORMATS,
+    RIGID_PREFIXES,
+    ROLE_SEGMENTS,
+    Calibration,
+    Rig,
+    RigError,
+    matrices_to_quats,
+    quats_to_matrices,
+    segment_roles,
+)
 
-#: the formats whose rigs are :class:`Rig` values (others, e.g. OpenSim's, are their exporter's own mapping)
-RIG_FORMATS = ("bvh", "gltf", "deepmimic")
-#: at most this many joints in a rig (a full-body rig with fingers and face has ~70–150): it bounds
-#: what every motion of the capture carries
-MAX_JOINTS = 256
-#: importer joint role -> the capture segment that joint moves (the joint at its proximal end)
-ROLE_SEGMENTS = {"hips": "pelvis", "lumbar": "abdomen", "head": "head",
-                 **{f"{role}_{s}": f"{seg}_{s}" for s in "rl" for role, seg in (
-                     ("hip", "thigh"), ("knee", "shank"), ("ankle", "foot"), ("mtp", "toes"),
-                     ("clavicle", "clavicle"), ("shoulder", "upper_arm"), ("elbow", "forearm"),
-                     ("wrist", "hand"))}}
-#: segments whose joints keep one calibration over the cycle (the rig's foot bones move rigidly
-#: with the motion's feet, so a planted foot stays planted on the rig)
-RIGID_PREFIXES = ("foot_", "toes_")
-#: per side, the leg segments whose driving joints the two-bone IK turns
-LEG_SEGMENTS = {"r": ("thigh_r", "shank_r", "foot_r"), "l": ("thigh_l", "shank_l", "foot_l")}
-
-
-class RigError(InputError):
-    """A motion cannot be written on its source rig; the message says why."""
-
-
-def _frozen(a: Any, dtype: Any = float) -> np.ndarray:
-    a = np.array(a, dtype=dtype, copy=True)
-    a.setflags(write=False)
-    return a
-
-
-def quats_to_matrices(q: np.ndarray) -> np.ndarray:
-    """(..., 4) unit quaternions (w, x, y, z) -> (..., 3, 3)."""
-    q = np.asarray(q, dtype=float)
-    return Rotation.from_quat(q.reshape(-1, 4), scalar_first=True).as_matrix().reshape(q.shape[:-1] + (3, 3))
-
-
-def matrices_to_quats(R: np.ndarray) -> np.ndarray:
-    """(..., 3, 3) -> (..., 4) (w, x, y, z), continuous along the first axis (sign flips removed)."""
-    R = np.asarray(R, dtype=float)
-    q = Rotation.from_matrix(R.reshape(-1, 3, 3)).as_quat(scalar_first=True).reshape(R.shape[:-2] + (4,))
-    if q.ndim >= 2:
-        for k in range(1, q.shape[0]):
-            flip = np.sum(q[k] * q[k - 1], axis=-1) < 0
-            q[k][flip] *= -1
-    return q
-
-
-@dataclass(frozen=True, eq=False)
-class Calibration:
-    """The rig at the cycle's frames, relative to the simplified motion (see the module doc)."""
-
-    t_start: float  # s, the cycle's start in the rig's times
-    period: float  # s, the capture cycle's duration
-    times: np.ndarray  # (F,) rig times covering [t_start, t_start + period]
-    local: np.ndarray  # (F, J, 3, 3) captured local rotations
-    root: np.ndarray  # (F, 3) captured root translation (input units)
-    joint_in_segment: np.ndarray  # (F, J, 3, 3): C_j for driving joints, identity elsewhere
-    root_in_pelvis: np.ndarray  # (F, 3) m, the root joint's position in the pelvis frame
-    ankle_in_foot: np.ndarray  # (F, 2, 3) m, ankle joints (right, left) in the foot frames
-
-    def __post_init__(self) -> None:
-        for name in ("times", "local", "root", "joint_in_segment", "root_in_pelvis", "ankle_in_foot"):
-            object.__setattr__(self, name, _frozen(getattr(self, name)))
-
-    def at(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Interpolated (local, root, joint_in_segment, root_in_pelvis, ankle_in_foot) at rig
-        times ``t`` (slerp for rotations, linear otherwise)."""
-        t = np.clip(np.asarray(t, dtype=float), self.times[0], self.times[-1])
-
-        def rot(a: np.ndarray) -> np.ndarray:
-            J = a.shape[1]
-            out = np.empty((t.size, J, 3, 3))
-            for j in range(J):
-                out[:, j] = Slerp(self.times, Rotation.from_matrix(a[:, j]))(t).as_matrix()
-            return out
-
-        def lin(a: np.ndarray) -> np.ndarray:
-            flat = a.reshape(a.shape[0], -1)
-            return np.stack([np.interp(t, self.times, flat[:, c]) for c in range(flat.shape[1])], axis=-1).reshape(
-                (t.size,) + a.shape[1:])
-
-        return rot(self.local), lin(self.root), rot(self.joint_in_segment), lin(self.root_in_pelvis), \
-            lin(self.ankle_in_foot)
-
-    def to_dict(self) -> dict[str, Any]:
-        r6 = _round
-        return {"t_start": self.t_start, "period": self.period, "times": r6(self.times),
-                "local": r6(matrices_to_quats(self.local)), "root": r6(self.root),
-                "joint_in_segment": r6(matrices_to_quats(self.joint_in_segment)),
-                "root_in_pelvis": r6(self.root_in_pelvis), "ankle_in_foot": r6(self.ankle_in_foot)}
-
-    @staticmethod
-    def from_dict(d: Mapping[str, Any]) -> Calibration:
-        return Calibration(float(d["t_start"]), float(d["period"]), np.asarray(d["times"], dtype=float),
-                           quats_to_matrices(np.asarray(d["local"], dtype=float)),
-                           np.asarray(d["root"], dtype=float),
-                           quats_to_matrices(np.asarray(d["joint_in_segment"], dtype=float)),
-                           np.asarray(d["root_in_pelvis"], dtype=float), np.asarray(d["ankle_in_foot"], dtype=float))
-
-
-def _round(a: np.ndarray, nd: int = 6) -> list:
-    return np.round(np.asarray(a, dtype=float), nd).tolist()
-
-
-@dataclass(frozen=True, eq=False)
-class Rig:
-    """A source skeleton and its captured animation (input axes and length units).
-
-    ``local`` (F, J, 3, 3) is each joint's full local rotation (rest rotation included) at
-    ``times``; ``root`` (F, 3) the root joint's local translation. Child joints sit at their
-    ``offsets`` in the parent frame (plus, for BVH joints with position channels, the
-    captured ``extra["positions"]``). ``roles``: capture segment -> index of the joint that
-    moves it (the joint at the segment's proximal end). ``channels``: per joint, the BVH
-    channel names (or ``("quaternion",)`` / ``("Zrotation",)`` for DeepMimic's spherical /
-    revolute joints, ``()`` for a fixed joint). ``frame`` maps our world onto the input's axes
-    and units. ``extra``: what the writer of that format needs besides (JSON-able).
-    """
-
-    format: str
-    names: tuple[str, ...]
-    parents: tuple[int, ...]
-    offsets: np.ndarray  # (J, 3)
-    channels: tuple[tuple[str, ...], ...]
-    roles: Mapping[str, int]
-    times: np.ndarray  # (F,)
-    local: np.ndarray  # (F, J, 3, 3)
-    root: np.ndarray  # (F, 3)
-    frame: GroundFrame = field(default_factory=GroundFrame)
-    end_sites: Mapping[int, np.ndarray] = field(default_factory=dict)
-    extra: Mapping[str, Any] = field(default_factory=dict)
-    calibration: Calibration | None = None
-
-    def __post_init__(self) -> None:
-        J = len(self.names)
-        if J > MAX_JOINTS:
-            raise RigError(f"the input's skeleton has {J} joints; at most {MAX_JOINTS} are supported")
-        if len(self.parents) != J or len(self.channels) != J:
-            raise RigError("rig: names, parents and channels must have one entry per joint")
-        if J == 0 or self.parents[0] != -1 or any(not -1 < p < j for j, p in enumerate(self.parents) if j):
-            raise RigError("rig: joints must be listed parents first, the root first")
-        for name in ("offsets", "times", "local", "root"):
-            object.__setattr__(self, name, _frozen(getattr(self, name)))
-        F = self.times.shape[0]
-        if self.offsets.shape != (J, 3) or self.local.shape != (F, J, 3, 3) or self.root.shape != (F, 3):
-            raise RigError(f"rig: expected offsets (J={J}, 3), local (F={F}, J, 3, 3), root (F, 3); got "
-                           f"{self.offsets.shape}, {self.local.shape}, {self.root.shape}")
-        bad = {s: j for s, j in self.roles.items() if not 0 <= int(j) < J}
-        if bad:
-            raise RigError(f"rig: roles point at no joint: {bad}")
-        object.__setattr__(self, "roles", {str(s): int(j) for s, j in self.roles.items()})
-        object.__setattr__(self, "end_sites", {int(j): _frozen(v) for j, v in self.end_sites.items()})
-        object.__setattr__(self, "extra", dict(self.extra))
-
-    @property
-    def J(self) -> int:
-        return len(self.names)
-
-    @property
-    def frame_time(self) -> float:
-        if self.times.size < 2:
-            return float(self.extra.get("frame_time", 1 / 30))
-        return float(np.median(np.diff(self.times)))
-
-    def positions(self) -> np.ndarray | None:
-        """(F, J, 3) captured local translations of joints with position channels, else None."""
-        p = self.extra.get("positions")
-        return None if p is None else np.asarray(p, dtype=float)
-
-    def forward(self, local: np.ndarray, root: np.ndarray, positions: np.ndarray | None = None
-                ) -> tuple[np.ndarray, np.ndarray]:
-        """World rotations (F, J, 3, 3) and positions (F, J, 3) in the input's axes and units."""
-        F = local.shape[0]
-        W = np.empty_like(local)
-        P = np.empty((F, self.J, 3))
-        for j, p in enumerate(self.parents):
-            if p < 0:
-                W[:, j], P[:, j] = local[:, j], root
-            else:
-                off = self.offsets[j] if positions is None else positions[:, j]
-                W[:, j] = W[:, p] @ local[:, j]
-                P[:, j] = P[:, p] + np.einsum("fij,fj->fi", W[:, p], np.broadcast_to(off, (F, 3)))
-        return W, P
-
-    def evolve(self, **changes: Any) -> Rig:
-        return replace(self, **changes)
-
-    # --- JSON (the motion context) -------------------------------------------------------
-    def to_dict(self, *, animation: bool = True) -> dict[str, Any]:
-        d: dict[str, Any] = {
-            "format": self.format, "names": list(self.names), "parents": list(self.parents),
-            "offsets": _round(self.offsets), "channels": [list(c) for c in self.channels],
-            "roles": dict(self.roles), "frame": self.frame.to_dict(),
-            "end_sites": {str(j): _round(v) for j, v in self.end_sites.items()},
-            "extra": dict(self.extra), "frame_time": self.frame_time,
-        }
-        if animation:
-            d.update(times=_round(self.times), local=_round(matrices_to_quats(self.local)), root=_round(self.root))
-        if self.calibration is not None:
-            d["calibration"] = self.calibration.to_dict()
-        return d
-
-    @staticmethod
-    def from_dict(d: Mapping[str, Any]) -> Rig:
-        try:
-            names = tuple(str(n) for n in d["names"])
-            J = len(names)
-            cal = d.get("calibration")
-            calibration = Calibration.from_dict(cal) if cal else None
-            if "times" in d:
-                times = np.asarray(d["times"], dtype=float)
-                local = quats_to_matrices(np.asarray(d["local"], dtype=float))
-                root = np.asarray(d["root"], dtype=float)
-            elif calibration is not None:  # a calibrated rig needs no animation of its own
-                times, local, root = calibration.times, calibration.local, calibration.root
-            else:
-                raise KeyError("times")
-            extra = dict(d.get("extra") or {})
-            extra.setdefault("frame_time", float(d.get("frame_time", 1 / 30)))
-            return Rig(str(d["format"]), names, tuple(int(p) for p in d["parents"]),
-                       np.asarray(d["offsets"], dtype=float).reshape(J, 3),
-                       tuple(tuple(str(c) for c in ch) for ch in d["channels"]),
-                       {str(k): int(v) for k, v in dict(d["roles"]).items()}, times, local, root,
-                       GroundFrame.from_dict(d.get("frame")),
-                       {int(k): np.asarray(v, dtype=float) for k, v in dict(d.get("end_sites") or {}).items()},
-                       extra, calibration)
-        except (KeyError, TypeError, ValueError) as e:
-            raise RigError(f"the motion's source rig is unreadable ({e.__class__.__name__}: {e})") from None
-
-
-def segment_roles(roles: Mapping[str, int]) -> dict[str, int]:
-    """Importer joint roles (``hip_r``, ``knee_r``, ``lumbar``…) -> capture segment -> joint."""
-    return {ROLE_SEGMENTS[r]: int(j) for r, j in roles.items() if r in ROLE_SEGMENTS}
+__all__ = [
+    "LEG_SEGMENTS",
+    "MAX_JOINTS",
+    "PIN_RELEASE_S",
+    "RIGID_PREFIXES",
+    "RIG_FORMATS",
+    "ROLE_SEGMENTS",
+    "Calibration",
+    "Rig",
+    "RigError",
+    "RigPose",
+    "calibrate",
+    "feet_report",
+    "foot_pins",
+    "hinge_axes",
+    "locked_joint_rms",
+    "matrices_to_quats",
+    "output_times",
+    "quats_to_matrices",
+    "retarget",
+    "segment_roles",
+    "unroll",
+]
 
 
 # --- calibration ------------------------------------------------------------------------
@@ -359,356 +174,3 @@ def calibrate(rig: Rig, character: Any, q: np.ndarray, fps: float, *, t_start: f
         extra["positions"] = pos.tolist()
     extra["calibrated_on"] = sorted(s for s in rig.roles if s in seg)
     return rig.evolve(times=t, local=local, root=root, extra=extra, calibration=cal)
-
-
-# --- retargeting ------------------------------------------------------------------------
-
-@dataclass(frozen=True, eq=False)
-class RigPose:
-    """A motion on the rig: ``local`` (F, J, 3, 3) rotations and ``root`` (F, 3) translation (input
-    units) at ``times`` (s from the cycle's start), plus what the feet check needs."""
-
-    times: np.ndarray
-    local: np.ndarray
-    root: np.ndarray
-    positions: np.ndarray | None  # (F, J, 3) local translations of joints with position channels
-    capture_time: np.ndarray  # (F,) the rig time of the same gait phase
-    ankle_target: np.ndarray  # (F, 2, 3) m, our frame: where the motion's feet carry the ankle joints
-    driven: tuple[str, ...]  # segments whose joints the motion drives
-
-
-def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Smallest rotation taking direction a (3,) to direction b (3,)."""
-    a = a / np.linalg.norm(a)
-    b = b / np.linalg.norm(b)
-    v = np.cross(a, b)
-    c = float(np.dot(a, b))
-    s = float(np.linalg.norm(v))
-    if s < 1e-12:
-        if c > 0:
-            return np.eye(3)
-        perp = np.cross(a, [1.0, 0.0, 0.0])
-        if np.linalg.norm(perp) < 1e-6:
-            perp = np.cross(a, [0.0, 1.0, 0.0])
-        return Rotation.from_rotvec(np.pi * perp / np.linalg.norm(perp)).as_matrix()
-    return Rotation.from_rotvec(v / s * math.atan2(s, c)).as_matrix()
-
-
-def _path(parents: Sequence[int], ancestor: int, joint: int) -> list[int]:
-    """Joints from ``ancestor`` (included) down to ``joint`` (excluded)."""
-    out = []
-    j = parents[joint]
-    while j >= 0 and j != ancestor:
-        out.append(j)
-        j = parents[j]
-    if j != ancestor:
-        return []
-    return [ancestor, *reversed(out)]
-
-
-def _two_bone(W: np.ndarray, P: np.ndarray, parents: Sequence[int], hip: int, knee: int, ankle: int,
-              target: np.ndarray, bend: np.ndarray, *, hinge: bool = False) -> None:
-    """Turn the hip -> knee and knee -> ankle chains (world rotations ``W`` (J, 3, 3), positions
-    ``P`` (J, 3), one frame, edited in place for the chain's joints) so the ankle reaches ``target``;
-    ``bend`` is the knee's flexion axis used when the leg is straight."""
-    H, K, A = P[hip], P[knee], P[ankle]
-    l1, l2 = np.linalg.norm(K - H), np.linalg.norm(A - K)
-    d = float(np.clip(np.linalg.norm(target - H), abs(l1 - l2) + 1e-6, l1 + l2 - 1e-6))
-    n = np.cross(K - H, A - K)
-    n = n / np.linalg.norm(n) if np.linalg.norm(n) > 1e-4 * l1 * l2 and not hinge else bend / np.linalg.norm(bend)
-    cur = float(np.clip((l1**2 + l2**2 - np.linalg.norm(A - H) ** 2) / (2 * l1 * l2), -1, 1))
-    want = float(np.clip((l1**2 + l2**2 - d**2) / (2 * l1 * l2), -1, 1))
-    delta = math.acos(want) - math.acos(cur)  # interior angle change
-    best = None
-    for sgn in (1.0, -1.0):
-        Rk = Rotation.from_rotvec(sgn * delta * n).as_matrix()
-        err = abs(np.linalg.norm(K + Rk @ (A - K) - H) - d)
-        if best is None or err < best[0]:
-            best = (err, Rk)
-    assert best is not None
-    Rk = best[1]
-    A1 = K + Rk @ (A - K)
-    Rh = _rotation_between(A1 - H, target - H)
-    for j in _path(parents, hip, knee):
-        W[j] = Rh @ W[j]
-    for j in _path(parents, knee, ankle):
-        W[j] = Rh @ Rk @ W[j]
-
-
-def hinge_axes(rig: Rig) -> dict[int, np.ndarray]:
-    """Joints with exactly one rotation channel (a BVH joint with one ``…rotation`` channel, a
-    DeepMimic revolute joint) -> that axis (unit, joint frame)."""
-    out = {}
-    for j, ch in enumerate(rig.channels):
-        rots = [c for c in ch if c.lower().endswith("rotation")]
-        if j > 0 and len(rots) == 1 and "quaternion" not in ch:
-            out[j] = np.eye(3)["XYZ".index(rots[0][0].upper())]
-    return out
-
-
-def _twist(R: np.ndarray, axis: np.ndarray) -> np.ndarray:
-    """The part of rotations R (F, 3, 3) about ``axis`` (swing-twist decomposition)."""
-    q = Rotation.from_matrix(R).as_quat()  # x, y, z, w
-    ang = 2.0 * np.arctan2(q[:, :3] @ axis, q[:, 3])
-    return Rotation.from_rotvec(ang[:, None] * axis[None, :]).as_matrix()
-
-
-def _locals(parents: Sequence[int], W: np.ndarray) -> np.ndarray:
-    local = np.empty_like(W)
-    for j, p in enumerate(parents):
-        local[:, j] = W[:, j] if p < 0 else np.einsum("fji,fjk->fik", W[:, p], W[:, j])
-    return local
-
-
-def _worlds(parents: Sequence[int], local: np.ndarray) -> np.ndarray:
-    W = np.empty_like(local)
-    for j, p in enumerate(parents):
-        W[:, j] = local[:, j] if p < 0 else W[:, p] @ local[:, j]
-    return W
-
-
-#: after a foot leaves the ground, how long its pinning correction takes to fade out (s)
-PIN_RELEASE_S = 0.15
-
-
-def foot_pins(motion: Any, q: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """(F, 2, 3) m: per output time and foot (right, left), the translation that keeps the
-    motion's ground contact points where they touched down (foot-skate clean-up).
-
-    The optimizer holds a contact point still at the motion's frames; between frames the
-    interpolated joints let it drift a few millimetres (up to ~1 cm in tight turns at 15 fps).
-    At dense output times each foot is moved so that its contact point that has been down
-    longest stays at its anchor (a point's anchor: where the corrected foot put it when it
-    touched down, so the correction never jumps when a second point lands), and the
-    correction fades out over :data:`PIN_RELEASE_S` once the foot is in the air. A frame counts
-    as in contact when both motion frames around it are."""
-    from solver.kinematics import contact_points
-
-    F = t.size
-    out = np.zeros((F, 2, 3))
-    if motion.contacts is None or not motion.character.contacts:
-        return out
-    P = len(motion.character.contacts)
-    cp = np.asarray(contact_points(motion.character, q), dtype=float).reshape(P, 3, F)
-    s = t * motion.fps
-    lo = np.clip(np.floor(s + 1e-9).astype(int), 0, motion.T - 1)
-    hi = np.clip(np.ceil(s - 1e-9).astype(int), 0, motion.T - 1)
-    on = motion.contacts[:, lo] & motion.contacts[:, hi]
-    dt = float(t[1] - t[0]) if F > 1 else 1.0
-    for k, side in enumerate(("r", "l")):
-        pts = [i for i, c in enumerate(motion.character.contacts) if c.side[0] == side]
-        anchor: dict[int, np.ndarray] = {}
-        corr = np.zeros(3)
-        released, since = np.zeros(3), 0.0
-        holder = None
-        for f in range(F):
-            for i in pts:
-                if on[i, f] and i not in anchor:
-                    anchor[i] = cp[i, :, f] + corr
-                elif not on[i, f]:
-                    anchor.pop(i, None)
-            if anchor:  # the point down longest holds the foot (dicts keep insertion order)
-                first = next(iter(anchor))
-                if holder is not None and first != holder:  # the holder lifted: take over without a jump
-                    anchor[first] = cp[first, :, f] + corr
-                holder = first
-                corr = anchor[first] - cp[first, :, f]
-                released, since = corr, 0.0
-            else:
-                since += dt
-                corr = released * max(0.0, 1.0 - since / PIN_RELEASE_S)
-                holder = None
-            out[f, k] = corr
-    return out
-
-
-def output_times(motion: Any, frame_time: float) -> tuple[np.ndarray, float]:
-    """One gait cycle of ``motion`` sampled near ``frame_time``: (times from 0 to the cycle's
-    duration D included, D)."""
-    D = (motion.T - 2) / motion.fps if motion.cyclic else (motion.T - 1) / motion.fps
-    n = max(int(round(D / frame_time)), 2)
-    return np.linspace(0.0, D, n + 1), D
-
-
-def retarget(motion: Any, rig: Rig, *, frame_time: float | None = None) -> RigPose:
-    """``motion`` (of the character the rig was calibrated on) on the rig, one cycle at the rig's
-    frame rate (or ``frame_time``)."""
-    from solver.trajectory import sample
-
-    cal = rig.calibration
-    if cal is None:
-        raise RigError("the source rig was never calibrated against a tutor (it is a capture's rig): "
-                       "make a tutor first")
-    ch = motion.character
-    seg = {s.name: i for i, s in enumerate(ch.segments)}
-    if "pelvis" not in seg:
-        raise RigError("the motion's character has no pelvis segment")
-    frame = motion.frame
-    t, D = output_times(motion, frame_time or rig.frame_time)
-    tc = cal.t_start + t / D * cal.period
-    local_c, root_c, C, root_in_pelvis, ankle_in_foot = cal.at(tc)
-    positions = None
-    pos = rig.positions()
-    if pos is not None:
-        positions = np.stack([np.stack([np.interp(tc, cal.times, pos[:, j, c]) for c in range(3)], -1)
-                              for j in range(rig.J)], 1)
-    q = sample(motion.q, motion.fps, t, cyclic=motion.cyclic, interpolation=motion.interpolation)
-    Rs, Ps = segment_frames(ch, q)
-    Rs, Ps = np.moveaxis(Rs, -1, 1), np.moveaxis(Ps, -1, 1)  # (S, F, 3, 3), (S, F, 3)
-    driven = {j: s for s, j in rig.roles.items() if s in seg}
-    hinges = hinge_axes(rig)
-    F = t.size
-    Wo = np.empty((F, rig.J, 3, 3))
-    for j, p in enumerate(rig.parents):
-        if j in driven:
-            Wo[:, j] = Rs[seg[driven[j]]] @ C[:, j]
-        elif p < 0:  # a root above the pelvis (Unreal's "root"): as captured
-            Wo[:, j] = np.einsum("ji,fjk->fik", frame.R, local_c[:, j])
-        else:
-            Wo[:, j] = Wo[:, p] @ local_c[:, j]
-    pelvis_pos = Ps[seg["pelvis"]] + np.einsum("fij,fj->fi", Rs[seg["pelvis"]], root_in_pelvis)
-    anchor = rig.roles.get("pelvis", 0)
-    if anchor == 0:
-        root_pos = pelvis_pos
-    else:  # the pelvis joint is placed through its own position channels
-        if positions is None:
-            raise RigError(f"the joint that moves the pelvis ({rig.names[anchor]}) is not the root and has no "
-                           "position channels: the rig cannot follow the motion's pelvis")
-        root_pos = frame.point_from_input(root_c, tc)
-    unit = rig.frame.unit_m
-
-    def fk(Wo: np.ndarray) -> np.ndarray:
-        P = np.empty((F, rig.J, 3))
-        P[:, 0] = root_pos
-        for j, p in enumerate(rig.parents):
-            if p < 0:
-                continue
-            if j == anchor and positions is not None:
-                positions[:, j] = np.einsum("fji,fj->fi", Wo[:, p], pelvis_pos - P[:, p]) / unit
-            off = rig.offsets[j] if positions is None else positions[:, j]
-            P[:, j] = P[:, p] + unit * np.einsum("fij,fj->fi", Wo[:, p], np.broadcast_to(off, (F, 3)))
-        return P
-
-    Po = fk(Wo)
-    pins = foot_pins(motion, q, t)
-    targets = np.full((F, 2, 3), np.nan)
-    for k, side in enumerate("rl"):
-        thigh, shank, foot = LEG_SEGMENTS[side]
-        if not all(s in rig.roles and s in seg for s in (thigh, shank, foot)):
-            continue
-        hip, knee, ankle = rig.roles[thigh], rig.roles[shank], rig.roles[foot]
-        if not (_path(rig.parents, hip, knee) and _path(rig.parents, knee, ankle)):
-            continue
-        targets[:, k] = Ps[seg[foot]] + np.einsum("fij,fj->fi", Rs[seg[foot]], ankle_in_foot[:, k]) + pins[:, k]
-        if knee in hinges:  # a hinge knee bends about its own axis
-            bend = np.einsum("fij,j->fi", Wo[:, rig.parents[knee]], hinges[knee])
-        else:
-            bend = Rs[seg[shank]][:, :, 1]  # our knees flex about the shank's y axis
-        for f in range(F):
-            _two_bone(Wo[f], Po[f], rig.parents, hip, knee, ankle, targets[f, k], bend[f], hinge=knee in hinges)
-        Po = fk(Wo)
-    local = _locals(rig.parents, Wo)
-    if hinges:  # joints turning about one axis only: keep that part, then aim the legs again
-        saved = Wo.copy()
-        for j, axis in hinges.items():
-            local[:, j] = _twist(local[:, j], axis)
-        Wo = _worlds(rig.parents, local)
-        for k, side in enumerate("rl"):
-            thigh, shank, foot = LEG_SEGMENTS[side]
-            if np.isnan(targets[:, k]).all():
-                continue
-            hip, ankle = rig.roles[thigh], rig.roles[foot]
-            chain = _path(rig.parents, hip, ankle)
-            Po = fk(Wo)
-            for f in range(F):
-                Rh = _rotation_between(Po[f, ankle] - Po[f, hip], targets[f, k] - Po[f, hip])
-                for j in chain:
-                    Wo[f, j] = Rh @ Wo[f, j]
-            for j in chain:
-                p = rig.parents[j]
-                local[:, j] = np.einsum("fji,fjk->fik", Wo[:, p], Wo[:, j])
-            if ankle not in hinges:  # the foot keeps the motion's orientation
-                local[:, ankle] = np.einsum("fji,fjk->fik", Wo[:, chain[-1]], saved[:, ankle])
-            Wo = _worlds(rig.parents, local)
-    # local rotations: unchanged by the choice of world axes (Wo = Rᵀ W_input)
-    local = _locals(rig.parents, Wo)
-    local[:, 0] = np.einsum("ij,fjk->fik", frame.R, Wo[:, 0])  # the root's rotation in input axes
-    t_frame = tc  # the frame's time dependence (treadmill belt) follows the capture's clock
-    root_in = root_c if anchor else frame.point_to_input(root_pos, t_frame)
-    return RigPose(t, local, root_in, positions, tc, targets, tuple(sorted(driven.values())))
-
-
-def feet_report(motion: Any, rig: Rig, pose: RigPose) -> dict[str, Any]:
-    """How well the rig's feet follow the motion, from the rig's own forward kinematics.
-
-    Per side: ``ankle_error_m``, the largest distance over stance frames between the rig's
-    ankle joint and where the motion's foot frame carries it; ``slide_m``, the largest
-    horizontal drift, over one contact interval of one of the motion's contact points (heel,
-    toe), of the point of the rig's foot (ankle joint's frame for a heel point, toe joint's
-    for a toe point) that lies on that contact point when the interval starts: a foot bone
-    that stays pinned where the motion's foot is on the ground does not slide. A frame
-    counts as in contact when both motion frames around it are."""
-    from solver.kinematics import contact_points
-    from solver.trajectory import sample
-
-    if motion.contacts is None:
-        return {}
-    frame = motion.frame
-    W, P = rig.forward(pose.local, pose.root, pose.positions)
-    Wo = np.einsum("ji,fkjl->fkil", frame.R, W)
-    Po = frame.point_from_input(P, pose.capture_time[:, None])
-    s = pose.times * motion.fps
-    lo = np.clip(np.floor(s + 1e-9).astype(int), 0, motion.T - 1)
-    hi = np.clip(np.ceil(s - 1e-9).astype(int), 0, motion.T - 1)
-    active = motion.contacts[:, lo] & motion.contacts[:, hi]  # (points, F)
-    q = sample(motion.q, motion.fps, pose.times, cyclic=motion.cyclic, interpolation=motion.interpolation)
-    cp = np.asarray(contact_points(motion.character, q)).reshape(len(motion.character.contacts), 3, -1)
-    feet = motion.foot_contact()
-    out: dict[str, Any] = {}
-    for k, side in enumerate(("right", "left")):
-        foot = LEG_SEGMENTS[side[0]][2]
-        if foot not in rig.roles or np.isnan(pose.ankle_target[:, k]).all():
-            continue
-        a = rig.roles[foot]
-        toe = rig.roles.get(f"toes_{side[0]}", a)
-        stance = feet[k][lo] & feet[k][hi]
-        err = np.linalg.norm(Po[:, a] - pose.ankle_target[:, k], axis=1)
-        slides = []
-        for i, c in enumerate(motion.character.contacts):
-            if c.side != side[0] and c.side != side:
-                continue
-            j = toe if "toe" in c.name else a
-            edges = np.flatnonzero(np.diff(np.concatenate([[0], active[i].astype(int), [0]])))
-            for s0, s1 in zip(edges[::2], edges[1::2]):
-                if s1 - s0 < 2:
-                    continue
-                local = Wo[s0, j].T @ (cp[i, :, s0] - Po[s0, j])
-                pts = Po[s0:s1, j] + np.einsum("fij,j->fi", Wo[s0:s1, j], local)
-                slides.append(float(np.max(np.linalg.norm(pts[:, :2] - pts[0, :2], axis=1))))
-        out[side] = {"ankle_error_m": float(err[stance].max()) if stance.any() else 0.0,
-                     "slide_m": max(slides) if slides else 0.0, "contact_intervals": len(slides)}
-    return out
-
-
-def locked_joint_rms(rig: Rig, pose: RigPose) -> dict[str, float]:
-    """RMS (degrees) of the rotation between each joint the motion does not drive and the
-    capture's own local rotation at the same gait phase, and the amplitude ratio (exported
-    range of motion over captured) of those joints."""
-    cal = rig.calibration
-    if cal is None:
-        return {}
-    local_c, *_ = cal.at(pose.capture_time)
-    driven = {rig.roles[s] for s in pose.driven if s in rig.roles}
-    legs = set()
-    for side in "rl":
-        thigh, shank, foot = LEG_SEGMENTS[side]
-        if all(s in rig.roles for s in (thigh, shank, foot)):
-            legs.update(_path(rig.parents, rig.roles[thigh], rig.roles[shank]))
-            legs.update(_path(rig.parents, rig.roles[shank], rig.roles[foot]))
-    free = [j for j in range(1, rig.J) if j not in driven and j not in legs]
-    if not free:
-        return {"rms_deg": 0.0, "joints": 0}
-    rel = np.einsum("fjik,fjil->fjkl", local_c[:, free], pose.local[:, free])
-    ang = Rotation.from_matrix(rel.reshape(-1, 3, 3)).magnitude().reshape(rel.shape[:2])
-    return {"rms_deg": float(np.degrees(np.sqrt(np.mean(ang**2)))), "max_deg": float(np.degrees(ang.max())),
-            "joints": len(free)}
