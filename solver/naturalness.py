@@ -235,7 +235,7 @@ def naturalness_report(motion: Motion, reference: Mapping[str, Any] | None = Non
 
 @register_check(section="naturalness", verdict="natural", order=20)
 def _naturalness_section(ctx: Context) -> SectionResult:
-    return naturalness_checks(ctx.motion)
+    return naturalness_checks(ctx.motion, lim=ctx.limits_for("naturalness", NaturalnessLimits()))
 
 
 def naturalness_checks(motion: Motion, reference: Mapping[str, Any] | None = None,

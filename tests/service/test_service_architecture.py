@@ -219,3 +219,14 @@ def test_no_import_cycle_between_modules():
     or through others): a piece two modules share lives in a module of its own."""
     cycles = _cycles(_modules_graph())
     assert not cycles, f"import circles between modules: {cycles}"
+
+
+#: the longest a module in solver/, mjcf/ or service/ may be (database migrations aside): a module
+#: longer than this does more than one job
+MODULE_LINES = 650
+
+
+def test_no_module_does_more_than_one_job_by_its_length():
+    long = {str(p.relative_to(ROOT)): n for pkg in ("solver", "mjcf", "service") for p in (ROOT / pkg).rglob("*.py")
+            if "migrations" not in p.parts and (n := len(p.read_text().splitlines())) > MODULE_LINES}
+    assert not long, f"modules over {MODULE_LINES} lines: {long}"
