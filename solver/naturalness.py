@@ -82,6 +82,14 @@ def _get(d: Mapping | None, *keys: str) -> Any:
     return d
 
 
+def _fig(d: Mapping[str, Any], *keys: str) -> Any:
+    """A figure of the motion's own: a path it does not have raises (a misspelt figure is an
+    error, not a check that passes); a figure with nothing to measure is None."""
+    for k in keys:
+        d = d[k]
+    return d
+
+
 def checks_of(fig: Mapping[str, Any], *, reference: Mapping[str, Any] | None = None,
               lim: NaturalnessLimits = NaturalnessLimits()) -> dict[str, Check]:
     """The checks (figure, limit, source, the capture's figure) from ``gait_figures``, by name;
@@ -97,49 +105,52 @@ def checks_of(fig: Mapping[str, Any], *, reference: Mapping[str, Any] | None = N
             "RMS distance between the capture's markers and the fitted skeleton's (the capture this walk keeps)",
             source=SOURCES["fit_quality"]))
     checks.append(Check.measure(
-        "swing_clearance", _get(fig, "swing_clearance", "min_m"), lim.clearance_m, "m",
+        "swing_clearance", _fig(fig, "swing_clearance", "min_m"), lim.clearance_m, "m",
         f"lowest heel, toe or sole corner of a swing foot moving faster than {lim.moving_speed:g} m/s in mid-swing "
         f"(more than {lim.swing_edge_frames} frame from lift-off and touchdown)",
-        source=SOURCES["swing_clearance"], at_least=True, capture=_get(cap, "swing_clearance", "min_m")))
+        source=SOURCES["swing_clearance"], at_least=True, capture=_get(cap, "swing_clearance", "min_m"),
+        missing="no swing foot moving in mid-swing"))
     if "foot_pitch_under_load" in fig:
         checks.append(Check.measure(
-            "foot_pitch_under_load", _get(fig, "foot_pitch_under_load", "max_deg"), lim.pitch_deg, "deg",
+            "foot_pitch_under_load", _fig(fig, "foot_pitch_under_load", "max_deg"), lim.pitch_deg, "deg",
             f"largest pitch, heel up or toe up, of a foot carrying more than {lim.pitch_load:g} BW",
-            source=SOURCES["foot_pitch_under_load"], capture=_get(cap, "foot_pitch_under_load", "max_deg")))
+            source=SOURCES["foot_pitch_under_load"], capture=_get(cap, "foot_pitch_under_load", "max_deg"),
+            missing="no foot carries the load"))
     checks.append(Check.measure(
         "joint_limits", fig["joints_at_limits"]["max_frames"], lim.limit_frames, "frames",
         f"frames a coordinate spends within {lim.limit_band_deg:g}° of its model limit"
         + (f" (worst: {fig['joints_at_limits']['worst']})" if fig["joints_at_limits"]["worst"] else ""),
         source=SOURCES["joint_limits"], capture=_get(cap, "joints_at_limits", "max_frames")))
-    js = fig.get("joint_speed") or {}
+    js = _fig(fig, "joint_speed")
     checks.append(Check.measure(
         "joint_speed", js.get("max_deg_s"), lim.joint_speed_deg_s, "deg/s",
         "fastest change of a joint coordinate between two frames"
         + (f" (worst: {js['worst']['coordinate']})" if js.get("worst") else ""),
-        source=SOURCES["joint_speed"], capture=_get(cap, "joint_speed", "max_deg_s")))
+        source=SOURCES["joint_speed"], capture=_get(cap, "joint_speed", "max_deg_s"), missing="no hinge joint"))
     checks.append(Check.measure(
-        "crossover", _get(fig, "crossover", "max_far_side_m"), lim.crossover_m, "m",
+        "crossover", _fig(fig, "crossover", "max_far_side_m"), lim.crossover_m, "m",
         "furthest a loaded foot stands on the far side of the pelvis, across the direction of travel and "
-        "across the pelvis's heading", source=SOURCES["crossover"], capture=_get(cap, "crossover", "max_far_side_m")))
+        "across the pelvis's heading", source=SOURCES["crossover"], capture=_get(cap, "crossover", "max_far_side_m"),
+        missing="no loaded foot"))
     if "shared_load" in fig:
         checks.append(Check.measure(
-            "shared_load", _get(fig, "shared_load", "min_bw"), lim.shared_load, "BW",
+            "shared_load", _fig(fig, "shared_load", "min_bw"), lim.shared_load, "BW",
             "least, over the changes of support, of the load both feet carry at once", source=SOURCES["shared_load"],
-            at_least=True, capture=_get(cap, "shared_load", "min_bw")))
+            at_least=True, capture=_get(cap, "shared_load", "min_bw"), missing="no change of support"))
     if "forces_bw" in fig:
         checks.append(Check.measure(
             "fore_aft_force", fig["forces_bw"]["fore_aft_max_abs"], lim.fore_aft, "BW",
             "largest fore-aft force of a foot, level ground", source=SOURCES["fore_aft_force"],
-            capture=_get(cap, "forces_bw", "fore_aft_max_abs"), applies=level))
+            capture=_get(cap, "forces_bw", "fore_aft_max_abs"), applies=level, missing="no loaded foot"))
         checks.append(Check.measure(
             "lateral_force", fig["forces_bw"]["lateral_max_abs"], lim.lateral, "BW",
             "largest mediolateral force of a foot, level ground", source=SOURCES["lateral_force"], warning=True,
-            capture=_get(cap, "forces_bw", "lateral_max_abs"), applies=level))
+            capture=_get(cap, "forces_bw", "lateral_max_abs"), applies=level, missing="no loaded foot"))
         checks.append(Check.measure(
             "vertical_force_peak", fig["forces_bw"]["vertical_max"], lim.peak_vertical, "BW",
             "largest vertical force of a foot, level ground",
             source=SOURCES["vertical_force_shape"], warning=True, capture=_get(cap, "forces_bw", "vertical_max"),
-            applies=level))
+            applies=level, missing="no loaded foot"))
         humps = [min(s["loading_peak_bw"], s["push_off_peak_bw"]) - s["valley_bw"]
                  for s in fig.get("vertical_force_shape") or []]
         cap_humps = [min(s["loading_peak_bw"], s["push_off_peak_bw"]) - s["valley_bw"]
@@ -150,12 +161,14 @@ def checks_of(fig: Mapping[str, Any], *, reference: Mapping[str, Any] | None = N
             "smallest height of a stance's loading or push-off peak above its mid-stance valley, level ground"
             + (" (the capture's plates show the valley)" if plates_valley else ""),
             source=SOURCES["vertical_force_shape"], warning=not plates_valley, at_least=True,
-            capture=min(cap_humps) if cap_humps else None, applies=level))
+            capture=min(cap_humps) if cap_humps else None, applies=level,
+            missing="no stance with a loading and a push-off peak"))
         checks.append(Check.measure(
-            "fore_aft_pattern", _get(fig, "fore_aft_pattern", "max_sign_changes"), lim.fore_aft_changes, "changes",
+            "fore_aft_pattern", _fig(fig, "fore_aft_pattern", "max_sign_changes"), lim.fore_aft_changes, "changes",
             f"most sign changes of a foot's fore-aft force within one stance (crossing ±{lim.fore_aft_band:g} BW "
             f"while the foot carries over {lim.fore_aft_load:g} BW), level ground", source=SOURCES["fore_aft_pattern"],
-            capture=_get(cap, "fore_aft_pattern", "max_sign_changes"), applies=level))
+            capture=_get(cap, "fore_aft_pattern", "max_sign_changes"), applies=level,
+            missing="no stance carrying the load"))
         rf = fig["required_friction"]
         cap_rf = _get(cap, "required_friction", "max")
         checks.append(Check.measure(
@@ -163,31 +176,33 @@ def checks_of(fig: Mapping[str, Any], *, reference: Mapping[str, Any] | None = N
             f"largest friction a foot loaded over {lim.friction_load:g} BW needs, as a fraction of μ",
             source=SOURCES["friction_margin"], capture=None if cap_rf is None else cap_rf / rf["mu"]))
         checks.append(Check.measure(
-            "push", _get(fig, "push", "min"), lim.push, "f_z·leg",
+            "push", _fig(fig, "push", "min"), lim.push, "f_z·leg",
             "least horizontal force of a loaded foot along the line from the foot to the centre of mass",
-            source=SOURCES["push"], warning=True, at_least=True, capture=_get(cap, "push", "min")))
+            source=SOURCES["push"], warning=True, at_least=True, capture=_get(cap, "push", "min"),
+            missing="no loaded foot"))
     st = fig.get("stairs_geometry")
     if st:
         checks.append(Check.measure(
-            "nosing_clearance", _get(st, "nosing_clearance", "min_m"), lim.nosing_clearance_m, "m",
+            "nosing_clearance", _fig(st, "nosing_clearance", "min_m"), lim.nosing_clearance_m, "m",
             "least height of a swinging sole corner above a nosing it passes, where it crosses the riser's plane "
             "(along the spline between the frames; negative: through the riser)", source=SOURCES["nosing_clearance"],
-            at_least=True))
+            at_least=True, missing="no swing passes a nosing"))
         checks.append(Check.measure(
-            "stance_over_nosing", _get(st, "tread", "max_over_nosing_m"), lim.tread_overhang_m, "m",
+            "stance_over_nosing", _fig(st, "tread", "max_over_nosing_m"), lim.tread_overhang_m, "m",
             "furthest a stance sole's corner stands beyond its tread's nosing (over the step below)",
-            source=SOURCES["stance_on_tread"]))
+            source=SOURCES["stance_on_tread"], missing="no stance on a tread"))
         checks.append(Check.measure(
-            "stance_into_riser", _get(st, "tread", "max_into_riser_m"), lim.tread_riser_m, "m",
+            "stance_into_riser", _fig(st, "tread", "max_into_riser_m"), lim.tread_riser_m, "m",
             "furthest a stance sole's corner reaches into the riser of the step above its tread",
-            source=SOURCES["stance_on_tread"]))
+            source=SOURCES["stance_on_tread"], missing="no stance on a tread"))
         ref = STAIRS_SWING[st["direction"]]
         for joint in ("knee", "hip"):
             lo_, hi_ = ref[joint]
             checks.append(Check.measure(
-                f"stairs_swing_{joint}", _get(st, "swing_peaks", f"{joint}_min_deg"), lo_, "deg",
+                f"stairs_swing_{joint}", _fig(st, "swing_peaks", f"{joint}_min_deg"), lo_, "deg",
                 f"least, over the swings, of the peak swing {joint} flexion (people going {st['direction']}: "
-                f"{lo_:g}-{hi_:g}°)", source=SOURCES["stairs_swing"], warning=True, at_least=True))
+                f"{lo_:g}-{hi_:g}°)", source=SOURCES["stairs_swing"], warning=True, at_least=True,
+                missing="no swing"))
     slope = fig["slope_along_deg"]
     lean, tut_lean = fig["trunk_lean_deg"]["mean"], _get(tut, "trunk_lean_deg", "mean")
     if tut_lean is not None and abs(slope) > lim.level_deg:
@@ -207,9 +222,9 @@ def checks_of(fig: Mapping[str, Any], *, reference: Mapping[str, Any] | None = N
                                     + " (limit: the published range, or the capture's + 5°)",
                                     source=SOURCES["pelvis_ranges"], warning=True, capture=cpr.get(ax)))
     checks.append(Check.measure(
-        "foot_heading", _get(fig, "foot_heading_deg", "max_abs_loaded"), lim.foot_heading_deg, "deg",
+        "foot_heading", _fig(fig, "foot_heading_deg", "max_abs_loaded"), lim.foot_heading_deg, "deg",
         "largest heading difference between a loaded foot and the pelvis", source=SOURCES["foot_heading"], warning=True,
-        capture=_get(cap, "foot_heading_deg", "max_abs_loaded")))
+        capture=_get(cap, "foot_heading_deg", "max_abs_loaded"), missing="no loaded foot"))
     return {c.name: c for c in checks}
 
 
