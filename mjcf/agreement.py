@@ -1,7 +1,7 @@
 """Does the simulated model agree with the motion it performs? (docs/simulation.md, "Agreement")
 
-Measured on the reference alone (no controller), with the simulation's performable model
-(:func:`mjcf.performable.performable_model`):
+Measured on the reference alone (no controller), with the simulation's performable model and its
+geometry (:func:`mjcf.performable.performable_model`):
 
 * **The sole.** The simulated sole is the character's (``Character.sole``: the rectangle whose back
   and front edges have the heel and toe contact points as midpoints, as wide as the foot box), turned
@@ -15,12 +15,12 @@ Measured on the reference alone (no controller), with the simulation's performab
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import mujoco
 import numpy as np
 
+from mjcf.performable import ModelGeometry
 from solver.environment import body_weight
 from solver.motion import FEET, Motion
 
@@ -32,28 +32,7 @@ FLAT_COS, FLAT_HEIGHT = float(np.cos(np.radians(2.0))), 0.002
 COP_MIN_FORCE_BW = 0.02
 
 
-def _sole_geoms(model: mujoco.MjModel) -> list[tuple[int, int]]:
-    out = []
-    for side in FEET:
-        gid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, f"sole_{side}")
-        out.append((gid, int(model.geom_bodyid[gid])))
-    return out
-
-
-def _corners(model: mujoco.MjModel, gid: int) -> np.ndarray:
-    """(4, 3) the bottom corners of a sole geom in its body's frame."""
-    R9 = np.zeros(9)
-    mujoco.mju_quat2Mat(R9, model.geom_quat[gid])
-    R, pos, s = R9.reshape(3, 3), model.geom_pos[gid], model.geom_size[gid]
-    return np.array([pos + R @ np.array([sx * s[0], sy * s[1], -s[2]]) for sx in (-1, 1) for sy in (1, -1)])
-
-
-def _coordinate_qpos(motion: Motion, model: mujoco.MjModel) -> np.ndarray:
-    ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, nm) for nm in motion.character.coordinate_names]
-    return np.array([model.jnt_qposadr[i] for i in ids])
-
-
-def sole_agreement(motion: Motion, model: mujoco.MjModel) -> dict[str, Any]:
+def sole_agreement(motion: Motion, model: mujoco.MjModel, geometry: ModelGeometry) -> dict[str, Any]:
     """The simulated soles against the character's, and the stored centres of pressure on them.
 
     ``sole_matches_character``: every sole geom's bottom face has the character's heel and toe
@@ -66,7 +45,7 @@ def sole_agreement(motion: Motion, model: mujoco.MjModel) -> dict[str, Any]:
     (``flat_stance_frames``; the optimizer's centre of pressure is bounded in the foot's box, whose
     height lets it off the sole's outline when the foot is tilted, at heel strike and push-off)."""
     ch = motion.character
-    qadr = _coordinate_qpos(motion, model)
+    qadr = geometry.coordinate_qpos
     d = mujoco.MjData(model)
     bw = body_weight(motion)
     P = motion.T - 2
@@ -74,7 +53,7 @@ def sole_agreement(motion: Motion, model: mujoco.MjModel) -> dict[str, Any]:
     matches = True
     per_foot: dict[str, Any] = {}
     n_all = n_out_all = n_flat = n_out_flat = 0
-    for f, (gid, _bid) in enumerate(_sole_geoms(model)):
+    for f, gid in enumerate(s.geom for s in geometry.soles):
         side = FEET[f]
         sole = ch.sole(side)
         half = model.geom_size[gid]
@@ -108,7 +87,7 @@ def sole_agreement(motion: Motion, model: mujoco.MjModel) -> dict[str, Any]:
             outside = bx > COP_TOLERANCE or by > COP_TOLERANCE
             n_out_all += outside
             corners = [c + Rg @ np.array([sx * half[0], sy * half[1], 0.0]) for sx in (-1, 1) for sy in (-1, 1)]
-            if Rg[2, 2] > FLAT_COS and max(float(p[2]) - ground_height(model, d, p) for p in corners) < FLAT_HEIGHT:
+            if Rg[2, 2] > FLAT_COS and max(float(p[2]) - geometry.ground_height(d, p) for p in corners) < FLAT_HEIGHT:
                 n_flat += 1
                 n_out_flat += outside
             beyond = max(beyond, float(bx), float(by))
@@ -121,16 +100,17 @@ def sole_agreement(motion: Motion, model: mujoco.MjModel) -> dict[str, Any]:
             "tolerance_m": COP_TOLERANCE}
 
 
-def swing_clearance(motion: Motion, model: mujoco.MjModel, ref: Any, step: float = 0.002) -> dict[str, Any]:
+def swing_clearance(motion: Motion, model: mujoco.MjModel, geometry: ModelGeometry, ref: Any,
+                    step: float = 0.002) -> dict[str, Any]:
     """The reference's sole corners above the ground through each foot's swing (the reference's
     frames before and after without a contact of that foot), sampled every ``step`` s over one cycle
     on the reference's spline (``ref``: the simulation's ``mjcf.reference.Reference``): per foot the
     lowest corner (m), where in the swing it is (0 lift-off, 1 touchdown) and the fraction of the
     swing with a corner below the ground."""
-    qadr = _coordinate_qpos(motion, model)
+    qadr = geometry.coordinate_qpos
     d = mujoco.MjData(model)
-    owners = [[i for i, c in enumerate(motion.character.contacts) if c.side == side] for side in FEET]
-    sole_corners = [(bid, _corners(model, gid)) for gid, bid in _sole_geoms(model)]
+    owners = [s.points for s in geometry.soles]
+    sole_corners = [(s.body, s.corners) for s in geometry.soles]
     lows: list[list[tuple[float, float]]] = [[], []]
     for t in np.arange(0.0, ref.period, step):
         sp = [ref.swing_progress(float(t), owners[f]) for f in range(2)]
@@ -141,7 +121,7 @@ def swing_clearance(motion: Motion, model: mujoco.MjModel, ref: Any, step: float
         for f, (bid, corners) in enumerate(sole_corners):
             if sp[f] is None:
                 continue
-            h = min(float(p[2]) - ground_height(model, d, p)
+            h = min(float(p[2]) - geometry.ground_height(d, p)
                     for p in (d.xpos[bid] + d.xmat[bid].reshape(3, 3) @ c for c in corners))
             lows[f].append((h, float(sp[f] or 0.0)))
     out: dict[str, Any] = {}
@@ -159,21 +139,7 @@ def swing_clearance(motion: Motion, model: mujoco.MjModel, ref: Any, step: float
     return out
 
 
-def agreement(motion: Motion, model: mujoco.MjModel, ref: Any) -> dict[str, Any]:
+def agreement(motion: Motion, model: mujoco.MjModel, ref: Any, geometry: ModelGeometry) -> dict[str, Any]:
     """Both measures, as ``report.json``'s ``agreement``."""
-    return {"sole": sole_agreement(motion, model), "swing_clearance": swing_clearance(motion, model, ref)}
-
-
-def ground_height(m: mujoco.MjModel, d: mujoco.MjData, p: np.ndarray) -> float:
-    """Height of the ground (floor or the tread below) at a world point."""
-    best = 0.0 if m.geom_contype[0] else -math.inf
-    for i in range(m.ngeom):
-        nm = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, i) or ""
-        if not nm.startswith("tread_"):
-            continue
-        R = d.geom_xmat[i].reshape(3, 3)
-        loc = R.T @ (p - d.geom_xpos[i])
-        hs = m.geom_size[i]
-        if abs(loc[0]) <= hs[0] and abs(loc[1]) <= hs[1]:
-            best = max(best, float(d.geom_xpos[i][2] + hs[2]))
-    return best if np.isfinite(best) else 0.0
+    return {"sole": sole_agreement(motion, model, geometry),
+            "swing_clearance": swing_clearance(motion, model, geometry, ref)}

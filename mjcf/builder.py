@@ -109,10 +109,37 @@ def _sole_box(character: Character, side: str, roll: float, thickness: float,
     return seg, center, half, rot
 
 
+@dataclass(frozen=True)
+class ContactParts:
+    """The elements of a performable spec (:func:`build_performable`) that simulation code refers
+    to, as the spec's own element objects: the model compiled from the spec resolves them to ids
+    (``mjcf.performable.ModelGeometry``), so no other module relies on how they are named."""
+
+    root: mujoco.MjsBody  # the root segment's body (the pelvis)
+    soles: tuple[mujoco.MjsGeom, ...]  # the box soles, right then left (``solver.motion.FEET``)
+    floor: mujoco.MjsGeom | None  # the plane z = 0 when it is part of the ground
+    treads: tuple[mujoco.MjsGeom, ...]  # the stairs' blocks of ground
+    fall: tuple[mujoco.MjsGeom, ...]  # segment geoms (not the feet's) whose touching the ground is a fall
+    inversion: tuple[mujoco.MjsJoint, ...]  # the feet's inversion hinges, right then left, when there are
+
+
 def build_spec(character: Character, gravity: Sequence[float] = DEFAULT_GRAVITY,
                contacts: ContactOptions | None = None) -> mujoco.MjSpec:
     """The character's model; ``contacts`` turns it into a performable one (see
     :class:`ContactOptions`); without, geoms are visual only and nothing is actuated."""
+    return _build(character, gravity, contacts)[0]
+
+
+def build_performable(character: Character, gravity: Sequence[float],
+                      contacts: ContactOptions) -> tuple[mujoco.MjSpec, ContactParts]:
+    """The performable spec (:func:`build_spec` with ``contacts``) and its :class:`ContactParts`."""
+    spec, parts = _build(character, gravity, contacts)
+    assert parts is not None
+    return spec, parts
+
+
+def _build(character: Character, gravity: Sequence[float],
+           contacts: ContactOptions | None) -> tuple[mujoco.MjSpec, ContactParts | None]:
     spec = mujoco.MjSpec()
     spec.modelname = character.name
     spec.compiler.degree = False
@@ -126,6 +153,10 @@ def build_spec(character: Character, gravity: Sequence[float] = DEFAULT_GRAVITY,
     floor.contype = 1
     floor.conaffinity = 1
     root_dofs = {d.name for d in character.segments[0].dofs} if contacts is not None else set()
+    treads: list[mujoco.MjsGeom] = []
+    fall: list[mujoco.MjsGeom] = []
+    soles: list[mujoco.MjsGeom] = []
+    inversion_joints: list[mujoco.MjsJoint] = []
     if contacts is not None:
         spec.option.timestep = float(contacts.timestep)
         spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
@@ -141,6 +172,7 @@ def build_spec(character: Character, gravity: Sequence[float] = DEFAULT_GRAVITY,
             g.quat = [float(np.cos(tr.yaw / 2)), 0.0, 0.0, float(np.sin(tr.yaw / 2))]
             g.contype, g.conaffinity = _GROUND
             g.friction = [float(contacts.friction), 0.005, 0.0001]
+            treads.append(g)
 
     bodies: dict[str, mujoco.MjsBody] = {}
     # the feet and what hangs from them (toes) never count as a fall
@@ -182,6 +214,7 @@ def build_spec(character: Character, gravity: Sequence[float] = DEFAULT_GRAVITY,
             g.conaffinity = 0
             if contacts is not None and seg.name not in foot_segments:
                 g.contype, g.conaffinity = _BODY
+                fall.append(g)
             g.mass = 0.0
         if seg.length > 0:
             body.add_site(name=f"{MARKER_PREFIX}{seg.name}", pos=seg.marker.tolist(), size=[0.008, 0, 0])
@@ -201,15 +234,13 @@ def build_spec(character: Character, gravity: Sequence[float] = DEFAULT_GRAVITY,
     for c in character.contacts:
         bodies[c.segment].add_site(name=c.name, pos=c.position.tolist(), size=[0.01, 0, 0], rgba=[1, 0, 0, 1])
     if contacts is not None:
-        inversion = []
         for side, roll in zip(("right", "left"), contacts.sole_roll, strict=True):
             seg_name, center, half, rot = _sole_box(character, side, float(roll), contacts.sole_thickness,
                                                     contacts.sole_half_width)
             holder = bodies[seg_name]
             if contacts.inversion:
-                holder.add_joint(name=f"inversion_{side}", type=mujoco.mjtJoint.mjJNT_HINGE,
-                                           axis=rot[:, 0].tolist(), pos=[0.0, 0.0, 0.0])
-                inversion.append(f"inversion_{side}")
+                inversion_joints.append(holder.add_joint(name=f"inversion_{side}", type=mujoco.mjtJoint.mjJNT_HINGE,
+                                                         axis=rot[:, 0].tolist(), pos=[0.0, 0.0, 0.0]))
             g = holder.add_geom(name=f"sole_{side}", type=mujoco.mjtGeom.mjGEOM_BOX, size=half.tolist(),
                                 pos=center.tolist(), quat=_quat(rot).tolist(), rgba=[0.3, 0.3, 0.3, 1.0])
             g.contype, g.conaffinity = _SOLE
@@ -217,8 +248,9 @@ def build_spec(character: Character, gravity: Sequence[float] = DEFAULT_GRAVITY,
             g.condim = 4 if contacts.torsional_friction > 0 else 3
             g.solref = list(map(float, contacts.solref))
             g.mass = 0.0
-        for name in inversion:
-            a = spec.add_actuator(name=name, target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+            soles.append(g)
+        for joint in inversion_joints:
+            a = spec.add_actuator(name=joint.name, target=joint.name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
             a.gear = [1.0, 0, 0, 0, 0, 0]
             a.ctrllimited = mujoco.mjtLimited.mjLIMITED_FALSE
         for seg in character.segments:
@@ -228,7 +260,11 @@ def build_spec(character: Character, gravity: Sequence[float] = DEFAULT_GRAVITY,
                 a = spec.add_actuator(name=d.name, target=d.name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
                 a.gear = [1.0, 0, 0, 0, 0, 0]
                 a.ctrllimited = mujoco.mjtLimited.mjLIMITED_FALSE
-    return spec
+    if contacts is None:
+        return spec, None
+    return spec, ContactParts(root=bodies[character.segments[0].name], soles=tuple(soles),
+                              floor=floor if contacts.floor else None, treads=tuple(treads), fall=tuple(fall),
+                              inversion=tuple(inversion_joints))
 
 
 def compile_model(character: Character, gravity: Sequence[float] = DEFAULT_GRAVITY) -> mujoco.MjModel:

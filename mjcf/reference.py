@@ -107,7 +107,7 @@ class Reference:
             w = np.concatenate([m, f], axis=1)
         return w
 
-    def swing_progress(self, t: float, points: list[int]) -> float | None:
+    def swing_progress(self, t: float, points: list[int] | np.ndarray) -> float | None:
         """Where t is within the swing of the foot owning ``points`` (0 at the last contact frame,
         1 at the next), or None when the foot is in contact at the frame before or after t."""
         _, i, u = self._split(t)

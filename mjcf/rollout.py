@@ -1,9 +1,10 @@
-"""A run of the tracking controller in MuJoCo: its start and its steps.
+"""A run of a controller (``mjcf.controller.Controller``) in MuJoCo: its start and its steps.
 
 :func:`_start` puts the walk at a reference time (mid single support for
 :func:`mjcf.simulate.simulate`) with the reference's velocities (no impact), its contacts
-preloaded at the stored vertical force; :func:`_rollout` steps the model under the controller,
-detects a fall and samples the series the report is made from (:class:`_Run`).
+preloaded at the stored vertical force; :func:`_rollout` steps the model under the controller's
+hooks, ends at its termination (by default a fall) and samples the series the report is made from
+(:class:`_Run`).
 """
 
 from __future__ import annotations
@@ -15,18 +16,19 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from mjcf.agreement import ground_height
+from mjcf.controller import Controller
+from mjcf.performable import ModelGeometry
 from mjcf.reference import ROOT_Z, Reference
-from mjcf.tracker import Tracker
+from solver.environment import body_weight
 
 
-def _foot_forces(m: mujoco.MjModel, d: mujoco.MjData, sole_geoms: tuple[int, int]) -> np.ndarray:
+def _foot_forces(m: mujoco.MjModel, d: mujoco.MjData, geometry: ModelGeometry) -> np.ndarray:
     """(2, 3) world contact force on each sole."""
     out = np.zeros((2, 3))
     f6 = np.zeros(6)
     for i in range(d.ncon):
         c = d.contact[i]
-        for f, gid in enumerate(sole_geoms):
+        for f, gid in enumerate(sole.geom for sole in geometry.soles):
             if c.geom1 == gid or c.geom2 == gid:
                 mujoco.mj_contactForce(m, d, i, f6)
                 fw = c.frame.reshape(3, 3).T @ f6[:3]
@@ -38,41 +40,42 @@ def _foot_forces(m: mujoco.MjModel, d: mujoco.MjData, sole_geoms: tuple[int, int
 MAX_PRELOAD_DEPTH = 0.01
 
 
-def _start(m: mujoco.MjModel, ctl: Tracker, ref: Reference, t0: float,
+def _start(m: mujoco.MjModel, geometry: ModelGeometry, ctl: Controller, ref: Reference, t0: float,
            preload: bool) -> tuple[mujoco.MjData, dict[str, Any]]:
     """The state the simulation starts from at reference time ``t0``: the reference's pose and
     velocities, the body lowered so the lowest scheduled sole corner touches the ground; with
     ``preload``, lowered further (the soft contacts' penetration) until MuJoCo's vertical contact
-    force under the controller's first torques equals the stored one (bisection on the depth). A
-    fresh ``MjData`` (a replay from qpos0/qvel0 starts from the same solver state)."""
+    force under the controller's first controls (``initialize`` then ``control`` at each depth)
+    equals the stored one (bisection on the depth). A fresh ``MjData`` (a replay from qpos0/qvel0
+    starts from the same solver state)."""
     d = mujoco.MjData(m)
     qr, qdr, _ = ref.state(t0)
-    d.qpos[ctl.qadr] = qr
-    d.qvel[ctl.vadr] = qdr
+    d.qpos[geometry.coordinate_qpos] = qr
+    d.qvel[geometry.coordinate_dof] = qdr
     mujoco.mj_forward(m, d)
     active = ref.active(t0)
     lows = []
-    for _gid, bid, corners, owner, _c in ctl.soles:
+    for sole in geometry.soles:
+        bid = sole.body
         for c in range(4):
-            if active[owner[c]]:
-                p = d.xpos[bid] + d.xmat[bid].reshape(3, 3) @ corners[c]
-                lows.append(p[2] - ground_height(m, d, p))
-    zadr = int(ctl.qadr[ROOT_Z])
+            if active[sole.owner[c]]:
+                p = d.xpos[bid] + d.xmat[bid].reshape(3, 3) @ sole.corners[c]
+                lows.append(p[2] - geometry.ground_height(d, p))
+    zadr = int(geometry.coordinate_qpos[ROOT_Z])
     if lows:
         d.qpos[zadr] -= min(lows) + 2e-4
     stored = float(ref.wrench(t0)[:, 5].sum())
-    sole_geoms = (ctl.soles[0][0], ctl.soles[1][0])
-    info: dict[str, Any] = {"stored_vertical_force_bw": stored / ctl.bw, "preloaded": bool(preload and lows),
+    bw = body_weight(ref.motion)
+    info: dict[str, Any] = {"stored_vertical_force_bw": stored / bw, "preloaded": bool(preload and lows),
                             "depth_m": 2e-4 if lows else 0.0}
 
     def force(depth: float) -> float:
         d.qpos[zadr] = z0 - depth
         mujoco.mj_forward(m, d)
-        saved = ctl.snapshot()
+        ctl.initialize(d, t0)
         d.ctrl[:] = ctl.control(d, t0)
-        ctl.restore(saved)
         mujoco.mj_forward(m, d)
-        return float(_foot_forces(m, d, sole_geoms)[:, 2].sum())
+        return float(_foot_forces(m, d, geometry)[:, 2].sum())
 
     if preload and lows:
         z0 = float(d.qpos[zadr]) + 2e-4
@@ -88,7 +91,7 @@ def _start(m: mujoco.MjModel, ctl: Tracker, ref: Reference, t0: float,
                 hi = mid
         # where the force jumps (the controller's loaded corners change with the depth) the deeper side: it
         # carries the stored force over the first 10 ms better than the shallower (measured on the tutors)
-        info["t0_vertical_force_bw"] = force(hi) / ctl.bw
+        info["t0_vertical_force_bw"] = force(hi) / bw
         info["depth_m"] = hi
     fresh = mujoco.MjData(m)
     fresh.qpos[:] = d.qpos
@@ -103,7 +106,8 @@ START_WINDOW_S = 0.06
 
 @dataclass(eq=False)
 class _Run:
-    """One rollout: per step time, ctrl and qpos; the series sampled every 10 ms; the fall."""
+    """One rollout: per step time, ctrl and qpos; the series sampled every 10 ms; the fall (the
+    controller's termination: its time and reason)."""
 
     time: np.ndarray
     ctrl: np.ndarray
@@ -118,66 +122,56 @@ class _Run:
     qvel_end: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
-def _rollout(m: mujoco.MjModel, d: mujoco.MjData, ctl: Tracker, ref: Reference, t0: float, steps: int,
-             stop_on_fall: bool, pelvis: int) -> _Run:
-    """Run the controller from the state in ``d`` (reference time ``t0``) for ``steps`` steps."""
-    gains = ctl.g
+#: the series the run samples itself (a controller's ``measures`` add others)
+RUN_SERIES = ("foot_force", "foot_force_ref", "t_ref", "q_ref", "q", "t", "com")
+
+
+def _rollout(m: mujoco.MjModel, d: mujoco.MjData, ctl: Controller, ref: Reference, geometry: ModelGeometry,
+             t0: float, steps: int, stop_on_fall: bool) -> _Run:
+    """Run the controller from the state in ``d`` (reference time ``t0``) for ``steps`` steps, or
+    until its termination (with ``stop_on_fall``); the hooks in the order ``mjcf.controller`` gives."""
     dt = float(m.opt.timestep)
     time = np.zeros(steps)
     ctrl = np.zeros((steps, m.nu))
     qpos = np.zeros((steps, m.nq))
-    sole_geoms = (ctl.soles[0][0], ctl.soles[1][0])
-    body_geoms = {i for i in range(m.ngeom) if m.geom_contype[i] == 2}
     every = max(1, int(round(0.01 / dt)))  # measures every 10 ms
     n_start = int(round(START_WINDOW_S / dt))
     start_force: list[float] = []
-    keys = ("foot_force", "foot_force_qp", "stance_corners", "foot_force_ref", "t_ref", "q_ref", "q", "t", "com",
-            "anchor")
-    S: dict[str, list[Any]] = {k: [] for k in keys}
-    qr0 = ref.state(t0)[0]
+    S: dict[str, list[Any]] = {k: [] for k in RUN_SERIES}
+    com_body = int(m.body_rootid[geometry.pelvis])
     t_ref = t0
-    pelvis_h0 = float(d.xpos[pelvis][2])
+    ctl.initialize(d, t0)
     fell, fall_time, reason = False, None, None
     tau = np.zeros(m.nu)
     wall0 = _time.perf_counter()
     done = steps
     for s in range(steps):
         t = s * dt
-        if s % gains.control_period == 0:
+        if s % ctl.control_period == 0:
             tau = ctl.control(d, t_ref)
         d.ctrl[:] = tau
         if s % every == 0:
-            S["foot_force"].append(_foot_forces(m, d, sole_geoms))
-            S["foot_force_qp"].append(ctl.predicted.copy())
-            S["stance_corners"].append(list(ctl.n_corners))
+            S["foot_force"].append(_foot_forces(m, d, geometry))
             S["foot_force_ref"].append(ref.wrench(t_ref)[:, 3:])
             S["t_ref"].append(t_ref)
             S["q_ref"].append(ref.state(t_ref)[0])
-            S["q"].append(d.qpos[ctl.qadr].copy())
+            S["q"].append(d.qpos[geometry.coordinate_qpos].copy())
             S["t"].append(t)
-            S["com"].append(d.subtree_com[ctl.com_body].copy())
-            S["anchor"].append(ctl.anchor.copy())
+            S["com"].append(d.subtree_com[com_body].copy())
+            for k, v in ctl.measures(d).items():
+                if k in RUN_SERIES:
+                    raise ValueError(f"a controller's measure is named as the run's own series: {k}")
+                S.setdefault(k, []).append(v)
         mujoco.mj_step(m, d)
         time[s] = t + dt
         ctrl[s] = d.ctrl
         qpos[s] = d.qpos
         mujoco.mj_forward(m, d)
         if s < n_start:
-            start_force.append(float(_foot_forces(m, d, sole_geoms)[:, 2].sum()))
-        # a fall: pelvis sunk, or any non-foot body on the ground
-        bad = None
+            start_force.append(float(_foot_forces(m, d, geometry)[:, 2].sum()))
+        ctl.after_step(d)
         t_ref += dt * ctl.clock_rate(d, t_ref)
-        ph = float(d.xpos[pelvis][2]) - float(ref.state(t_ref)[0][ROOT_Z] - qr0[ROOT_Z])
-        if ph < 0.6 * pelvis_h0:
-            bad = f"pelvis height {ph:.3f} m (start {pelvis_h0:.3f} m)"
-        for i in range(d.ncon):
-            c = d.contact[i]
-            if c.geom1 in body_geoms or c.geom2 in body_geoms:
-                gb = c.geom1 if c.geom1 in body_geoms else c.geom2
-                bad = f"{mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, gb)} touches the ground"
-                break
-        if not np.all(np.isfinite(d.qpos)):
-            bad = "the simulation diverged"
+        bad = ctl.termination(d, t_ref)
         if bad is not None and not fell:
             fell, fall_time, reason = True, t + dt, bad
             if stop_on_fall:

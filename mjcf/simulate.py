@@ -2,8 +2,10 @@
 
 :func:`simulate` performs the motion and reports on it (:class:`SimulationResult`). Its parts: the
 reference (``mjcf.reference``: the motion over any number of cycles), the model
-(``mjcf.performable``: contacts on, an unactuated root, one motor per joint), the controller
-(``mjcf.tracker``) and the run (``mjcf.rollout``: the start without impact, the steps, a fall).
+(``mjcf.performable``: contacts on, an unactuated root, one motor per joint; its
+``ModelGeometry``), the controller (any ``mjcf.controller.Controller``; by default
+``mjcf.tracker.Tracker``) and the run (``mjcf.rollout``: the start without impact, the steps, the
+controller's termination, by default a fall).
 
 The walk runs continuously from mid stance; beside this continuous run, :func:`simulate` starts
 every cycle afresh from the reference's state and tracks it to its end with a penalized residual
@@ -16,16 +18,19 @@ from __future__ import annotations
 import math
 import time as _time
 from dataclasses import dataclass, field, replace
+from functools import partial
 from typing import Any
 
 import mujoco
 import numpy as np
 
 from mjcf.agreement import agreement
-from mjcf.performable import performable_model
+from mjcf.controller import Controller, ControllerFactory
+from mjcf.gains import Gains, motor_peaks
+from mjcf.performable import ModelGeometry, performable_model
 from mjcf.reference import ROOT_Z, Reference, SimulationError, mid_stance_time
 from mjcf.rollout import _rollout, _Run, _start
-from mjcf.tracker import Gains, Tracker
+from mjcf.tracker import Tracker
 from solver.environment import body_weight
 from solver.motion import Motion
 from solver.trajectory import ROOT_XY, ROOT_YAW
@@ -61,15 +66,15 @@ CLOSE_TOLERANCE = {"joint_rms_deg": 5.0, "joint_velocity_rms_deg_s": 50.0, "pelv
                    "root_attitude_deg": 5.0, "root_velocity_m_s": 0.2}
 
 
-def _end_error(run: _Run, ctl: Tracker, ref: Reference) -> dict[str, float]:
+def _end_error(run: _Run, geometry: ModelGeometry, ref: Reference) -> dict[str, float]:
     """How far the state at a run's end is from the reference's at the reference clock's end time: joint
     angles and velocities (RMS), pelvis height, root attitude (largest of the three angles), root linear
     velocity (the horizontal position is re-anchored on the feet: not compared)."""
     if not len(run.qpos):
         return {}
     qr, qdr, _ = ref.state(run.t_ref_end)
-    q = run.qpos[-1][ctl.qadr]
-    qd = run.qvel_end[ctl.vadr]
+    q = run.qpos[-1][geometry.coordinate_qpos]
+    qd = run.qvel_end[geometry.coordinate_dof]
     return {"joint_rms_deg": float(np.degrees(np.sqrt(np.mean((q[6:] - qr[6:]) ** 2)))),
             "joint_velocity_rms_deg_s": float(np.degrees(np.sqrt(np.mean((qd[6:] - qdr[6:]) ** 2)))),
             "pelvis_height_m": float(q[ROOT_Z] - qr[ROOT_Z]),
@@ -93,34 +98,35 @@ def _start_report(run: _Run, info: dict[str, Any], bw: float, dt: float) -> dict
     return out
 
 
-def _resync(motion: Motion, ref: Reference, t0: float, cycles: int, gains: Gains) -> dict[str, Any]:
+def _resync(motion: Motion, ref: Reference, t0: float, cycles: int, gains: Gains,
+            controller: ControllerFactory | None = None) -> dict[str, Any]:
     """Performability per cycle: every cycle started afresh from the reference's state at its start
     (t0 + k × period, preloaded as the continuous run), tracked to its end by the same controller
-    with a penalized residual wrench at the root (six motors on the root coordinates, weighted by
-    ``gains.residual_weight`` in the QP: a Moco-style residual actuator). A cycle completes when it
+    (``controller``; by default the :class:`~mjcf.tracker.Tracker` with ``gains``) with a penalized
+    residual wrench at the root (six motors on the root coordinates, weighted by
+    ``gains.residual_weight`` in the Tracker's QP: a Moco-style residual actuator). A cycle completes when it
     ends without a fall; it *closes* when its end state is also within ``CLOSE_TOLERANCE`` of the
     reference's (``end_error``). The residual's RMS is in body weights: forces / BW and the root hinges'
     torques / (BW × 1 m), over every simulated step."""
-    _xml, m, _ = performable_model(motion, cycles, ref, gains.sole_half_width, gains.inversion, root_residual=True)
-    ctl = Tracker(motion, m, ref, gains)
-    pelvis = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, motion.character.segments[0].name)
+    _xml, m, geometry = performable_model(motion, cycles, ref, gains.sole_half_width, gains.inversion,
+                                          root_residual=True)
+    ctl = (controller or partial(Tracker, gains=gains))(motion, m, geometry, ref)
     steps = int(round(ref.period / float(m.opt.timestep)))
-    fresh = ctl.snapshot()
-    scale = np.array([ctl.bw] * 3 + [ctl.bw * 1.0] * 3)
+    bw = body_weight(motion)
+    scale = np.array([bw] * 3 + [bw * 1.0] * 3)
     per_cycle = []
     squares: list[np.ndarray] = []
     cpu = _time.process_time()
     completed = closed = 0
     for k in range(cycles):
-        ctl.restore(fresh)
         tk = t0 + k * ref.period
-        d, _info = _start(m, ctl, ref, tk, gains.preload)
-        run = _rollout(m, d, ctl, ref, tk, steps, True, pelvis)
-        r = run.ctrl[:, ctl.residual] / scale
+        d, _info = _start(m, geometry, ctl, ref, tk, gains.preload)
+        run = _rollout(m, d, ctl, ref, geometry, tk, steps, True)
+        r = run.ctrl[:, geometry.residual] / scale
         sq = np.sum(r**2, axis=1)
         squares.append(sq)
         completed += not run.fell
-        err = _end_error(run, ctl, ref)
+        err = _end_error(run, geometry, ref)
         closes = not run.fell and all(abs(err[key]) <= tol for key, tol in CLOSE_TOLERANCE.items())
         closed += closes
         per_cycle.append({"cycle": k, "completed": not run.fell,
@@ -144,35 +150,38 @@ def _resync(motion: Motion, ref: Reference, t0: float, cycles: int, gains: Gains
 
 
 def simulate(motion: Motion, cycles: int = 10, gains: Gains | None = None, *,
-             stop_on_fall: bool = True, resync: bool = True) -> SimulationResult:
-    """Simulate ``cycles`` gait cycles of ``motion`` under the tracking controller, continuously
-    from mid stance; with ``resync`` also each cycle from the reference's state at its start with a
-    penalized root residual (the report's ``resync``)."""
+             controller: ControllerFactory | None = None, stop_on_fall: bool = True,
+             resync: bool = True) -> SimulationResult:
+    """Simulate ``cycles`` gait cycles of ``motion`` under a controller, continuously from mid
+    stance; with ``resync`` also each cycle from the reference's state at its start with a
+    penalized root residual (the report's ``resync``). ``controller`` makes the controller from
+    (motion, model, geometry, reference) (``mjcf.controller``); by default the
+    :class:`~mjcf.tracker.Tracker` with ``gains``, which also hold the model's options
+    (``sole_half_width``, ``inversion``) and the start's (``preload``)."""
     if cycles < 1:
         raise SimulationError("cycles must be at least 1")
     gains = gains or Gains()
     ref = Reference(motion)
     t0 = mid_stance_time(motion)
-    xml, m, _ = performable_model(motion, cycles, ref, gains.sole_half_width, gains.inversion)
-    ctl = Tracker(motion, m, ref, gains)
-    d, start_info = _start(m, ctl, ref, t0, gains.preload)
+    xml, m, geometry = performable_model(motion, cycles, ref, gains.sole_half_width, gains.inversion)
+    ctl = (controller or partial(Tracker, gains=gains))(motion, m, geometry, ref)
+    d, start_info = _start(m, geometry, ctl, ref, t0, gains.preload)
     qpos0, qvel0 = d.qpos.copy(), d.qvel.copy()
     dt = float(m.opt.timestep)
     steps = int(round(cycles * ref.period / dt))
-    pelvis = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, motion.character.segments[0].name)
-    run = _rollout(m, d, ctl, ref, t0, steps, stop_on_fall, pelvis)
+    run = _rollout(m, d, ctl, ref, geometry, t0, steps, stop_on_fall)
     res = SimulationResult(
         xml=xml, timestep=dt, qpos0=qpos0, qvel0=qvel0, time=run.time, ctrl=run.ctrl, qpos=run.qpos,
         actuator_names=tuple(mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_ACTUATOR, a) for a in range(m.nu)),
-        coordinate_qpos=ctl.qadr, t0=t0, cycle_duration_s=ref.period, cycles_requested=cycles,
+        coordinate_qpos=geometry.coordinate_qpos.copy(), t0=t0, cycle_duration_s=ref.period, cycles_requested=cycles,
         fell=run.fell, fall_time=run.fall_time, fall_reason=run.fall_reason, wall_time_s=run.wall,
         series=run.series,
     )
-    report = _report(res, motion, ref, ctl)
-    report["start"] = _start_report(run, start_info, ctl.bw, dt)
-    report["agreement"] = agreement(motion, m, ref)
+    report = _report(res, motion, ref, ctl, motor_peaks(motion, m, geometry), geometry.motors)
+    report["start"] = _start_report(run, start_info, body_weight(motion), dt)
+    report["agreement"] = agreement(motion, m, ref, geometry)
     if resync:
-        report["resync"] = _resync(motion, ref, t0, cycles, gains)
+        report["resync"] = _resync(motion, ref, t0, cycles, gains, controller)
     return replace(res, report=report)
 
 
@@ -180,7 +189,9 @@ def _wrap(a: np.ndarray) -> np.ndarray:
     return (a + np.pi) % (2 * np.pi) - np.pi
 
 
-def _report(res: SimulationResult, motion: Motion, ref: Reference, ctl: Tracker) -> dict[str, Any]:
+def _report(res: SimulationResult, motion: Motion, ref: Reference, ctl: Controller, peaks: np.ndarray,
+            motors: np.ndarray) -> dict[str, Any]:
+    """The report of a run; ``peaks``: per motor (``motors``) the motion's own inverse-dynamics peak."""
     S = res.series
     walked_s = float(res.time[-1]) if len(res.time) else 0.0
     cycles_walked = walked_s / ref.period
@@ -200,9 +211,9 @@ def _report(res: SimulationResult, motion: Motion, ref: Reference, ctl: Tracker)
                       "heading_deg": float(np.degrees(_wrap(q[i, ROOT_YAW] - qr[i, ROOT_YAW]))),
                       "joint_rms_deg": float(np.degrees(np.sqrt(np.mean((q[i, 6:] - qr[i, 6:]) ** 2)))),
                       "pelvis_height_m": float(q[i, ROOT_Z] - qr[i, ROOT_Z])})
-    peaks_sim = np.max(np.abs(res.ctrl[:, ctl.motor]), axis=0) if len(res.ctrl) else np.zeros(len(ctl.peaks))
-    ratio = peaks_sim / np.maximum(ctl.peaks, 1e-9)
-    act = [res.actuator_names[a] for a in ctl.motor]
+    peaks_sim = np.max(np.abs(res.ctrl[:, motors]), axis=0) if len(res.ctrl) else np.zeros(len(peaks))
+    ratio = peaks_sim / np.maximum(peaks, 1e-9)
+    act = [res.actuator_names[a] for a in motors]
     return {
         "motion": {"character": motion.character.name, "fps": motion.fps, "frames": motion.T,
                    "environment": motion.environment.to_dict()},
@@ -216,7 +227,7 @@ def _report(res: SimulationResult, motion: Motion, ref: Reference, ctl: Tracker)
         "start_reference_time_s": res.t0,
         "reference_clock_offset_s": (float(S["t_ref"][-1] - S["t"][-1] - res.t0) if len(S["t"]) else 0.0),
         "timestep_s": res.timestep,
-        "control_period_s": res.timestep * ctl.g.control_period,
+        "control_period_s": res.timestep * ctl.control_period,
         "joint_tracking_rms_deg": float(np.sqrt(np.mean(joint_err**2))) if joint_err.size else float("nan"),
         "joint_tracking_rms_deg_per_joint": {names[6 + j]: float(np.sqrt(np.mean(joint_err[:, j] ** 2)))
                                              for j in range(joint_err.shape[1])} if joint_err.size else {},
@@ -225,10 +236,11 @@ def _report(res: SimulationResult, motion: Motion, ref: Reference, ctl: Tracker)
         "foot_force_rms_bw": force_rms,
         "body_weight_n": bw,
         "peak_torque_nm": {a: float(p) for a, p in zip(act, peaks_sim, strict=True)},
-        "id_peak_torque_nm": {a: float(p) for a, p in zip(act, ctl.peaks, strict=True)},
+        "id_peak_torque_nm": {a: float(p) for a, p in zip(act, peaks, strict=True)},
         "peak_torque_ratio": {a: float(r) for a, r in zip(act, ratio, strict=True)},
         "peak_torque_ratio_max": float(ratio.max()) if len(ratio) else float("nan"),
-        "torque_limit_nm": {a: float(v) for a, v in zip(act, ctl.tau_limit, strict=True)},
+        "torque_limit_nm": ({a: float(v) for a, v in zip(act, ctl.torque_limit, strict=True)}
+                            if ctl.torque_limit is not None else None),
         "wall_time_s": res.wall_time_s,
         "realtime_factor": walked_s / res.wall_time_s if res.wall_time_s > 0 else float("nan"),
     }

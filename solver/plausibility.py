@@ -58,18 +58,19 @@ def _residual_section(ctx: Context) -> SectionResult:
     applied, force / weight and moment / (weight × leg), within the residual tolerance."""
     motion, tol, weight, leg = ctx.motion, ctx.tolerances, ctx.weight, ctx.leg
     res = root_residual(motion, ctx.gravity)
-    rr = {
+    force, moment = float(np.abs(res[3:]).max()) / weight, float(np.abs(res[:3]).max()) / (weight * leg)
+    rr: dict[str, Any] = {
         "max_force_N": float(np.abs(res[3:]).max()),
         "max_moment_Nm": float(np.abs(res[:3]).max()),
         "rms_force_N": float(np.sqrt((res[3:] ** 2).sum(axis=0).mean())),
-        "max_force_rel_weight": float(np.abs(res[3:]).max() / weight),
-        "max_moment_rel_weight_leg": float(np.abs(res[:3]).max() / (weight * leg)),
+        "max_force_rel_weight": force,
+        "max_moment_rel_weight_leg": moment,
         "about": "root position of each frame",
         "frames": ("frames and midpoints (C2 cubic spline)" if motion.interpolation == "cubic-spline"
                    else "interior (central differences)"),
     }
-    checks = [Check.measure("root_force", rr["max_force_rel_weight"], tol.residual, "BW", "root residual force"),
-              Check.measure("root_moment", rr["max_moment_rel_weight_leg"], tol.residual, "BW·leg",
+    checks = [Check.measure("root_force", force, tol.residual, "BW", "root residual force"),
+              Check.measure("root_moment", moment, tol.residual, "BW·leg",
                             "root residual moment")]
     if motion.wrenches is None:
         checks.append(Check("wrenches", None, 0.0, "", "the motion stores its contact wrenches", False,

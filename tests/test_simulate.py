@@ -91,31 +91,28 @@ def test_tutor_walks_and_report(simulated):
 def test_stairs_treads_hold_the_feet_and_clear_the_swing(simulated):
     """The treads built for a flight of stairs hold every stance foot of the reference on its
     tread top, and each riser stands where the reference's swing foot passes above it."""
-    from mjcf.agreement import ground_height
     from mjcf.performable import performable_model
     from mjcf.reference import Reference
-    from mjcf.tracker import Gains, Tracker
 
     tutor, _, _ = simulated
     res = solver.extrapolate(tutor, solver.Target(step_height_m=0.08))
     assert res.status == "succeeded", res.message
     motion = res.steps[-1].motion
     ref = Reference(motion)
-    _, model, _ = performable_model(motion, 2, ref)
-    treads = [i for i in range(model.ngeom) if model.geom(i).name.startswith("tread_")]
-    assert len(treads) >= 6 and model.geom_contype[0] == 0  # treads instead of the floor
-    ctl = Tracker(motion, model, ref, Gains())
+    _, model, geometry = performable_model(motion, 2, ref)
+    assert len(geometry.treads) >= 6 and not geometry.floor and model.geom_contype[0] == 0  # treads, no floor
     d = mujoco.MjData(model)
     stance, swing = [], []
     for t in np.arange(0.0, 2 * ref.period, 0.01):
-        d.qpos[ctl.qadr] = ref.state(t)[0]
+        d.qpos[geometry.coordinate_qpos] = ref.state(t)[0]
         mujoco.mj_kinematics(model, d)
         active = ref.active(t)
         contacts_now = ref.contacts[:, min(int(round(t / ref.dt)) % ref.P, ref.P - 1)]
-        for _gid, bid, corners, owner, _c in ctl.soles:
+        for sole in geometry.soles:
+            owner = list(sole.owner)
             for c in range(4):
-                p = d.xpos[bid] + d.xmat[bid].reshape(3, 3) @ corners[c]
-                h = p[2] - ground_height(model, d, p)
+                p = d.xpos[sole.body] + d.xmat[sole.body].reshape(3, 3) @ sole.corners[c]
+                h = p[2] - geometry.ground_height(d, p)
                 (stance if contacts_now[owner[c]] else swing if not active[owner].any() else []).append(h)
     # stance heel/toe edges on their tread (the sole's width rolls them by a few mm)
     assert min(stance) > -0.02 and np.median(np.abs(stance)) < 0.01
@@ -152,10 +149,11 @@ def test_simulated_sole_is_the_characters_and_the_reference_clears_it(simulated)
 def test_start_is_preloaded_at_the_stored_vertical_force(simulated):
     """The start's contacts carry the stored vertical force from the first step (the body pressed into
     the soft contacts), where the unloaded start has none and oscillates."""
+    from mjcf.gains import Gains
     from mjcf.performable import performable_model
     from mjcf.reference import Reference, mid_stance_time
     from mjcf.rollout import _rollout, _start
-    from mjcf.tracker import Gains, Tracker
+    from mjcf.tracker import Tracker
 
     motion, out, _ = simulated
     start = json.loads((out / "report.json").read_text())["start"]
@@ -164,11 +162,10 @@ def test_start_is_preloaded_at_the_stored_vertical_force(simulated):
     assert start["first_60ms_rms_difference_bw"] < 0.08
     ref = Reference(motion)
     t0 = mid_stance_time(motion)
-    _, model, _ = performable_model(motion, 1, ref)
-    ctl = Tracker(motion, model, ref, Gains(preload=False))
-    d, info = _start(model, ctl, ref, t0, preload=False)
-    pelvis = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, motion.character.segments[0].name)
-    run = _rollout(model, d, ctl, ref, t0, 60, True, pelvis)
+    _, model, geometry = performable_model(motion, 1, ref)
+    ctl = Tracker(motion, model, geometry, ref, Gains(preload=False))
+    d, info = _start(model, geometry, ctl, ref, t0, preload=False)
+    run = _rollout(model, d, ctl, ref, geometry, t0, 60, True)
     unloaded = run.start_force / ctl.bw
     assert not info["preloaded"] and unloaded[0] < 0.1  # the unloaded start: no force on the first step
     assert np.max(np.abs(unloaded[:10] - start["stored_vertical_force_bw"])) > 0.5
@@ -177,9 +174,9 @@ def test_start_is_preloaded_at_the_stored_vertical_force(simulated):
 def test_cycle_completes_from_the_reference_state_without_root_help(simulated):
     """Priced out of the QP, the root residual stays below 10⁻⁴ BW and the tutor's cycle still completes
     from the reference's state (docs/simulation.md: on the shipped tutors the root help is not needed)."""
+    from mjcf.gains import Gains
     from mjcf.reference import Reference, mid_stance_time
     from mjcf.simulate import _resync
-    from mjcf.tracker import Gains
 
     motion, _, _ = simulated
     ref = Reference(motion)
