@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+import shared_tutors
 
 from solver import axes as registry
 from solver.axes import Target, environment_at, guide_at, nlp_at
@@ -109,12 +110,7 @@ def test_service_schema_and_cli_flags_are_derived_from_the_registry():
 
 @pytest.fixture(scope="module")
 def tutor(shared_data):
-    from solver.io import load_trial
-    from solver.pipeline import make_tutor
-
-    d = shared_data / "deepmimic_humanoid3d_walk"
-    res = make_tutor(load_trial([d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt"]), fps=15,
-                     character="halfboy")
+    res = shared_tutors.tutor(shared_data)
     assert res.status == "succeeded", res.message
     return res.motion
 

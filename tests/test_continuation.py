@@ -5,6 +5,7 @@ import time
 
 import numpy as np
 import pytest
+import shared_tutors
 
 from solver import spatial as sp
 from solver.continuation import (
@@ -16,18 +17,13 @@ from solver.continuation import (
     guide_at,
     motion_at,
 )
-from solver.pipeline import make_tutor
 from solver.spacetime import Environment
 from solver.transforms import curve, slope
 
 
 @pytest.fixture(scope="module")
 def tutor(shared_data):
-    from solver.io import load_trial
-
-    d = shared_data / "deepmimic_humanoid3d_walk"
-    res = make_tutor(load_trial([d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt"]), fps=15,
-                     character="halfboy")
+    res = shared_tutors.tutor(shared_data)
     assert res.status == "succeeded", res.message
     return res.motion
 

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import shared_tutors
 
 from solver.export import export_motion, media_type
 from solver.export.opensim import GRF_LABELS, OpenSimExportError, opensim_residuals, source_rig
@@ -206,9 +207,7 @@ def test_a_slope_optimum_is_written_on_an_inclined_ground_under_the_models_gravi
 def test_a_motion_of_another_source_is_written_on_the_generic_model_scaled_to_it(shared_data, tmp_path):
     """A DeepMimic tutor: refused on its (absent) OpenSim model, written on gait2354 scaled to
     its character with the character's masses; OpenSim's inverse dynamics balances it."""
-    d = shared_data / "deepmimic_humanoid3d_walk"
-    res = make_tutor(load_trial([d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt"]),
-                     character="halfboy", fps=15.0)
+    res = shared_tutors.tutor(shared_data)
     assert res.status == "succeeded", res.message
     tutor = res.motion
     with pytest.raises(OpenSimExportError, match="model='generic'"):

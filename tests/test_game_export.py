@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import shared_tutors
 
 from solver import kinematics as K
 from solver.export import Y_UP, ExportError, export_motion, game
@@ -32,12 +33,7 @@ needs_three = pytest.mark.skipif(
 
 @pytest.fixture(scope="module")
 def tutor(shared_data) -> Motion:
-    from solver.io import load_trial
-    from solver.pipeline import capture_motion, make_tutor
-
-    d = shared_data / "deepmimic_humanoid3d_walk"
-    res = make_tutor(capture_motion(load_trial([d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt"])),
-                     character="halfboy", fps=15.0)
+    res = shared_tutors.tutor(shared_data, as_motion=True)
     assert res.status == "succeeded", res.message
     return res.motion
 

@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+import shared_tutors
 
 from solver import library as L
 from solver.continuation import Target, environment_at, guide_at, nlp_at
@@ -83,12 +84,7 @@ def test_on_ray_finds_stored_optima_on_a_cells_homotopy():
 
 @pytest.fixture(scope="module")
 def tutor(shared_data):
-    from solver.io import load_trial
-    from solver.pipeline import capture_motion, make_tutor
-
-    d = shared_data / "deepmimic_humanoid3d_walk"
-    res = make_tutor(capture_motion(load_trial([d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt"])),
-                     character="halfboy", fps=15.0)
+    res = shared_tutors.tutor(shared_data, as_motion=True)
     assert res.status == "succeeded"
     return res.motion
 

@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 import pytest
+import shared_tutors
 
 from solver.character.reference import REFERENCE
 from solver.kinematics import contact_points, sole_corners, standing_leg_length
@@ -179,12 +180,7 @@ def test_the_capture_figures_stand_beside_each_check():
 
 @pytest.fixture(scope="module")
 def tutor(shared_data):
-    from solver.io import load_trial
-    from solver.pipeline import make_tutor
-
-    d = shared_data / "deepmimic_humanoid3d_walk"
-    res = make_tutor(load_trial([d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt"]), fps=FPS,
-                     character="halfboy")
+    res = shared_tutors.tutor(shared_data, fps=FPS)
     assert res.status == "succeeded", res.message
     return res
 

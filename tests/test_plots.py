@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import shared_tutors
 from PIL import Image
 
 from service.plots import (
@@ -53,12 +54,7 @@ def motionx(*args, timeout: int = 300) -> subprocess.CompletedProcess:
 
 @pytest.fixture(scope="module")
 def tutor(shared_data) -> Motion:
-    from solver.io import load_trial
-    from solver.pipeline import capture_motion, make_tutor
-
-    d = shared_data / "deepmimic_humanoid3d_walk"
-    res = make_tutor(capture_motion(load_trial([d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt"])),
-                     character="halfboy", fps=15.0)
+    res = shared_tutors.tutor(shared_data, as_motion=True)
     assert res.status == "succeeded", res.message
     return res.motion
 

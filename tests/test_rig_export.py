@@ -14,6 +14,7 @@ import json
 
 import numpy as np
 import pytest
+import shared_tutors
 from scipy.spatial.transform import Rotation, Slerp
 
 import solver
@@ -201,7 +202,7 @@ def test_deepmimic_motion_on_its_own_character(shared_data, tmp_path):
     ankles stay where the tutor's feet are."""
     folder = shared_data / "deepmimic_humanoid3d_walk"
     files = [folder / "humanoid3d_walk.txt", folder / "humanoid3d_character.txt"]
-    tutor = solver.make_tutor(solver.load_trial(files), character="halfboy", fps=15.0).motion
+    tutor = shared_tutors.tutor(shared_data).motion
     text = solver.export_motion(tutor, "deepmimic")
     d = json.loads(text)
     assert d["Loop"] == "wrap" and len(d["Frames"][0]) == 44 and d["Frames"][-1][0] == 0.0

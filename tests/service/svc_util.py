@@ -5,6 +5,7 @@ from __future__ import annotations
 import secrets
 
 import numpy as np
+import shared_tutors
 
 KEY_A, KEY_B = "test-key-a-" + secrets.token_hex(8), "test-key-b-" + secrets.token_hex(8)
 
@@ -73,12 +74,7 @@ def deepmimic_files(shared_data):
 
 def tutor_json(shared_data) -> str:
     """The tutor of the DeepMimic walk, made by the pipeline (solver.pipeline.make_tutor)."""
-    from solver.io import load_trial
-    from solver.pipeline import capture_motion, make_tutor
-
-    d = shared_data / "deepmimic_humanoid3d_walk"
-    res = make_tutor(capture_motion(load_trial([d / "humanoid3d_walk.txt", d / "humanoid3d_character.txt"])),
-                     character="halfboy", fps=15.0)
+    res = shared_tutors.tutor(shared_data, as_motion=True)
     assert res.status == "succeeded", res.message
     return res.motion.to_json()
 
