@@ -208,12 +208,12 @@ class Settings(BaseSettings):
 
     @property
     def check_module_names(self) -> tuple[str, ...]:
-        return tuple(m.strip() for m in self.check_modules.split(",") if m.strip())
+        return _module_names(self.check_modules)
 
     @field_validator("check_modules")
     @classmethod
-    def _module_names(cls, v: str) -> str:
-        for name in (m.strip() for m in v.split(",") if m.strip()):
+    def _valid_module_names(cls, v: str) -> str:
+        for name in _module_names(v):
             if not all(part.isidentifier() for part in name.split(".")):
                 raise ValueError(f"check module {name!r} is not a Python module name (dotted identifiers)")
         return v
@@ -231,6 +231,10 @@ def enable_native_code(settings: Settings) -> None:
 
     native.enable(compiled=settings.compiled_derivatives, blas=settings.optimized_blas,
                   cache_dir=settings.compiled_dir)
+
+
+def _module_names(text: str) -> tuple[str, ...]:
+    return tuple(m.strip() for m in text.split(",") if m.strip())
 
 
 def load_check_modules(settings: Settings) -> None:

@@ -10,7 +10,7 @@ Moments are reported about the root (pelvis) position of each frame, so they do 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -58,10 +58,11 @@ def _residual_section(ctx: Context) -> SectionResult:
     applied, force / weight and moment / (weight × leg), within the residual tolerance."""
     motion, tol, weight, leg = ctx.motion, ctx.tolerances, ctx.weight, ctx.leg
     res = root_residual(motion, ctx.gravity)
-    force, moment = float(np.abs(res[3:]).max()) / weight, float(np.abs(res[:3]).max()) / (weight * leg)
+    max_force, max_moment = float(np.abs(res[3:]).max()), float(np.abs(res[:3]).max())
+    force, moment = max_force / weight, max_moment / (weight * leg)
     rr: dict[str, Any] = {
-        "max_force_N": float(np.abs(res[3:]).max()),
-        "max_moment_Nm": float(np.abs(res[:3]).max()),
+        "max_force_N": max_force,
+        "max_moment_Nm": max_moment,
         "rms_force_N": float(np.sqrt((res[3:] ** 2).sum(axis=0).mean())),
         "max_force_rel_weight": force,
         "max_moment_rel_weight_leg": moment,
@@ -135,7 +136,7 @@ def report(motion: Motion, tol: Tolerances = Tolerances(), realism: RealismLimit
         result = section.produce(ctx)
         if section.flatten:
             out.update(result.extra)
-            out[section.name] = SectionResult(result.checks, {}, result.checked, result.unchecked).to_dict()
+            out[section.name] = replace(result, extra={}).to_dict()
         else:
             out[section.name] = result.to_dict()
         flags.update(section.flag_checks(result))
