@@ -51,10 +51,12 @@ from solver.spacetime.types import (
     DEFAULT_IPOPT,
     STANDARD_GRAVITY,
     SUCCESS_STATUSES,
+    WARM_START_IPOPT,
     WEIGHT_SLOTS,
-    Environment,
+    ProblemData,
     SolveResult,
-    Weights,
+    SolverOptions,
+    WarmStart,
     weight_slots,
 )
 from solver.stairs import flight_for
@@ -415,35 +417,11 @@ class SpacetimeProblem(Layout):
         return self.derivatives_used is not self.ff.derivatives
 
     # --- solve -----------------------------------------------------------------------------
-    def solve(
-        self,
-        guide_q: np.ndarray | None,
-        *,
-        guide_markers: np.ndarray | None = None,
-        env: Environment = Environment(),
-        weights: Weights = Weights(),
-        heading_change: float | None = None,
-        init_q: np.ndarray | None = None,
-        init_wrenches: np.ndarray | None = None,
-        lam_x0: np.ndarray | None = None,
-        lam_g0: np.ndarray | None = None,
-        max_iter: int = 500,
-        locks: Mapping[int, float] | None = None,
-        warm: bool = False,
-        ipopt_options: Mapping[str, Any] | None = None,
-        should_stop: Any = None,
-        frame_interval: float | None = None,
-        prior_q: np.ndarray | None = None,
-        guide_com: np.ndarray | None = None,
-    ) -> SolveResult:
-        """Solve at the given parameters. ``heading_change`` Δψ (rad): yaw[T−2] − yaw[0] of the
-        optimum (default: the initial motion's). ``should_stop()`` is polled at every iteration
-        (IPOPT stops with ``User_Requested_Stop``). ``frame_interval``: the spline's frame
-        interval h (s), default 1/fps (the speed axis changes it; the frame count is fixed).
-        ``prior_q``: the coordinates the joint and root-rotation priors pull toward (default: the
-        guide's; the tutor's correction: the capture's own joint angles). ``guide_com`` (3, T): the
-        centre of mass ``Weights.com_track`` pulls toward (default: the guide's), whose acceleration is
-        also the total ground force ``Weights.force_track`` pulls toward."""
+    def solve(self, data: ProblemData, start: WarmStart | None = None,
+              options: SolverOptions = SolverOptions()) -> SolveResult:
+        """Solve at the parameter values ``data`` from ``start`` (default: the guide, no wrenches,
+        no multipliers) as ``options`` say."""
+        guide_q, guide_markers, env, frame_interval = data.guide_q, data.guide_markers, data.env, data.frame_interval
         h = self.dt if frame_interval is None else float(frame_interval)
         if not (math.isfinite(h) and h > 0):
             raise ValueError(f"the frame interval must be a positive number of seconds, got {frame_interval!r}")
@@ -457,14 +435,14 @@ class SpacetimeProblem(Layout):
         guide_markers = np.asarray(guide_markers, dtype=float)
         if guide_markers.shape != (3 * self.n_markers, self.T):
             raise ValueError(f"guide markers must be ({3 * self.n_markers}, {self.T}), got {guide_markers.shape}")
-        if init_q is None:
+        if start is None:
             if guide_q is None:
                 raise ValueError("give an initial motion")
-            init_q = guide_q
-        q0 = np.asarray(init_q, dtype=float)
+            start = WarmStart(guide_q)
+        q0 = np.asarray(start.q, dtype=float)
         if q0.shape != (self.n, self.T) or not np.all(np.isfinite(q0)):
             raise ValueError(f"initial motion must be finite with shape ({self.n}, {self.T})")
-        dpsi = float(q0[YAW, -2] - q0[YAW, 0]) if heading_change is None else float(heading_change)
+        dpsi = float(q0[YAW, -2] - q0[YAW, 0]) if data.heading_change is None else float(data.heading_change)
         if not math.isfinite(dpsi):
             raise ValueError("the heading change must be finite")
         gq = q0 if guide_q is None else guide_q  # coordinates prior: the guide's, else the start's
@@ -482,11 +460,11 @@ class SpacetimeProblem(Layout):
         # λ step the previous optimum, which the optimum stays closer to than to the guide)
         path = path_heading(q0, self.T - 2)
         anchor = self.anchor_points(q0)
-        prior = gq if prior_q is None else np.asarray(prior_q, dtype=float)
-        com_target = self.com_points(gq) if guide_com is None else np.asarray(guide_com, dtype=float)
+        prior = gq if data.prior_q is None else np.asarray(data.prior_q, dtype=float)
+        com_target = self.com_points(gq) if data.guide_com is None else np.asarray(data.guide_com, dtype=float)
         if prior.shape != (self.n, self.T) or not np.all(np.isfinite(prior)):
             raise ValueError(f"prior_q must be finite with shape ({self.n}, {self.T})")
-        p = self.parameters(guide_markers, prior, env, weights, ref, anchor, dpsi,
+        p = self.parameters(guide_markers, prior, env, data.weights, ref, anchor, dpsi,
                             self.com_points(q0) if self.dynamics else None, h=h,
                             ground=self.contact_ground(feet_ground), rise=rise, joint_range=self.joint_range(gq),
                             path=path, lean=self.trunk_lean(gq, env.gravity, path) if self.ff.has_contacts else None,
@@ -501,25 +479,21 @@ class SpacetimeProblem(Layout):
         lbg, ubg = self.constraint_bounds(h)
         parts = [self.pack_q(q0)]
         if self.dynamics:
-            parts += [self.pack_v(spline_velocities(q0, h)), self.pack_wrenches(init_wrenches, ref)]
+            parts += [self.pack_v(spline_velocities(q0, h)), self.pack_wrenches(start.wrenches, ref)]
         x0 = np.concatenate(parts)
         g_ratio = float(np.linalg.norm(env.gravity)) / STANDARD_GRAVITY  # loads in the environment's body weights
-        lbx, ubx = self.bounds(locks, shared_load=self.ff.naturalness.shared_load * g_ratio)
+        lbx, ubx = self.bounds(data.locks, shared_load=self.ff.naturalness.shared_load * g_ratio)
         if self.rising:  # [stairs] joints off their limits (solver.spacetime.stairs)
             lbx, ubx = stairs_joint_bounds(self, lbx, ubx)
         x0 = np.clip(x0, lbx, ubx)
         args: dict[str, Any] = dict(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
-        opts: dict[str, Any] = {"ipopt.max_iter": int(max_iter)}
-        if warm and lam_x0 is not None and lam_g0 is not None:
-            args["lam_x0"], args["lam_g0"] = lam_x0, lam_g0
-            opts.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-4,
-                         "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_bound_frac": 1e-6,
-                         "ipopt.warm_start_slack_bound_push": 1e-6, "ipopt.warm_start_slack_bound_frac": 1e-6,
-                         "ipopt.warm_start_mult_bound_push": 1e-6})
-        if ipopt_options:
-            opts.update(ipopt_options)
-        solver = self._solver_for(opts, should_stop is not None)
-        STOP.check = should_stop
+        opts: dict[str, Any] = {"ipopt.max_iter": int(options.max_iter)}
+        if start.warm:
+            args["lam_x0"], args["lam_g0"] = start.lam_x, start.lam_g
+            opts.update(WARM_START_IPOPT)
+        opts.update(options.ipopt)
+        solver = self._solver_for(opts, options.should_stop is not None)
+        STOP.check = options.should_stop
         t0 = time.perf_counter()
         try:
             sol = solver(**args)
