@@ -193,6 +193,21 @@ def test_contact_equations_are_independent(halfboy_tutor):
     assert s.min() > 1e-6 * s.max(), f"rank-deficient equality Jacobian: σ_min/σ_max = {s.min() / s.max():.1e}"
 
 
+def test_a_warm_start_takes_an_earlier_solves_multipliers_when_it_has_them():
+    """IPOPT starts warm from both multipliers of a solve; a result without them (the tutor taken as
+    its own optimum) leaves the start cold."""
+    from solver.spacetime import SolveResult
+
+    q = np.zeros((6, 5))
+    cold = WarmStart(q)
+    assert not cold.warm
+    solved = SolveResult(True, "Solve_Succeeded", 9, 0.1, q, None, 0.0, 0.0, np.ones(4), np.ones(2), 0.0)
+    warm = cold.with_multipliers(solved)
+    assert warm.warm and warm.q is q and warm.lam_x is solved.lam_x and warm.lam_g is solved.lam_g
+    taken = SolveResult(True, "tutor", 0, 0.0, q, None, 0.0, 0.0, None, None, 0.0)
+    assert not cold.with_multipliers(taken).warm
+
+
 def test_bad_inputs_are_refused_clearly(halfboy_tutor):
     tut = halfboy_tutor.motion
     prob = problem_for(tut.character, tut.T, tut.fps, tut.contacts)
