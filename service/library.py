@@ -60,7 +60,7 @@ def plan(body: dict) -> tuple[dict, list[tuple[str, dict, dict]], list[str]]:
 
 def warm_start(db: Database, job_id: str, ref: dict):
     """The best stored optimum for cell job ``job_id`` (``ref`` = its spec's ``library``), as
-    (WarmStart, Motion, validation, source job id, source step), or None."""
+    (CellStart, Motion, validation, source job id, source step), or None."""
     with db.read() as s:
         lib = store.get_library(s, library_id=ref["id"], owner=None)
         if lib is None:
@@ -84,7 +84,7 @@ def warm_start(db: Database, job_id: str, ref: dict):
             return None
         motion = store.load_motion(row)
         validation = row.validation
-    ws = L.WarmStart(float(t), cells[j].key, float(lam))
+    ws = L.CellStart(float(t), cells[j].key, float(lam))
     return ws, motion, validation, j, step
 
 

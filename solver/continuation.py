@@ -24,7 +24,7 @@ from solver.jsonable import jsonable
 from solver.motion import GaitReference, Motion
 from solver.naturalness import motion_figures
 from solver.outputs import progress_csv, step_stem
-from solver.spacetime import SolveResult, SpacetimeProblem, Weights
+from solver.spacetime import ProblemData, SolveResult, SolverOptions, SpacetimeProblem, WarmStart, Weights
 from solver.stairs import flight_for
 from solver.status import Status
 
@@ -203,20 +203,20 @@ def tutor_heading_change(tutor: Motion) -> float:
 
 
 def _predict(history: list[_State], lam_try: float, secant: bool,
-             guide: Callable[[float], np.ndarray]) -> tuple[np.ndarray, np.ndarray | None]:
+             guide: Callable[[float], np.ndarray]) -> WarmStart:
     """Initial motion at λ_try: the new guide plus the previous optimum's deviation from its
     own guide (the guide carries the bend and tilt of the homotopy; the deviation carries what
     the physics added), extrapolated along the secant of the last two deviations."""
     b = history[-1]
     dev_b = b.res.q - guide(b.lam)
     if not secant or len(history) < 2:
-        return guide(lam_try) + dev_b, b.res.wrenches
+        return WarmStart(guide(lam_try) + dev_b, b.res.wrenches)
     a = history[-2]
     s = (lam_try - b.lam) / (b.lam - a.lam)
     dev_a = a.res.q - guide(a.lam)
     wa, wb = a.res.wrenches, b.res.wrenches
-    return (guide(lam_try) + dev_b + s * (dev_b - dev_a),
-            wb if wa is None or wb is None else wb + s * (wb - wa))
+    return WarmStart(guide(lam_try) + dev_b + s * (dev_b - dev_a),
+                     wb if wa is None or wb is None else wb + s * (wb - wa))
 
 
 class _Walk:
@@ -282,31 +282,25 @@ class _Walk:
         return ExtrapolationResult(Status(status), float(lam), tuple(self.steps), tuple(self.records), self.solves,
                                    time.perf_counter() - self.t0, message, self.target)
 
-    def solve(self, lam: float, init: tuple[np.ndarray, np.ndarray | None], warm_from: SolveResult | None,
-              max_iter: int, guide: np.ndarray | None = None,
+    def solve(self, lam: float, start: WarmStart, max_iter: int, guide: np.ndarray | None = None,
               restart_mu: float | None = None) -> tuple[SolveResult | None, bool, str, Environment, dict]:
         env, values = environment_at(self.env0, self.target, lam)
         if guide is None:
             guide = self.guide(lam)
         if env.step_height_m:  # the flight stands under the start iterate's stance feet
-            flight = flight_for(self.tutor.character, init[0], self.tutor.foot_contact(), env.with_(stairs_at=None))
+            flight = flight_for(self.tutor.character, start.q, self.tutor.foot_contact(), env.with_(stairs_at=None))
             env = env.with_(stairs_at=flight.at if flight is not None else None)
-        warm = warm_from is not None and warm_from.lam_x is not None
-        opts = None
+        opts: dict[str, Any] = {}
         if restart_mu is not None:  # mu_init only acts with the monotone barrier strategy
             opts = {"ipopt.mu_strategy": "monotone", "ipopt.mu_init": restart_mu}
-            if not warm:
+            if not start.warm:
                 opts.update({"ipopt.bound_push": 1e-6, "ipopt.bound_frac": 1e-6})
         try:
             eff = self.nlp(lam)
             dpsi = self.dpsi0 + math.radians(eff["heading_change_deg"])
-            res = self.prob.solve(guide, env=env, weights=self.weights,
-                                  frame_interval=self.prob.dt * eff["frame_interval"],
-                                  init_q=init[0], init_wrenches=init[1], max_iter=max_iter,
-                                  heading_change=dpsi, should_stop=self.should_cancel,
-                                  lam_x0=warm_from.lam_x if warm and warm_from is not None else None,
-                                  lam_g0=warm_from.lam_g if warm and warm_from is not None else None,
-                                  warm=warm, ipopt_options=opts)
+            data = ProblemData(guide, env=env, weights=self.weights, heading_change=dpsi,
+                               frame_interval=self.prob.dt * eff["frame_interval"])
+            res = self.prob.solve(data, start, SolverOptions(max_iter, opts, self.should_cancel))
         except RuntimeError as e:  # a numerical failure inside the solver is a status, not a crash
             self.solves += 1
             return None, False, f"error: {e}", env, values
@@ -328,7 +322,7 @@ class _Walk:
             self.record(0.0, values, res, not why, "tutor" if not why else f"tutor {why}", 0.0)
             if not why:
                 return _State(0.0, res)
-        solved, ok, status, env, values = self.solve(0.0, (tut.q, tut.wrenches), None,
+        solved, ok, status, env, values = self.solve(0.0, WarmStart(tut.q, tut.wrenches),
                                                      max(self.control.max_iter, 500), guide=tut.q)
         why = "" if not ok or solved is None else self.accept(0.0, env, values, solved)
         ok = ok and solved is not None and not why
@@ -355,16 +349,15 @@ class _Walk:
             growing = delta > last_step * (1 + 1e-9)
             mode = c.warm_multipliers if adaptive else "never"
             if mode == "fallback":
-                res, ok, status, env, values = self.solve(lam_try, init, history[-1].res,
+                res, ok, status, env, values = self.solve(lam_try, init.with_multipliers(history[-1].res),
                                                           min(c.warm_budget, c.max_iter), restart_mu=c.restart_mu)
                 if not ok:  # cold restart at the same λ (the warm attempt is recorded as rejected)
                     self.record(lam_try, values, res, False, f"warm attempt: {status}", lam)
-                    res, ok, status, env, values = self.solve(lam_try, init, None, c.max_iter,
-                                                              restart_mu=c.restart_mu)
+                    res, ok, status, env, values = self.solve(lam_try, init, c.max_iter, restart_mu=c.restart_mu)
             else:
                 use_warm = mode == "always" or (mode == "small" and not growing)
-                warm_from = history[-1].res if use_warm else None
-                res, ok, status, env, values = self.solve(lam_try, init, warm_from, c.max_iter,
+                start = init.with_multipliers(history[-1].res) if use_warm else init
+                res, ok, status, env, values = self.solve(lam_try, start, c.max_iter,
                                                           restart_mu=c.restart_mu if adaptive else None)
             why = self.accept(lam_try, env, values, res) if ok else ""  # type: ignore[arg-type]
             if ok and not why:

@@ -176,19 +176,21 @@ def on_ray(cell: Cell, other: Cell, lam: float) -> float | None:
 
 
 @dataclass(frozen=True)
-class WarmStart:
+class CellStart:
+    """A cell's warm start: the stored optimum of another cell (or its own) its homotopy starts from."""
+
     lam: float  # where this cell's homotopy starts
     source_cell: str  # the cell whose stored optimum it is
     source_lam: float  # that optimum's λ on its own homotopy
 
 
-def best_start(cell: Cell, stored: Iterable[tuple[Cell, float]]) -> WarmStart | None:
+def best_start(cell: Cell, stored: Iterable[tuple[Cell, float]]) -> CellStart | None:
     """The stored optimum (cell, λ) furthest along ``cell``'s homotopy, or None."""
-    best: WarmStart | None = None
+    best: CellStart | None = None
     for other, lam in stored:
         t = on_ray(cell, other, lam)
         if t is not None and (best is None or t > best.lam):
-            best = WarmStart(t, other.key, lam)
+            best = CellStart(t, other.key, lam)
     return best
 
 
@@ -231,7 +233,7 @@ class CellResult:
     steps: list  # (λ, motion) of every optimum of this cell
     solves: int
     wall_time_s: float
-    warm_start: WarmStart | None
+    warm_start: CellStart | None
     clip_lam: float | None = None
 
     def __post_init__(self) -> None:
@@ -406,7 +408,7 @@ VERSION = 1
 
 def cell_entry(cell: Cell, *, status: str, lam_reached: float, message: str = "", motion=None,
                clip_lam: float | None = None, files: Mapping[str, str] | None = None,
-               warm_start: WarmStart | Mapping[str, Any] | None = None, solves: int | None = None,
+               warm_start: CellStart | Mapping[str, Any] | None = None, solves: int | None = None,
                wall_time_s: float | None = None, report: Mapping[str, Any] | None = None,
                extra: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """One cell of a manifest: parameters, status (an impasse is marked and keeps its last
@@ -426,7 +428,7 @@ def cell_entry(cell: Cell, *, status: str, lam_reached: float, message: str = ""
             entry["loop"] = {k: g["loop"][k] for k in ("frames", "duration", "seamless", "closure_m")}
     else:
         entry["realism"] = None
-    if isinstance(warm_start, WarmStart):
+    if isinstance(warm_start, CellStart):
         warm_start = dataclasses.asdict(warm_start)
     entry["warm_start"] = dict(warm_start) if warm_start else None
     if solves is not None:

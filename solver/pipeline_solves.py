@@ -15,7 +15,15 @@ from solver.contact import estimate_contact_wrenches
 from solver.environment import STANDARD_GRAVITY_VECTOR
 from solver.kinematics import markers
 from solver.motion import foot_schedule_of
-from solver.spacetime import Environment, SolveResult, SpacetimeProblem, Weights
+from solver.spacetime import (
+    Environment,
+    ProblemData,
+    SolveResult,
+    SolverOptions,
+    SpacetimeProblem,
+    WarmStart,
+    Weights,
+)
 
 #: the tutor's weights: the simplification and the correction track the capture's own joint
 #: angles and pelvis rotations (1° weighs like 3 mm of marker distance, as MocoTrack tracks the
@@ -52,8 +60,8 @@ def simplify(capture_character: Character, q_capture: np.ndarray, synthesis: Cha
     problem = problem_for(synthesis, T, fps, None, dynamics=False)
     gm = markers(capture_character, q_capture).reshape(-1, T)
     init = _select(capture_character, q_capture, synthesis)
-    return problem.solve(None, guide_markers=gm, init_q=init, weights=weights, max_iter=max_iter,
-                         should_stop=should_cancel, guide_com=com)
+    return problem.solve(ProblemData(guide_markers=gm, weights=weights, guide_com=com), WarmStart(init),
+                         SolverOptions(max_iter, should_stop=should_cancel))
 
 
 def correct(synthesis: Character, q_sim: np.ndarray, contacts: np.ndarray, fps: float, *,
@@ -66,9 +74,9 @@ def correct(synthesis: Character, q_sim: np.ndarray, contacts: np.ndarray, fps: 
     ``com``: the centre of mass ``Weights.com_track`` keeps it near (default: the simplified's);
     ``should_cancel()``: polled at every IPOPT iteration, as in :func:`simplify`."""
     problem = problem_for(synthesis, q_sim.shape[1], fps, contacts)
-    return problem.solve(q_sim, init_q=q_sim, init_wrenches=init_wrenches, env=env, weights=weights,
-                         max_iter=max_iter, heading_change=heading_change, prior_q=prior_q,
-                         should_stop=should_cancel, guide_com=com)
+    data = ProblemData(q_sim, env=env, weights=weights, heading_change=heading_change, prior_q=prior_q,
+                       guide_com=com)
+    return problem.solve(data, WarmStart(q_sim, init_wrenches), SolverOptions(max_iter, should_stop=should_cancel))
 
 
 def heading_change_to_impose(q_capture: np.ndarray, q_simplified: np.ndarray) -> float:

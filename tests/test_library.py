@@ -79,7 +79,7 @@ def test_on_ray_finds_stored_optima_on_a_cells_homotopy():
     fast, faster = L.Cell((("speed_scale", 1.2),)), L.Cell((("speed_scale", 1.4),))
     assert L.on_ray(faster, fast, 1.0) == pytest.approx(0.5) and L.on_ray(faster, fast, 0.0) == 0.0
     ws = L.best_start(outer, [(other, 1.0), (inner, 0.6), (inner, 1.0), (other, 0.0)])
-    assert ws == L.WarmStart(0.5, inner.key, 1.0)
+    assert ws == L.CellStart(0.5, inner.key, 1.0)
 
 
 @pytest.fixture(scope="module")

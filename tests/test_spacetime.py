@@ -9,7 +9,7 @@ from solver import character as C
 from solver.kinematics import contact_points, markers
 from solver.motion import Motion, validate_schema
 from solver.pipeline import make_tutor, problem_for, synthesis_character
-from solver.spacetime import Environment, SpacetimeProblem
+from solver.spacetime import Environment, ProblemData, SolverOptions, SpacetimeProblem, WarmStart
 
 DM = "deepmimic_humanoid3d_walk"
 
@@ -121,7 +121,7 @@ def test_base_problem_returns_the_tutor(halfboy_tutor):
     centre of mass) move it, by the markers' worth of their weight (about a centimetre)."""
     tut = halfboy_tutor.motion
     prob = problem_for(tut.character, tut.T, tut.fps, tut.contacts)
-    res = prob.solve(tut.q, init_q=tut.q, init_wrenches=tut.wrenches, heading_change=0.0)
+    res = prob.solve(ProblemData(tut.q, heading_change=0.0), WarmStart(tut.q, tut.wrenches))
     assert res.success and res.iterations < 60
     assert res.marker_rms < 0.015
 
@@ -131,7 +131,7 @@ def test_solver_failure_is_a_status_not_a_solution(halfboy_tutor, deepmimic_capt
     tut = halfboy_tutor.motion
     prob = problem_for(tut.character, tut.T, tut.fps, tut.contacts)
     tilted = Environment((-9.81 * np.sin(0.4), 0.0, -9.81 * np.cos(0.4)))
-    res = prob.solve(tut.q, init_q=tut.q, init_wrenches=tut.wrenches, env=tilted, max_iter=3)
+    res = prob.solve(ProblemData(tut.q, env=tilted), WarmStart(tut.q, tut.wrenches), SolverOptions(max_iter=3))
     assert not res.success and res.status == "Maximum_Iterations_Exceeded"
     failed = make_tutor(deepmimic_capture, character="halfboy", fps=15, max_iter=3)
     assert failed.status == "failed" and failed.motion is None
@@ -193,15 +193,30 @@ def test_contact_equations_are_independent(halfboy_tutor):
     assert s.min() > 1e-6 * s.max(), f"rank-deficient equality Jacobian: σ_min/σ_max = {s.min() / s.max():.1e}"
 
 
+def test_a_warm_start_takes_an_earlier_solves_multipliers_when_it_has_them():
+    """IPOPT starts warm from both multipliers of a solve; a result without them (the tutor taken as
+    its own optimum) leaves the start cold."""
+    from solver.spacetime import SolveResult
+
+    q = np.zeros((6, 5))
+    cold = WarmStart(q)
+    assert not cold.warm
+    solved = SolveResult(True, "Solve_Succeeded", 9, 0.1, q, None, 0.0, 0.0, np.ones(4), np.ones(2), 0.0)
+    warm = cold.with_multipliers(solved)
+    assert warm.warm and warm.q is q and warm.lam_x is solved.lam_x and warm.lam_g is solved.lam_g
+    taken = SolveResult(True, "tutor", 0, 0.0, q, None, 0.0, 0.0, None, None, 0.0)
+    assert not cold.with_multipliers(taken).warm
+
+
 def test_bad_inputs_are_refused_clearly(halfboy_tutor):
     tut = halfboy_tutor.motion
     prob = problem_for(tut.character, tut.T, tut.fps, tut.contacts)
     with pytest.raises(ValueError, match="guide must be"):
-        prob.solve(tut.q[:, :-1])
+        prob.solve(ProblemData(tut.q[:, :-1]))
     bad = tut.q.copy()
     bad[3, 2] = np.nan
     with pytest.raises(ValueError, match="finite"):
-        prob.solve(tut.q, init_q=bad)
+        prob.solve(ProblemData(tut.q), WarmStart(bad))
     A = tut.contacts.copy()
     A[0, -1] = not A[0, 1]
     with pytest.raises(ValueError, match="repeat frames 1-2"):

@@ -1,7 +1,8 @@
 """Spacetime optimization of a motion (docs/method.md (M5)) with CasADi + IPOPT: a realistic transcription
 (C² cubic spline, dynamics at frames and midpoints) of named terms with exact sparse derivatives.
 
-* ``types``: Environment, Weights, Realism bounds, SolveResult, IPOPT defaults;
+* ``types``: Environment, Weights, Realism bounds; ProblemData, WarmStart, SolverOptions (what a solve
+  takes), SolveResult; IPOPT defaults;
 * ``frame``: the generic functions of a frame, a pair of frames, a spline segment;
 * ``derivatives``: the mapped-derivative scatter engine;
 * ``layout``: how motions, wrenches and weights map onto x and p; ``callback``: stopping a solve;
@@ -19,11 +20,14 @@ from solver.spacetime.types import (
                                     STANDARD_GRAVITY,
                                     SUCCESS_STATUSES,
                                     Environment,
+                                    ProblemData,
                                     Realism,
                                     SolveResult,
+                                    SolverOptions,
+                                    WarmStart,
                                     Weights,
 )
 
 __all__ = ["DEFAULT_IPOPT", "MAP_THREADS", "MARKER_SCALE", "ROOT_PERIODIC", "STANDARD_GRAVITY", "SUCCESS_STATUSES",
-           "Environment", "FrameFunctions", "Realism", "SolveResult", "SpacetimeProblem", "Weights", "compiled",
-           "frame_functions"]
+           "Environment", "FrameFunctions", "ProblemData", "Realism", "SolveResult",
+           "SolverOptions", "SpacetimeProblem", "WarmStart", "Weights", "compiled", "frame_functions"]

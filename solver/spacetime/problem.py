@@ -51,10 +51,12 @@ from solver.spacetime.types import (
     DEFAULT_IPOPT,
     STANDARD_GRAVITY,
     SUCCESS_STATUSES,
+    WARM_START_IPOPT,
     WEIGHT_SLOTS,
-    Environment,
+    ProblemData,
     SolveResult,
-    Weights,
+    SolverOptions,
+    WarmStart,
     weight_slots,
 )
 from solver.stairs import flight_for
@@ -166,26 +168,26 @@ class SpacetimeProblem(Layout):
 
         x = self._x = ca.MX.sym("x", self.nx)
         nm3 = 3 * ff.n_markers
-        sizes = {"gm": nm3 * Tn, "gq": n * Tn, "g": 3, "mu": 1, "wts": len(WEIGHT_SLOTS), "ref": 6 * Tn,
-                 "anchor": 3 * Tn, "dpsi": 1, "com": 3 * Tn, "h": 1, "ground": max(ff.P, 1) * Tn, "rise": 1,
-                 "range": 2 * n, "path": Tn, "lean": Tn, "loads": 2, "gcom": 3 * Tn, "clear": 2 * Tn, "gforce": 3 * Tn,
-                 "width": 4 * Tn, "stairs": STAIRS_PARAMS * Tn}
+        #: each parameter block's shape: (rows, frames) for a per-frame block, else a vector's length
+        shapes: dict[str, int | tuple[int, int]] = {
+            "gm": (nm3, Tn), "gq": (n, Tn), "g": 3, "mu": 1, "wts": len(WEIGHT_SLOTS), "ref": (6, Tn),
+            "anchor": (3, Tn), "dpsi": 1, "com": (3, Tn), "h": 1, "ground": (max(ff.P, 1), Tn), "rise": 1,
+            "range": 2 * n, "path": Tn, "lean": Tn, "loads": 2, "gcom": (3, Tn), "clear": (2, Tn), "gforce": (3, Tn),
+            "width": (4, Tn), "stairs": (STAIRS_PARAMS, Tn)}
         self._p_layout, off = {}, 0
         for name in P_LAYOUT:
-            self._p_layout[name] = (off, sizes[name])
-            off += sizes[name]
+            shape = shapes[name]
+            size = shape[0] * shape[1] if isinstance(shape, tuple) else shape
+            self._p_layout[name] = (off, size)
+            off += size
         p = ca.MX.sym("p", off)
-
-        def par(name: str, shape: tuple[int, int] | None = None) -> ca.MX:
-            o, s = self._p_layout[name]
-            return ca.reshape(p[o : o + s], *shape) if shape else p[o : o + s]
-
-        GM, GQ = par("gm", (nm3, Tn)), par("gq", (n, Tn))
-        grav, mu, wts, dpsi = par("g"), par("mu"), weight_slots(par("wts")), par("dpsi")
-        REF, ANCHOR = par("ref", (6, Tn)), par("anchor", (3, Tn))
-        self._GROUND, self._RISE = par("ground", (max(ff.P, 1), Tn)), par("rise")
-        self._COM = par("com", (3, Tn))
-        self._H = par("h")
+        #: the parameter blocks by name (``P_LAYOUT``), slices of p in their shapes
+        self._par: dict[str, ca.MX] = {}
+        for name, (o, size) in self._p_layout.items():
+            shape = shapes[name]
+            self._par[name] = ca.reshape(p[o : o + size], *shape) if isinstance(shape, tuple) else p[o : o + size]
+        P = self._par
+        wts = weight_slots(P["wts"])
         #: constraint rows whose bounds scale with the frame interval: (rows, fn(h) -> (lo, hi))
         self._h_bounds: list[tuple[np.ndarray, Any]] = []
         qi = self._q_index
@@ -198,19 +200,15 @@ class SpacetimeProblem(Layout):
 
         # --- objective ---------------------------------------------------------------------
         cw = ca.repmat(ca.vertcat(*(wts[name] for name in FRAME_COST_WEIGHTS)), 1, Tn)
-        rng = par("range")
-        self._PATH, self._LEAN, self._LOADS = par("path"), par("lean"), par("loads")
-        self._cost(Term("cost", ff.cost, 1, qi, [GM, GQ, cw, ca.repmat(rng[:n], 1, Tn), ca.repmat(rng[n:], 1, Tn),
-                                                 par("gcom", (3, Tn))],
+        rng = P["range"]
+        self._cost(Term("cost", ff.cost, 1, qi, [P["gm"], P["gq"], cw, ca.repmat(rng[:n], 1, Tn),
+                                                 ca.repmat(rng[n:], 1, Tn), P["gcom"]],
                         derivatives=ff.derivatives["cost"], cost=True))
-        self._CLEAR = par("clear", (2, Tn))
-        self._GFORCE = par("gforce", (3, Tn))
-        self._WIDTH = par("width", (4, Tn))
-        self._cyclic_root(x, dpsi)
+        self._cyclic_root()
         if dynamics:
-            self._dynamic_terms(x, grav, mu, wts, dpsi, REF, ANCHOR)
+            self._dynamic_terms(wts)
             if self.rising:  # [stairs] treads, risers and nosings (solver.spacetime.stairs)
-                add_stairs_terms(self, par("stairs", (STAIRS_PARAMS, Tn)))
+                add_stairs_terms(self, P["stairs"])
         else:
             K = list(range(1, Tn - 1))
             zacc = np.vstack([qi[:, [t - 1 for t in K]], qi[:, K], qi[:, [t + 1 for t in K]]])
@@ -233,7 +231,7 @@ class SpacetimeProblem(Layout):
                                                                                 self.ng, extra)
         self._nlp = {"x": x, "p": p, "f": objective, "g": g}
         Q = ca.reshape(x[qi.ravel(order="F").tolist()], n, Tn)
-        self._fg = ca.Function("fg", [x, p], [objective, g, ca.sum2(ff.marker_cost.map(Tn)(Q, GM))])
+        self._fg = ca.Function("fg", [x, p], [objective, g, ca.sum2(ff.marker_cost.map(Tn)(Q, P["gm"]))])
         self._base_options = dict(DEFAULT_IPOPT)
         if ipopt_options:
             self._base_options.update(ipopt_options)
@@ -271,7 +269,7 @@ class SpacetimeProblem(Layout):
         self._groups.setdefault(group or term.name, []).extend(range(self._ng, self._ng + len(sel)))
         self._ng += len(sel)
 
-    def _cyclic_root(self, x: ca.MX, dpsi: ca.MX) -> None:
+    def _cyclic_root(self) -> None:
         Tn, qi, vi = self.T, self._q_index, self._v_index
         fr = [0, 1, Tn - 2, Tn - 1]
         parts = [qi[0, fr], qi[1, fr], qi[YAW, fr]]
@@ -281,7 +279,7 @@ class SpacetimeProblem(Layout):
             parts += [qi[ROOT_Z, fr]]
         fn = _cyclic_root_function(self.dynamics, self.rising)
         rows = fn.size1_out(0)
-        self._rows(Term("cyc", fn, 1, np.concatenate(parts)[:, None], [dpsi, self._RISE]),
+        self._rows(Term("cyc", fn, 1, np.concatenate(parts)[:, None], [self._par["dpsi"], self._par["rise"]]),
                    [(0, r) for r in range(rows)], 0.0, 0.0, "cyclic_root")
 
     def _wrench_columns(self, frames: list[int]) -> np.ndarray:
@@ -289,11 +287,13 @@ class SpacetimeProblem(Layout):
         cols = [self._w_index[:, (1 if t == self.T - 1 else t) - 1] for t in frames]
         return np.stack(cols, axis=1)
 
-    def _dynamic_terms(self, x, grav, mu, wts: dict[str, ca.MX], dpsi, REF, ANCHOR) -> None:
+    def _dynamic_terms(self, wts: dict[str, ca.MX]) -> None:
         ff, Tn, qi, vi = self.ff, self.T, self._q_index, self._v_index
+        P = self._par
+        grav, mu, dpsi, REF, ANCHOR = P["g"], P["mu"], P["dpsi"], P["ref"], P["anchor"]
         A = self.contacts
         B = self.foot_contact()
-        h = self._H  # the frame interval: an NLP parameter
+        h = P["h"]  # the frame interval: an NLP parameter
         frames = self.distinct_frames
         D = ff.derivatives
         # contact heights
@@ -302,22 +302,22 @@ class SpacetimeProblem(Layout):
             for j in range(ff.P):
                 sel.append((c, j))
                 hi.append(0.0 if A[j, t] else math.inf)
-        self._rows(Term("z", ff.z, 1, qi[:, frames], [self._GROUND[:, frames]], derivatives=D["z"]), sel, 0.0,
+        self._rows(Term("z", ff.z, 1, qi[:, frames], [P["ground"][:, frames]], derivatives=D["z"]), sel, 0.0,
                    np.array(hi), "contact")
         # [naturalness] a swinging foot's sole (its four corners) clears the ground
         sel = [(c, SOLE_CORNERS * k_ + r) for c, t in enumerate(frames) for k_ in range(2) if not B[k_, t]
                for r in range(SOLE_CORNERS)]
-        self._rows(Term("sole", ff.sole, 1, qi[:, frames], [self._GROUND[:, frames]], derivatives=D["sole"]), sel,
+        self._rows(Term("sole", ff.sole, 1, qi[:, frames], [P["ground"][:, frames]], derivatives=D["sole"]), sel,
                    ff.naturalness.clearance_m, math.inf, "clearance")
-        self._cost(Term("clr", ff.clr, 1, qi[:, frames], [self._GROUND[:, frames], self._CLEAR[:, frames],
+        self._cost(Term("clr", ff.clr, 1, qi[:, frames], [P["ground"][:, frames], P["clear"][:, frames],
                                                           ca.repmat(wts["clearance"], 1, len(frames))],
                         derivatives=D["clr"], cost=True))
         # [naturalness] a foot in contact does not cross to the far side of the pelvis
         sel = [(c, r) for c, t in enumerate(frames) for r in range(CROSS_ROWS) if B[r % 2, t]]
-        self._rows(Term("cross", ff.cross, 1, qi[:, frames], [self._PATH[frames].T], derivatives=D["cross"]), sel,
+        self._rows(Term("cross", ff.cross, 1, qi[:, frames], [P["path"][frames].T], derivatives=D["cross"]), sel,
                    -math.inf, ff.naturalness.crossover_m, "crossover")
-        self._cost(Term("width", ff.width, 1, qi[:, frames], [self._PATH[frames].T, self._WIDTH[:2, frames],
-                                                              self._WIDTH[2:, frames],
+        self._cost(Term("width", ff.width, 1, qi[:, frames], [P["path"][frames].T, P["width"][:2, frames],
+                                                              P["width"][2:, frames],
                                                               ca.repmat(wts["step_width"], 1, len(frames))],
                         derivatives=D["width"], cost=True))
         # no slip, no spin between consecutive frames
@@ -361,9 +361,9 @@ class SpacetimeProblem(Layout):
             if B[:, t].any():
                 sel.append((c, 2 * FOOT_ROWS))
         self._rows(Term("feet", ff.feet, 2, np.vstack([qi[:, E], W]), [ca.repmat(mu, 1, len(E)), REF[:, E],
-                                                                        self._COM[:, E], self._PATH[E].T,
-                                                                        ca.repmat(self._LOADS[0], 1, len(E)),
-                                                                        ca.repmat(self._LOADS[1], 1, len(E))],
+                                                                        P["com"][:, E], P["path"][E].T,
+                                                                        ca.repmat(P["loads"][0], 1, len(E)),
+                                                                        ca.repmat(P["loads"][1], 1, len(E))],
                         derivatives=D["feet"]), sel, 0.0, math.inf)
         # spline continuity at the knots 1..T−2
         K = list(range(1, Tn - 1))
@@ -387,7 +387,7 @@ class SpacetimeProblem(Layout):
         # realism: small second differences of the total ground wrench (frames k−1, k, k+1)
         Wm = self._wrench_columns([T_ if T_ > 0 else Tn - 2 for T_ in km])  # frame 0 is frame T−2 turned back
         ta = ca.horzcat(-dpsi, ca.DM.zeros(1, len(K) - 1))
-        sm_params = [REF[:, km], REF[:, K], REF[:, kp], self._COM[:, km], self._COM[:, K], self._COM[:, kp], ta, turn]
+        sm_params = [REF[:, km], REF[:, K], REF[:, kp], P["com"][:, km], P["com"][:, K], P["com"][:, kp], ta, turn]
         self._h_bounds.append((self._ng + np.arange(2 * len(K)), lambda hv: (-math.inf, np.tile(
             [(rl.force_curvature * (15.0 * hv) ** 2) ** 2, (rl.moment_curvature * (15.0 * hv) ** 2) ** 2], len(K)))))
         self._rows(Term("smooth", ff.smooth, 3, np.vstack([Wm, W, Wb]), sm_params, derivatives=D["smooth"]),
@@ -395,12 +395,12 @@ class SpacetimeProblem(Layout):
         self._cost(Term("wrate", ff.wrate, 2, np.vstack([W, Wb]), [turn, ca.repmat(wts["wrench_rate"], 1, len(K))],
                         derivatives=D["wrate"], cost=True))
         self._cost(Term("lean", ff.lean, 1, qi[:, frames],
-                        [ca.repmat(grav, 1, len(frames)), self._PATH[frames].T, self._LEAN[frames].T,
+                        [ca.repmat(grav, 1, len(frames)), P["path"][frames].T, P["lean"][frames].T,
                          ca.repmat(wts["trunk_lean"], 1, len(frames))],
                         derivatives=D["lean"], cost=True))
-        self._cost(Term("wcom", ff.wcom, 1, W, [REF[:, E], self._COM[:, E], ca.repmat(wts["com_moment"], 1, len(E))],
+        self._cost(Term("wcom", ff.wcom, 1, W, [REF[:, E], P["com"][:, E], ca.repmat(wts["com_moment"], 1, len(E))],
                         derivatives=D["wcom"], cost=True))
-        GF = self._GFORCE
+        GF = P["gforce"]
         self._cost(Term("ftrack", ff.ftrack, 1, W, [GF[:, E], ca.repmat(wts["force_track"], 1, len(E))],
                         derivatives=D["ftrack"], cost=True))
         self._cost(Term("jspeed", ff.jspeed, 2, np.vstack([qi[:, frames], qi[:, [t + 1 for t in frames]]]),
@@ -415,35 +415,11 @@ class SpacetimeProblem(Layout):
         return self.derivatives_used is not self.ff.derivatives
 
     # --- solve -----------------------------------------------------------------------------
-    def solve(
-        self,
-        guide_q: np.ndarray | None,
-        *,
-        guide_markers: np.ndarray | None = None,
-        env: Environment = Environment(),
-        weights: Weights = Weights(),
-        heading_change: float | None = None,
-        init_q: np.ndarray | None = None,
-        init_wrenches: np.ndarray | None = None,
-        lam_x0: np.ndarray | None = None,
-        lam_g0: np.ndarray | None = None,
-        max_iter: int = 500,
-        locks: Mapping[int, float] | None = None,
-        warm: bool = False,
-        ipopt_options: Mapping[str, Any] | None = None,
-        should_stop: Any = None,
-        frame_interval: float | None = None,
-        prior_q: np.ndarray | None = None,
-        guide_com: np.ndarray | None = None,
-    ) -> SolveResult:
-        """Solve at the given parameters. ``heading_change`` Δψ (rad): yaw[T−2] − yaw[0] of the
-        optimum (default: the initial motion's). ``should_stop()`` is polled at every iteration
-        (IPOPT stops with ``User_Requested_Stop``). ``frame_interval``: the spline's frame
-        interval h (s), default 1/fps (the speed axis changes it; the frame count is fixed).
-        ``prior_q``: the coordinates the joint and root-rotation priors pull toward (default: the
-        guide's; the tutor's correction: the capture's own joint angles). ``guide_com`` (3, T): the
-        centre of mass ``Weights.com_track`` pulls toward (default: the guide's), whose acceleration is
-        also the total ground force ``Weights.force_track`` pulls toward."""
+    def solve(self, data: ProblemData, start: WarmStart | None = None,
+              options: SolverOptions = SolverOptions()) -> SolveResult:
+        """Solve at the parameter values ``data`` from ``start`` (default: the guide, no wrenches,
+        no multipliers) as ``options`` say."""
+        guide_q, guide_markers, env, frame_interval = data.guide_q, data.guide_markers, data.env, data.frame_interval
         h = self.dt if frame_interval is None else float(frame_interval)
         if not (math.isfinite(h) and h > 0):
             raise ValueError(f"the frame interval must be a positive number of seconds, got {frame_interval!r}")
@@ -457,14 +433,14 @@ class SpacetimeProblem(Layout):
         guide_markers = np.asarray(guide_markers, dtype=float)
         if guide_markers.shape != (3 * self.n_markers, self.T):
             raise ValueError(f"guide markers must be ({3 * self.n_markers}, {self.T}), got {guide_markers.shape}")
-        if init_q is None:
+        if start is None:
             if guide_q is None:
                 raise ValueError("give an initial motion")
-            init_q = guide_q
-        q0 = np.asarray(init_q, dtype=float)
+            start = WarmStart(guide_q)
+        q0 = np.asarray(start.q, dtype=float)
         if q0.shape != (self.n, self.T) or not np.all(np.isfinite(q0)):
             raise ValueError(f"initial motion must be finite with shape ({self.n}, {self.T})")
-        dpsi = float(q0[YAW, -2] - q0[YAW, 0]) if heading_change is None else float(heading_change)
+        dpsi = float(q0[YAW, -2] - q0[YAW, 0]) if data.heading_change is None else float(data.heading_change)
         if not math.isfinite(dpsi):
             raise ValueError("the heading change must be finite")
         gq = q0 if guide_q is None else guide_q  # coordinates prior: the guide's, else the start's
@@ -482,11 +458,11 @@ class SpacetimeProblem(Layout):
         # λ step the previous optimum, which the optimum stays closer to than to the guide)
         path = path_heading(q0, self.T - 2)
         anchor = self.anchor_points(q0)
-        prior = gq if prior_q is None else np.asarray(prior_q, dtype=float)
-        com_target = self.com_points(gq) if guide_com is None else np.asarray(guide_com, dtype=float)
+        prior = gq if data.prior_q is None else np.asarray(data.prior_q, dtype=float)
+        com_target = self.com_points(gq) if data.guide_com is None else np.asarray(data.guide_com, dtype=float)
         if prior.shape != (self.n, self.T) or not np.all(np.isfinite(prior)):
             raise ValueError(f"prior_q must be finite with shape ({self.n}, {self.T})")
-        p = self.parameters(guide_markers, prior, env, weights, ref, anchor, dpsi,
+        p = self.parameters(guide_markers, prior, env, data.weights, ref, anchor, dpsi,
                             self.com_points(q0) if self.dynamics else None, h=h,
                             ground=self.contact_ground(feet_ground), rise=rise, joint_range=self.joint_range(gq),
                             path=path, lean=self.trunk_lean(gq, env.gravity, path) if self.ff.has_contacts else None,
@@ -501,25 +477,21 @@ class SpacetimeProblem(Layout):
         lbg, ubg = self.constraint_bounds(h)
         parts = [self.pack_q(q0)]
         if self.dynamics:
-            parts += [self.pack_v(spline_velocities(q0, h)), self.pack_wrenches(init_wrenches, ref)]
+            parts += [self.pack_v(spline_velocities(q0, h)), self.pack_wrenches(start.wrenches, ref)]
         x0 = np.concatenate(parts)
         g_ratio = float(np.linalg.norm(env.gravity)) / STANDARD_GRAVITY  # loads in the environment's body weights
-        lbx, ubx = self.bounds(locks, shared_load=self.ff.naturalness.shared_load * g_ratio)
+        lbx, ubx = self.bounds(data.locks, shared_load=self.ff.naturalness.shared_load * g_ratio)
         if self.rising:  # [stairs] joints off their limits (solver.spacetime.stairs)
             lbx, ubx = stairs_joint_bounds(self, lbx, ubx)
         x0 = np.clip(x0, lbx, ubx)
         args: dict[str, Any] = dict(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
-        opts: dict[str, Any] = {"ipopt.max_iter": int(max_iter)}
-        if warm and lam_x0 is not None and lam_g0 is not None:
-            args["lam_x0"], args["lam_g0"] = lam_x0, lam_g0
-            opts.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-4,
-                         "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_bound_frac": 1e-6,
-                         "ipopt.warm_start_slack_bound_push": 1e-6, "ipopt.warm_start_slack_bound_frac": 1e-6,
-                         "ipopt.warm_start_mult_bound_push": 1e-6})
-        if ipopt_options:
-            opts.update(ipopt_options)
-        solver = self._solver_for(opts, should_stop is not None)
-        STOP.check = should_stop
+        opts: dict[str, Any] = {"ipopt.max_iter": int(options.max_iter)}
+        if start.warm:
+            args["lam_x0"], args["lam_g0"] = start.lam_x, start.lam_g
+            opts.update(WARM_START_IPOPT)
+        opts.update(options.ipopt)
+        solver = self._solver_for(opts, options.should_stop is not None)
+        STOP.check = options.should_stop
         t0 = time.perf_counter()
         try:
             sol = solver(**args)

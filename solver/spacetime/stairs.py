@@ -246,7 +246,7 @@ def add_stairs_terms(prob, STAIRS, bounds: StairsBounds = StairsBounds()) -> Non
         us = ca.DM(np.repeat(SPLINE_POINTS, m)).T
         sel = [(c + m * j, r) for j in range(len(SPLINE_POINTS)) for c, r in sel]
         prob._rows(Term("stairs_step_spline", fns.step_mid, 4, np.tile(z, len(SPLINE_POINTS)),
-                        [ca.repmat(prob._H, 1, m * len(SPLINE_POINTS)), us,
+                        [ca.repmat(prob._par["h"], 1, m * len(SPLINE_POINTS)), us,
                          ca.repmat(ca.horzcat(*cols), 1, len(SPLINE_POINTS))],
                         derivatives=D["step_mid"]), sel, 0.0, np.inf, "stairs_step")
     # joints change between frames inside the naturalness check's speed (hinges; the root's six excluded)

@@ -1,9 +1,10 @@
-"""Values of the spacetime problem: environment, weights, realism bounds, solve result."""
+"""Values of the spacetime problem: environment, weights, realism bounds; what one solve takes (problem data,
+warm start, solver options) and what it returns (solve result)."""
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields
 from typing import Any
 
@@ -26,6 +27,17 @@ DEFAULT_IPOPT = {
     "error_on_fail": False,
 }
 SUCCESS_STATUSES = ("Solve_Succeeded",)
+#: IPOPT options of a solve that starts from multipliers (``WarmStart.warm``): a small barrier
+#: parameter and the starting point kept where it is (not pushed away from its bounds)
+WARM_START_IPOPT = {
+    "ipopt.warm_start_init_point": "yes",
+    "ipopt.mu_init": 1e-4,
+    "ipopt.warm_start_bound_push": 1e-6,
+    "ipopt.warm_start_bound_frac": 1e-6,
+    "ipopt.warm_start_slack_bound_push": 1e-6,
+    "ipopt.warm_start_slack_bound_frac": 1e-6,
+    "ipopt.warm_start_mult_bound_push": 1e-6,
+}
 
 
 @dataclass(frozen=True)
@@ -262,3 +274,62 @@ class SolveResult:
     stats: Mapping[str, Any] = field(default_factory=dict)
     v: np.ndarray | None = None  # (n, T) knot velocities of the spline (dynamic problems)
     heading_change: float = math.nan  # rad, the cycle's yaw change Δψ imposed
+
+
+@dataclass(frozen=True, eq=False)
+class ProblemData:
+    """What one solve of a built problem asks for: the values of its parameters.
+
+    ``guide_q`` (n, T): the guide motion, whose markers the optimum tracks unless ``guide_markers``
+    (3 × markers, T) are given (the kinematic fit: the capture's). ``heading_change`` Δψ (rad):
+    yaw[T−2] − yaw[0] of the optimum (default: the start's). ``frame_interval``: the spline's frame
+    interval h (s), default 1/fps (the speed axis changes it; the frame count is fixed). ``prior_q``:
+    the coordinates the joint and root-rotation priors pull toward (default: the guide's; the tutor's
+    correction: the capture's own joint angles). ``guide_com`` (3, T): the centre of mass
+    ``Weights.com_track`` pulls toward (default: the guide's), whose acceleration is also the total
+    ground force ``Weights.force_track`` pulls toward. ``locks``: coordinate index → value it is
+    held at."""
+
+    guide_q: np.ndarray | None = None
+    guide_markers: np.ndarray | None = None
+    env: Environment = field(default_factory=Environment)
+    weights: Weights = field(default_factory=Weights)
+    heading_change: float | None = None
+    frame_interval: float | None = None
+    prior_q: np.ndarray | None = None
+    guide_com: np.ndarray | None = None
+    locks: Mapping[int, float] | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class WarmStart:
+    """Where IPOPT starts: the coordinates ``q`` (n, T), the contact ``wrenches`` (2, 6, T; default:
+    none) and, for a warm start proper, the multipliers of an earlier solve of the same problem
+    (``lam_x``, ``lam_g``: both, or neither)."""
+
+    q: np.ndarray
+    wrenches: np.ndarray | None = None
+    lam_x: np.ndarray | None = None
+    lam_g: np.ndarray | None = None
+
+    @property
+    def warm(self) -> bool:
+        """Starts from multipliers (IPOPT's ``WARM_START_IPOPT`` options)."""
+        return self.lam_x is not None and self.lam_g is not None
+
+    def with_multipliers(self, res: SolveResult) -> WarmStart:
+        """This start with the multipliers of the solve ``res`` (none when it has none)."""
+        if res.lam_x is None or res.lam_g is None:
+            return self
+        return WarmStart(self.q, self.wrenches, res.lam_x, res.lam_g)
+
+
+@dataclass(frozen=True)
+class SolverOptions:
+    """How IPOPT runs one solve: at most ``max_iter`` iterations; ``ipopt``: options over the
+    problem's own (``DEFAULT_IPOPT`` and its constructor's); ``should_stop()``: polled at every
+    iteration (true: IPOPT stops with ``User_Requested_Stop``)."""
+
+    max_iter: int = 500
+    ipopt: Mapping[str, Any] = field(default_factory=dict)
+    should_stop: Callable[[], bool] | None = None
