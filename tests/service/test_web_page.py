@@ -473,9 +473,10 @@ def test_a_check_section_added_in_one_module_reaches_the_report_and_the_page(tmp
             try:
                 page.wait_for_selector(f'#motion-list button[data-id="{motion_id}"]', timeout=90_000)
             except Exception as e:  # say what the page saw (a CI run timed out here once)
-                raise AssertionError(f"the uploaded motion is not listed: {e}; page state "
-                                     f"{page.evaluate('JSON.stringify(window.motionx && window.motionx.state)')[:2000]}; "
-                                     f"errors {errors}; API log {(a.data_dir / 'api.log').read_text()[-3000:]}") from e
+                seen = page.evaluate("JSON.stringify(window.motionx && window.motionx.state)")
+                log = (a.data_dir / "api.log").read_text()
+                raise AssertionError(f"the uploaded motion is not listed: {e}; page state {seen[:2000]}; "
+                                     f"errors {errors}; API log {log[-3000:]}") from e
             page.click(f'#motion-list button[data-id="{motion_id}"]')
             wait_js(page, "window.motionx.state.validation", timeout=60)
             section = page.locator('#validation tr[data-section="walking_speed"]')
