@@ -18,7 +18,21 @@ package never imports web, queue, database or settings code.
 from __future__ import annotations
 
 import importlib
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # the real types for mypy and IDEs; at run time the names load on first use
+    from solver.capture import Capture
+    from solver.continuation import ExtrapolationResult, StepControl, Target, extrapolate
+    from solver.export import export_motion
+    from solver.io import load_trial
+    from solver.library import LibraryResult, grid_cells, list_cells, solve_library
+    from solver.motion import Motion
+    from solver.native import enable as enable_native
+    from solver.pipeline import TutorResult, make_tutor
+    from solver.plausibility import Tolerances
+    from solver.spacetime import Weights
+    from solver.status import Status
+    from solver.validation import validate
 
 #: the front door: name -> the module that defines it
 _FRONT_DOOR = {
@@ -39,7 +53,10 @@ _FRONT_DOOR = {
 }
 _ALIASES = {"enable_native": "enable"}
 
-__all__ = sorted(_FRONT_DOOR)
+#: the names above, written out so that type checkers see them re-exported (a test keeps the two equal)
+__all__ = ["Capture", "ExtrapolationResult", "LibraryResult", "Motion", "Status", "StepControl", "Target",
+           "Tolerances", "TutorResult", "Weights", "enable_native", "export_motion", "extrapolate", "grid_cells",
+           "list_cells", "load_trial", "make_tutor", "solve_library", "validate"]
 
 
 def __getattr__(name: str) -> Any:

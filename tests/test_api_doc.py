@@ -31,9 +31,18 @@ def test_import_solver_lists_the_front_door():
     assert heavy == "[]"  # names load on first use: `import solver` alone loads no CasADi or MuJoCo
 
 
+def test_the_front_door_is_typed_for_type_checkers(tmp_path):
+    """mypy sees the front door's real signatures (the TYPE_CHECKING imports), not ``Any``."""
+    mypy = pytest.importorskip("mypy.api")
+    (tmp_path / "use.py").write_text("import solver\nreveal_type(solver.make_tutor)\nreveal_type(solver.Target)\n")
+    out, _err, _rc = mypy.run([str(tmp_path / "use.py"), "--no-incremental", "--follow-imports=silent"])
+    assert "-> solver.pipeline.TutorResult" in out and "solver.axes.base.Target" in out, out
+
+
 def test_front_door_names_resolve_and_unknown_names_are_refused():
     import solver
 
+    assert sorted(solver.__all__) == sorted(solver._FRONT_DOOR)  # the static list type checkers read
     for name in solver.__all__:
         assert getattr(solver, name) is not None
     with pytest.raises(AttributeError, match="no attribute 'tutr'"):
