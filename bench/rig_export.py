@@ -16,11 +16,12 @@ from scipy.spatial.transform import Rotation, Slerp
 import solver
 from bench.trials import best_time, data_dir
 from solver.io.bvh import parse_bvh, read_bvh
-from solver.rig import Rig, feet_report, retarget
+from solver.rig import SkeletonRig, feet_report, retarget
 
 
 def _locked_rms_deg(motion, src) -> float:
-    rig = Rig.from_dict(motion.provenance["rig"])
+    rig = motion.context.rig
+    assert isinstance(rig, SkeletonRig)
     pose = retarget(motion, rig)
     out = parse_bvh(solver.export_motion(motion, "bvh", rig="source"))
     thighs = (rig.roles["thigh_r"], rig.roles["thigh_l"])
@@ -51,7 +52,8 @@ def run() -> dict:
     cells = {r.cell.key: r.motion for r in lib.cells if r.motion is not None}
     rows = {}
     for name, m in {**motions, **{f"cell {k}": v for k, v in cells.items()}}.items():
-        rig = Rig.from_dict(m.provenance["rig"])
+        rig = m.context.rig
+        assert isinstance(rig, SkeletonRig)
         rep = feet_report(m, rig, retarget(m, rig))
         rows[name] = {
             "ankle_error_mm": round(1e3 * max(r["ankle_error_m"] for r in rep.values()), 2),

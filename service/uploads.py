@@ -170,12 +170,14 @@ def _check_rig_asset(motion: Motion) -> None:
     """A glTF rig's asset (``provenance.rig.extra.asset`` in the file, the motion's ``context.rig``;
     a GLB the ``rig=source`` exports carry into what they write) is checked like an imported glTF
     file: never passed on unchecked."""
+    from solver.rig import SkeletonRig  # lazy: runs in a compute process
+
     rig = motion.context.rig
-    if not isinstance(rig, dict) or rig.get("format") != "gltf":
+    if not isinstance(rig, SkeletonRig) or rig.format != "gltf":
         return
     from solver.io.gltf import GltfError, parse_gltf  # lazy: runs in a compute process
 
-    asset = (rig.get("extra") or {}).get("asset") if isinstance(rig.get("extra"), dict) else None
+    asset = rig.extra.get("asset")
     try:
         if not isinstance(asset, str):
             raise GltfError("provenance.rig: a glTF rig without its asset")
@@ -405,8 +407,10 @@ def motion_from_trial(files: list[tuple[str, bytes]], *, mass: float | None, bel
             raise UploadError(clip(f"could not import the trial: {why}", 500)) from None
         summary = input_summary(capture, tmp)
         rig = motion.context.rig
+        if rig is not None:
+            rig = type(rig).from_dict(_hide_paths(rig.to_dict(), tmp))
         motion = motion.evolve(provenance={**_hide_paths(dict(motion.provenance), tmp), "input": summary},
-                               context=motion.context.with_(rig=None if rig is None else _hide_paths(dict(rig), tmp)))
+                               context=motion.context.with_(rig=rig))
     check_motion(motion)
     return motion
 

@@ -17,11 +17,14 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from solver.character import Character
+
+if TYPE_CHECKING:
+    from solver.retargeting import Rig
 
 
 def _frozen(a: np.ndarray, dtype=float) -> np.ndarray:
@@ -118,9 +121,10 @@ class Capture:
     source: Mapping[str, Any] = field(default_factory=dict)
     contacts: np.ndarray | None = None  # (P, T) bool, character.contacts order (e.g. from plates)
     measured: MeasuredGRF | None = None
-    #: the input's own skeleton and its animation at ``times`` (:class:`solver.rig.Rig`), when it
-    #: has one (BVH, skinned glTF, DeepMimic): what results are written back onto
-    rig: Any = None
+    #: the input's own rig (:class:`solver.retargeting.Rig`), when it has one: a BVH, skinned glTF
+    #: or DeepMimic skeleton and its animation at ``times``, an OpenSim trial's model: what results
+    #: are written back onto
+    rig: Rig | None = None
     #: a gait cycle cut from a longer trial: (n, W) the captured frames just before its first and
     #: (n, W) just after its last, at its rate (``solver.gait.extract_cycle``): what closes its loop
     #: (``solver.gait.close_loop``)

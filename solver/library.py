@@ -319,8 +319,8 @@ class LibraryResult:
                 r.motion.save(out / f"{r.cell.key}.motion.json")
                 (out / f"{r.cell.key}.clip.json").write_text(to_clip_json(r.motion, world=world))
                 rig = r.motion.context.rig
-                if isinstance(rig, Mapping) and rig.get("format") in RIG_FILES:
-                    fmt, kind = RIG_FILES[rig["format"]]
+                if rig is not None and rig.format in RIG_FILES:
+                    fmt, kind = RIG_FILES[rig.format]
                     (out / f"{r.cell.key}.{kind}").write_text(str(export_motion(r.motion, fmt, rig="source",
                                                                                 world=world)))
                 clips.append((r.cell.key, r.motion))
@@ -329,7 +329,7 @@ class LibraryResult:
                                                                             "manifest": "manifest.json"},
                                                              world=world))
             rig = clips[0][1].context.rig
-            if isinstance(rig, Mapping) and rig.get("format") in RIG_FORMATS:
+            if rig is not None and rig.format in RIG_FORMATS:
                 (out / "library.rig.glb").write_bytes(rig_glb_library(clips, world=world))
         (out / "manifest.json").write_text(json.dumps(manifest, indent=1, allow_nan=False))
         return out

@@ -37,6 +37,7 @@ import numpy as np
 from solver.capture import GroundFrame
 from solver.character import REFERENCE, Character, CharacterError, character_from_dict, character_to_dict, reference
 from solver.environment import Environment
+from solver.retargeting import Rig, RigError
 
 FORMAT = "motionx.motion"
 VERSION = 2
@@ -130,8 +131,9 @@ class MotionContext:
     - ``axis_values``: the homotopy axes' values at the motion (``solver.axes``: slope, curve, …; a
       λ optimum's, empty otherwise);
     - ``frame``: the input's ground frame, the way back to the capture's axes, units and clock;
-    - ``rig``: the input's own rig as the exporters read it (a :class:`solver.rig.Rig`'s dict, or an
-      OpenSim trial's mapping, ``solver.io.opensim.rig``);
+    - ``rig``: the input's own rig, what the exporters deliver the motion on (a
+      :class:`solver.retargeting.Rig`: a skeleton's, ``solver.rig``, or an OpenSim model's,
+      ``solver.io.opensim.rig``), kept as the motion file holds it (:meth:`Rig.as_stored`);
     - ``cycle``: the captured gait cycle the motion stands for;
     - ``heading_change_deg``: the heading change over the cycle the optimizer imposed,
       ``tutor_heading_change_deg`` its tutor's, ``heading_change_requested_deg`` an explicit request;
@@ -144,7 +146,7 @@ class MotionContext:
     environment: Environment | None = None
     axis_values: Mapping[str, float] = field(default_factory=dict)
     frame: GroundFrame | None = None
-    rig: Mapping[str, Any] | None = None
+    rig: Rig | None = None
     cycle: Cycle | None = None
     heading_change_deg: float | None = None
     tutor_heading_change_deg: float | None = None
@@ -152,14 +154,13 @@ class MotionContext:
     gait_reference: GaitReference | None = None
 
     def __post_init__(self) -> None:
-        for k, kind in (("environment", Environment), ("frame", GroundFrame), ("cycle", Cycle),
+        for k, kind in (("environment", Environment), ("frame", GroundFrame), ("rig", Rig), ("cycle", Cycle),
                         ("gait_reference", GaitReference)):
             v = getattr(self, k)
             if v is not None and not isinstance(v, kind):
                 raise MotionError(f"context.{k} must be a {kind.__name__} or None, got {type(v).__name__}")
-        if self.rig is not None and not isinstance(self.rig, Mapping):
-            raise MotionError(f"context.rig must be a mapping or None, got {type(self.rig).__name__}")
-        object.__setattr__(self, "rig", None if self.rig is None else dict(self.rig))
+        if self.rig is not None:
+            object.__setattr__(self, "rig", self.rig.as_stored())
         object.__setattr__(self, "axis_values", {str(k): float(v) for k, v in self.axis_values.items()})
         for k in ("heading_change_deg", "tutor_heading_change_deg", "heading_change_requested_deg"):
             v = getattr(self, k)
@@ -176,7 +177,8 @@ class MotionContext:
         out: dict[str, Any] = {}
         values = {"environment": None if self.environment is None else self.environment.to_dict(),
                   "axis_values": dict(self.axis_values) or None,
-                  "frame": None if self.frame is None else self.frame.to_dict(), "rig": self.rig,
+                  "frame": None if self.frame is None else self.frame.to_dict(),
+                  "rig": None if self.rig is None else self.rig.to_dict(),
                   "heading_change_deg": self.heading_change_deg,
                   "tutor_heading_change_deg": self.tutor_heading_change_deg,
                   "heading_change_requested_deg": self.heading_change_requested_deg,
@@ -212,9 +214,7 @@ class MotionContext:
                 kw["frame"] = GroundFrame.from_dict(raw["frame"])
             where = "rig"
             if raw["rig"] is not None:
-                if not isinstance(raw["rig"], Mapping):
-                    raise ValueError("must be an object")
-                kw["rig"] = raw["rig"]
+                kw["rig"] = Rig.from_dict(raw["rig"])
             for name in ("heading_change_deg", "tutor_heading_change_deg", "heading_change_requested_deg"):
                 where = name
                 kw[name] = _number(raw[name])
@@ -231,7 +231,7 @@ class MotionContext:
                 elif cyc is not None:
                     raise ValueError("must be an object")
                 rest["source"] = src
-        except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as e:
+        except (KeyError, TypeError, ValueError, AttributeError, OverflowError, RigError) as e:
             raise MotionError(f"provenance.{where}: {e}") from None
         return MotionContext(**kw), rest
 

@@ -50,7 +50,7 @@ from solver.pipeline_solves import (
     tutor_weights,
 )
 from solver.plausibility import report
-from solver.rig import RIG_FORMATS, Rig, calibrate, unroll
+from solver.rig import Rig, SkeletonRig, calibrate, unroll
 from solver.spacetime import Environment, SolveResult, Weights
 from solver.status import Status
 
@@ -59,7 +59,7 @@ __all__ = [
     "TUTOR_WEIGHTS", "TUTOR_WEIGHTS_OF", "UPPER_ROOT_SEGMENTS", "USED_DEG", "PipelineError", "PreparedCycle",
     "TutorResult", "capture_com", "capture_motion", "closed_cycle", "contact_plane_calibration", "correct",
     "default_fps", "estimate_wrenches", "fit_figures", "heading_change_to_impose", "make_tutor",
-    "motion_capture", "prepare_cycle", "problem_for", "rig_from_dict", "rig_to_dict", "simplified_motion",
+    "motion_capture", "prepare_cycle", "problem_for", "simplified_motion",
     "simplify", "sole_calibration", "synthesis_character", "tutor_rig", "tutor_weights", "used_coordinates",
 ]
 
@@ -127,7 +127,7 @@ def capture_motion(capture: Capture) -> Motion:
         contacts=capture.contacts,
         provenance=jsonable({"step": "capture", "source": source, "t0": float(capture.times[0]), "lambda": None}),
         context=MotionContext(frame=capture.frame, cycle=cycle,
-                              rig=None if capture.rig is None else jsonable(rig_to_dict(capture.rig))),
+                              rig=capture.rig),
     )
 
 
@@ -145,7 +145,7 @@ def motion_capture(motion: Motion) -> Capture:
         frame=motion.frame,
         source=source,
         contacts=motion.contacts,
-        rig=rig_from_dict(ctx.rig),
+        rig=ctx.rig,
     )
 
 
@@ -156,29 +156,15 @@ def _source_and_cycle(source: Mapping[str, Any]) -> tuple[dict[str, Any], Cycle 
     return src, Cycle.from_dict(jsonable(cyc)) if isinstance(cyc, Mapping) else None
 
 
-def rig_to_dict(rig: Any) -> dict[str, Any]:
-    """A capture's source rig as a motion's context holds it (``MotionContext.rig``): a
-    :class:`Rig`'s dict, or a format's own mapping."""
-    return rig.to_dict() if isinstance(rig, Rig) else dict(rig)
-
-
-def rig_from_dict(d: Any) -> Any:
-    """Inverse of :func:`rig_to_dict` (None when the motion has no rig)."""
-    if not isinstance(d, Mapping):
-        return None
-    return Rig.from_dict(d) if d.get("format") in RIG_FORMATS else dict(d)
-
-
 def tutor_rig(capture: Capture, cyc: Capture, syn: Character, q_sim: np.ndarray, fps: float,
-              stats: dict[str, Any]) -> dict[str, Any] | None:
-    """The capture's rig calibrated against the simplified cycle (``solver.rig.calibrate``), as
-    the tutor's context carries it; a rig that cannot be calibrated costs only the rig export
-    (noted in ``stats``)."""
+              stats: dict[str, Any]) -> Rig | None:
+    """The capture's rig as the tutor's context carries it: a skeleton calibrated against the
+    simplified cycle (``solver.rig.calibrate``; a rig that cannot be calibrated costs only the
+    rig export, noted in ``stats``); an OpenSim model as imported (the OpenSim export calibrates
+    it against each motion it writes)."""
     rig = capture.rig
-    if rig is None:
-        return None
-    if not isinstance(rig, Rig):
-        return dict(rig)
+    if not isinstance(rig, SkeletonRig):
+        return rig
     info = cyc.source.get("cycle") or {}
     try:
         t_start, period = float(info["t_start"]), float(info["period_s"])
@@ -187,12 +173,13 @@ def tutor_rig(capture: Capture, cyc: Capture, syn: Character, q_sim: np.ndarray,
             disp[2] = 0.0
             rig = unroll(rig, 3, capture.frame.vector_to_input(disp) / capture.frame.unit_m)
         frame = _shifted_frame(capture.frame, stats.get("contact_plane_shift_mm", 0.0) / 1e3)
-        cal = calibrate(rig, syn, q_sim, fps, t_start=t_start, period=period, frame=frame)
+        simplified = Motion(syn, fps, q_sim, interpolation="cubic-spline", cyclic=True,
+                            context=MotionContext(frame=frame, cycle=Cycle(t_start, period)))
+        return calibrate(rig, simplified)
     except (KeyError, TypeError, ValueError) as e:
         stats["rig"] = f"the source rig could not be calibrated: {e}"
         log.warning("source rig not calibrated: %s", e)
         return None
-    return cal.to_dict(animation=False)
 
 
 #: superfluous coordinates the full body keeps when the capture uses them (``used_coordinates``):
@@ -503,7 +490,7 @@ def make_tutor(
         context=MotionContext(
             environment=env,
             frame=_shifted_frame(capture.frame, stats.get("contact_plane_shift_mm", 0.0) / 1e3),
-            rig=None if (rig := tutor_rig(capture, cyc, syn, q_sim, fps, stats)) is None else jsonable(rig),
+            rig=tutor_rig(capture, cyc, syn, q_sim, fps, stats),
             cycle=src_prov[1],
             heading_change_deg=math.degrees(dpsi),
             gait_reference=GaitReference(

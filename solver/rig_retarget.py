@@ -1,4 +1,6 @@
-"""A motion put back on its input's rig (:func:`retarget`), and how well the rig follows it.
+"""A skeleton rig's calibration (:class:`RotationCalibration`, fitted against the simplified
+motion), a motion put back on the rig through it (:func:`retarget`, :func:`follow`), and how well
+the rig follows it.
 
 At each output time the gait phase picks the calibrated rig time; driving joints take the
 motion's segment rotations through their calibration, other joints their captured rotations,
@@ -11,29 +13,141 @@ rig's own forward kinematics. ``solver.rig`` describes the method.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation
+from scipy.spatial.transform import Rotation, Slerp
 
-from solver.kinematics import segment_frames
-from solver.rig_skeleton import LEG_SEGMENTS, Rig, RigError
+from solver.kinematics import contact_points, segment_frames
+from solver.retargeting import Calibration
+from solver.rig_skeleton import (
+    LEG_SEGMENTS,
+    RIGID_PREFIXES,
+    RigError,
+    RigPose,
+    SkeletonRig,
+    cycle_frames,
+    cycle_of,
+    matrices_to_quats,
+    quats_to_matrices,
+)
+from solver.trajectory import sample
+
+if TYPE_CHECKING:
+    from solver.motion import Motion
+
+
+def _frozen(a: Any) -> np.ndarray:
+    a = np.array(a, dtype=float, copy=True)
+    a.setflags(write=False)
+    return a
+
+
+def _round(a: np.ndarray, nd: int = 6) -> list:
+    return np.round(np.asarray(a, dtype=float), nd).tolist()
 
 
 @dataclass(frozen=True, eq=False)
-class RigPose:
-    """A motion on the rig: ``local`` (F, J, 3, 3) rotations and ``root`` (F, 3) translation (input
-    units) at ``times`` (s from the cycle's start), plus what the feet check needs."""
+class RotationCalibration(Calibration[SkeletonRig, RigPose]):
+    """The rig at the cycle's frames, relative to the simplified motion (see ``solver.rig``):
+    interpolated between those frames by slerp (:meth:`at`)."""
 
-    times: np.ndarray
-    local: np.ndarray
-    root: np.ndarray
-    positions: np.ndarray | None  # (F, J, 3) local translations of joints with position channels
-    capture_time: np.ndarray  # (F,) the rig time of the same gait phase
-    ankle_target: np.ndarray  # (F, 2, 3) m, our frame: where the motion's feet carry the ankle joints
-    driven: tuple[str, ...]  # segments whose joints the motion drives
+    t_start: float  # s, the cycle's start in the rig's times
+    period: float  # s, the capture cycle's duration
+    times: np.ndarray  # (F,) rig times covering [t_start, t_start + period]
+    local: np.ndarray  # (F, J, 3, 3) captured local rotations
+    root: np.ndarray  # (F, 3) captured root translation (input units)
+    joint_in_segment: np.ndarray  # (F, J, 3, 3): C_j for driving joints, identity elsewhere
+    root_in_pelvis: np.ndarray  # (F, 3) m, the root joint's position in the pelvis frame
+    ankle_in_foot: np.ndarray  # (F, 2, 3) m, ankle joints (right, left) in the foot frames
+
+    def __post_init__(self) -> None:
+        for name in ("times", "local", "root", "joint_in_segment", "root_in_pelvis", "ankle_in_foot"):
+            object.__setattr__(self, name, _frozen(getattr(self, name)))
+
+    @classmethod
+    def fit(cls, rig: SkeletonRig, reference: Motion) -> RotationCalibration:
+        """At every rig frame of the captured cycle, each driving joint's world rotation in its
+        segment's frame in ``reference`` (the simplified motion, a gait cycle; its context's frame
+        is the capture's ground frame), the root joint's position in the pelvis frame and each
+        ankle joint's position in its foot frame (see ``solver.rig``)."""
+        t_start, period = cycle_of(reference)
+        idx = cycle_frames(rig, t_start, period)
+        t = rig.times[idx]
+        local, root = rig.local[idx], rig.root[idx]
+        pos = rig.positions()
+        pos = None if pos is None else pos[idx]
+        frame = reference.frame
+        W, P = rig.forward(local, root, pos)
+        Wo = np.einsum("ji,fkjl->fkil", frame.R, W)  # Rᵀ W: the rig in our world
+        Po = frame.point_from_input(P, t[:, None])
+        q, fps, character = reference.q, reference.fps, reference.character
+        duration = (q.shape[1] - 2) / fps
+        tm = np.clip((t - t_start) / period, 0.0, 1.0) * duration
+        qs = sample(q, fps, tm, cyclic=True, interpolation=reference.interpolation)
+        Rs, Ps = segment_frames(character, qs)  # (S, 3, 3, F), (S, 3, F)
+        seg = {s.name: i for i, s in enumerate(character.segments)}
+        C = np.broadcast_to(np.eye(3), Wo.shape).copy()
+        for s, j in rig.roles.items():
+            if s in seg:
+                Rseg = np.moveaxis(Rs[seg[s]], -1, 0)
+                C[:, j] = np.einsum("fji,fjk->fik", Rseg, Wo[:, j])
+        for s, j in rig.roles.items():  # feet rigid on the motion's feet: they stay planted where it is
+            if s in seg and s.startswith(RIGID_PREFIXES):
+                C[:, j] = Rotation.from_matrix(C[:, j]).mean().as_matrix()
+        pel = seg.get("pelvis", 0)
+        Rp, Pp = np.moveaxis(Rs[pel], -1, 0), Ps[pel].T
+        anchor = rig.roles.get("pelvis", 0)
+        root_in_pelvis = np.einsum("fji,fj->fi", Rp, Po[:, anchor] - Pp)
+        ankles = np.zeros((t.size, 2, 3))
+        for k, side in enumerate("rl"):
+            foot = LEG_SEGMENTS[side][2]
+            if foot in seg and foot in rig.roles:
+                Rf, Pf = np.moveaxis(Rs[seg[foot]], -1, 0), Ps[seg[foot]].T
+                ankles[:, k] = np.einsum("fji,fj->fi", Rf, Po[:, rig.roles[foot]] - Pf).mean(axis=0)
+        return cls(float(t_start), float(period), t, local, root, C, root_in_pelvis, ankles)
+
+    def pose(self, motion: Motion, rig: SkeletonRig, times: np.ndarray, q: np.ndarray, duration: float) -> RigPose:
+        """The joints' local rotations and the root's translation (:func:`follow`)."""
+        return follow(self, motion, rig, times, q, duration)
+
+    def at(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Interpolated (local, root, joint_in_segment, root_in_pelvis, ankle_in_foot) at rig
+        times ``t`` (slerp for rotations, linear otherwise)."""
+        t = np.clip(np.asarray(t, dtype=float), self.times[0], self.times[-1])
+
+        def rot(a: np.ndarray) -> np.ndarray:
+            J = a.shape[1]
+            out = np.empty((t.size, J, 3, 3))
+            for j in range(J):
+                out[:, j] = Slerp(self.times, Rotation.from_matrix(a[:, j]))(t).as_matrix()
+            return out
+
+        def lin(a: np.ndarray) -> np.ndarray:
+            flat = a.reshape(a.shape[0], -1)
+            return np.stack([np.interp(t, self.times, flat[:, c]) for c in range(flat.shape[1])], axis=-1).reshape(
+                (t.size,) + a.shape[1:])
+
+        return rot(self.local), lin(self.root), rot(self.joint_in_segment), lin(self.root_in_pelvis), \
+            lin(self.ankle_in_foot)
+
+    def to_dict(self) -> dict[str, Any]:
+        r6 = _round
+        return {"t_start": self.t_start, "period": self.period, "times": r6(self.times),
+                "local": r6(matrices_to_quats(self.local)), "root": r6(self.root),
+                "joint_in_segment": r6(matrices_to_quats(self.joint_in_segment)),
+                "root_in_pelvis": r6(self.root_in_pelvis), "ankle_in_foot": r6(self.ankle_in_foot)}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> RotationCalibration:
+        return cls(float(d["t_start"]), float(d["period"]), np.asarray(d["times"], dtype=float),
+                   quats_to_matrices(np.asarray(d["local"], dtype=float)), np.asarray(d["root"], dtype=float),
+                   quats_to_matrices(np.asarray(d["joint_in_segment"], dtype=float)),
+                   np.asarray(d["root_in_pelvis"], dtype=float), np.asarray(d["ankle_in_foot"], dtype=float))
+
+
 
 
 def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -94,7 +208,7 @@ def _two_bone(W: np.ndarray, P: np.ndarray, parents: Sequence[int], hip: int, kn
         W[j] = Rh @ Rk @ W[j]
 
 
-def hinge_axes(rig: Rig) -> dict[int, np.ndarray]:
+def hinge_axes(rig: SkeletonRig) -> dict[int, np.ndarray]:
     """Joints with exactly one rotation channel (a BVH joint with one ``…rotation`` channel, a
     DeepMimic revolute joint) -> that axis (unit, joint frame)."""
     out = {}
@@ -141,8 +255,6 @@ def foot_pins(motion: Any, q: np.ndarray, t: np.ndarray) -> np.ndarray:
     touched down, so the correction never jumps when a second point lands), and the
     correction fades out over :data:`PIN_RELEASE_S` once the foot is in the air. A frame counts
     as in contact when both motion frames around it are."""
-    from solver.kinematics import contact_points
-
     F = t.size
     out = np.zeros((F, 2, 3))
     if motion.contacts is None or not motion.character.contacts:
@@ -189,21 +301,27 @@ def output_times(motion: Any, frame_time: float) -> tuple[np.ndarray, float]:
     return np.linspace(0.0, D, n + 1), D
 
 
-def retarget(motion: Any, rig: Rig, *, frame_time: float | None = None) -> RigPose:
+def retarget(motion: Any, rig: SkeletonRig, *, frame_time: float | None = None) -> RigPose:
     """``motion`` (of the character the rig was calibrated on) on the rig, one cycle at the rig's
-    frame rate (or ``frame_time``)."""
-    from solver.trajectory import sample
-
+    frame rate (or ``frame_time``), through its calibration (:meth:`RotationCalibration.pose`)."""
     cal = rig.calibration
     if cal is None:
         raise RigError("the source rig was never calibrated against a tutor (it is a capture's rig): "
                        "make a tutor first")
+    t, D = output_times(motion, frame_time or rig.frame_time)
+    q = sample(motion.q, motion.fps, t, cyclic=motion.cyclic, interpolation=motion.interpolation)
+    return cal.pose(motion, rig, t, q, D)
+
+
+def follow(cal: RotationCalibration, motion: Any, rig: SkeletonRig, t: np.ndarray, q: np.ndarray,
+           D: float) -> RigPose:
+    """``motion`` on ``rig`` through its calibration ``cal`` at times ``t`` (s from the cycle's
+    start, ``D`` the motion's cycle), ``q`` (n, F) its coordinates there (see ``solver.rig``)."""
     ch = motion.character
     seg = {s.name: i for i, s in enumerate(ch.segments)}
     if "pelvis" not in seg:
         raise RigError("the motion's character has no pelvis segment")
     frame = motion.frame
-    t, D = output_times(motion, frame_time or rig.frame_time)
     tc = cal.t_start + t / D * cal.period
     local_c, root_c, C, root_in_pelvis, ankle_in_foot = cal.at(tc)
     positions = None
@@ -211,7 +329,6 @@ def retarget(motion: Any, rig: Rig, *, frame_time: float | None = None) -> RigPo
     if pos is not None:
         positions = np.stack([np.stack([np.interp(tc, cal.times, pos[:, j, c]) for c in range(3)], -1)
                               for j in range(rig.J)], 1)
-    q = sample(motion.q, motion.fps, t, cyclic=motion.cyclic, interpolation=motion.interpolation)
     Rs, Ps = segment_frames(ch, q)
     Rs, Ps = np.moveaxis(Rs, -1, 1), np.moveaxis(Ps, -1, 1)  # (S, F, 3, 3), (S, F, 3)
     driven = {j: s for s, j in rig.roles.items() if s in seg}
@@ -297,7 +414,7 @@ def retarget(motion: Any, rig: Rig, *, frame_time: float | None = None) -> RigPo
     return RigPose(t, local, root_in, positions, tc, targets, tuple(sorted(driven.values())))
 
 
-def feet_report(motion: Any, rig: Rig, pose: RigPose) -> dict[str, Any]:
+def feet_report(motion: Any, rig: SkeletonRig, pose: RigPose) -> dict[str, Any]:
     """How well the rig's feet follow the motion, from the rig's own forward kinematics.
 
     Per side: ``ankle_error_m``, the largest distance over stance frames between the rig's
@@ -307,9 +424,6 @@ def feet_report(motion: Any, rig: Rig, pose: RigPose) -> dict[str, Any]:
     for a toe point) that lies on that contact point when the interval starts: a foot bone
     that stays pinned where the motion's foot is on the ground does not slide. A frame
     counts as in contact when both motion frames around it are."""
-    from solver.kinematics import contact_points
-    from solver.trajectory import sample
-
     if motion.contacts is None:
         return {}
     frame = motion.frame
@@ -349,12 +463,12 @@ def feet_report(motion: Any, rig: Rig, pose: RigPose) -> dict[str, Any]:
     return out
 
 
-def locked_joint_rms(rig: Rig, pose: RigPose) -> dict[str, float]:
+def locked_joint_rms(rig: SkeletonRig, pose: RigPose) -> dict[str, float]:
     """RMS (degrees) of the rotation between each joint the motion does not drive and the
     capture's own local rotation at the same gait phase, and the amplitude ratio (exported
     range of motion over captured) of those joints."""
     cal = rig.calibration
-    if cal is None:
+    if not isinstance(cal, RotationCalibration):
         return {}
     local_c, *_ = cal.at(pose.capture_time)
     driven = {rig.roles[s] for s in pose.driven if s in rig.roles}

@@ -1,25 +1,31 @@
-"""The input's own skeleton as a value: :class:`Rig` (joints, hierarchy, offsets, channels, the
-captured animation, the joint that moves each capture segment) and its :class:`Calibration`
-against a simplified motion, both to and from the JSON a motion's context carries.
+"""The input's own skeleton as a rig (:class:`SkeletonRig`: joints, hierarchy, offsets, channels,
+the captured animation, the joint that moves each capture segment; its calibration,
+:class:`solver.rig_retarget.RotationCalibration`, is the :class:`~solver.retargeting.Calibration`
+of BVH, glTF and DeepMimic rigs) and a motion on it (:class:`RigPose`), to and from the plain data
+a motion's context carries.
 
-Also the rig's vocabulary: the formats whose rigs are :class:`Rig` values, importer joint roles
-→ capture segments, each leg's segments, and unit quaternions (w, x, y, z) ↔ rotation matrices.
+Also the rig's vocabulary: importer joint roles → capture segments, each leg's segments, and unit
+quaternions (w, x, y, z) ↔ rotation matrices. ``solver.rig`` describes the method.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field, replace
-from typing import Any
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation, Slerp
+from scipy.spatial.transform import Rotation
 
 from solver.capture import GroundFrame
-from solver.errors import InputError
+from solver.retargeting import RIG_FORMATS, Calibration, Rig, RigError, calibration_kind
 
-#: the formats whose rigs are :class:`Rig` values (others, e.g. OpenSim's, are their exporter's own mapping)
-RIG_FORMATS = ("bvh", "gltf", "deepmimic")
+if TYPE_CHECKING:
+    from solver.motion import Motion
+
+__all__ = ["LEG_SEGMENTS", "MAX_JOINTS", "RIGID_PREFIXES", "RIG_FORMATS", "ROLE_SEGMENTS", "RigError", "RigPose",
+           "SkeletonRig", "matrices_to_quats", "quats_to_matrices", "segment_roles"]
+
 #: at most this many joints in a rig (a full-body rig with fingers and face has ~70–150): it bounds
 #: what every motion of the capture carries
 MAX_JOINTS = 256
@@ -34,10 +40,6 @@ ROLE_SEGMENTS = {"hips": "pelvis", "lumbar": "abdomen", "head": "head",
 RIGID_PREFIXES = ("foot_", "toes_")
 #: per side, the leg segments whose driving joints the two-bone IK turns
 LEG_SEGMENTS = {"r": ("thigh_r", "shank_r", "foot_r"), "l": ("thigh_l", "shank_l", "foot_l")}
-
-
-class RigError(InputError):
-    """A motion cannot be written on its source rig; the message says why."""
 
 
 def _frozen(a: Any, dtype: Any = float) -> np.ndarray:
@@ -63,66 +65,47 @@ def matrices_to_quats(R: np.ndarray) -> np.ndarray:
     return q
 
 
-@dataclass(frozen=True, eq=False)
-class Calibration:
-    """The rig at the cycle's frames, relative to the simplified motion (see ``solver.rig``)."""
-
-    t_start: float  # s, the cycle's start in the rig's times
-    period: float  # s, the capture cycle's duration
-    times: np.ndarray  # (F,) rig times covering [t_start, t_start + period]
-    local: np.ndarray  # (F, J, 3, 3) captured local rotations
-    root: np.ndarray  # (F, 3) captured root translation (input units)
-    joint_in_segment: np.ndarray  # (F, J, 3, 3): C_j for driving joints, identity elsewhere
-    root_in_pelvis: np.ndarray  # (F, 3) m, the root joint's position in the pelvis frame
-    ankle_in_foot: np.ndarray  # (F, 2, 3) m, ankle joints (right, left) in the foot frames
-
-    def __post_init__(self) -> None:
-        for name in ("times", "local", "root", "joint_in_segment", "root_in_pelvis", "ankle_in_foot"):
-            object.__setattr__(self, name, _frozen(getattr(self, name)))
-
-    def at(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Interpolated (local, root, joint_in_segment, root_in_pelvis, ankle_in_foot) at rig
-        times ``t`` (slerp for rotations, linear otherwise)."""
-        t = np.clip(np.asarray(t, dtype=float), self.times[0], self.times[-1])
-
-        def rot(a: np.ndarray) -> np.ndarray:
-            J = a.shape[1]
-            out = np.empty((t.size, J, 3, 3))
-            for j in range(J):
-                out[:, j] = Slerp(self.times, Rotation.from_matrix(a[:, j]))(t).as_matrix()
-            return out
-
-        def lin(a: np.ndarray) -> np.ndarray:
-            flat = a.reshape(a.shape[0], -1)
-            return np.stack([np.interp(t, self.times, flat[:, c]) for c in range(flat.shape[1])], axis=-1).reshape(
-                (t.size,) + a.shape[1:])
-
-        return rot(self.local), lin(self.root), rot(self.joint_in_segment), lin(self.root_in_pelvis), \
-            lin(self.ankle_in_foot)
-
-    def to_dict(self) -> dict[str, Any]:
-        r6 = _round
-        return {"t_start": self.t_start, "period": self.period, "times": r6(self.times),
-                "local": r6(matrices_to_quats(self.local)), "root": r6(self.root),
-                "joint_in_segment": r6(matrices_to_quats(self.joint_in_segment)),
-                "root_in_pelvis": r6(self.root_in_pelvis), "ankle_in_foot": r6(self.ankle_in_foot)}
-
-    @staticmethod
-    def from_dict(d: Mapping[str, Any]) -> Calibration:
-        return Calibration(float(d["t_start"]), float(d["period"]), np.asarray(d["times"], dtype=float),
-                           quats_to_matrices(np.asarray(d["local"], dtype=float)),
-                           np.asarray(d["root"], dtype=float),
-                           quats_to_matrices(np.asarray(d["joint_in_segment"], dtype=float)),
-                           np.asarray(d["root_in_pelvis"], dtype=float), np.asarray(d["ankle_in_foot"], dtype=float))
-
-
 def _round(a: np.ndarray, nd: int = 6) -> list:
     return np.round(np.asarray(a, dtype=float), nd).tolist()
 
 
 @dataclass(frozen=True, eq=False)
-class Rig:
-    """A source skeleton and its captured animation (input axes and length units).
+class RigPose:
+    """A motion on the rig: ``local`` (F, J, 3, 3) rotations and ``root`` (F, 3) translation (input
+    units) at ``times`` (s from the cycle's start), plus what the feet check needs."""
+
+    times: np.ndarray
+    local: np.ndarray
+    root: np.ndarray
+    positions: np.ndarray | None  # (F, J, 3) local translations of joints with position channels
+    capture_time: np.ndarray  # (F,) the rig time of the same gait phase
+    ankle_target: np.ndarray  # (F, 2, 3) m, our frame: where the motion's feet carry the ankle joints
+    driven: tuple[str, ...]  # segments whose joints the motion drives
+
+
+def cycle_of(reference: Motion) -> tuple[float, float]:
+    """(t_start, period) of the captured cycle a reference motion stands for (its context's)."""
+    cyc = reference.context.cycle
+    if cyc is None or cyc.t_start is None or cyc.period_s is None:
+        raise RigError("the reference motion does not record the captured cycle (its context's cycle)")
+    return cyc.t_start, cyc.period_s
+
+
+def cycle_frames(rig: SkeletonRig, t_start: float, period: float) -> np.ndarray:
+    """Indices of the rig frames covering [t_start, t_start + period] (one frame either side)."""
+    t = rig.times
+    a = max(int(np.searchsorted(t, t_start, side="right")) - 2, 0)
+    b = min(int(np.searchsorted(t, t_start + period, side="left")) + 2, t.size)
+    if b - a < 2 or t[a] > t_start + 1e-6 or t[b - 1] < t_start + period - 1e-6:
+        raise RigError(f"the source rig's frames ({t[0]:.3f}-{t[-1]:.3f} s) do not cover the gait cycle "
+                       f"({t_start:.3f}-{t_start + period:.3f} s)")
+    return np.arange(a, b)
+
+
+@dataclass(frozen=True, eq=False)
+class SkeletonRig(Rig):
+    """A source skeleton and its captured animation (input axes and length units): the rig of a
+    BVH, skinned glTF or DeepMimic input (:data:`~solver.retargeting.RIG_FORMATS`).
 
     ``local`` (F, J, 3, 3) is each joint's full local rotation (rest rotation included) at
     ``times``; ``root`` (F, 3) the root joint's local translation. Child joints sit at their
@@ -132,6 +115,8 @@ class Rig:
     channel names (or ``("quaternion",)`` / ``("Zrotation",)`` for DeepMimic's spherical /
     revolute joints, ``()`` for a fixed joint). ``frame`` maps our world onto the input's axes
     and units. ``extra``: what the writer of that format needs besides (JSON-able).
+    ``calibration``: its :class:`~solver.rig_retarget.RotationCalibration` once calibrated
+    (:meth:`calibrated`).
     """
 
     format: str
@@ -146,7 +131,8 @@ class Rig:
     frame: GroundFrame = field(default_factory=GroundFrame)
     end_sites: Mapping[int, np.ndarray] = field(default_factory=dict)
     extra: Mapping[str, Any] = field(default_factory=dict)
-    calibration: Calibration | None = None
+    calibration: Calibration[Any, Any] | None = None
+    file_data: Mapping[str, Any] | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
         J = len(self.names)
@@ -199,11 +185,24 @@ class Rig:
                 P[:, j] = P[:, p] + np.einsum("fij,fj->fi", W[:, p], np.broadcast_to(off, (F, 3)))
         return W, P
 
-    def evolve(self, **changes: Any) -> Rig:
-        return replace(self, **changes)
+    def calibrated(self, reference: Motion) -> SkeletonRig:
+        """The rig calibrated against ``reference`` (the simplified cycle:
+        :meth:`solver.rig_retarget.RotationCalibration.fit`), its animation the frames of the
+        captured cycle the calibration holds."""
+        cal = calibration_kind(self.format).fit(self, reference)
+        idx = cycle_frames(self, *cycle_of(reference))
+        extra = dict(self.extra)
+        pos = self.positions()
+        if pos is not None:
+            extra["positions"] = pos[idx].tolist()
+        seg = {s.name for s in reference.character.segments}
+        extra["calibrated_on"] = sorted(s for s in self.roles if s in seg)
+        return self.evolve(times=self.times[idx], local=self.local[idx], root=self.root[idx], extra=extra,
+                           calibration=cal)
 
-    # --- JSON (the motion context) -------------------------------------------------------
-    def to_dict(self, *, animation: bool = True) -> dict[str, Any]:
+    # --- plain data (the motion context) ----------------------------------------------------
+    def data(self) -> dict[str, Any]:
+        """The rig as plain data: its animation left out when its calibration holds the same frames."""
         d: dict[str, Any] = {
             "format": self.format, "names": list(self.names), "parents": list(self.parents),
             "offsets": _round(self.offsets), "channels": [list(c) for c in self.channels],
@@ -211,38 +210,33 @@ class Rig:
             "end_sites": {str(j): _round(v) for j, v in self.end_sites.items()},
             "extra": dict(self.extra), "frame_time": self.frame_time,
         }
-        if animation:
-            d.update(times=_round(self.times), local=_round(matrices_to_quats(self.local)), root=_round(self.root))
-        if self.calibration is not None:
-            d["calibration"] = self.calibration.to_dict()
+        animation = {"times": _round(self.times), "local": _round(matrices_to_quats(self.local)),
+                     "root": _round(self.root)}
+        cal = None if self.calibration is None else self.calibration.to_dict()
+        if cal is None or any(cal.get(k) != v for k, v in animation.items()):
+            d.update(animation)
+        if cal is not None:
+            d["calibration"] = cal
         return d
 
-    @staticmethod
-    def from_dict(d: Mapping[str, Any]) -> Rig:
-        try:
-            names = tuple(str(n) for n in d["names"])
-            J = len(names)
-            cal = d.get("calibration")
-            calibration = Calibration.from_dict(cal) if cal else None
-            if "times" in d:
-                times = np.asarray(d["times"], dtype=float)
-                local = quats_to_matrices(np.asarray(d["local"], dtype=float))
-                root = np.asarray(d["root"], dtype=float)
-            elif calibration is not None:  # a calibrated rig needs no animation of its own
-                times, local, root = calibration.times, calibration.local, calibration.root
-            else:
-                raise KeyError("times")
-            extra = dict(d.get("extra") or {})
-            extra.setdefault("frame_time", float(d.get("frame_time", 1 / 30)))
-            return Rig(str(d["format"]), names, tuple(int(p) for p in d["parents"]),
-                       np.asarray(d["offsets"], dtype=float).reshape(J, 3),
-                       tuple(tuple(str(c) for c in ch) for ch in d["channels"]),
-                       {str(k): int(v) for k, v in dict(d["roles"]).items()}, times, local, root,
-                       GroundFrame.from_dict(d.get("frame")),
-                       {int(k): np.asarray(v, dtype=float) for k, v in dict(d.get("end_sites") or {}).items()},
-                       extra, calibration)
-        except (KeyError, TypeError, ValueError) as e:
-            raise RigError(f"the motion's source rig is unreadable ({e.__class__.__name__}: {e})") from None
+    @classmethod
+    def read(cls, d: Mapping[str, Any]) -> SkeletonRig:
+        names = tuple(str(n) for n in d["names"])
+        J = len(names)
+        calibration = cls.read_calibration(d)
+        held = d if "times" in d else d.get("calibration") or {}  # a calibrated rig's animation: its calibration's
+        times = np.asarray(held["times"], dtype=float)
+        local = quats_to_matrices(np.asarray(held["local"], dtype=float))
+        root = np.asarray(held["root"], dtype=float)
+        extra = dict(d.get("extra") or {})
+        extra.setdefault("frame_time", float(d.get("frame_time", 1 / 30)))
+        return cls(str(d["format"]), names, tuple(int(p) for p in d["parents"]),
+                   np.asarray(d["offsets"], dtype=float).reshape(J, 3),
+                   tuple(tuple(str(c) for c in ch) for ch in d["channels"]),
+                   {str(k): int(v) for k, v in dict(d["roles"]).items()}, times, local, root,
+                   GroundFrame.from_dict(d.get("frame")),
+                   {int(k): np.asarray(v, dtype=float) for k, v in dict(d.get("end_sites") or {}).items()},
+                   extra, calibration)
 
 
 def segment_roles(roles: Mapping[str, int]) -> dict[str, int]:

@@ -117,7 +117,7 @@ def test_the_files_are_the_models_coordinates_and_feet(exports, trials, name):
     rig = source_rig(trials[name][1])
     coords = read_mot(folder / "coordinates.mot")
     assert coords.in_degrees is True
-    assert list(coords.labels) == list(rig["model_coordinates"])
+    assert list(coords.labels) == list(rig.model_coordinates)
     assert np.allclose(np.diff(coords.time), 0.01, atol=1e-6)  # 100 Hz, three cycles
     cycle = summary["motion"]["cycle_s"]
     assert coords.time[-1] == pytest.approx(3 * cycle, abs=0.011)

@@ -35,7 +35,7 @@ from solver.io.gltf import GltfError, gltf_track, parse_gltf
 from solver.io.gltf.animation import _sample_channel
 from solver.kinematics import contact_points
 from solver.motion import Motion
-from solver.rig import Rig, feet_report, retarget
+from solver.rig import SkeletonRig, feet_report, retarget
 from solver.trajectory import sample
 
 pygltflib = pytest.importorskip("pygltflib")
@@ -114,7 +114,7 @@ def glb_fk(data: bytes, animation: int = 0):
     return g, times, W
 
 
-def feet_from_fk(motion: Motion, rig: Rig, pose, W: dict[int, np.ndarray], to_input: np.ndarray,
+def feet_from_fk(motion: Motion, rig: SkeletonRig, pose, W: dict[int, np.ndarray], to_input: np.ndarray,
                  node_of: dict[str, int]) -> dict[str, float]:
     """From the GLB's own node matrices: the ankle joints' largest distance from where the motion's
     feet carry them in stance, and the largest slide of a contact point carried by the rig's foot
@@ -183,7 +183,7 @@ def test_import_reads_the_character_as_the_cmu_walk_it_was_made_from(shared_data
 def test_capture_carries_the_character_without_its_animation(runs, shared_data):
     capture, _ = runs
     rig = capture.rig
-    assert isinstance(rig, Rig) and rig.format == "gltf" and rig.J == 31
+    assert isinstance(rig, SkeletonRig) and rig.format == "gltf" and rig.J == 31
     src = pygltflib.GLTF2.load(str(shared_data / TRIAL))
     assert [src.nodes[n].name for n in rig.extra["nodes"]] == list(rig.names)
     asset = base64.b64decode(rig.extra["asset"])
@@ -337,7 +337,7 @@ def test_walks_come_out_on_the_input_character(runs, shared_data, name, tmp_path
     # (c) our own forward kinematics of the written nodes: one cycle at the input's 30 fps, the feet planted
     g, times, W = glb_fk(data)
     (anim,) = g.animations
-    rig = Rig.from_dict(motion.context.rig)
+    rig = motion.context.rig
     pose = retarget(motion, rig)
     assert np.allclose(times, pose.times, atol=1e-6) and times[0] == 0.0
     assert times[1] == pytest.approx(1 / 30, rel=1e-4)
@@ -391,7 +391,7 @@ def test_library_glb_has_one_animation_per_motion(runs, tmp_path):
     assert [m.name for m in g.meshes] == ["Body", *(f"ground {n}" for n in motions)] and len(g.skins) == 1
     for k, (name, motion) in enumerate(items):
         g, times, W = glb_fk(data, animation=k)
-        rig = Rig.from_dict(motion.context.rig)
+        rig = motion.context.rig
         pose = retarget(motion, rig)
         node_of = {n.name: i for i, n in enumerate(g.nodes)}
         fk = feet_from_fk(motion, rig, pose, W, np.linalg.inv(W[node_of["Armature"]][0]), node_of)
@@ -416,7 +416,7 @@ def test_bvh_and_deepmimic_rigs_come_out_as_their_own_skeletons(shared_data, tmp
         path.write_bytes(data)
         report = khronos_report(path)
         assert report["errors"] == 0 and report["warnings"] == 0, (fmt, report["messages"])
-        rig = Rig.from_dict(motion.context.rig)
+        rig = motion.context.rig
         g, times, W = glb_fk(data)
         names = [n.name for n in g.nodes]
         assert names[1:1 + rig.J] == list(rig.names) and len(g.skins[0].joints) == rig.J
@@ -525,7 +525,7 @@ def test_rig_source_refusals(runs, shared_data):
     with pytest.raises(ExportError, match="at least one"):
         rig_glb_library([])
     rig = tutor.context.rig
-    other = tutor.evolve(context=tutor.context.with_(rig={**rig, "names": list(reversed(rig["names"]))}))
+    other = tutor.evolve(context=tutor.context.with_(rig=rig.evolve(names=tuple(reversed(rig.names)))))
     with pytest.raises(ExportError, match="another source rig"):
         rig_glb_library([("a", tutor), ("b", other)])
     assert rig_glb(tutor)[:4] == b"glTF"

@@ -17,6 +17,8 @@ from solver.character import reference
 from solver.environment import Environment
 from solver.motion import CONTEXT_KEYS, Cycle, GaitReference, Motion, MotionContext, MotionError
 from solver.realism import requested_heading
+from solver.retargeting import Rig
+from solver.rig import SkeletonRig
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -26,6 +28,12 @@ def _walk(T: int = 12) -> Motion:
     q = 0.05 * np.random.default_rng(0).standard_normal((ch.n, T))
     return Motion(ch, 15.0, q, reference_name="halfboy", provenance={"step": "extrapolate", "lambda": 0.5})
 
+
+#: a one-joint BVH rig as a motion file holds it
+ONE_JOINT_RIG = {"format": "bvh", "names": ["Hips"], "parents": [-1], "offsets": [[0.0, 0.0, 0.0]],
+                 "channels": [["Xposition", "Yposition", "Zposition", "Zrotation", "Xrotation", "Yrotation"]],
+                 "roles": {"pelvis": 0}, "times": [0.0, 0.1], "local": [[[1.0, 0.0, 0.0, 0.0]], [[1.0, 0.0, 0.0, 0.0]]],
+                 "root": [[0.0, 90.0, 0.0], [5.0, 90.0, 0.0]]}
 
 #: a λ optimum's provenance as the motion files of earlier versions hold it (every context key at
 #: the top level of ``provenance``, the captured cycle inside ``source``)
@@ -44,7 +52,7 @@ OLD_PROVENANCE = {
     "heading_change_deg": 21.0,
     "tutor_heading_change_deg": 1.0,
     "gait_reference": {"capture": {"cadence_steps_per_min": 104.0}, "tutor": None, "fit": {"marker_rms_mm": 9.5}},
-    "rig": {"format": "bvh", "names": ["Hips"]},
+    "rig": ONE_JOINT_RIG,
     "created": "2026-01-01T00:00:00+00:00",
 }
 
@@ -62,7 +70,8 @@ def test_an_old_motion_file_loads_with_its_context_and_is_written_back_the_same(
     assert ctx.axis_values == {"slope_deg": 10.0, "curve_deg": 20.0}
     assert isinstance(ctx.frame, GroundFrame) and m.frame.unit_m == 0.001 and m.frame.axes == "y up"
     assert np.allclose(m.frame.offset, [0.1, 0.0, 0.2])
-    assert ctx.rig == {"format": "bvh", "names": ["Hips"]}
+    assert isinstance(ctx.rig, SkeletonRig) and ctx.rig.names == ("Hips",) and ctx.rig.frame_time == 0.1
+    assert ctx.rig.to_dict() == ONE_JOINT_RIG  # written back as read
     assert ctx.cycle is not None and (ctx.cycle.t_start, ctx.cycle.period_s) == (0.66, 1.02)
     assert ctx.cycle.record["frames"] == [10, 25]
     assert (ctx.heading_change_deg, ctx.tutor_heading_change_deg, ctx.heading_change_requested_deg) == (21.0, 1.0, None)
@@ -100,6 +109,8 @@ def test_files_before_environment_values_give_the_curve_from_target_and_lambda()
     ("environment", {"friction": 0}, "provenance.environment: friction"),
     ("frame", {"R": "up"}, "provenance.frame"),
     ("rig", [1, 2], "provenance.rig"),
+    ("rig", {"format": "bvh", "names": ["Hips"]}, "provenance.rig: the motion's source rig is unreadable"),
+    ("rig", {"format": "fbx"}, "provenance.rig: unknown rig format 'fbx'"),
     ("environment_values", "flat", "provenance.environment_values"),
     ("source", {"cycle": 3}, "provenance.source.cycle"),
 ])
@@ -121,7 +132,7 @@ def test_context_keys_are_refused_in_provenance():
 
 def test_the_context_is_typed_and_immutable():
     ctx = MotionContext(environment=Environment(friction=0.5), cycle=Cycle(0.5, 1.1, {"index": 0}),
-                        heading_change_deg=3, rig={"format": "bvh"})
+                        heading_change_deg=3, rig=Rig.from_dict(ONE_JOINT_RIG))
     m = _walk().evolve(context=ctx)
     assert m.environment.friction == 0.5 and m.context.heading_change_deg == 3.0
     with pytest.raises(AttributeError):
@@ -133,8 +144,10 @@ def test_the_context_is_typed_and_immutable():
         MotionContext(heading_change_deg=math.nan)
     with pytest.raises(MotionError, match="environment"):
         MotionContext(environment={"friction": 1.0})  # type: ignore[arg-type]
+    with pytest.raises(MotionError, match=r"context\.rig must be a Rig"):
+        MotionContext(rig=ONE_JOINT_RIG)  # type: ignore[arg-type]
     d = m.to_dict()["provenance"]
-    assert d["source"] == {"cycle": {"index": 0, "t_start": 0.5, "period_s": 1.1}} and d["rig"] == {"format": "bvh"}
+    assert d["source"] == {"cycle": {"index": 0, "t_start": 0.5, "period_s": 1.1}} and d["rig"] == ONE_JOINT_RIG
 
 
 # --- no physics code reads the context from provenance --------------------------------------------------

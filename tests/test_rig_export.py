@@ -21,7 +21,7 @@ import solver
 from solver.export import ExportError
 from solver.io.bvh import parse_bvh, read_bvh
 from solver.kinematics import contact_points
-from solver.rig import Rig, feet_report, retarget
+from solver.rig import feet_report, retarget
 from solver.trajectory import sample
 
 bvhio = pytest.importorskip("bvhio")
@@ -90,7 +90,7 @@ def test_walks_come_out_on_the_input_rig(runs, name, tmp_path):
     text = solver.export_motion(motion, "bvh", rig="source", world="ground")  # the solver's frame, as retarget's
     src, out = read_bvh(path), parse_bvh(text)  # (the default world, gravity down: tests/test_world_export.py)
     _same_hierarchy(out, src)
-    rig = Rig.from_dict(motion.context.rig)
+    rig = motion.context.rig
     pose = retarget(motion, rig)
     assert pose.times.size == out.T and abs(out.frame_time - (pose.times[1] - pose.times[0])) < 1e-6
     # bvhio's forward kinematics of the file against the rig's own
@@ -145,7 +145,7 @@ def test_locked_joints_carry_the_capture_at_the_same_phase(runs, name):
     motion = motions[name]
     src = read_bvh(path)
     out = parse_bvh(solver.export_motion(motion, "bvh", rig="source"))
-    rig = Rig.from_dict(motion.context.rig)
+    rig = motion.context.rig
     pose = retarget(motion, rig)
     legs = set()
     for j in range(len(src.names)):
@@ -176,7 +176,7 @@ def test_library_cells_come_out_on_the_input_rig(runs, tmp_path):
     for key, m in cells.items():
         out = parse_bvh(solver.export_motion(m, "bvh", rig="source"))
         _same_hierarchy(out, src)
-        rig = Rig.from_dict(m.context.rig)
+        rig = m.context.rig
         rep = feet_report(m, rig, retarget(m, rig))
         for side in ("right", "left"):
             assert rep[side]["ankle_error_m"] <= 0.02 and rep[side]["slide_m"] <= 0.01, (key, rep)
@@ -210,7 +210,7 @@ def test_deepmimic_motion_on_its_own_character(shared_data, tmp_path):
     f.write_text(text)
     back = solver.load_trial([f, files[1]])
     assert len(d["Frames"]) == back.T
-    rig = Rig.from_dict(tutor.context.rig)
+    rig = tutor.context.rig
     rep = feet_report(tutor, rig, retarget(tutor, rig))
     for side in ("right", "left"):
         assert rep[side]["ankle_error_m"] <= 0.02 and rep[side]["slide_m"] <= 0.01, rep
@@ -233,7 +233,7 @@ def test_a_z_up_metre_rig_comes_out_on_itself(shared_data):
     tutor = solver.make_tutor(solver.load_trial([path], mass=MASS, up="z"), character="halfboy", fps=15.0).motion
     text = solver.export_motion(tutor, "bvh", rig="source")
     _same_hierarchy(parse_bvh(text), read_bvh(path))
-    rig = Rig.from_dict(tutor.context.rig)
+    rig = tutor.context.rig
     rep = feet_report(tutor, rig, retarget(tutor, rig))
     for side in ("right", "left"):
         assert rep[side]["ankle_error_m"] <= 0.02 and rep[side]["slide_m"] <= 0.01, rep

@@ -41,7 +41,7 @@ from solver.capture import GroundFrame
 from solver.errors import InputError
 from solver.io.bvh import BvhClip, parse_bvh, read_bvh
 from solver.kinematics import contact_points
-from solver.rig import Rig, feet_report, locked_joint_rms, retarget
+from solver.rig import SkeletonRig, feet_report, locked_joint_rms, retarget
 from solver.trajectory import sample
 
 REPORT = Path(__file__).resolve().parents[1] / "out" / "wild_rigs.json"
@@ -162,7 +162,7 @@ def _carried_contacts(motion, P, R, t, tc, frame: GroundFrame, feet) -> float:
     return worst
 
 
-def _locked_rms_from_file(src: BvhClip, out: BvhClip, rig: Rig, pose) -> tuple[float, int]:
+def _locked_rms_from_file(src: BvhClip, out: BvhClip, rig: SkeletonRig, pose) -> tuple[float, int]:
     """RMS (°) between the written file's local rotations and the input file's at the same gait
     phase, over the joints outside the legs that the motion does not drive (spine, arms, head)."""
     legs = set()
@@ -194,7 +194,7 @@ def _trunk_tilt(P: np.ndarray, lumbar: int, top: int, up: np.ndarray) -> np.ndar
 def _figures(name, made) -> dict:
     files, capture, tutor, seconds = made[name]
     motion = tutor.motion
-    rig = Rig.from_dict(motion.context.rig)
+    rig = motion.context.rig
     pose = retarget(motion, rig)
     frame = motion.frame
     feet = [rig.roles[s] if s in rig.roles else rig.roles[s.replace("toes", "foot")]

@@ -36,7 +36,7 @@ from solver.export import reimport as RI
 from solver.export.gltf import to_library_glb
 from solver.export.world import WORLDS, ground_json
 from solver.motion import FEET, Motion
-from solver.rig import Rig, retarget
+from solver.rig import SkeletonRig, retarget
 
 TRIAL = "cmu16_bvh/16_15_walk.bvh"
 TARGETS = {"up10": {"slope_deg": 10.0}, "down10": {"slope_deg": -10.0}, "stairs": {"step_height_m": 0.15},
@@ -298,7 +298,7 @@ def test_clip_and_game_data_are_in_the_same_world(walks):
 
 # --- on the input's own skeleton --------------------------------------------------------------------
 
-def _ankle_heights(motion: Motion, rig: Rig, pose) -> tuple[np.ndarray, np.ndarray]:
+def _ankle_heights(motion: Motion, rig: SkeletonRig, pose) -> tuple[np.ndarray, np.ndarray]:
     """(stance (F, 2) bool, the ankle joints' height above their ground in the solver's frame (F, 2))."""
     s = pose.times * motion.fps
     lo = np.clip(np.floor(s + 1e-9).astype(int), 0, motion.T - 1)
@@ -311,7 +311,7 @@ def _ankle_heights(motion: Motion, rig: Rig, pose) -> tuple[np.ndarray, np.ndarr
 @pytest.mark.parametrize("name", ["up10", "stairs"])
 def test_source_rig_glb_and_bvh_climb_their_ground(walks, name, tmp_path):
     motion = walks[name]
-    rig = Rig.from_dict(motion.context.rig)
+    rig = motion.context.rig
     pose = retarget(motion, rig)
     stance, height = _ankle_heights(motion, rig, pose)
     ankles = [rig.names[rig.roles[f"foot_{s}"]] for s in "rl"]

@@ -90,9 +90,12 @@ def _written_frames(motion, options: dict) -> tuple[int, float]:
     (``--rig source``) one gait cycle at the input's frame rate (a 60 fps BVH comes back at 60 fps)."""
     if options.get("rig") != "source":
         return motion.T, motion.fps
-    from solver.rig import Rig, output_times
+    from solver.rig import SkeletonRig, output_times
 
-    t, _ = output_times(motion, Rig.from_dict(motion.context.rig or {}).frame_time)
+    rig = motion.context.rig
+    if not isinstance(rig, SkeletonRig):  # an OpenSim model's GLB samples the model itself: not counted here
+        return motion.T, motion.fps
+    t, _ = output_times(motion, rig.frame_time)
     return int(t.size), round(float(1.0 / (t[1] - t[0])), 6)
 
 

@@ -36,7 +36,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -44,6 +44,9 @@ from solver import spatial as sp
 from solver.character import Character
 from solver.formats import EXPORT_WORLDS, EXPORTERS
 from solver.motion import Motion, MotionContext
+
+if TYPE_CHECKING:
+    from solver.rig import SkeletonRig
 
 __all__ = [
     "DEFAULT_WORLD",
@@ -306,7 +309,7 @@ def export_choices(context: MotionContext, provenance: Mapping[str, Any]) -> dic
     an OpenSim trial; ``opensim`` with ``model="generic"`` remains possible for any motion),
     ``on_rig`` (the formats that write it on the input's own skeleton, ``rig="source"``), ``rig``
     (the format of that skeleton, or None) and ``source`` (the trial's format, or None)."""
-    rig_format = context.rig.get("format") if context.rig is not None else None
+    rig_format = context.rig.format if context.rig is not None else None
     src = provenance.get("source")
     source = src.get("format") if isinstance(src, Mapping) else None
     formats = [f for f in EXPORTERS if f not in ALIASES and NEEDS_RIG.get(f, rig_format) == rig_format]
@@ -353,21 +356,17 @@ def write_folder(archive: bytes, path: str | Path) -> Path:
     return out
 
 
-def source_rig(motion: Motion, formats: tuple[str, ...], what: str):
-    """The motion's source rig (``motion.context.rig``, a :class:`solver.rig.Rig`) when its format
-    is one of ``formats``; otherwise an :class:`ExportError` naming ``what`` it needs and where the
+def source_rig(motion: Motion, formats: tuple[str, ...], what: str) -> SkeletonRig:
+    """The motion's source rig (``motion.context.rig``), a skeleton (:class:`solver.rig.SkeletonRig`)
+    of one of ``formats``; otherwise an :class:`ExportError` naming ``what`` it needs and where the
     motion came from."""
-    from solver.rig import Rig, RigError
+    from solver.rig import SkeletonRig  # lazy: solver.rig only for the input-rig exports
 
-    d = motion.context.rig
-    if not isinstance(d, Mapping) or d.get("format") not in formats:
-        src = d.get("format") if isinstance(d, Mapping) else None
-        why = f"this one came from {src}" if src else "this one has no source rig"
+    rig = motion.context.rig
+    if not isinstance(rig, SkeletonRig) or rig.format not in formats:
+        why = f"this one came from {rig.format}" if rig is not None else "this one has no source rig"
         raise ExportError(f"{what} ({why})")
-    try:
-        return Rig.from_dict(d)
-    except RigError as e:
-        raise ExportError(str(e)) from None
+    return rig
 def check_decimals(decimals: object) -> None:
     """Text exporters write 1 to 12 decimals."""
     if isinstance(decimals, bool) or not isinstance(decimals, int) or not 1 <= decimals <= 12:

@@ -61,7 +61,7 @@ from solver.export.gltf_parts import (
 )
 from solver.export.world import check_world, ground_of_motion, world_rig_pose
 from solver.motion import Motion
-from solver.rig import RIG_FORMATS, Rig, RigError, RigPose, retarget
+from solver.rig import RIG_FORMATS, RigError, RigPose, SkeletonRig, retarget
 
 __all__ = ["rig_glb", "rig_glb_library", "rig_gltf_embedded"]
 
@@ -70,7 +70,7 @@ __all__ = ["rig_glb", "rig_glb_library", "rig_gltf_embedded"]
 _MOVED = 1e-6
 
 
-def source_rig(motion: Motion) -> Rig:
+def source_rig(motion: Motion) -> SkeletonRig:
     """The motion's source rig (``motion.context.rig``); an :class:`ExportError` saying why not."""
     return _source_rig(motion, RIG_FORMATS,
                        "rig=source needs a motion made from a skinned glTF, BVH or DeepMimic input")
@@ -100,13 +100,13 @@ def _quats(local: np.ndarray) -> np.ndarray:
     return q / np.linalg.norm(q, axis=-1, keepdims=True)
 
 
-def _poses(items: Sequence[tuple[str, Motion]], world: str) -> tuple[Rig, list[tuple[str, Motion, RigPose]]]:
+def _poses(items: Sequence[tuple[str, Motion]], world: str) -> tuple[SkeletonRig, list[tuple[str, Motion, RigPose]]]:
     if not items:
         raise ExportError("a rig GLB needs at least one motion")
     names = [n for n, _ in items]
     if len(set(names)) != len(names) or not all(isinstance(n, str) and n for n in names):
         raise ExportError("animation names must be distinct non-empty strings")
-    rigs: list[Rig] = []
+    rigs: list[SkeletonRig] = []
     out = []
     for name, m in items:
         _check_motion(m)
@@ -121,12 +121,12 @@ def _poses(items: Sequence[tuple[str, Motion]], world: str) -> tuple[Rig, list[t
     return rigs[0], out
 
 
-def _same_rig(a: Rig, b: Rig) -> bool:
+def _same_rig(a: SkeletonRig, b: SkeletonRig) -> bool:
     return (a.format == b.format and a.names == b.names and a.parents == b.parents
             and np.allclose(a.offsets, b.offsets) and a.extra.get("asset") == b.extra.get("asset"))
 
 
-def _translations(rig: Rig, pose: RigPose) -> np.ndarray:
+def _translations(rig: SkeletonRig, pose: RigPose) -> np.ndarray:
     """(F, J, 3) each joint's translation in its parent's frame (the root's: ``pose.root``), input units."""
     F = pose.times.size
     if pose.positions is not None:
@@ -137,7 +137,7 @@ def _translations(rig: Rig, pose: RigPose) -> np.ndarray:
     return t
 
 
-def _motion_extras(motion: Motion, rig: Rig, pose: RigPose) -> dict[str, Any]:
+def _motion_extras(motion: Motion, rig: SkeletonRig, pose: RigPose) -> dict[str, Any]:
     prov = motion.provenance
     out: dict[str, Any] = {"step": prov.get("step"), "fps": float(1.0 / (pose.times[1] - pose.times[0])),
                            "frames": int(pose.times.size), "cycle_duration_s": float(pose.times[-1]),
@@ -148,7 +148,7 @@ def _motion_extras(motion: Motion, rig: Rig, pose: RigPose) -> dict[str, Any]:
     return json.loads(json.dumps(out, allow_nan=False, default=str))
 
 
-def _animation(buf: Buffer, name: str, motion: Motion, rig: Rig, pose: RigPose, nodes: Sequence[int],
+def _animation(buf: Buffer, name: str, motion: Motion, rig: SkeletonRig, pose: RigPose, nodes: Sequence[int],
                rest_translation: np.ndarray, to_node: np.ndarray) -> dict[str, Any]:
     """One animation: rotation channels for every joint node, translation channels for the root
     and the joints whose translation is not their node's. ``to_node`` (J,): input units per node
@@ -172,7 +172,7 @@ def _animation(buf: Buffer, name: str, motion: Motion, rig: Rig, pose: RigPose, 
 
 # --- a skinned glTF input -------------------------------------------------------------------------
 
-def _source_document(rig: Rig, poses: list[tuple[str, Motion, RigPose]], meshes: bool,
+def _source_document(rig: SkeletonRig, poses: list[tuple[str, Motion, RigPose]], meshes: bool,
                      world: str) -> tuple[dict, bytes]:
     from solver.io.gltf import GltfError, parse_gltf
     from solver.io.gltf.nodes import _matrix, node_parents, node_trs
@@ -340,7 +340,7 @@ def _body_shape(body: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray, np.nda
     return V @ R.T + at, N @ R.T, T
 
 
-def _skeleton_document(rig: Rig, poses: list[tuple[str, Motion, RigPose]], meshes: bool,
+def _skeleton_document(rig: SkeletonRig, poses: list[tuple[str, Motion, RigPose]], meshes: bool,
                        frame: Any, in_world: str) -> tuple[dict, bytes]:
     J = rig.J
     buf = Buffer()
@@ -402,7 +402,7 @@ def _skeleton_document(rig: Rig, poses: list[tuple[str, Motion, RigPose]], meshe
     return doc, bytes(buf.data)
 
 
-def _skeleton_primitives(rig: Rig, world: np.ndarray, children: Mapping[int, list[int]],
+def _skeleton_primitives(rig: SkeletonRig, world: np.ndarray, children: Mapping[int, list[int]],
                          buf: Buffer) -> list[tuple[dict, list[float]]]:
     """Mesh primitives (one per colour) of the rig's bones, in the bind pose (scene metres),
     each vertex bound to its joint."""
@@ -501,9 +501,11 @@ def _opensim_document(items: Sequence[tuple[str, Motion]], meshes: bool, world: 
                 positions[:, j] = np.einsum("fji,fj->fi", R[:, p], P[:, j] - P[:, p])
         com = mb["com"][order]
         leaves = {j: 2.0 * com[j] for j in range(J) if j not in par and np.linalg.norm(com[j]) > 0}
-        this = Rig("opensim", tuple(bodies[i] for i in order), par, offsets,
-                   tuple(("Xposition", "Yposition", "Zposition", "quaternion") for _ in range(J)), {}, mb["times"],
-                   local, P[:, 0], mb["frame"], end_sites=leaves, extra={"frame_time": 1.0 / 30.0})
+        # the model's bodies as a skeleton, for the glTF writer
+        this = SkeletonRig("opensim", tuple(bodies[i] for i in order), par, offsets,
+                           tuple(("Xposition", "Yposition", "Zposition", "quaternion") for _ in range(J)), {},
+                           mb["times"], local, P[:, 0], mb["frame"], end_sites=leaves,
+                           extra={"frame_time": 1.0 / 30.0})
         rig = rig or this
         if this.names != rig.names:
             raise ExportError(f"{name!r} is on another OpenSim model than {items[0][0]!r}: one GLB holds one model")
@@ -515,7 +517,7 @@ def _opensim_document(items: Sequence[tuple[str, Motion]], meshes: bool, world: 
 
 def _is_opensim(motion: Motion) -> bool:
     rig = motion.context.rig
-    return isinstance(rig, Mapping) and rig.get("format") == "opensim"
+    return rig is not None and rig.format == "opensim"
 
 
 def _document(items: Sequence[tuple[str, Motion]], meshes: bool, world: str) -> tuple[dict, bytes]:

@@ -72,7 +72,7 @@ from solver.io.roles import (
     spine_joints,
 )
 from solver.io.track import SkeletonTrack
-from solver.rig import Rig, segment_roles
+from solver.rig import SkeletonRig, segment_roles
 
 log = logging.getLogger(__name__)
 
@@ -420,8 +420,8 @@ def load_bvh(
     return capture.evolve(rig=bvh_rig(read_bvh(path), track))
 
 
-def bvh_rig(clip: BvhClip, track: SkeletonTrack) -> Rig:
-    """The clip's own skeleton and animation as a :class:`solver.rig.Rig` (the roles the track
+def bvh_rig(clip: BvhClip, track: SkeletonTrack) -> SkeletonRig:
+    """The clip's own skeleton and animation as a :class:`solver.rig.SkeletonRig` (the roles the track
     found: hips -> pelvis, RightUpLeg -> thigh_r, lumbar -> abdomen, …)."""
     by_name = {n: j for j, n in enumerate(clip.names)}
     roles = {r: by_name[n] for r, n in track.source["joint_roles"].items() if n in by_name}
@@ -436,6 +436,6 @@ def bvh_rig(clip: BvhClip, track: SkeletonTrack) -> Rig:
         extra["absolute_positions"] = sorted(clip.absolute)
     if moved:
         extra["positions"] = pos.tolist()
-    return Rig("bvh", clip.names, clip.parents, clip.offsets, clip.channels, segment_roles(roles),
-               np.arange(T) * clip.frame_time, local, pos[:, 0], track.frame,
-               end_sites=dict(clip.end_sites), extra=extra)
+    return SkeletonRig("bvh", clip.names, clip.parents, clip.offsets, clip.channels, segment_roles(roles),
+                       np.arange(T) * clip.frame_time, local, pos[:, 0], track.frame,
+                       end_sites=dict(clip.end_sites), extra=extra)

@@ -56,7 +56,7 @@ from solver.errors import InputError
 from solver.io.fit import fit_track
 from solver.io.readers import TrialError
 from solver.io.track import SkeletonTrack, add_pelvis, rescaled_masses, split_mass
-from solver.rig import Rig
+from solver.rig import SkeletonRig
 
 log = logging.getLogger(__name__)
 
@@ -325,8 +325,8 @@ RIG_ROLES = {"root": "pelvis", "chest": "abdomen", "neck": "head",
 RIG_CHANNELS = {"spherical": ("quaternion",), "revolute": ("Zrotation",), "fixed": (), "none": ()}
 
 
-def deepmimic_rig(sk: DeepMimicSkeleton, motion: str | Path, track: SkeletonTrack) -> Rig:
-    """The character's skeleton and the clip's local rotations as a :class:`solver.rig.Rig`
+def deepmimic_rig(sk: DeepMimicSkeleton, motion: str | Path, track: SkeletonTrack) -> SkeletonRig:
+    """The character's skeleton and the clip's local rotations as a :class:`solver.rig.SkeletonRig`
     (DeepMimic axes, metres), with its ``BodyDefs`` (shapes for a GLB of the character) and the
     clip's loop mode in ``extra``."""
     frames = np.array(_load_json(motion, "DeepMimic motion")["Frames"], dtype=float)
@@ -349,6 +349,7 @@ def deepmimic_rig(sk: DeepMimicSkeleton, motion: str | Path, track: SkeletonTrac
                      else RIG_CHANNELS[sk.types[j]] for j in range(J))
     roles = {seg: sk.names.index(j) for j, seg in RIG_ROLES.items() if j in sk.names}
     body_defs = {n: dict(b) for n, b in sk.bodies.items()}
-    return Rig("deepmimic", sk.names, sk.parents, sk.attach, channels, roles, track.times, local, frames[:, 1:4],
-               track.frame, extra={"frame_time": float(np.median(frames[:-1, 0])), "types": list(sk.types),
-                                   "body_defs": body_defs, "loop": track.source.get("loop", "none")})
+    return SkeletonRig("deepmimic", sk.names, sk.parents, sk.attach, channels, roles, track.times, local,
+                       frames[:, 1:4], track.frame,
+                       extra={"frame_time": float(np.median(frames[:-1, 0])), "types": list(sk.types),
+                              "body_defs": body_defs, "loop": track.source.get("loop", "none")})

@@ -2,7 +2,7 @@
 model, an inverse-dynamics setup, checked by OpenSim's own tools.
 
 A motion made from an OpenSim trial is written on the trial's own model (its context's
-``rig``, see :mod:`solver.io.opensim.rig`, holds the model and the trial); a
+``rig``, an :class:`~solver.io.opensim.rig.OpenSimRig`, holds the model and the trial); a
 motion of another source, with ``model="generic"``, on OpenSim's gait2354 model scaled to its
 character (:func:`generic_rig`). The folder holds:
 
@@ -29,8 +29,10 @@ captured frame of the cycle the importer's OpenSim evaluation gives every body's
 capture skeleton's fit gives our segments' poses: the rigid map between a body and its
 *anchor* segment (the segment it belongs to when the motion's character has it) is the
 *calibration*, a smooth periodic function of the gait phase
-(:class:`~solver.export.opensim.calibration.Calibration`). It holds what our character does
-not model (subtalar, knee translations, toes…) as the trial had it at that phase. A motion
+(:class:`~solver.export.opensim.calibration.OpenSimCalibration`, the OpenSim rig's
+:class:`~solver.retargeting.Calibration`: ``rig.calibrated(motion)`` fits it, its ``pose`` places
+the bodies). It holds what our character does not model (subtalar, knee translations, toes…) as
+the trial had it at that phase. A motion
 time ``t`` is at phase ``φ = t / D`` (``D`` the motion's cycle) and so at capture time
 ``t_start + φ · period`` (the motion's ``context.cycle``): each body is placed at the motion's
 anchor pose composed with the calibration there. Bodies whose segment the character merged

@@ -3,10 +3,8 @@ written on an OpenSim model (:func:`exportable`, :func:`source_rig`)."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Any
-
 from solver.export import ExportError
+from solver.io.opensim.rig import OpenSimRig
 from solver.motion import Motion
 
 #: sampling rate of the written files (Hz)
@@ -60,21 +58,16 @@ def _cycle(motion: Motion) -> tuple[float, float]:
     return cycle.t_start, cycle.period_s
 
 
-def source_rig(motion: Motion) -> Mapping[str, Any]:
+def source_rig(motion: Motion) -> OpenSimRig:
     """The OpenSim rig a motion carries (``motion.context.rig``), checked; refused otherwise."""
     exportable(motion)
     rig = motion.context.rig
-    fmt = (motion.provenance.get("source") or {}).get("format")
-    if not isinstance(rig, Mapping) or rig.get("format") != "opensim":
+    if not isinstance(rig, OpenSimRig):
+        fmt = (motion.provenance.get("source") or {}).get("format")
         have = f"its source is {fmt!r}" if fmt else "it records no source"
         raise OpenSimExportError(
             f"the OpenSim export writes a motion on the OpenSim model of the trial it was made from; this motion "
-            f"carries no OpenSim model ({have}; its rig is "
-            f"{'absent' if rig is None else repr(rig.get('format')) if isinstance(rig, Mapping) else 'not a mapping'})."
+            f"carries no OpenSim model ({have}; its rig is {'absent' if rig is None else repr(rig.format)})."
             " Make the tutor from an OpenSim trial (.osim + coordinates or markers), or pass model='generic' "
             "(motionx export --generic-model) to write it on the generic gait2354 model scaled to its character")
-    missing = [k for k in ("model", "coordinates", "times", "fit", "bodies", "body_segments", "feet", "frame")
-               if k not in rig]
-    if missing:
-        raise OpenSimExportError(f"the motion's OpenSim rig lacks {missing}")
     return rig

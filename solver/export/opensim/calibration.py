@@ -1,15 +1,17 @@
-"""The model's bodies on the motion: each OpenSim body against the segment of the motion's
-character it rides on, as a smooth periodic function of the gait phase (:class:`Calibration`,
-:func:`calibration`), the bodies placed along the motion (:func:`body_poses`), the virtual markers
-OpenSim's inverse kinematics fits to them (:func:`virtual_markers`), and the bodies along one
-cycle for a look at them (:func:`model_bodies`)."""
+"""The model's bodies on the motion: :class:`OpenSimCalibration`, the
+:class:`~solver.retargeting.Calibration` of an OpenSim rig (:class:`~solver.io.opensim.rig.OpenSimRig`):
+each OpenSim body against the segment of the motion's character it rides on, as a smooth periodic
+function of the gait phase (:class:`BodySeries`), fitted on OpenSim's evaluation of the model along
+the trial (:meth:`OpenSimCalibration.fit`) and applied to place the bodies along a motion
+(:meth:`OpenSimCalibration.pose`); the virtual markers OpenSim's inverse kinematics fits to them
+(:func:`virtual_markers`), and the bodies along one cycle for a look at them (:func:`model_bodies`)."""
 
 from __future__ import annotations
 
 import re
 import tempfile
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -21,8 +23,10 @@ from solver.character import Character
 from solver.export.opensim.base import OpenSimExportError, _cycle, source_rig
 from solver.export.opensim.files import repaired_model_text, with_gravity
 from solver.export.opensim.sampling import cycle_samples, export_frame
+from solver.io.opensim.rig import OpenSimRig, unpack_model
 from solver.kinematics import segment_frames
 from solver.motion import Motion
+from solver.retargeting import Calibration
 
 #: the calibration's harmonics reach this frequency (Hz)
 CALIBRATION_CUTOFF_HZ = 6.0
@@ -34,21 +38,21 @@ UNMARKED_BODIES = re.compile(r"patella.*")
 TRUNK_PARTS = ("abdomen", "thorax", "head")
 
 
-def trunk_parts(rig: Mapping[str, Any], character: Character) -> tuple[str | None, list[tuple[str, float]]]:
+def trunk_parts(rig: OpenSimRig, character: Character) -> tuple[str | None, list[tuple[str, float]]]:
     """The model body split between trunk segments the motion's character has (the torso of a
     model with arms, for a full-body character) and those segments with their masses; (None,
     []) when the character moves at most one of them."""
-    body = next((b for b, sg in dict(rig["body_segments"]).items() if sg == "torso"), None)
+    body = next((b for b, sg in rig.body_segments.items() if sg == "torso"), None)
     names = {sg.name: sg for sg in character.segments}
     parts = [(p, float(names[p].mass)) for p in TRUNK_PARTS if p in names]
     return (body, parts) if body is not None and len(parts) > 1 else (None, [])
 
 
-def _own_segments(rig: Mapping[str, Any]) -> dict[str, str | None]:
-    return {b: ("abdomen" if s == "torso" else s) for b, s in dict(rig["body_segments"]).items()}
+def _own_segments(rig: OpenSimRig) -> dict[str, str | None]:
+    return {b: ("abdomen" if s == "torso" else s) for b, s in rig.body_segments.items()}
 
 
-def _anchors(rig: Mapping[str, Any], character: Character, parents: Mapping[str, str],
+def _anchors(rig: OpenSimRig, character: Character, parents: Mapping[str, str],
              override: Mapping[str, str] | None = None) -> dict[str, str]:
     """Each model body -> the segment of the motion's character it rides on (see
     :mod:`solver.export.opensim`); ``override``: body -> its own segment instead of the rig's."""
@@ -67,14 +71,14 @@ def _anchors(rig: Mapping[str, Any], character: Character, parents: Mapping[str,
             return character.segments[0].name
         return anchor(p, (*seen, b))
 
-    for b in rig["bodies"]:
+    for b in rig.bodies:
         out[b] = anchor(b)
     return out
 
 
-def _fit_q(rig: Mapping[str, Any], character: Character) -> np.ndarray:
-    names = list(rig["fit"]["names"])
-    qf = np.asarray(rig["fit"]["q"], dtype=float)
+def _fit_q(rig: OpenSimRig, character: Character) -> np.ndarray:
+    names = list(rig.fit_names)
+    qf = rig.fit_q
     missing = [c for c in character.coordinate_names if c not in names]
     if missing:
         raise OpenSimExportError(f"the motion's character has coordinates the capture fit lacks: {missing}")
@@ -91,7 +95,7 @@ def _fourier(phase: np.ndarray, K: int) -> np.ndarray:
 
 
 @dataclass(frozen=True, eq=False)
-class Calibration:
+class BodySeries:
     """Each model body relative to its anchor segment as a smooth periodic function of the gait
     phase: rotation ``mean[b] · exp(Σ rot[b, j] basis_j(φ))`` and origin ``Σ pos[b, j]
     basis_j(φ)`` (anchor frame, metres). A body riding on a segment that is not its own (the
@@ -117,11 +121,26 @@ class Calibration:
         p = np.einsum("sj,bjk->sbk", basis, self.pos) + np.einsum("sbij,bj->sbi", H, self.offset)
         return H @ self.right, p
 
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data (every number as computed)."""
+        return {"anchors": dict(self.anchors), "mean": self.mean.tolist(), "rot": self.rot.tolist(),
+                "pos": self.pos.tolist(), "harmonics": self.harmonics, "fit_rms_deg": self.fit_rms_deg,
+                "fit_rms_mm": self.fit_rms_mm, "right": self.right.tolist(), "offset": self.offset.tolist()}
 
-def calibration(rig: Mapping[str, Any], character: Character, evaluation: Mapping[str, Any],
-                cycle: tuple[float, float], posture: tuple[np.ndarray, np.ndarray],
-                cutoff_hz: float = CALIBRATION_CUTOFF_HZ, override: Mapping[str, str] | None = None
-                ) -> Calibration:
+    @staticmethod
+    def from_dict(d: Mapping[str, Any]) -> BodySeries:
+        def arr(k: str) -> np.ndarray:
+            return np.asarray(d[k], dtype=float)
+
+        return BodySeries({str(b): str(a) for b, a in dict(d["anchors"]).items()}, arr("mean"), arr("rot"),
+                          arr("pos"), int(d["harmonics"]), float(d["fit_rms_deg"]), float(d["fit_rms_mm"]),
+                          arr("right"), arr("offset"))
+
+
+def _series(rig: OpenSimRig, character: Character, evaluation: Mapping[str, Any],
+            cycle: tuple[float, float], posture: tuple[np.ndarray, np.ndarray],
+            cutoff_hz: float = CALIBRATION_CUTOFF_HZ, override: Mapping[str, str] | None = None
+            ) -> BodySeries:
     """The model's bodies against the motion's character at the captured cycle's frames (our
     world; ``evaluation``: OpenSim's body frames along the trial's coordinates,
     :func:`solver.io.opensim.worker.run_worker`; the capture skeleton's fit in the rig), as a
@@ -134,12 +153,12 @@ def calibration(rig: Mapping[str, Any], character: Character, evaluation: Mappin
     own (the pelvis), that host taken at its mean calibration — one pose of the model, so the
     model can take it, and the posture in which the character holds the merged segments."""
     bodies = list(evaluation["body_names"])
-    if bodies != list(rig["bodies"]):
+    if bodies != list(rig.bodies):
         raise OpenSimExportError("the motion's OpenSim model does not have the bodies its rig records")
     parents = dict(zip(evaluation["joint_child"], evaluation["joint_parent"]))
     anchors = _anchors(rig, character, parents, override)
-    frame = GroundFrame.from_dict(rig["frame"])
-    times = np.asarray(rig["times"], dtype=float)
+    frame = rig.frame
+    times = rig.times
     t_start, period = cycle
     inside = (times >= t_start - 1e-9) & (times < t_start + period - 1e-9)
     if inside.sum() < 8:
@@ -195,26 +214,25 @@ def calibration(rig: Mapping[str, Any], character: Character, evaluation: Mappin
         offset[i] = rel_p
     er = np.degrees(np.linalg.norm(np.concatenate(err_r), axis=1)) if err_r else np.zeros(1)
     ep = 1e3 * np.linalg.norm(np.concatenate(err_p), axis=1) if err_p else np.zeros(1)
-    return Calibration(anchors, mean, rot, pos, K, float(np.sqrt(np.mean(er**2))), float(np.sqrt(np.mean(ep**2))),
-                       right, offset)
+    return BodySeries(anchors, mean, rot, pos, K, float(np.sqrt(np.mean(er**2))), float(np.sqrt(np.mean(ep**2))),
+                      right, offset)
 
 
-def body_poses(motion: Motion, q: np.ndarray, t: np.ndarray, D: float, cal: Calibration,
-               frame: GroundFrame | None = None,
-               blend: Mapping[str, Sequence[tuple[Calibration, float]]] | None = None
-               ) -> tuple[np.ndarray, np.ndarray]:
+def _body_poses(motion: Motion, q: np.ndarray, t: np.ndarray, D: float, cal: BodySeries, frame: GroundFrame,
+                blend: Mapping[str, Sequence[tuple[BodySeries, float]]] | None = None
+                ) -> tuple[np.ndarray, np.ndarray]:
     """The model's bodies (S, B, 3, 3), (S, B, 3) in OpenSim ground, placed on the motion's anchors
     ``q`` (n, S) at times ``t`` (s; ``D`` the motion's cycle) with the calibration at the same gait
-    phase; ``frame``: the motion's world → OpenSim ground (default
-    :func:`~solver.export.opensim.sampling.export_frame`). ``blend``: body -> (calibration, weight)
+    phase; ``frame``: the motion's world → OpenSim ground
+    (:func:`~solver.export.opensim.sampling.export_frame`). ``blend``: body -> (series, weight)
     pairs whose poses it takes the weighted mean of (a torso shared by our abdomen, thorax and
     head, weighed by mass)."""
     if blend:
-        W, P = body_poses(motion, q, t, D, cal, frame)
+        W, P = _body_poses(motion, q, t, D, cal, frame)
         bodies = list(cal.anchors)
         for b, cals in blend.items():
             i = bodies.index(b)
-            poses = [body_poses(motion, q, t, D, c, frame) for c, _ in cals]
+            poses = [_body_poses(motion, q, t, D, c, frame) for c, _ in cals]
             w = np.array([float(x) for _, x in cals])
             P[:, i] = np.einsum("k,kti->ti", w / w.sum(), np.stack([pp[1][:, i] for pp in poses]))
             for s_ in range(t.size):
@@ -224,7 +242,6 @@ def body_poses(motion: Motion, q: np.ndarray, t: np.ndarray, D: float, cal: Cali
     C, d = cal.at(t / D)
     Rs, Ps = segment_frames(motion.character, q)
     names = [s.name for s in motion.character.segments]
-    frame = export_frame(motion)[0] if frame is None else frame
     W = np.empty_like(C)
     P = np.empty_like(d)
     for i, b in enumerate(cal.anchors):
@@ -252,31 +269,102 @@ def virtual_markers(bodies: Sequence[str], body_com: np.ndarray, W: np.ndarray, 
     return defs, np.stack(traj, axis=1)
 
 
-def _calibrated(motion: Motion, rig: Mapping[str, Any], model_path: Path
-                ) -> tuple[dict[str, Any], tuple[np.ndarray, np.ndarray], Calibration, Any]:
-    """OpenSim's evaluation of the model along the captured trial (``model_path``: the model as
-    written), its posture at the cycle's mean coordinates, the calibration of its bodies against
-    the motion's character and the trunk's blend (:func:`calibration`, :func:`trunk_parts`)."""
-    from solver.io.opensim.worker import run_worker
+@dataclass(frozen=True, eq=False)
+class EvaluatedModel:
+    """The model as OpenSim evaluated it for a calibration: each body's parent (``ground`` for the
+    root), centre of mass (B, 3) in its frame, each coordinate (rotational or not), and the
+    bodies' frames (B, 3, 3), (B, 3) in OpenSim ground at the cycle's mean coordinates
+    (``posture``)."""
 
-    names = list(rig["coordinates"]["names"])
-    values = np.asarray(rig["coordinates"]["values"], dtype=float)
-    t_start, period = _cycle(motion)
-    times = np.asarray(rig["times"], dtype=float)
-    in_cycle = (times >= t_start - 1e-9) & (times < t_start + period)
+    parents: Mapping[str, str]
+    body_com: np.ndarray
+    coordinates: Mapping[str, bool]
+    posture: tuple[np.ndarray, np.ndarray]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"parents": dict(self.parents), "body_com": self.body_com.tolist(),
+                "coordinates": dict(self.coordinates), "posture": [self.posture[0].tolist(), self.posture[1].tolist()]}
+
+    @staticmethod
+    def from_dict(d: Mapping[str, Any]) -> EvaluatedModel:
+        return EvaluatedModel({str(b): str(p) for b, p in dict(d["parents"]).items()},
+                              np.asarray(d["body_com"], dtype=float),
+                              {str(c): bool(r) for c, r in dict(d["coordinates"]).items()},
+                              (np.asarray(d["posture"][0], dtype=float), np.asarray(d["posture"][1], dtype=float)))
+
+
+def _evaluated(rig: OpenSimRig, reference: Motion) -> tuple[dict[str, Any], tuple[np.ndarray, np.ndarray]]:
+    """OpenSim's evaluation of the rig's model along the captured trial (the model as the export
+    writes it for ``reference``, its gravity included) and its posture at the cycle's mean coordinates."""
+    from solver.io.opensim.worker import run_worker  # lazy: OpenSim's child process, only for an export
+
+    text, _ = repaired_model_text(unpack_model(rig.model["osim_xz_b64"]))
+    text, _ = with_gravity(text, export_frame(reference)[1])
+    t_start, period = _cycle(reference)
+    in_cycle = (rig.times >= t_start - 1e-9) & (rig.times < t_start + period)
+    values = rig.coordinates
     mean_row = values[in_cycle].mean(axis=0) if in_cycle.any() else values.mean(axis=0)
-    ev = run_worker(str(model_path), names, np.vstack([values, mean_row]), False)
+    with tempfile.TemporaryDirectory(prefix="motionx-osim-calibration-") as scratch:
+        path = Path(scratch) / "model.osim"
+        path.write_bytes(text)
+        ev = run_worker(str(path), list(rig.coordinate_names), np.vstack([values, mean_row]), False)
     posture = (np.asarray(ev["R"])[-1], np.asarray(ev["P"])[-1])
-    ev = {**ev, "R": np.asarray(ev["R"])[:-1], "P": np.asarray(ev["P"])[:-1]}
-    cyc = (t_start, period)
-    cal = calibration(rig, motion.character, ev, cyc, posture)
-    torso, parts = trunk_parts(rig, motion.character)
-    blend = None
-    if torso is not None:
-        blend = {torso: [(cal if k == 0 else calibration(rig, motion.character, ev, cyc, posture,
-                                                          override={torso: seg}), m)
-                         for k, (seg, m) in enumerate(parts)]}
-    return ev, posture, cal, blend
+    return {**ev, "R": np.asarray(ev["R"])[:-1], "P": np.asarray(ev["P"])[:-1]}, posture
+
+
+@dataclass(frozen=True, eq=False)
+class OpenSimCalibration(Calibration[OpenSimRig, tuple[np.ndarray, np.ndarray]]):
+    """An OpenSim rig's calibration (:class:`~solver.retargeting.Calibration`): the model's
+    ``bodies`` against the motion's character (:class:`BodySeries`), a torso shared by several of
+    its trunk segments as the mass-weighted ``blend`` of one series per segment (body ->
+    (series, weight) pairs), and the ``model`` as OpenSim evaluated it."""
+
+    bodies: BodySeries
+    blend: Mapping[str, tuple[tuple[BodySeries, float], ...]] = field(default_factory=dict)
+    model: EvaluatedModel | None = None
+
+    @classmethod
+    def fit(cls, rig: OpenSimRig, reference: Motion) -> OpenSimCalibration:
+        """The model's bodies against ``reference``'s character at the captured cycle's frames
+        (``reference``: the motion to write, a gait cycle recording its captured cycle; the
+        capture skeleton's fit of the trial, in the rig, places the character there), OpenSim
+        evaluating the model along the trial (in a child process). Runs OpenSim: an
+        :class:`~solver.io.opensim.base.OpenSimError` when it cannot."""
+        cycle = reference.context.cycle
+        if cycle is None or cycle.t_start is None or cycle.period_s is None:
+            raise OpenSimExportError("the motion does not record the captured gait cycle it stands for")
+        ev, posture = _evaluated(rig, reference)
+        cyc = (cycle.t_start, cycle.period_s)
+        ch = reference.character
+        series = _series(rig, ch, ev, cyc, posture)
+        torso, parts = trunk_parts(rig, ch)
+        blend = {}
+        if torso is not None:
+            blend = {torso: tuple((series if k == 0 else _series(rig, ch, ev, cyc, posture, override={torso: seg}), m)
+                                  for k, (seg, m) in enumerate(parts))}
+        model = EvaluatedModel(dict(zip(ev["joint_child"], ev["joint_parent"])),
+                               np.asarray(ev["body_com"], dtype=float),
+                               dict(zip(ev["coord_names"], (bool(r) for r in ev["coord_rotational"]))), posture)
+        return cls(series, blend, model)
+
+    def pose(self, motion: Motion, rig: OpenSimRig, times: np.ndarray, q: np.ndarray,
+             duration: float) -> tuple[np.ndarray, np.ndarray]:
+        """The model's bodies (S, B, 3, 3), (S, B, 3) in OpenSim ground (the motion's world through
+        :func:`~solver.export.opensim.sampling.export_frame`), each placed on its anchor segment
+        with its series at the same gait phase."""
+        return _body_poses(motion, q, times, duration, self.bodies, export_frame(motion)[0], self.blend)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"bodies": self.bodies.to_dict(),
+                "blend": {b: [[c.to_dict(), w] for c, w in parts] for b, parts in self.blend.items()},
+                "model": None if self.model is None else self.model.to_dict()}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> OpenSimCalibration:
+        return cls(BodySeries.from_dict(d["bodies"]),
+                   {str(b): tuple((BodySeries.from_dict(c), float(w)) for c, w in parts)
+                    for b, parts in dict(d.get("blend") or {}).items()},
+                   None if d.get("model") is None else EvaluatedModel.from_dict(d["model"]))
 
 
 def model_bodies(motion: Motion, rate: float = 30.0) -> dict[str, Any]:
@@ -290,42 +378,36 @@ def model_bodies(motion: Motion, rate: float = 30.0) -> dict[str, Any]:
     ground frame without the slope's turn: the model's ground in the world where gravity points
     down)."""
     from solver.io.opensim.base import OpenSimError
-    from solver.io.opensim.rig import unpack_model
-    from solver.io.opensim.worker import run_worker
+    from solver.io.opensim.worker import run_worker  # lazy: OpenSim's child process
 
     rig = motion.context.rig
-    trial = not (motion.cyclic and motion.wrenches is not None)  # a capture: the trial as the model moved
-    if trial:
-        if not isinstance(rig, Mapping) or rig.get("format") != "opensim":
-            raise OpenSimExportError("the motion was not made from an OpenSim trial: it has no OpenSim model")
-    else:
-        rig = source_rig(motion)
-    text, _ = repaired_model_text(unpack_model(rig["model"]["osim_xz_b64"]))
     frame, gravity = export_frame(motion)
-    text, _ = with_gravity(text, gravity)
     try:
-        with tempfile.TemporaryDirectory(prefix="motionx-osim-bodies-") as scratch:
-            path = Path(scratch) / "model.osim"
-            path.write_bytes(text)
-            if trial:
-                times = np.asarray(rig["times"], dtype=float)
-                ev = run_worker(str(path), list(rig["coordinates"]["names"]),
-                                np.asarray(rig["coordinates"]["values"], dtype=float), False)
-            else:
-                ev, posture, cal, blend = _calibrated(motion, rig, path)
+        if not (motion.cyclic and motion.wrenches is not None):  # a capture: the trial as the model moved
+            if not isinstance(rig, OpenSimRig):
+                raise OpenSimExportError("the motion was not made from an OpenSim trial: it has no OpenSim model")
+            text, _ = repaired_model_text(unpack_model(rig.model["osim_xz_b64"]))
+            text, _ = with_gravity(text, gravity)
+            with tempfile.TemporaryDirectory(prefix="motionx-osim-bodies-") as scratch:
+                path = Path(scratch) / "model.osim"
+                path.write_bytes(text)
+                ev = run_worker(str(path), list(rig.coordinate_names), rig.coordinates, False)
+            t_abs = rig.times
+            t = rig.times - rig.times[0]
+            W, P = np.asarray(ev["R"], dtype=float), np.asarray(ev["P"], dtype=float)
+            parents = dict(zip(ev["joint_child"], ev["joint_parent"]))
+            posture, com = (W[0], P[0]), np.asarray(ev["body_com"], dtype=float)
+        else:
+            rig = source_rig(motion)
+            cal = rig.calibrated(motion).calibration
+            assert isinstance(cal, OpenSimCalibration) and cal.model is not None  # the format's calibration
+            t, q, _, D = cycle_samples(motion, 1, float(rate))
+            t_abs = _cycle(motion)[0] + t
+            W, P = cal.pose(motion, rig, t, q, D)
+            parents, posture, com = dict(cal.model.parents), cal.model.posture, cal.model.body_com
     except OpenSimError as e:
         raise OpenSimExportError(str(e)) from None
-    if trial:
-        t_abs = times
-        t = times - times[0]
-        W, P = np.asarray(ev["R"], dtype=float), np.asarray(ev["P"], dtype=float)
-        posture = (W[0], P[0])
-    else:
-        t, q, _, D = cycle_samples(motion, 1, float(rate))
-        t_abs = _cycle(motion)[0] + t
-        W, P = body_poses(motion, q, t, D, cal, frame, blend)
     # a treadmill trial's model walks on its belt: moved on with it, it walks along its ground
     P = P + (frame.R @ frame.velocity / frame.unit_m)[None, None, :] * t_abs[:, None, None]
-    return {"bodies": list(rig["bodies"]), "parents": dict(zip(ev["joint_child"], ev["joint_parent"])),
-            "times": t, "R": W, "P": P, "posture": posture, "com": np.asarray(ev["body_com"], dtype=float),
-            "frame": motion.frame}
+    return {"bodies": list(rig.bodies), "parents": parents, "times": t, "R": W, "P": P, "posture": posture,
+            "com": com, "frame": motion.frame}

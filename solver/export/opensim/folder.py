@@ -16,7 +16,6 @@ from typing import Any
 
 import numpy as np
 
-from solver.capture import GroundFrame
 from solver.export.opensim.base import (
     CAPTURE_LOWPASS_HZ,
     COORDINATES_FILE,
@@ -34,7 +33,7 @@ from solver.export.opensim.base import (
     exportable,
     source_rig,
 )
-from solver.export.opensim.calibration import _calibrated, body_poses, trunk_parts, virtual_markers
+from solver.export.opensim.calibration import OpenSimCalibration, trunk_parts, virtual_markers
 from solver.export.opensim.child import run_child
 from solver.export.opensim.files import (
     external_loads_xml,
@@ -88,7 +87,7 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
         except _OpenSimError as e:
             raise OpenSimExportError(str(e)) from None
         # written in OpenSim's own axes: the source's ground frame (BVH's y up, centimetres…) is not the model's
-        motion = motion.evolve(context=motion.context.with_(rig=generic, frame=GroundFrame.from_dict(generic["frame"])))
+        motion = motion.evolve(context=motion.context.with_(rig=generic, frame=generic.frame))
     rig = source_rig(motion)
     if not (isinstance(cycles, int) and not isinstance(cycles, bool) and 1 <= cycles <= 10):
         raise OpenSimExportError(f"cycles must be an integer from 1 to 10, got {cycles!r}")
@@ -101,7 +100,7 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
         raise OpenSimExportError(f"reduce_residuals must be true or false, got {reduce_residuals!r}")
     folder = Path(folder).resolve()
     folder.mkdir(parents=True, exist_ok=True)
-    model_info = rig["model"]
+    model_info = rig.model
     text, repaired = repaired_model_text(unpack_model(model_info["osim_xz_b64"]))
     model_file = Path(str(model_info.get("file") or "model.osim")).name
     if not model_file.endswith(".osim"):
@@ -111,16 +110,18 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
     (folder / model_file).write_bytes(text)
     timing: dict[str, float] = {}
     try:
-        # the model's bodies along the captured trial, then against our segments
+        # the model's bodies along the captured trial, then against our segments (the rig's calibration)
         tk = time.perf_counter()
-        ev, posture, cal, blend = _calibrated(motion, rig, folder / model_file)
+        cal = rig.calibrated(motion).calibration
+        assert isinstance(cal, OpenSimCalibration) and cal.model is not None  # the format's calibration (fitted)
+        model_ev = cal.model
         timing["evaluate_capture_s"] = time.perf_counter() - tk
         cyc = motion.context.cycle
         assert cyc is not None and cyc.t_start is not None  # exportable
         torso, parts = trunk_parts(rig, motion.character)
         t, q, w, D = cycle_samples(motion, cycles, float(rate))
-        W, P = body_poses(motion, q, t, D, cal, frame, blend)
-        defs, xyz = virtual_markers(list(rig["bodies"]), np.asarray(ev["body_com"], dtype=float), W, P)
+        W, P = cal.pose(motion, rig, t, q, D)
+        defs, xyz = virtual_markers(list(rig.bodies), model_ev.body_com, W, P)
         with tempfile.TemporaryDirectory(prefix="motionx-osim-ik-") as scratch:
             trc = Path(scratch) / "virtual_markers.trc"
             write_trc(trc, [m[0] for m in defs], t, xyz, float(rate))
@@ -134,7 +135,7 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
         t_abs = cyc.t_start + t
         # the motion stands its contact points on z = 0, the capture's soles were that much lower:
         # the floor (the trial's plates) is z = -shift in the motion's world
-        m_frame, c_frame = motion.frame, GroundFrame.from_dict(rig["frame"])
+        m_frame, c_frame = motion.frame, rig.frame
         shift = float((m_frame.R.T @ (m_frame.offset - c_frame.offset))[2]) * m_frame.unit_m
         normal = frame.R @ np.array([0.0, 0.0, 1.0])
         origin = frame.point_to_input(np.tile([0.0, 0.0, -shift], (t.size, 1)), t_abs)
@@ -142,7 +143,7 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
         w_in = wrenches_to_input(w, t_abs, frame)
         naive = grf_columns(w_in, normal, origin, min_load)
         write_mot(folder / GRF_FILE, "grf", GRF_LABELS, t, _grf_table(naive), in_degrees=False)
-        (folder / EXTERNAL_LOADS_FILE).write_text(external_loads_xml(rig["feet"], GRF_FILE))
+        (folder / EXTERNAL_LOADS_FILE).write_text(external_loads_xml(rig.feet, GRF_FILE))
         window = (D, 2 * D) if cycles >= 3 else (float(t[0]), float(t[-1]))
         (folder / SETUP_FILE).write_text(id_setup_xml(model_file, COORDINATES_FILE, EXTERNAL_LOADS_FILE, *window,
                                                       lowpass=lowpass))
@@ -167,7 +168,7 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
             cols = grf_columns(w_new, normal, origin, min_load)
             write_mot(folder / GRF_FILE, "grf", GRF_LABELS, t, _grf_table(cols), in_degrees=False)
             inside = (t >= window[0] - 1e-9) & (t <= window[1] + 1e-9)
-            prints = footprints(list(rig["bodies"]), np.asarray(ev["body_com"], dtype=float), W, P, rig["feet"])
+            prints = footprints(list(rig.bodies), model_ev.body_com, W, P, rig.feet)
             out_before = cop_outside_feet(naive, prints, inside, min_load)
             out_after = cop_outside_feet(cols, prints, inside, min_load)
             per_foot = _adjustment_figures(naive, cols, t, window, min_load)
@@ -202,13 +203,12 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
         for name in (ID_OUTPUT_FILE, "opensim.log"):  # outputs of running the setup, not part of the export
             (folder / name).unlink(missing_ok=True)
         tk = time.perf_counter()
-        reference = _capture_reference(rig, folder / model_file, _cycle(motion),
-                                       dict(zip(ev["coord_names"], (bool(r) for r in ev["coord_rotational"]))))
+        reference = _capture_reference(rig, folder / model_file, _cycle(motion), dict(model_ev.coordinates))
         timing["capture_inverse_dynamics_s"] = time.perf_counter() - tk
     except OpenSimError as e:
         raise OpenSimExportError(str(e)) from None
     timing["total_s"] = time.perf_counter() - t_begin
-    translational = {n for n, r in zip(ev["coord_names"], ev["coord_rotational"]) if not r}
+    translational = {n for n, r in model_ev.coordinates.items() if not r}
     ik_rms = np.asarray(ik["marker_rms_m"], dtype=float)
     ik_max = np.asarray(ik["marker_max_m"], dtype=float)
     summary = {
@@ -219,7 +219,7 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
                    "cycle_s": D, "source_cycle": cyc.to_dict()},
         "model": {"file": model_file, "name": model_info.get("name"), "sha256_source": model_info.get("sha256"),
                   "socket_paths_repaired": repaired, "gravity_changed": model_gravity,
-                  "generic": rig.get("generic")},
+                  "generic": rig.generic},
         "files": {"model": model_file, "coordinates": COORDINATES_FILE, "ground_reactions": GRF_FILE,
                   "external_loads": EXTERNAL_LOADS_FILE, "inverse_dynamics_setup": SETUP_FILE},
         "sampling": {"rate_hz": float(rate), "cycles": cycles, "rows": int(t.size),
@@ -229,14 +229,14 @@ def write_opensim(motion: Motion, folder: str | Path, *, cycles: int = CYCLES, r
                          "ground_normal": normal.round(9).tolist(), "ground_point_m": origin[0].round(6).tolist(),
                          "contact_plane_shift_m": shift, "gravity_m_s2": gravity.round(6).tolist(),
                          "belt_velocity_m_s": frame.vector_to_input(frame.velocity).tolist(),
-                         "feet": dict(rig["feet"])},
+                         "feet": dict(rig.feet)},
         "inverse_kinematics": {"tool": "OpenSim InverseKinematicsTool", "virtual_markers": len(defs),
                                "bodies_marked": sorted({m[1] for m in defs}),
-                               "anchors": {**dict(cal.anchors), **({torso: "+".join(p for p, _ in parts)}
-                                                                    if torso is not None else {})},
-                               "calibration": {"harmonics": cal.harmonics,
-                                               "smoothing_rms_deg": cal.fit_rms_deg,
-                                               "smoothing_rms_mm": cal.fit_rms_mm},
+                               "anchors": {**dict(cal.bodies.anchors),
+                                           **({torso: "+".join(p for p, _ in parts)} if torso is not None else {})},
+                               "calibration": {"harmonics": cal.bodies.harmonics,
+                                               "smoothing_rms_deg": cal.bodies.fit_rms_deg,
+                                               "smoothing_rms_mm": cal.bodies.fit_rms_mm},
                                "marker_rms_mm": {"mean": 1e3 * float(ik_rms.mean()), "max": 1e3 * float(ik_rms.max())},
                                "marker_max_mm": 1e3 * float(ik_max.max()),
                                "refinement_iterations_max": ik.get("refine_iterations_max"),

@@ -4,12 +4,12 @@ motion's character and given its mass distribution, as an OpenSim rig (:func:`ge
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from solver.export.opensim.base import OpenSimExportError, _cycle
 from solver.export.opensim.child import run_child
+from solver.io.opensim.rig import OpenSimRig
 from solver.kinematics import segment_frames
 from solver.motion import Motion
 
@@ -21,7 +21,7 @@ GENERIC_MODEL = Path(__file__).parents[1] / "models" / "gait2354_subject01.osim"
 _GENERIC_FRAMES = 10
 
 
-def generic_rig(motion: Motion, scratch: str | Path) -> dict[str, Any]:
+def generic_rig(motion: Motion, scratch: str | Path) -> OpenSimRig:
     """An OpenSim rig for a motion of another source (BVH, C3D, DeepMimic…): the generic model
     (:data:`GENERIC_MODEL`) scaled to the motion's character — pelvis by the hip width, each
     femur, tibia and foot by our thigh, shank and foot lengths, the torso by the legs' mean —
@@ -29,8 +29,9 @@ def generic_rig(motion: Motion, scratch: str | Path) -> dict[str, Any]:
     corresponding bodies, every other segment on the torso; a HalfBoy's pelvis carries its
     upper body, so its torso is left nearly massless); calibrated in the default
     standing pose (the model's coordinates at their defaults, ours at zero: both stand with the
-    segments aligned), the model's hip mid-point on ours. The rig has the keys of an imported
-    one (:mod:`solver.io.opensim.rig`); the motion is then written in OpenSim's own axes."""
+    segments aligned), the model's hip mid-point on ours. The rig is an
+    :class:`~solver.io.opensim.rig.OpenSimRig` like an imported one, with ``generic`` set; the
+    motion is then written in OpenSim's own axes."""
     from solver.capture import GroundFrame as Frame
     from solver.io.opensim.base import C_OSIM
     from solver.io.opensim.model import _body_segments
@@ -127,7 +128,7 @@ def generic_rig(motion: Motion, scratch: str | Path) -> dict[str, Any]:
     scaled = massed
     t_start, period = _cycle(motion)
     times = t_start + period * np.arange(_GENERIC_FRAMES) / _GENERIC_FRAMES
-    return {
+    return OpenSimRig.from_dict({
         "format": "opensim",
         "generic": {"model": GENERIC_MODEL.name, "scale_factors": {b: round(f[0], 4) for b, f in factors.items()},
                     "mass_kg": ch.total_mass},
@@ -141,4 +142,4 @@ def generic_rig(motion: Motion, scratch: str | Path) -> dict[str, Any]:
         "body_segments": dict(seg_of),
         "feet": {"right": "calcn_r", "left": "calcn_l"},
         "frame": Frame(R=C_OSIM.T, axes="OpenSim ground: x forward, y up, z right").to_dict(),
-    }
+    })

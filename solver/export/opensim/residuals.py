@@ -8,7 +8,7 @@ import tempfile
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -16,6 +16,9 @@ from solver.checks import Check
 from solver.export.opensim.base import CAPTURE_LOWPASS_HZ, EXTERNAL_LOADS_FILE, SETUP_FILE, OpenSimExportError
 from solver.export.opensim.child import run_child
 from solver.export.opensim.files import external_loads_xml, id_setup_xml, repaired_model_text, write_mot
+
+if TYPE_CHECKING:
+    from solver.io.opensim.rig import OpenSimRig
 
 #: a plate carrying less vertical force (N) than this is off in the trial's own check
 PLATE_MIN_N = 20.0
@@ -209,12 +212,12 @@ def capture_residuals(model: str | Path, coordinates: str | Path, grf: str | Pat
         raise OpenSimExportError(str(e)) from None
 
 
-def _capture_reference(rig: Mapping[str, Any], model_path: Path, cycle: tuple[float, float],
+def _capture_reference(rig: OpenSimRig, model_path: Path, cycle: tuple[float, float],
                        rotational: Mapping[str, bool]) -> dict[str, Any]:
     """The trial's own residuals over the captured cycle where the plates are complete, when the
     trial's GRF file is still where it was imported from; otherwise why not (``rotational``:
     coordinate name -> whether OpenSim says it is a rotation)."""
-    plates = rig.get("plates") or {}
+    plates = rig.plates or {}
     grf = plates.get("grf")
     if not grf or not Path(grf).is_file():
         return {"available": False, "why": "the trial's force-plate file is not available" if grf else
@@ -229,13 +232,13 @@ def _capture_reference(rig: Mapping[str, Any], model_path: Path, cycle: tuple[fl
     if t1 - t0 < 0.2:
         return {"available": False, "why": "the plates do not cover the captured cycle"}
     with tempfile.TemporaryDirectory(prefix="motionx-osim-capture-") as d:
-        names = list(rig["coordinates"]["names"])
-        values = np.asarray(rig["coordinates"]["values"], dtype=float).copy()
+        names = list(rig.coordinate_names)
+        values = np.array(rig.coordinates, dtype=float)
         rot = np.array([bool(rotational[n]) for n in names], dtype=bool)
         values[:, rot] = np.degrees(values[:, rot])
         mot = Path(d) / "capture_coordinates.mot"
-        write_mot(mot, "Coordinates", names, np.asarray(rig["times"], dtype=float), values, in_degrees=True)
-        out = capture_residuals(model_path, mot, grf, xml, t0=t0, t1=t1, feet=rig["feet"])
+        write_mot(mot, "Coordinates", names, rig.times, values, in_degrees=True)
+        out = capture_residuals(model_path, mot, grf, xml, t0=t0, t1=t1, feet=rig.feet)
     out["available"] = True
     out["what"] = ("the trial's own coordinates and force plates on its model, OpenSim's InverseDynamicsTool, "
                    f"coordinates low-passed at {out['lowpass_hz']:g} Hz, over the captured cycle where every loaded "

@@ -29,7 +29,7 @@ from solver.io.roles import (
     spine_joints,
 )
 from solver.io.track import SkeletonTrack
-from solver.rig import Rig, segment_roles
+from solver.rig import SkeletonRig, segment_roles
 
 log = logging.getLogger(__name__)
 
@@ -114,8 +114,8 @@ def load_gltf(path: str | Path, *, mass: float | None = None, lower_only: bool |
     return capture.evolve(rig=gltf_rig(asset, sk, roles, track))
 
 
-def gltf_rig(asset: GltfAsset, sk: _Skeleton, roles: Mapping[str, int], track: SkeletonTrack) -> Rig:
-    """The character's skeleton and animation as a :class:`solver.rig.Rig` (see the module doc)."""
+def gltf_rig(asset: GltfAsset, sk: _Skeleton, roles: Mapping[str, int], track: SkeletonTrack) -> SkeletonRig:
+    """The character's skeleton and animation as a :class:`solver.rig.SkeletonRig` (see the module doc)."""
     J = len(sk.names)
     stripped = without_animations(asset)
     glb = glb_bytes(stripped.doc, stripped.bin)
@@ -129,5 +129,5 @@ def gltf_rig(asset: GltfAsset, sk: _Skeleton, roles: Mapping[str, int], track: S
     }
     if sk.moved or roles.get("hips", 0) != 0:  # joints with position channels (a pelvis under a root)
         extra["positions"] = sk.translation.tolist()
-    return Rig("gltf", sk.names, sk.parents, offsets, channels, segment_roles(roles), sk.times, sk.local,
-               sk.translation[:, 0], track.frame, extra=extra)
+    return SkeletonRig("gltf", sk.names, sk.parents, offsets, channels, segment_roles(roles), sk.times, sk.local,
+                       sk.translation[:, 0], track.frame, extra=extra)

@@ -99,7 +99,7 @@ from solver.io.mass import ImpliedMass, implied_mass, mass_warning, stride_from_
 from solver.io.opensim.base import C_OSIM, OpenSimError
 from solver.io.opensim.external_loads import grf_arrays, read_opensim_grf
 from solver.io.opensim.model import PLACEHOLDER_MASS_FRACTION, opensim_evaluation, opensim_track
-from solver.io.opensim.rig import opensim_rig
+from solver.io.opensim.rig import OpenSimRig, opensim_rig
 from solver.io.opensim.storage import Storage, read_mot
 from solver.io.opensim.treadmill import estimate_belt_speed
 from solver.io.readers import TrialError, by_suffix
@@ -208,9 +208,10 @@ def load_opensim(
                 log.info("%s: %s", Path(grf).name, warn)  # source["mass_warning"]: the front ends show it
                 src["mass_warning"] = warn
         complete = cap.times[measured.valid]
-        rig = {**(cap.rig or {}), "plates": {
+        assert isinstance(cap.rig, OpenSimRig)  # opensim_rig
+        rig = cap.rig.evolve(plates={
             "grf": str(Path(grf).resolve()),
             "external_loads": None if grf_xml is None else str(Path(grf_xml).resolve()),
-            "complete_s": [float(complete[0]), float(complete[-1])] if complete.size else None}}
+            "complete_s": [float(complete[0]), float(complete[-1])] if complete.size else None})
         cap = cap.evolve(measured=measured, source=src, rig=rig)
     return cap
