@@ -10,7 +10,7 @@ Proven here:
 - restart Redis (gracefully, and as a crash) with jobs queued: none lost;
 - cancel, Server-Sent Events.
 
-Each crash/restart loop runs MOTIONX_RELIABILITY_REPEAT times (default 2; e.g.
+Each crash/restart loop runs MOTIONX_RELIABILITY_REPEAT times (default 1 in make test; `make reliability` runs 20, e.g.
 ``MOTIONX_RELIABILITY_REPEAT=20 python -m pytest tests/service -k reliability``).
 """
 
@@ -41,7 +41,7 @@ from service.db import get_database
 from service.models import JobRow, MotionRow
 from service.topology import Stack, create_postgres_database, drop_postgres_database, wait_worker_ready
 
-REPEAT = repeat_count(2)
+REPEAT = repeat_count(1)
 # Short timeouts so a killed worker's job comes back within seconds (the production defaults
 # are 1 h / 2 h): the job time limit stays well above the test jobs (a raw capture's natural
 # tutor 5 s alone, steps 1-4 s) — 12x that on an idle machine, and times the machine's load per

@@ -13,7 +13,7 @@ from svc_util import CHEAP, KILLABLE, job_motions, same_motions, wait_job
 from service.db import get_database
 from service.models import JobRow
 
-REPEAT = repeat_count(2)
+REPEAT = repeat_count(1)
 
 
 @pytest.fixture(scope="module")
