@@ -76,6 +76,11 @@ PACKAGES = ("solver", "mjcf", "service", "worker")
 ALLOWED = {"solver": set(), "mjcf": {"solver"}, "service": {"solver", "mjcf"}, "worker": {"service", "solver", "mjcf"}}
 
 
+def _is_module(name: str) -> bool:
+    path = ROOT.joinpath(*name.split("."))
+    return path.with_suffix(".py").is_file() or (path / "__init__.py").is_file()
+
+
 def _module_graph(depth: int) -> dict[str, set[str]]:
     """Edges between our modules, cut to their first ``depth`` name parts, from every import
     statement of every file (top-level or not, relative ones resolved)."""
@@ -94,9 +99,11 @@ def _module_graph(depth: int) -> dict[str, set[str]]:
                 elif isinstance(node, ast.ImportFrom):
                     if node.level:
                         base = parts[: len(parts) - node.level + (1 if is_pkg else 0)]
-                        targets = [".".join(base + ([node.module] if node.module else []))]
+                        module = ".".join(base + ([node.module] if node.module else []))
                     else:
-                        targets = [node.module or ""]
+                        module = node.module or ""
+                    # `from solver import spatial` imports the module solver.spatial, not the package's __init__
+                    targets = [f"{module}.{a.name}" if _is_module(f"{module}.{a.name}") else module for a in node.names]
                 else:
                     continue
                 src = ".".join(parts[:depth])
