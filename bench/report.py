@@ -240,12 +240,47 @@ def joints_table(before: dict, after: dict,
     return "\n".join(rows)
 
 
+def moco_table(res: dict) -> str:
+    """MocoTrack and the motionx tutors on the same walk: CPU seconds, iterations, fidelity, load."""
+    rows = ["| trial | run | CPU s (wall s) | IPOPT iterations | status | joints' RMS to the trial (pelvis) "
+            "| MocoTrack CPU ÷ this run's | load average before → after |", "|---|---|---|---|---|---|---|---|"]
+
+    def load(r: dict) -> str:
+        b, a = r.get("load_before"), r.get("load_after")
+        return "–" if not b or not a else f"{b[0]:.1f} → {a[0]:.1f}"
+
+    for trial, row in (res.get("trials") or {}).items():
+        if "error" in row:
+            rows.append(f"| {trial} | – | – | – | {row['error']} | – | – | – |")
+            continue
+        m = row.get("moco") or {}
+        job = row.get("moco_job") or {}
+        jr = m.get("joint_rms_to_reference_deg") or {}
+        label = f"MocoTrack, torque-driven, plates given ({job.get('mesh_intervals', '–')} mesh intervals)"
+        status = m.get("solver_status") if m.get("status") in ("succeeded", "failed") \
+            else f"{m.get('status')}: {m.get('message')}"
+        tr = jr.get("pelvis_translation_mm") or {}
+        shift = "/".join(f"{v:.0f}" for v in tr.values())
+        rows.append(f"| {trial} | {label} | {_f(m.get('cpu_s'), '{:.1f}')} ({_f(m.get('wall_s'), '{:.0f}')}) "
+                    f"| {m.get('iterations', '–')} | {status} | {_f(jr.get('overall'))}° ({_f(jr.get('pelvis'))}°"
+                    f"{f'; pelvis x/y/z {shift} mm' if shift else ''}) | – | {load(m)} |")
+        for kind, r in (row.get("motionx") or {}).items():
+            rms = r.get("joint_rms_to_capture_deg") or {}
+            ratio = (row.get("ratio_moco_cpu_to_motionx_cpu") or {}).get(kind)
+            its = f"{r.get('simplify_iterations', '–')} + {r.get('correct_iterations', '–')}"
+            rows.append(f"| {trial} | motionx tutor, {kind} at {_f(r.get('fps'), '{:.1f}')} frames/s "
+                        f"| {_f(r.get('cpu_s'), '{:.1f}')} ({_f(r.get('wall_s'), '{:.0f}')}) | {its} "
+                        f"| {r.get('status')} | {_f(rms.get('overall'))}° ({_f(rms.get('pelvis'))}°) "
+                        f"| {_f(ratio, '{:.1f}')} | {load(r)} |")
+    return "\n".join(rows)
+
+
 FILL = {"tutor": ("docs/spacetime.md", tutor_table), "continuation": ("docs/continuation.md", continuation_table),
         "compiled": ("docs/spacetime.md", compiled_table), "blas": ("docs/spacetime.md", blas_table),
         "front_door": ("docs/api.md", front_door_table),
         "rig_export": ("docs/export.md", rig_export_table),
         "simulation": ("docs/simulation.md", simulation_table),
-        "fidelity": ("docs/naturalness.md", fidelity_table)}
+        "fidelity": ("docs/naturalness.md", fidelity_table), "moco": ("docs/spacetime.md", moco_table)}
 
 
 def fill(sec: dict, only: list[str] | None = None) -> None:

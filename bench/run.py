@@ -20,7 +20,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 SECTIONS = ["dynamics", "grf", "tutor", "continuation", "naturalness", "compiled", "blas", "service", "library",
-            "front_door", "plots", "rig_export", "simulation", "fidelity"]
+            "front_door", "plots", "rig_export", "simulation", "fidelity", "moco"]
 
 
 def main() -> int:

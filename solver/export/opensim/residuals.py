@@ -159,25 +159,23 @@ def _floor_height(folder: Path, fields: Mapping[str, str]) -> float:
     return float(np.sum(y * w) / np.sum(w)) if w.size else 0.0
 
 
-def capture_residuals(model: str | Path, coordinates: str | Path, grf: str | Path,
-                      external_loads: str | Path | None = None, *, t0: float, t1: float,
-                      lowpass: float = CAPTURE_LOWPASS_HZ, feet: Mapping[str, str] | None = None
-                      ) -> dict[str, Any]:
-    """The residuals of a trial's own inverse dynamics — its coordinates file and force plates on
-    its model — by OpenSim's InverseDynamicsTool over [t0, t1] (s), coordinates low-passed at
-    ``lowpass`` Hz as OpenSim's examples do (:func:`residual_figures`). Without an ExternalLoads
-    file the GRF columns are told by their names (``ground_force_r_vx``…) and applied to ``feet``
-    (default ``calcn_r``, ``calcn_l``). The files are copied to a scratch folder (a 3.x model's
-    socket paths repaired as for an export; coupled coordinates set by their
-    CoordinateCouplerConstraint, :func:`~solver.export.opensim.child._child_couple`); a plate
-    carrying less than ``PLATE_MIN_N`` vertically is zeroed there (force, point, torque), as
-    force-plate thresholds do: its centre of pressure is meaningless (33 km away in the
-    loaded-walking trial's file) and would turn a few newtons of noise into kilonewton-metres."""
+def trial_folder(folder: str | Path, model: str | Path, coordinates: str | Path, grf: str | Path,
+                 external_loads: str | Path | None = None, *, feet: Mapping[str, str] | None = None) -> dict[str, Any]:
+    """A trial's files written to ``folder`` as OpenSim's tools take them: ``model.osim`` (a 3.x
+    model's socket paths repaired as for an export), ``coordinates.mot`` (coupled coordinates set by
+    their CoordinateCouplerConstraint, :func:`~solver.export.opensim.child._child_couple`),
+    ``grf.mot`` (a plate carrying less than ``PLATE_MIN_N`` vertically zeroed: force, point, torque,
+    as force-plate thresholds do: its centre of pressure is meaningless, 33 km away in the
+    loaded-walking trial's file, and would turn a few newtons of noise into kilonewton-metres) and
+    ``EXTERNAL_LOADS_FILE`` applying it. Without an ExternalLoads file the GRF columns are told by
+    their names (``ground_force_r_vx``…) and applied to ``feet`` (default ``calcn_r``, ``calcn_l``).
+    Returns the coupled coordinates recomputed and the plate threshold (N)."""
     from solver.io.opensim.base import OpenSimError
     from solver.io.opensim.external_loads import external_loads as read_loads
     from solver.io.opensim.external_loads import guess_force_specs
     from solver.io.opensim.storage import read_mot
 
+    folder = Path(folder)
     feet = dict(feet or {"right": "calcn_r", "left": "calcn_l"})
     try:
         sto = read_mot(grf)
@@ -187,29 +185,46 @@ def capture_residuals(model: str | Path, coordinates: str | Path, grf: str | Pat
             t_id = next((c for c in (sp.torque + "_", sp.torque) if sp.torque and all(
                 c + a in sto.labels for a in "xyz")), "")
             cols.append((sp.side, sp.force, sp.point, t_id))
-        with tempfile.TemporaryDirectory(prefix="motionx-osim-capture-") as d:
-            folder = Path(d)
-            text, _ = repaired_model_text(Path(model).read_bytes())
-            (folder / "model.osim").write_bytes(text)
-            coupled = run_child({"job": "couple", "model": str(folder / "model.osim"),
-                                 "coordinates": str(Path(coordinates).resolve()),
-                                 "out": str(folder / "coordinates.mot")})["coupled"]
-            data = np.array(sto.data, copy=True)
-            for _, f_id, p_id, t_id in cols:  # a plate under no load: its point is meaningless (far away)
-                idx = [sto.labels.index(f_id + a) for a in "xyz"] + [sto.labels.index(p_id + a) for a in "xyz"]
-                idx += [sto.labels.index(t_id + a) for a in "xyz"] if t_id else []
-                off = sto.column(f_id + "y") < PLATE_MIN_N
-                data[np.ix_(np.flatnonzero(off), np.asarray(idx, dtype=int))] = 0.0
-            write_mot(folder / "grf.mot", "grf", sto.labels, sto.time, data, in_degrees=False)
-            (folder / EXTERNAL_LOADS_FILE).write_text(external_loads_xml(feet, "grf.mot", cols))
-            (folder / SETUP_FILE).write_text(id_setup_xml("model.osim", "coordinates.mot", EXTERNAL_LOADS_FILE,
-                                                          t0, t1, lowpass=lowpass))
-            out = opensim_residuals(folder)
-            out["coupled_coordinates_recomputed"] = coupled
-            out["plates_below_N_zeroed"] = PLATE_MIN_N
-            return out
+        text, _ = repaired_model_text(Path(model).read_bytes())
+        (folder / "model.osim").write_bytes(text)
+        coupled = run_child({"job": "couple", "model": str(folder / "model.osim"),
+                             "coordinates": str(Path(coordinates).resolve()),
+                             "out": str(folder / "coordinates.mot")})["coupled"]
+        data = np.array(sto.data, copy=True)
+        for _, f_id, p_id, t_id in cols:  # a plate under no load: its point is meaningless (far away)
+            idx = [sto.labels.index(f_id + a) for a in "xyz"] + [sto.labels.index(p_id + a) for a in "xyz"]
+            idx += [sto.labels.index(t_id + a) for a in "xyz"] if t_id else []
+            off = sto.column(f_id + "y") < PLATE_MIN_N
+            data[np.ix_(np.flatnonzero(off), np.asarray(idx, dtype=int))] = 0.0
+        write_mot(folder / "grf.mot", "grf", sto.labels, sto.time, data, in_degrees=False)
+        (folder / EXTERNAL_LOADS_FILE).write_text(external_loads_xml(feet, "grf.mot", cols))
     except OpenSimError as e:
         raise OpenSimExportError(str(e)) from None
+    return {"coupled_coordinates_recomputed": coupled, "plates_below_N_zeroed": PLATE_MIN_N}
+
+
+def capture_residuals(model: str | Path, coordinates: str | Path, grf: str | Path,
+                      external_loads: str | Path | None = None, *, t0: float, t1: float,
+                      lowpass: float = CAPTURE_LOWPASS_HZ, feet: Mapping[str, str] | None = None
+                      ) -> dict[str, Any]:
+    """The residuals of a trial's own inverse dynamics — its coordinates file and force plates on
+    its model — by OpenSim's InverseDynamicsTool over [t0, t1] (s), coordinates low-passed at
+    ``lowpass`` Hz as OpenSim's examples do (:func:`residual_figures`), on the trial's files in a
+    scratch folder (:func:`trial_folder`: the model repaired, coupled coordinates set, plates
+    under no load zeroed)."""
+    from solver.io.opensim.base import OpenSimError
+
+    with tempfile.TemporaryDirectory(prefix="motionx-osim-capture-") as d:
+        folder = Path(d)
+        prepared = trial_folder(folder, model, coordinates, grf, external_loads, feet=feet)
+        (folder / SETUP_FILE).write_text(id_setup_xml("model.osim", "coordinates.mot", EXTERNAL_LOADS_FILE,
+                                                      t0, t1, lowpass=lowpass))
+        try:
+            out = opensim_residuals(folder)
+        except OpenSimError as e:
+            raise OpenSimExportError(str(e)) from None
+        out.update(prepared)
+        return out
 
 
 def _capture_reference(rig: OpenSimRig, model_path: Path, cycle: tuple[float, float],
