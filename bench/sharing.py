@@ -1,4 +1,4 @@
-"""Sharing the service (issue 39): what key B sees while key A loads the service, as figures.
+"""Sharing the service: what key B sees while key A loads the service, as figures.
 
 Not a section of ``make bench`` (it runs for several minutes): ``python -m bench.sharing [--only
 heavy jobs storage gets]``, one JSON object on stdout. Each part starts its own ``motionx serve``
