@@ -63,17 +63,10 @@ def measured(fn: Callable[[], Any]) -> tuple[Any, dict]:
 
 
 def machine() -> dict:
-    """The CPU (its model name, OpenBLAS's kernel, the BLAS MUMPS runs on), cores, platform."""
+    """The CPU (OpenBLAS's kernel, the BLAS MUMPS runs on: ``bench.machine.cpu``), cores, platform."""
     from bench.machine import cpu
 
-    model = ""
-    try:
-        model = next((ln.split(":", 1)[1].strip() for ln in Path("/proc/cpuinfo").read_text().splitlines()
-                      if ln.startswith("model name")), "")
-    except OSError:
-        pass
-    return {"cpu_model": model or platform.processor(), "cores": os.cpu_count(), "platform": platform.platform(),
-            "python": platform.python_version(), **cpu()}
+    return {"cores": os.cpu_count(), "platform": platform.platform(), "python": platform.python_version(), **cpu()}
 
 
 def tutor_row(capture: Any, character: str, fps: float) -> dict:

@@ -1,6 +1,7 @@
 """OpenSim Moco's MocoTrack on a trial folder, in a process of its own (``bench.moco`` starts it:
 ``python -m bench.moco_track`` with a JSON job on stdin; the ``opensim`` wheel's CasADi cannot share
-a process with ours, :mod:`solver.io.opensim.worker`). Nothing here imports CasADi or the solver.
+a process with ours, :mod:`solver.io.opensim.worker`). Nothing here imports CasADi: of the solver,
+only its OpenSim table reader.
 
 The problem is exampleMocoTrack's torque-driven one, tracking the trial's coordinates instead of
 markers: the trial's model (``model.osim``, written by ``bench.moco.prepare``) with its locked
@@ -27,6 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
+from solver.io.opensim.storage import read_mot  # numpy only: no CasADi before OpenSim's
+
 #: the coordinates tracked: the trial's (coupled coordinates set), its header stating inDegrees
 REFERENCE = "reference.mot"
 #: the job's keys and their defaults (``folder``, ``t0``, ``t1``, ``mesh_interval`` are required)
@@ -49,15 +52,6 @@ def check_job(job: dict) -> dict:
     if not float(job["t1"]) > float(job["t0"]):
         raise ValueError(f"the tracked window is empty: t0 = {job['t0']}, t1 = {job['t1']}")
     return {**DEFAULTS, **job}
-
-
-def _read_coordinates(path: Path) -> tuple[list[str], np.ndarray, np.ndarray, bool]:
-    lines = path.read_text().splitlines()
-    end = next(i for i, ln in enumerate(lines) if ln.strip().lower() == "endheader")
-    labels = lines[end + 1].split()
-    rows = np.array([[float(x) for x in ln.split()] for ln in lines[end + 2:] if ln.strip()])
-    deg = any(ln.replace(" ", "").lower() == "indegrees=yes" for ln in lines[:end])
-    return labels[1:], rows[:, 0], rows[:, 1:], deg
 
 
 def track(osim, job: dict) -> dict:  # pragma: no cover - runs in the child (bench only)
@@ -154,7 +148,8 @@ def _figures(osim, sol, folder: Path, base, coords, mp) -> dict:  # pragma: no c
     root_coords = {root.get_coordinates(k).getName() for k in range(root.numCoordinates())}
     out: dict = {}
     times = np.array(sol.getTimeMat()).ravel()
-    labels, t_ref, ref_q, deg = _read_coordinates(folder / REFERENCE)
+    sto = read_mot(folder / REFERENCE)  # its header states inDegrees (bench.moco.prepare writes it)
+    labels, t_ref, ref_q, deg = sto.labels, sto.time, sto.data, bool(sto.in_degrees)
     per, trans = {}, {}
     for c in coords:
         name = c.getName()
