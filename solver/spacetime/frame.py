@@ -180,12 +180,15 @@ class FrameFunctions:
                 far.append(sgn * ca.dot(c - q[:2], left))
         self.cross = ca.Function("cross", [q, th], [ca.vertcat(*far)])
         # [naturalness] each foot in contact where the walker puts it: its far-side distance across the
-        # direction of travel (rows 0-1 above) toward a per-frame target (the guide's; masked where the
-        # foot is off the ground), per 1 cm: the step width is the walker's own, a turn is not taken by
-        # bringing the inner foot onto the path line
-        wtarget, wmask, wwd = ca.SX.sym("wtarget", 2), ca.SX.sym("wmask", 2), ca.SX.sym("wwd")
+        # direction of travel and across the pelvis's heading (the four rows above) toward per-frame
+        # targets (the guide's; masked where the foot is off the ground), per 1 cm: the step width is the
+        # walker's own, and a turn is taken neither by bringing the inner foot onto the path line nor by
+        # yawing the pelvis into the turn over a planted inner foot (with the path rows alone, a 90° curve's
+        # inner foot stood on the crossover bound's edge across the pelvis's heading)
+        wtarget, wmask, wwd = ca.SX.sym("wtarget", CROSS_ROWS), ca.SX.sym("wmask", 2), ca.SX.sym("wwd")
         self.width = ca.Function("width", [q, th, wtarget, wmask, wwd],
-                                 [wwd * sum(wmask[k_] * ((far[k_] - wtarget[k_]) / 0.01) ** 2 for k_ in range(2))])
+                                 [wwd * sum(wmask[r % 2] * ((far[r] - wtarget[r]) / 0.01) ** 2
+                                            for r in range(CROSS_ROWS))])
         # [naturalness] the trunk's lean against gravity in the sagittal plane of the direction of
         # travel (sine; + forward), and its prior toward a target per frame (the guide's)
         seg, trunk_local = trunk_axis(ch)

@@ -12,6 +12,7 @@ import numpy as np
 from solver.kinematics import centre_of_mass, contact_points, markers, sole_corners
 from solver.motion import FEET, foot_schedule_of
 from solver.naturalness import limited_coordinates
+from solver.spacetime.frame import CROSS_ROWS
 from solver.spacetime.types import STANDARD_GRAVITY, WEIGHT_SLOTS, Environment, Weights
 
 MARKER_SCALE = 0.01  # m: the objective is in units of (1 cm)²
@@ -259,16 +260,17 @@ class Layout:
             (np.zeros((3, nT)) if guide_com is None else np.asarray(guide_com, dtype=float)).ravel(order="F"),
             (np.zeros((2, nT)) if clearance is None else np.asarray(clearance, dtype=float)).ravel(order="F"),
             (np.zeros((3, nT)) if guide_force is None else np.asarray(guide_force, dtype=float)).ravel(order="F"),
-            (np.zeros((4, nT)) if width is None else np.asarray(width, dtype=float)).ravel(order="F"),
+            (np.zeros((CROSS_ROWS + 2, nT)) if width is None else np.asarray(width, dtype=float)).ravel(order="F"),
             (stairs_parameters(None, np.zeros((2, nT), dtype=bool)) if stairs is None
              else np.asarray(stairs, dtype=float)).ravel(order="F"),
         ])
 
     def width_targets(self, q: np.ndarray, path: np.ndarray) -> np.ndarray:
-        """(4, T) each foot's far-side distance across the direction of travel ``path`` in the motion
-        ``q`` (the guide's: the step width the optimum keeps), then 1 where the foot is on the ground."""
+        """(6, T) each foot's far-side distance across the direction of travel ``path``, then across the
+        pelvis's heading, in the motion ``q`` (the guide's: where the optimum keeps the feet), then 1 where
+        the foot is on the ground."""
         f = self.ff.cross.map(self.T)
-        far = np.asarray(f(np.asarray(q, dtype=float), np.asarray(path, dtype=float).reshape(1, -1)))[:2]
+        far = np.asarray(f(np.asarray(q, dtype=float), np.asarray(path, dtype=float).reshape(1, -1)))
         return np.vstack([far, self.foot_contact().astype(float)])
 
     def force_targets(self, com: np.ndarray, h: float, gravity) -> np.ndarray:

@@ -77,7 +77,8 @@ YAW = 3
 #: bound (scaled: body weights of standard gravity) and the environment's gravity over the standard;
 #: "gcom": per frame, the centre of mass to track; "clear": per foot and frame, the sole's clearance target;
 #: "gforce": per frame, the total ground force to track (body weights of standard gravity); "width": per frame,
-#: each foot's far-side distance across the direction of travel to keep, then a mask (1: the foot is down);
+#: each foot's far-side distance across the direction of travel, then across the pelvis's heading, to keep,
+#: then a mask (1: the foot is down);
 #: "stairs": per frame, the flight of stairs and each foot's tread or nosings (``solver.spacetime.stairs``)
 P_LAYOUT = ("gm", "gq", "g", "mu", "wts", "ref", "anchor", "dpsi", "com", "h", "ground", "rise", "range", "path",
             "lean", "loads", "gcom", "clear", "gforce", "width", "stairs")
@@ -173,7 +174,7 @@ class SpacetimeProblem(Layout):
             "gm": (nm3, Tn), "gq": (n, Tn), "g": 3, "mu": 1, "wts": len(WEIGHT_SLOTS), "ref": (6, Tn),
             "anchor": (3, Tn), "dpsi": 1, "com": (3, Tn), "h": 1, "ground": (max(ff.P, 1), Tn), "rise": 1,
             "range": 2 * n, "path": Tn, "lean": Tn, "loads": 2, "gcom": (3, Tn), "clear": (2, Tn), "gforce": (3, Tn),
-            "width": (4, Tn), "stairs": (STAIRS_PARAMS, Tn)}
+            "width": (CROSS_ROWS + 2, Tn), "stairs": (STAIRS_PARAMS, Tn)}
         self._p_layout, off = {}, 0
         for name in P_LAYOUT:
             shape = shapes[name]
@@ -316,8 +317,8 @@ class SpacetimeProblem(Layout):
         sel = [(c, r) for c, t in enumerate(frames) for r in range(CROSS_ROWS) if B[r % 2, t]]
         self._rows(Term("cross", ff.cross, 1, qi[:, frames], [P["path"][frames].T], derivatives=D["cross"]), sel,
                    -math.inf, ff.naturalness.crossover_m, "crossover")
-        self._cost(Term("width", ff.width, 1, qi[:, frames], [P["path"][frames].T, P["width"][:2, frames],
-                                                              P["width"][2:, frames],
+        self._cost(Term("width", ff.width, 1, qi[:, frames], [P["path"][frames].T, P["width"][:CROSS_ROWS, frames],
+                                                              P["width"][CROSS_ROWS:, frames],
                                                               ca.repmat(wts["step_width"], 1, len(frames))],
                         derivatives=D["width"], cost=True))
         # no slip, no spin between consecutive frames
