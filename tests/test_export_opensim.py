@@ -224,3 +224,24 @@ def test_a_motion_of_another_source_is_written_on_the_generic_model_scaled_to_it
     coords = read_mot(tmp_path / "coordinates.mot")
     assert "pelvis_tilt" in coords.labels and "knee_angle_r" in coords.labels
     assert summary["capture_residuals"] == {"available": False, "why": "the trial has no force plates"}
+
+
+def _glb_keyframes(data: bytes) -> tuple[int, float]:
+    """The keyframe count of a GLB's first animation and its frame rate, read from its JSON chunk."""
+    n = int.from_bytes(data[12:16], "little")
+    doc = json.loads(data[20:20 + n])
+    acc = doc["accessors"][doc["animations"][0]["samplers"][0]["input"]]
+    return int(acc["count"]), (acc["count"] - 1) / (acc["max"][0] - acc["min"][0])
+
+
+def test_the_command_line_reports_the_frames_the_models_glb_holds(trials):
+    """``motionx export --rig source`` on an OpenSim motion reports the frames and rate of the GLB of the
+    trial's model (one cycle at 30 frames/s), not the motion's own 15 frames/s; a capture: its own frames."""
+    from service.commands.export import _written_frames
+
+    cap, tutor = trials["treadmill"]
+    for motion in (tutor, capture_motion(cap)):
+        frames, fps = _written_frames(motion, {"rig": "source"})
+        glb_frames, glb_fps = _glb_keyframes(export_motion(motion, "glb", rig="source"))
+        assert frames == glb_frames and fps == pytest.approx(glb_fps, rel=1e-4)
+    assert _written_frames(tutor, {"rig": "source"})[1] == pytest.approx(30.0) and tutor.fps < 16.0

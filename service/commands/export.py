@@ -87,16 +87,22 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 def _written_frames(motion, options: dict) -> tuple[int, float]:
     """The frames and frame rate of the file written: the motion's own, or on the input's rig
-    (``--rig source``) one gait cycle at the input's frame rate (a 60 fps BVH comes back at 60 fps)."""
+    (``--rig source``) one gait cycle at the input's frame rate (a 60 fps BVH comes back at 60 fps), or on
+    an OpenSim trial's model its bodies at the model's preview rate (``solver.export.opensim.preview_times``)."""
     if options.get("rig") != "source":
         return motion.T, motion.fps
     from solver.rig import SkeletonRig, output_times
 
     rig = motion.context.rig
-    if not isinstance(rig, SkeletonRig):  # an OpenSim model's GLB samples the model itself: not counted here
+    if isinstance(rig, SkeletonRig):
+        t, _ = output_times(motion, rig.frame_time)
+    elif rig is not None and rig.format == "opensim":
+        from solver.export.opensim import preview_times
+
+        t = preview_times(motion)
+    else:
         return motion.T, motion.fps
-    t, _ = output_times(motion, rig.frame_time)
-    return int(t.size), round(float(1.0 / (t[1] - t[0])), 6)
+    return int(t.size), (round(float(1.0 / (t[1] - t[0])), 6) if t.size > 1 else motion.fps)
 
 
 def _write_ground(motion, out: Path, options: dict) -> Path:

@@ -467,7 +467,7 @@ def _opensim_document(items: Sequence[tuple[str, Motion]], meshes: bool, world: 
     preview): a joint per body under the "rig" node, each body a tapered box from its origin to
     each child body's (a leaf body: to twice its centre of mass), one gait cycle at 30 frames/s
     (:func:`solver.export.opensim.model_bodies`), where gravity points down."""
-    from solver.export.opensim import OpenSimExportError, model_bodies
+    from solver.export.opensim import PREVIEW_RATE, OpenSimExportError, model_bodies
 
     if world != DEFAULT_WORLD:
         raise ExportError(f"the OpenSim model is written where gravity points down (world={DEFAULT_WORLD!r})")
@@ -505,7 +505,7 @@ def _opensim_document(items: Sequence[tuple[str, Motion]], meshes: bool, world: 
         this = SkeletonRig("opensim", tuple(bodies[i] for i in order), par, offsets,
                            tuple(("Xposition", "Yposition", "Zposition", "quaternion") for _ in range(J)), {},
                            mb["times"], local, P[:, 0], mb["frame"], end_sites=leaves,
-                           extra={"frame_time": 1.0 / 30.0})
+                           extra={"frame_time": 1.0 / PREVIEW_RATE})
         rig = rig or this
         if this.names != rig.names:
             raise ExportError(f"{name!r} is on another OpenSim model than {items[0][0]!r}: one GLB holds one model")

@@ -80,11 +80,11 @@ names used elsewhere.
 """
 
 from solver.export.opensim.base import OpenSimExportError, source_rig
-from solver.export.opensim.calibration import model_bodies
+from solver.export.opensim.calibration import PREVIEW_RATE, model_bodies, preview_times
 from solver.export.opensim.folder import to_opensim, write_opensim
 from solver.export.opensim.generic import generic_rig
 from solver.export.opensim.ground import GRF_LABELS
 from solver.export.opensim.residuals import capture_residuals, opensim_residuals
 
-__all__ = ["GRF_LABELS", "OpenSimExportError", "capture_residuals", "generic_rig", "model_bodies",
-           "opensim_residuals", "source_rig", "to_opensim", "write_opensim"]
+__all__ = ["GRF_LABELS", "PREVIEW_RATE", "OpenSimExportError", "capture_residuals", "generic_rig", "model_bodies",
+           "opensim_residuals", "preview_times", "source_rig", "to_opensim", "write_opensim"]

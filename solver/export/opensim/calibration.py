@@ -22,7 +22,7 @@ from solver.capture import GroundFrame
 from solver.character import Character
 from solver.export.opensim.base import OpenSimExportError, _cycle, source_rig
 from solver.export.opensim.files import repaired_model_text, with_gravity
-from solver.export.opensim.sampling import cycle_samples, export_frame
+from solver.export.opensim.sampling import cycle_samples, cycle_times, export_frame
 from solver.io.opensim.rig import OpenSimRig, unpack_model
 from solver.kinematics import segment_frames
 from solver.motion import Motion
@@ -367,7 +367,22 @@ class OpenSimCalibration(Calibration[OpenSimRig, tuple[np.ndarray, np.ndarray]])
                    None if d.get("model") is None else EvaluatedModel.from_dict(d["model"]))
 
 
-def model_bodies(motion: Motion, rate: float = 30.0) -> dict[str, Any]:
+#: frames per second of :func:`model_bodies`' cycle (the OpenSim model's GLB)
+PREVIEW_RATE = 30.0
+
+
+def preview_times(motion: Motion, rate: float = PREVIEW_RATE) -> np.ndarray:
+    """The times (from 0) at which :func:`model_bodies` poses the model: one gait cycle at ``rate``; a
+    capture (no cycle, no ground reactions): the trial's own frames."""
+    if not (motion.cyclic and motion.wrenches is not None):
+        rig = motion.context.rig
+        if not isinstance(rig, OpenSimRig):
+            raise OpenSimExportError("the motion was not made from an OpenSim trial: it has no OpenSim model")
+        return np.asarray(rig.times, dtype=float) - float(rig.times[0])
+    return cycle_times(motion, 1, float(rate))[0]
+
+
+def model_bodies(motion: Motion, rate: float = PREVIEW_RATE) -> dict[str, Any]:
     """The motion on its OpenSim trial's model, for a look at it (the web page's preview): one gait
     cycle at ``rate`` of every body's frame in the model's ground (where gravity points down),
     placed as :func:`~solver.export.opensim.folder.write_opensim` places them for OpenSim's inverse

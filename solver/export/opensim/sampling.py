@@ -1,5 +1,5 @@
 """The motion as the OpenSim export samples it: repeated over gait cycles at the written rate
-(:func:`cycle_samples`), and the map from its world to the trial's ground for OpenSim
+(:func:`cycle_samples`, at the times :func:`cycle_times`), and the map from its world to the trial's ground for OpenSim
 (:func:`export_frame`)."""
 
 from __future__ import annotations
@@ -19,15 +19,22 @@ def _rotz(a: float) -> np.ndarray:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
+def cycle_times(motion: Motion, cycles: int, rate: float) -> tuple[np.ndarray, float]:
+    """The times (S,) from 0 at which :func:`cycle_samples` samples ``cycles`` gait cycles at ``rate``,
+    and the cycle duration D (s)."""
+    D = (motion.T - 2) / motion.fps  # frames T-2, T-1 repeat 0, 1
+    S = int(math.floor(cycles * D * rate + 1e-9)) + 1
+    return np.arange(S) / rate, D
+
+
 def cycle_samples(motion: Motion, cycles: int, rate: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """The motion repeated ``cycles`` times and sampled at ``rate``: times (S,) from 0, q (n, S)
     (the periodic spline; each repetition moved by the cycle's own turn and displacement),
     wrenches (2, 6, S) (linear between the frames and midpoints where the optimizer's
     equations hold, moved alike) and the cycle duration D (s)."""
     N = motion.T - 2  # frames T-2, T-1 repeat 0, 1
-    D = N / motion.fps
-    S = int(math.floor(cycles * D * rate + 1e-9)) + 1
-    t = np.arange(S) / rate
+    t, D = cycle_times(motion, cycles, rate)
+    S = t.size
     c = np.minimum(np.floor(t / D + 1e-12).astype(int), cycles - 1)
     tau = t - c * D
     q1 = sample(motion.q, motion.fps, tau, cyclic=True, interpolation=motion.interpolation)
