@@ -63,6 +63,7 @@ def tutor_row(res, seconds: float) -> dict:
         "grf_against_plates": st.get("grf_against_plates"),
         "vertical_force_shape": valleys(m),
         "checks": checks(m.report),
+        "active_bounds": m.provenance["solver"].get("active_bounds"),
     })
     return row
 
@@ -97,7 +98,8 @@ def run() -> dict:
                     "solves": ext.solves, "rejections": [r.status for r in ext.records if not r.accepted][-6:],
                     "every_step_natural": all(s.motion.report["plausible"] and s.motion.report["natural"]
                                               for s in ext.steps),
-                    "last": None if last is None else checks(last.report)}
+                    "last": None if last is None else checks(last.report),
+                    "active_bounds": None if last is None else last.provenance["solver"].get("active_bounds")}
                 if save and last is not None:
                     last.save(os.path.join(save, f"{name}.{label}.json"))
                     with open(os.path.join(save, f"{name}.{label}.status"), "w") as f:

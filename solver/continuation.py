@@ -182,7 +182,8 @@ def _motion(tutor: Motion, lam: float, target: Target, env: Environment, values:
         "target": target.to_dict(),
         "continuation": {"method": control.method, "step": step},
         "solver": {"name": "ipopt", "status": res.status, "iterations": res.iterations,
-                   "time_s": round(res.wall_time, 6), "marker_rms_to_guide_mm": 1e3 * res.marker_rms},
+                   "time_s": round(res.wall_time, 6), "marker_rms_to_guide_mm": 1e3 * res.marker_rms,
+                   "active_bounds": dict(res.stats.get("active_bounds") or {})},
     }
     ctx = tutor.context.with_(
         environment=env, axis_values=dict(values), heading_change_deg=math.degrees(res.heading_change),

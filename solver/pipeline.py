@@ -502,7 +502,7 @@ def make_tutor(
             "source": src_prov[0],
             "lambda": 0.0,
             "solver": {"name": "ipopt", "status": res.status, "iterations": res.iterations,
-                       "time_s": res.wall_time},
+                       "time_s": res.wall_time, "active_bounds": dict(res.stats.get("active_bounds") or {})},
             "pipeline": stats,
         }),
     )

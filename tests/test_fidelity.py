@@ -69,6 +69,11 @@ def test_it_is_natural_with_no_feature_on_a_bound(default_tutor):
     assert clearance > checks["swing_clearance"]["limit"] + 0.003  # 9 mm: the check's limit
     assert clearance > Naturalness().clearance_m + 0.005  # 3 mm: the optimizer's safety net, far off
     assert checks["crossover"]["value"] < Naturalness().crossover_m - 0.005
+    # the optimizer's own record: no naturalness safety row (clearance, crossover, a swing point on the
+    # ground) and no joint at its limit carries the optimum (the feet's physics rows may: an unloaded foot)
+    active = default_tutor.motion.provenance["solver"]["active_bounds"]
+    assert not {"clearance", "crossover", "contact", "joint_rate"} & set(active), active
+    assert not any(k.startswith("bound:") for k in active), active
 
 
 def test_halfboy_does_not_crouch(shared_data):

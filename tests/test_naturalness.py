@@ -248,6 +248,30 @@ def test_an_uphill_walk_keeps_its_feet_on_their_own_side_of_the_pelvis(tutor):
     crossover = m.report["naturalness"]["figures"]["crossover"]
     assert crossover["across_pelvis_m"] <= Naturalness().crossover_m - 0.01, crossover
     assert crossover["across_path_m"] <= Naturalness().crossover_m - 0.01, crossover
+    assert "crossover" not in m.provenance["solver"]["active_bounds"]  # the optimizer's record agrees
+
+
+def test_the_optimizer_names_the_bounds_its_optimum_rests_on(tutor):
+    """A 90° curve in one HalfBoy cycle is the hardest turn of the shared walks: where the optimum's
+    record says a crossover row is on its bound, the naturalness check (computed from the motion, not the
+    optimizer) measures the loaded foot at that bound; joints named at their bounds are at their limits."""
+    from solver.continuation import Target, extrapolate
+    from solver.spacetime.types import Naturalness
+
+    res = extrapolate(tutor.motion, Target(curve_deg=90.0))
+    assert res.steps and res.steps[-1].lam > 0.5, res.message
+    for step in res.steps[1:]:
+        m = step.motion
+        active = m.provenance["solver"]["active_bounds"]
+        if "crossover" in active:
+            assert m.report["naturalness"]["figures"]["crossover"]["max_far_side_m"] > (
+                Naturalness().crossover_m - 0.002), (step.lam, active)
+        ch = m.character
+        for key in active:
+            if key.startswith("bound:"):
+                i = ch.coordinate_names.index(key.removeprefix("bound:"))
+                assert min(np.abs(m.q[i] - ch.lower[i]).min(), np.abs(m.q[i] - ch.upper[i]).min()) < math.radians(
+                    Naturalness().limit_margin_deg) + 1e-4, key
 
 
 def test_a_change_of_support_without_a_shared_frame_gets_one(tutor):

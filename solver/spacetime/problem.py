@@ -513,9 +513,33 @@ class SpacetimeProblem(Layout):
             status=status, iterations=int(stats.get("iter_count", -1)), wall_time=wall, q=q, wrenches=wr,
             objective=float(obj[0]), marker_rms=math.sqrt(max(float(mk_sum[0]), 0.0) / (self.n_markers * self.T)),
             lam_x=np.asarray(sol["lam_x"]).ravel(), lam_g=np.asarray(sol["lam_g"]).ravel(), max_violation=viol,
-            stats={"n_variables": self.nx, "n_constraints": self.ng, "build_time": self.build_time},
+            stats={"n_variables": self.nx, "n_constraints": self.ng, "build_time": self.build_time,
+                   "active_bounds": self.active_bounds(x, gval, lbg, ubg, lbx, ubx)},
             v=self.unpack_v(x) if self.dynamics else None, heading_change=dpsi,
         )
+
+    def active_bounds(self, x: np.ndarray, g: np.ndarray, lbg: np.ndarray, ubg: np.ndarray, lbx: np.ndarray,
+                      ubx: np.ndarray, tol: float = 1e-6) -> dict[str, int]:
+        """Where a solution ``x`` (constraint values ``g``) rests on an inequality: per constraint group
+        ("clearance", "crossover", "feet", "joint_rate", …) the rows within ``tol`` (their scaled units) of
+        a bound they do not share with the other side (equalities are not counted), and per coordinate
+        ("bound:knee_angle_r") the knots at its variable bounds (joint limits, the stairs' margins). An
+        optimum whose figure equals a safety bound shows here, before any check looks at it."""
+        out: dict[str, int] = {}
+        for name, rows in self._groups.items():
+            r = np.asarray(rows, dtype=int)
+            lo, hi, v = lbg[r], ubg[r], g[r]
+            at = (lo < hi) & (((v - lo) < tol) | ((hi - v) < tol))
+            if at.any():
+                out[name] = int(at.sum())
+        names = self.character.coordinate_names
+        for i in range(6, self.n):  # joints (the root's six have no limits)
+            idx = np.unique(self._q_index[i])
+            lo, hi, v = lbx[idx], ubx[idx], x[idx]
+            at = (lo < hi) & (((v - lo) < tol) | ((hi - v) < tol))
+            if at.any():
+                out[f"bound:{names[i]}"] = int(at.sum())
+        return out
 
     def _solver_for(self, opts: Mapping[str, Any], stoppable: bool) -> ca.Function:
         """IPOPT options are fixed per solver instance: one instance per option set, all
