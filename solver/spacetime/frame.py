@@ -179,16 +179,17 @@ class FrameFunctions:
                 c = (pts[self.heel_of[side]][:2] + pts[self.toe_of[side]][:2]) / 2
                 far.append(sgn * ca.dot(c - q[:2], left))
         self.cross = ca.Function("cross", [q, th], [ca.vertcat(*far)])
-        # [naturalness] each foot in contact where the walker puts it: its far-side distance across the
-        # direction of travel and across the pelvis's heading (the four rows above) toward per-frame
-        # targets (the guide's; masked where the foot is off the ground), per 1 cm: the step width is the
-        # walker's own, and a turn is taken neither by bringing the inner foot onto the path line nor by
-        # yawing the pelvis into the turn over a planted inner foot (with the path rows alone, a 90° curve's
-        # inner foot stood on the crossover bound's edge across the pelvis's heading)
+        # [naturalness] each foot in contact where the walker puts it, per 1 cm against per-frame targets
+        # (the guide's; masked where the foot is off the ground): its far-side distance across the
+        # direction of travel toward the guide's (the step width is the walker's own), and across the
+        # pelvis's heading no nearer the far side than the guide's (a turn is not taken by yawing the pelvis
+        # over a planted inner foot: with the path rows alone, a 90° curve's inner foot stood on the
+        # crossover bound's edge across the pelvis's heading; tracked both ways, the turn went into the hips'
+        # limits instead)
         wtarget, wmask, wwd = ca.SX.sym("wtarget", CROSS_ROWS), ca.SX.sym("wmask", 2), ca.SX.sym("wwd")
+        off = [far[r] - wtarget[r] if r < 2 else ca.fmax(0, far[r] - wtarget[r]) for r in range(CROSS_ROWS)]
         self.width = ca.Function("width", [q, th, wtarget, wmask, wwd],
-                                 [wwd * sum(wmask[r % 2] * ((far[r] - wtarget[r]) / 0.01) ** 2
-                                            for r in range(CROSS_ROWS))])
+                                 [wwd * sum(wmask[r % 2] * (off[r] / 0.01) ** 2 for r in range(CROSS_ROWS))])
         # [naturalness] the trunk's lean against gravity in the sagittal plane of the direction of
         # travel (sine; + forward), and its prior toward a target per frame (the guide's)
         seg, trunk_local = trunk_axis(ch)

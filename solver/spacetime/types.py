@@ -109,9 +109,10 @@ class Weights:
     #: between two frames where the capture's turned 363°/s; HalfBoy's ankle on a 10° downhill, 455°/s)
     joint_speed: float = 100.0
     #: [naturalness] squared difference of each foot's distance from the pelvis across the direction of
-    #: travel, and across the pelvis's heading, from the guide's while it is on the ground (per 1 cm,
-    #: averaged per heading): a walker keeps its step width; a curve is turned neither by bringing the inner
-    #: foot onto the path line nor by yawing the pelvis over it (the crossover bound's edge)
+    #: travel from the guide's, and across the pelvis's heading its excess toward the far side over the
+    #: guide's, while it is on the ground (per 1 cm, averaged per heading): a walker keeps its step width; a
+    #: curve is turned neither by bringing the inner foot onto the path line nor by yawing the pelvis over it
+    #: (the crossover bound's edge)
     step_width: float = 1.0
     #: [naturalness] squared clearance deficit of a moving swing foot's sole corners below the
     #: walker's mid-swing clearance (``Naturalness.clearance_target_m``), per (1 cm)² and corner-frame at
