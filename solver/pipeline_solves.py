@@ -37,8 +37,12 @@ TUTOR_WEIGHTS = Weights(coordinates=300.0, root_rotation=300.0, com_track=10.0)
 #: shape (one braking → propulsion change per stance) at a tenth of the full body's force weight, not the
 #: centre of mass's path, which made it crouch further (the overground walk's stance knees 23/20° where
 #: the capture's are 10/14°; 18/17° with these weights)
+#: HalfBoy's tutor leaves the feet's side of its pelvis to the joint angles it tracks (``pelvis_side``
+#: off): held there, the overground walk's stance knees crouched 21/23° for feet 2.8 cm nearer the subject's
+#: placement (the loaded foot 1.9 cm across the pelvis without it; the check allows 3 cm)
 TUTOR_WEIGHTS_OF = {"fullbody": TUTOR_WEIGHTS,
-                    "halfboy": Weights(coordinates=300.0, root_rotation=300.0, com_track=0.0, force_track=100.0)}
+                    "halfboy": Weights(coordinates=300.0, root_rotation=300.0, com_track=0.0, force_track=100.0,
+                                       pelvis_side=0.0)}
 
 
 def tutor_weights(character: str) -> Weights:

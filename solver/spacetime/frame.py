@@ -186,10 +186,12 @@ class FrameFunctions:
         # over a planted inner foot: with the path rows alone, a 90° curve's inner foot stood on the
         # crossover bound's edge across the pelvis's heading; tracked both ways, the turn went into the hips'
         # limits instead)
-        wtarget, wmask, wwd = ca.SX.sym("wtarget", CROSS_ROWS), ca.SX.sym("wmask", 2), ca.SX.sym("wwd")
+        wtarget, wmask = ca.SX.sym("wtarget", CROSS_ROWS), ca.SX.sym("wmask", 2)
+        wwd, wps = ca.SX.sym("wwd"), ca.SX.sym("wps")  # the path rows' weight, the pelvis rows'
         off = [far[r] - wtarget[r] if r < 2 else ca.fmax(0, far[r] - wtarget[r]) for r in range(CROSS_ROWS)]
-        self.width = ca.Function("width", [q, th, wtarget, wmask, wwd],
-                                 [wwd * sum(wmask[r % 2] * (off[r] / 0.01) ** 2 for r in range(CROSS_ROWS))])
+        self.width = ca.Function("width", [q, th, wtarget, wmask, wwd, wps],
+                                 [sum((wwd if r < 2 else wps) * wmask[r % 2] * (off[r] / 0.01) ** 2
+                                      for r in range(CROSS_ROWS))])
         # [naturalness] the trunk's lean against gravity in the sagittal plane of the direction of
         # travel (sine; + forward), and its prior toward a target per frame (the guide's)
         seg, trunk_local = trunk_axis(ch)

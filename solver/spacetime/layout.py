@@ -243,6 +243,7 @@ class Layout:
             "force_track": weights.force_track / K,
             "joint_speed": weights.joint_speed / (max(self.n - 6, 1) * nT),
             "step_width": weights.step_width / (2 * nT),
+            "pelvis_side": weights.pelvis_side / (2 * nT),
         }
         wts = [scaled[name] for name in WEIGHT_SLOTS]
         return np.concatenate([

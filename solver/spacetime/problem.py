@@ -319,7 +319,8 @@ class SpacetimeProblem(Layout):
                    -math.inf, ff.naturalness.crossover_m, "crossover")
         self._cost(Term("width", ff.width, 1, qi[:, frames], [P["path"][frames].T, P["width"][:CROSS_ROWS, frames],
                                                               P["width"][CROSS_ROWS:, frames],
-                                                              ca.repmat(wts["step_width"], 1, len(frames))],
+                                                              ca.repmat(wts["step_width"], 1, len(frames)),
+                                                              ca.repmat(wts["pelvis_side"], 1, len(frames))],
                         derivatives=D["width"], cost=True))
         # no slip, no spin between consecutive frames
         pairs = frames

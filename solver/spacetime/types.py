@@ -109,16 +109,21 @@ class Weights:
     #: between two frames where the capture's turned 363°/s; HalfBoy's ankle on a 10° downhill, 455°/s)
     joint_speed: float = 100.0
     #: [naturalness] squared difference of each foot's distance from the pelvis across the direction of
-    #: travel from the guide's, and across the pelvis's heading its excess toward the far side over the
-    #: guide's, while it is on the ground (per 1 cm, averaged per heading): a walker keeps its step width; a
-    #: curve is turned neither by bringing the inner foot onto the path line nor by yawing the pelvis over it
-    #: (the crossover bound's edge)
+    #: travel from the guide's while it is on the ground (per 1 cm, averaged): a walker keeps its step width;
+    #: a curve is not turned by bringing the inner foot onto the path line (the crossover bound's edge)
     step_width: float = 1.0
     #: [naturalness] squared clearance deficit of a moving swing foot's sole corners below the
     #: walker's mid-swing clearance (``Naturalness.clearance_target_m``), per (1 cm)² and corner-frame at
     #: 15 frames/s: 5 mm short at one corner of one frame weighs like 2.5 mm of marker distance over the
     #: whole cycle
     clearance: float = 1.0
+    #: [naturalness] squared excess of each foot's distance from the pelvis toward its far side across the
+    #: pelvis's own heading over the guide's foot's, while it is on the ground (per 1 cm, averaged): a curve
+    #: is not turned by yawing the pelvis over a planted inner foot (with ``step_width`` alone, the overground
+    #: walk's 90° curve and 20° uphill optima stood on the crossover bound's 2 cm edge across the pelvis's
+    #: heading). One-sided: a wider stance is free (tracked both ways, HalfBoy's turns went into its hips'
+    #: limits)
+    pelvis_side: float = 1.0
 
 
 #: the NLP's weight slots: the fields of :class:`Weights`, in the order of the parameter vector's
