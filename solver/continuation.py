@@ -181,9 +181,7 @@ def _motion(tutor: Motion, lam: float, target: Target, env: Environment, values:
         "lambda": float(lam),
         "target": target.to_dict(),
         "continuation": {"method": control.method, "step": step},
-        "solver": {"name": "ipopt", "status": res.status, "iterations": res.iterations,
-                   "time_s": round(res.wall_time, 6), "marker_rms_to_guide_mm": 1e3 * res.marker_rms,
-                   "active_bounds": dict(res.stats.get("active_bounds") or {})},
+        "solver": res.solver_record(time_s=round(res.wall_time, 6), marker_rms_to_guide_mm=1e3 * res.marker_rms),
     }
     ctx = tutor.context.with_(
         environment=env, axis_values=dict(values), heading_change_deg=math.degrees(res.heading_change),

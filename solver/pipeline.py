@@ -501,8 +501,7 @@ def make_tutor(
             "step": "tutor",
             "source": src_prov[0],
             "lambda": 0.0,
-            "solver": {"name": "ipopt", "status": res.status, "iterations": res.iterations,
-                       "time_s": res.wall_time, "active_bounds": dict(res.stats.get("active_bounds") or {})},
+            "solver": res.solver_record(),
             "pipeline": stats,
         }),
     )

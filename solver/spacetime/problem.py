@@ -526,21 +526,15 @@ class SpacetimeProblem(Layout):
         a bound they do not share with the other side (equalities are not counted), and per coordinate
         ("bound:knee_angle_r") the knots at its variable bounds (joint limits, the stairs' margins). An
         optimum whose figure equals a safety bound shows here, before any check looks at it."""
-        out: dict[str, int] = {}
-        for name, rows in self._groups.items():
-            r = np.asarray(rows, dtype=int)
-            lo, hi, v = lbg[r], ubg[r], g[r]
-            at = (lo < hi) & (((v - lo) < tol) | ((hi - v) < tol))
-            if at.any():
-                out[name] = int(at.sum())
+        def count(v: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> int:
+            return int(((lo < hi) & (((v - lo) < tol) | ((hi - v) < tol))).sum())
+
+        rows = {name: np.asarray(r, dtype=int) for name, r in self._groups.items()}
+        counts = {name: count(g[r], lbg[r], ubg[r]) for name, r in rows.items()}
         names = self.character.coordinate_names
-        for i in range(6, self.n):  # joints (the root's six have no limits)
-            idx = np.unique(self._q_index[i])
-            lo, hi, v = lbx[idx], ubx[idx], x[idx]
-            at = (lo < hi) & (((v - lo) < tol) | ((hi - v) < tol))
-            if at.any():
-                out[f"bound:{names[i]}"] = int(at.sum())
-        return out
+        knots = {f"bound:{names[i]}": np.unique(self._q_index[i]) for i in range(6, self.n)}  # joints: not the root
+        counts.update({name: count(x[k], lbx[k], ubx[k]) for name, k in knots.items()})
+        return {name: c for name, c in counts.items() if c}
 
     def _solver_for(self, opts: Mapping[str, Any], stoppable: bool) -> ca.Function:
         """IPOPT options are fixed per solver instance: one instance per option set, all

@@ -282,6 +282,12 @@ class SolveResult:
     v: np.ndarray | None = None  # (n, T) knot velocities of the spline (dynamic problems)
     heading_change: float = math.nan  # rad, the cycle's yaw change Δψ imposed
 
+    def solver_record(self, **extra: Any) -> dict[str, Any]:
+        """What a motion's provenance keeps of this solve (``provenance.solver``), ``extra`` added or
+        replacing: status, iterations, time, and the bounds the optimum rests on."""
+        return {"name": "ipopt", "status": self.status, "iterations": self.iterations, "time_s": self.wall_time,
+                "active_bounds": dict(self.stats.get("active_bounds") or {}), **extra}
+
 
 @dataclass(frozen=True, eq=False)
 class ProblemData:

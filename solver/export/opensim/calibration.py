@@ -371,13 +371,22 @@ class OpenSimCalibration(Calibration[OpenSimRig, tuple[np.ndarray, np.ndarray]])
 PREVIEW_RATE = 30.0
 
 
+def _capture_rig(motion: Motion) -> OpenSimRig | None:
+    """A capture's (no cycle, no ground reactions) OpenSim trial, None for a cyclic motion; an error for a
+    capture from anything else."""
+    if motion.cyclic and motion.wrenches is not None:
+        return None
+    rig = motion.context.rig
+    if not isinstance(rig, OpenSimRig):
+        raise OpenSimExportError("the motion was not made from an OpenSim trial: it has no OpenSim model")
+    return rig
+
+
 def preview_times(motion: Motion, rate: float = PREVIEW_RATE) -> np.ndarray:
     """The times (from 0) at which :func:`model_bodies` poses the model: one gait cycle at ``rate``; a
     capture (no cycle, no ground reactions): the trial's own frames."""
-    if not (motion.cyclic and motion.wrenches is not None):
-        rig = motion.context.rig
-        if not isinstance(rig, OpenSimRig):
-            raise OpenSimExportError("the motion was not made from an OpenSim trial: it has no OpenSim model")
+    rig = _capture_rig(motion)
+    if rig is not None:
         return np.asarray(rig.times, dtype=float) - float(rig.times[0])
     return cycle_times(motion, 1, float(rate))[0]
 
@@ -395,12 +404,11 @@ def model_bodies(motion: Motion, rate: float = PREVIEW_RATE) -> dict[str, Any]:
     from solver.io.opensim.base import OpenSimError
     from solver.io.opensim.worker import run_worker  # lazy: OpenSim's child process
 
-    rig = motion.context.rig
+    capture = _capture_rig(motion)
     frame, gravity = export_frame(motion)
     try:
-        if not (motion.cyclic and motion.wrenches is not None):  # a capture: the trial as the model moved
-            if not isinstance(rig, OpenSimRig):
-                raise OpenSimExportError("the motion was not made from an OpenSim trial: it has no OpenSim model")
+        if capture is not None:  # a capture: the trial as the model moved
+            rig = capture
             text, _ = repaired_model_text(unpack_model(rig.model["osim_xz_b64"]))
             text, _ = with_gravity(text, gravity)
             with tempfile.TemporaryDirectory(prefix="motionx-osim-bodies-") as scratch:
@@ -408,7 +416,7 @@ def model_bodies(motion: Motion, rate: float = PREVIEW_RATE) -> dict[str, Any]:
                 path.write_bytes(text)
                 ev = run_worker(str(path), list(rig.coordinate_names), rig.coordinates, False)
             t_abs = rig.times
-            t = rig.times - rig.times[0]
+            t = preview_times(motion)
             W, P = np.asarray(ev["R"], dtype=float), np.asarray(ev["P"], dtype=float)
             parents = dict(zip(ev["joint_child"], ev["joint_parent"]))
             posture, com = (W[0], P[0]), np.asarray(ev["body_com"], dtype=float)
