@@ -111,6 +111,31 @@ def simulation_table(res: dict) -> str:
                     f"/ {100 * r['cop_outside_flat_sole_fraction']:.0f} % "
                     f"| {r['swing_min_corner_height_mm']:.1f} "
                     f"| {_f(r['cpu_per_simulated_s'])}; {_f(r['resync_cpu_per_simulated_s'])} |")
+    return "\n".join(rows) + "\n\n" + offline_cycle_table(res)
+
+
+def offline_cycle_table(res: dict) -> str:
+    """The offline cycle (``mjcf.cycle``) of each motion and its controller's continuous run."""
+    rows = ["| HalfBoy tutor | offline cycle: CPU s (iterations) | root residual RMS (BW): tracker's cycle → "
+            "offline | end vs start: joints RMS (°), joint velocities RMS (°/s): tracker's cycle → offline "
+            "| cycle controller: cycles walked (of requested) | fell (reason) | joint RMS (°) | foot force RMS (BW) "
+            "| CPU s per simulated s |",
+            "|---|---|---|---|---|---|---|---|---|"]
+    for name, row in res["motions"].items():
+        r = row.get("offline_cycle")
+        if r is None:
+            continue
+        if r.get("status") != "computed":
+            rows.append(f"| {name} | {r.get('status')}: {r.get('message', '')} |" + "  |" * 7)
+            continue
+        b, a = r["end_error_before"], r["end_error_after"]
+        fell = f"yes ({r['fall_reason'] or '?'})" if r["fell"] else "no"
+        rows.append(f"| {name} | {r['cpu_s']:.1f} ({r['iterations']}) "
+                    f"| {r['residual_rms_bw_before']:.4f} → {r['residual_rms_bw_after']:.5f} "
+                    f"| {b['joint_rms_deg']:.2f}, {b['joint_velocity_rms_deg_s']:.1f} → "
+                    f"{a['joint_rms_deg']:.3f}, {a['joint_velocity_rms_deg_s']:.2f} "
+                    f"| {r['cycles_walked']:.2f} ({res['cycles']}) | {fell} | {r['joint_tracking_rms_deg']:.1f} "
+                    f"| {r['foot_force_rms_bw']:.2f} | {_f(r['cpu_per_simulated_s'])} |")
     return "\n".join(rows)
 
 

@@ -18,6 +18,7 @@ import time
 
 import solver
 from bench.trials import shared_trials
+from mjcf.cycle import cycle_controller, feasible_cycle
 from mjcf.simulate import simulate
 from solver.continuation import Target
 from solver.motion import Motion
@@ -69,6 +70,38 @@ def _row(motion: Motion) -> dict:
         "cpu_s": round(cpu, 2),
         "cpu_per_simulated_s": round(cpu_continuous / simulated_s, 3) if simulated_s > 0 else None,
         "resync_cpu_per_simulated_s": round(float(rs["cpu_s"]) / resync_s, 3) if resync_s > 0 else None,
+        "offline_cycle": _cycle_row(motion),
+    }
+
+
+def _cycle_row(motion: Motion) -> dict:
+    """The offline cycle (``mjcf.cycle.feasible_cycle``) and its controller's continuous run."""
+    cpu = time.process_time()
+    cyc = feasible_cycle(motion)
+    cpu = time.process_time() - cpu
+    rec = cyc.record
+    if rec["status"] != "computed":
+        return {"status": rec["status"], "message": rec.get("message", ""), "cpu_s": round(cpu, 2)}
+    run_cpu = time.process_time()
+    r = simulate(motion, CYCLES, controller=cycle_controller(cyc), resync=False).report
+    run_cpu = time.process_time() - run_cpu
+    simulated_s = float(r["simulated_s"])
+    return {
+        "status": rec["status"],
+        "iterations": rec["iterations"],
+        "cpu_s": round(cpu, 2),
+        "linearization_cpu_s": round(float(rec["linearization_cpu_s"]), 2),
+        "residual_rms_bw_before": round(float(rec["residual_rms_bw_before"]), 5),
+        "residual_rms_bw_after": round(float(rec["residual_rms_bw_after"]), 5),
+        "end_error_before": {k: round(float(v), 4) for k, v in rec["end_error_before"].items()},
+        "end_error_after": {k: round(float(v), 4) for k, v in rec["end_error_after"].items()},
+        "cycles_walked": round(float(r["cycles_walked"]), 3),
+        "fell": bool(r["fell"]),
+        "fall_reason": (r.get("fall") or {}).get("reason"),
+        "joint_tracking_rms_deg": round(float(r["joint_tracking_rms_deg"]), 3),
+        "foot_force_rms_bw": round(float(r["foot_force_rms_bw"]), 4),
+        "peak_torque_ratio_max": round(float(r["peak_torque_ratio_max"]), 3),
+        "cpu_per_simulated_s": round(run_cpu / simulated_s, 3) if simulated_s > 0 else None,
     }
 
 

@@ -178,6 +178,7 @@ def simulate(motion: Motion, cycles: int = 10, gains: Gains | None = None, *,
         series=run.series,
     )
     report = _report(res, motion, ref, ctl, motor_peaks(motion, m, geometry), geometry.motors)
+    report["controller"] = type(ctl).__name__
     report["start"] = _start_report(run, start_info, body_weight(motion), dt)
     report["agreement"] = agreement(motion, m, ref, geometry)
     if resync:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import replace
 from pathlib import Path
 
 from service.cli import CliError, add_command, load_motion
@@ -18,9 +19,20 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         raise CliError("--cycles must be >= 1")
     motion = load_motion(args.motion)
     try:
-        res = simulate(motion, args.cycles, resync=not args.no_resync)
+        controller, offline = None, None
+        if args.controller == "cycle":
+            from mjcf.cycle import cycle_controller, feasible_cycle
+
+            cycle = feasible_cycle(motion)
+            offline = {k: v for k, v in cycle.record.items() if k != "log"}
+            if offline["status"] != "computed":
+                raise CliError(f"no offline cycle: {offline.get('message', '')}")
+            controller = cycle_controller(cycle)
+        res = simulate(motion, args.cycles, controller=controller, resync=not args.no_resync)
     except SimulationError as e:
         raise CliError(str(e)) from e
+    if offline is not None:
+        res = replace(res, report={**res.report, "offline_cycle": offline})
     out = Path(args.out)
     report = write_simulation(res, motion, out)
     summary = {k: report[k] for k in SUMMARY_KEYS}
@@ -47,5 +59,10 @@ character fell in the continuous run.""")
     s.add_argument("--no-resync", action="store_true",
                    help="skip the per-cycle runs from the reference state (report.json's resync; about as long as "
                         "the continuous run)")
+    s.add_argument("--controller", choices=("tracker", "cycle"), default="tracker",
+                   help="tracker (default): the balancing QP tracking the motion; cycle: first compute offline a "
+                        "cycle the character performs with its joint motors alone, closing onto its start, and "
+                        "perform it with periodic LQR feedback (mjcf.cycle; 15-40 CPU-s more for HalfBoy; "
+                        "report.json's offline_cycle)")
     s.add_argument("--out", required=True, metavar="DIR", help="output folder")
     s.set_defaults(func=cmd_simulate)

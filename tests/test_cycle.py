@@ -1,0 +1,89 @@
+"""The offline cycle (``mjcf.cycle``) on the DeepMimic HalfBoy tutor: its states are a MuJoCo trajectory
+of the character under its joint motors alone, it closes onto its start under the cycle transform,
+and its controller walks the tutor for 10 cycles continuously (measured figures:
+docs/simulation.md, "The offline cycle")."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pytest
+import shared_tutors
+
+from mjcf.cycle import CycleController, cycle_controller, despiked, feasible_cycle
+from mjcf.gains import Gains
+from mjcf.performable import performable_model
+from mjcf.reference import Reference
+from mjcf.simulate import CLOSE_TOLERANCE, simulate
+
+
+@pytest.fixture(scope="module")
+def motion(shared_data):
+    res = shared_tutors.tutor(shared_data)
+    assert res.status == "succeeded"
+    return res.motion
+
+
+@pytest.fixture(scope="module")
+def cycle(motion):
+    return feasible_cycle(motion)
+
+
+def test_the_cycle_is_performed_by_the_motors_alone(motion, cycle):
+    """Independent of the optimizer's own rollouts: from every stored state, one MuJoCo step of a
+    model without any root residual under the stored motor torques lands on the next stored state."""
+    rec = cycle.record
+    assert rec["status"] == "computed"
+    # the tracker's cycle needed root help; the offline cycle needs none
+    assert rec["residual_rms_bw_before"] > 1e-3
+    assert rec["residual_rms_bw_after"] < 5e-4 and rec["residual_rms_bw_after"] < 0.01 * rec["residual_rms_bw_before"]
+    g = Gains()
+    _xml, m, geo = performable_model(motion, 2, Reference(motion), g.sole_half_width, g.inversion)
+    assert not len(geo.residual)
+    ids = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, nm) for nm in cycle.motor_names]
+    d = mujoco.MjData(m)
+    nv = m.nv
+    worst = 0.0
+    for s in range(0, cycle.steps, 7):
+        d.qpos[:], d.qvel[:] = cycle.states[s, :nv], cycle.states[s, nv:]
+        d.ctrl[:] = 0.0
+        d.ctrl[ids] = cycle.controls[s]
+        mujoco.mj_step(m, d)
+        worst = max(worst, float(np.abs(d.qvel - cycle.states[s + 1, nv:]).max()))
+    assert worst < 1e-3  # rad/s, m/s over one 1 ms step
+
+
+def test_the_cycle_closes_onto_its_start(cycle):
+    err = cycle.record["end_error_after"]
+    before = cycle.record["end_error_before"]
+    assert err["joint_rms_deg"] < 0.1 and err["joint_velocity_rms_deg_s"] < 2.0
+    assert abs(err["pelvis_height_m"]) < 1e-3 and err["root_velocity_m_s"] < 0.01
+    # ten times inside the resync's closing tolerance, which the tracker's own cycle misses
+    assert all(abs(err[k]) < 0.1 * tol for k, tol in CLOSE_TOLERANCE.items())
+    assert before["joint_velocity_rms_deg_s"] > CLOSE_TOLERANCE["joint_velocity_rms_deg_s"]
+
+
+def test_the_cycle_controller_walks_ten_cycles(motion, cycle):
+    """The default tracker falls after about three cycles of this tutor (docs/simulation.md)."""
+    rep = simulate(motion, 10, controller=cycle_controller(cycle), resync=False).report
+    assert rep["controller"] == "CycleController"
+    assert not rep["fell"], rep.get("fall")
+    assert rep["cycles_walked"] >= 10 - 1e-6
+    assert rep["joint_tracking_rms_deg"] < 6.0
+
+
+def test_gain_spikes_are_replaced_and_a_bad_cycle_is_refused(motion, cycle):
+    K = np.ones((20, 2, 3))
+    K[7] *= 1e5
+    out = despiked(K)
+    assert np.abs(out).max() == 1.0 and np.abs(K[7]).max() == 1e5  # the input is left as it was
+    size = np.abs(cycle.gains).max(axis=(1, 2))
+    assert size.max() <= 10 * np.median(size) + 1e-9
+    g = Gains()
+    ref = Reference(motion)
+    _xml, m, geo = performable_model(motion, 2, ref, g.sole_half_width, g.inversion)
+    from dataclasses import replace
+    empty = replace(cycle, controls=cycle.controls[:0], states=cycle.states[:0], gains=cycle.gains[:0],
+                    record={"status": "failed", "message": "test"})
+    with pytest.raises(ValueError, match="not computed"):
+        CycleController(motion, m, geo, ref, empty)
