@@ -11,6 +11,7 @@ model compiled in memory (:func:`compile_model`), and the XML is for viewing/exc
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -130,6 +131,17 @@ def build_spec(character: Character, gravity: Sequence[float] = DEFAULT_GRAVITY,
     return _build(character, gravity, contacts)[0]
 
 
+def _has_inversion(character: Character, segment: str, axis: np.ndarray) -> bool:
+    """The foot segment already turns about the heel-toe line ``axis`` (body frame): one of its own
+    hinges is within 30° of it (a capture's 3-DOF ankle, ``ankle_inversion_*``). A second hinge on the same
+    body about the same axis through the same point makes the mass matrix singular."""
+    seg = next(s for s in character.segments if s.name == segment)
+    a = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    near = math.cos(math.radians(30.0))
+    return any(d.kind == "hinge" and abs(float(np.dot(d.axis, a))) > near * float(np.linalg.norm(d.axis))
+               for d in seg.dofs)
+
+
 def build_performable(character: Character, gravity: Sequence[float],
                       contacts: ContactOptions) -> tuple[mujoco.MjSpec, ContactParts]:
     """The performable spec (:func:`build_spec` with ``contacts``) and its :class:`ContactParts`."""
@@ -238,7 +250,7 @@ def _build(character: Character, gravity: Sequence[float],
             seg_name, center, half, rot = _sole_box(character, side, float(roll), contacts.sole_thickness,
                                                     contacts.sole_half_width)
             holder = bodies[seg_name]
-            if contacts.inversion:
+            if contacts.inversion and not _has_inversion(character, seg_name, rot[:, 0]):
                 inversion_joints.append(holder.add_joint(name=f"inversion_{side}", type=mujoco.mjtJoint.mjJNT_HINGE,
                                                          axis=rot[:, 0].tolist(), pos=[0.0, 0.0, 0.0]))
             g = holder.add_geom(name=f"sole_{side}", type=mujoco.mjtGeom.mjGEOM_BOX, size=half.tolist(),

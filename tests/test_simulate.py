@@ -184,3 +184,22 @@ def test_cycle_completes_from_the_reference_state_without_root_help(simulated):
     assert rs["completed"] == 1 and rs["residual_root_wrench_rms_bw"] < 1e-4
     end = rs["per_cycle"][0]["end_error"]
     assert end["joint_rms_deg"] < 5.0 and abs(end["pelvis_height_m"]) < 0.02
+
+
+@pytest.mark.parametrize("name,added", [("halfboy", 2), ("capture-full", 0)])
+def test_a_foot_gets_an_inversion_hinge_only_when_it_has_none(name, added):
+    """The performable model's inversion hinge (about the heel-toe line) is added to a foot that cannot
+    turn about that line; a capture's 3-DOF ankle (``ankle_inversion_*``) already does, and a second hinge
+    about the same axis through the same point made the mass matrix singular (the full-body tutors fell
+    within 0.1 s, an arm thrown to the ground)."""
+    from mjcf.builder import ContactOptions, build_performable
+    from solver import character as C
+
+    spec, parts = build_performable(C.reference(name), (0.0, 0.0, -9.81), ContactOptions(inversion=True))
+    assert len(parts.inversion) == added
+    m = spec.compile()
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    M = np.zeros((m.nv, m.nv))
+    mujoco.mj_fullM(m, d, M)
+    assert np.linalg.eigvalsh(M).min() > 1e-8
