@@ -37,6 +37,7 @@ from mjcf.gains import Gains
 from mjcf.performable import ModelGeometry, performable_model
 from mjcf.reference import ROOT_Z, Reference, mid_stance_time
 from mjcf.rollout import _rollout, _start
+from mjcf.simulate import CLOSE_TOLERANCE
 from mjcf.tracker import Tracker
 from solver.environment import body_weight
 from solver.motion import Motion
@@ -71,7 +72,7 @@ DIVERGED_JOINT = 0.5
 DIVERGED_HEIGHT = 0.1
 FD_EPS = 1e-6
 LINE_SEARCH = (1.0, 0.5, 0.25, 0.1, 0.03, 0.01)
-#: iLQR's regularization of the torques' Hessian: from MU_MIN, ×10 while no step lowers the cost, up to MU_MAX
+#: iLQR's regularization of the torques' Hessian, adapted between these (Levenberg–Marquardt, ``feasible_cycle``)
 MU_MIN, MU_MAX = 1e-6, 1e2
 
 
@@ -97,6 +98,12 @@ class FeasibleCycle:
     coordinate_qpos: np.ndarray
     coordinate_dof: np.ndarray
     record: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for name in ("states", "controls", "gains", "coordinate_qpos", "coordinate_dof"):
+            a = np.array(getattr(self, name))
+            a.setflags(write=False)
+            object.__setattr__(self, name, a)
 
     @property
     def steps(self) -> int:
@@ -304,6 +311,8 @@ def feasible_cycle(motion: Motion, gains: Gains | None = None, *, iterations: in
     ref = Reference(motion)
     _xml, m, geo = performable_model(motion, 2, ref, gains.sole_half_width, gains.inversion, root_residual=True)
     nv, nu = m.nv, m.nu
+    if m.nq != nv:
+        raise ValueError("the offline cycle needs a model of hinges and slides (qpos and qvel of one size)")
     cq, cd = geo.coordinate_qpos, geo.coordinate_dof
     t0 = mid_stance_time(motion)
     N = int(round(ref.period / float(m.opt.timestep)))
@@ -327,7 +336,7 @@ def feasible_cycle(motion: Motion, gains: Gains | None = None, *, iterations: in
     Ut[:, geo.residual] = 0.0
 
     def cost(X: np.ndarray, U: np.ndarray, wf: float) -> float:
-        if not np.all(np.isfinite(X)):
+        if not np.all(np.isfinite(X)) or np.abs(X).max() > 1e6:  # a diverged rollout
             return math.inf
         e = X[:-1] - Xt[:-1]
         e[:, cq[:2]] = 0.0
@@ -376,8 +385,10 @@ def feasible_cycle(motion: Motion, gains: Gains | None = None, *, iterations: in
             break
     # the feedback: periodic LQR on the final cycle's linearizations, its torque weight chosen on perturbed starts
     Kfb, rec["feedback"] = _select_gains(m, geo, X, U, w, turn, rise)
-    rec.update({"iterations": it, "residual_rms_bw_after": residual_rms(U),
-                "end_error_after": _end_error(X[-1], target, nv, cq, cd),
+    end = _end_error(X[-1], target, nv, cq, cd)
+    rec.update({"iterations": it, "residual_rms_bw_after": residual_rms(U), "end_error_after": end,
+                # the resync's closing tolerance: the next cycle can start where this one ends
+                "closes": all(abs(end[k]) <= tol for k, tol in CLOSE_TOLERANCE.items()),
                 "linearization_cpu_s": lin_cpu, "cpu_s": _time.process_time() - cpu0, "status": "computed"})
     names = tuple(mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_ACTUATOR, int(a)) for a in geo.motors)
     return FeasibleCycle(float(m.opt.timestep), t0, ref.period, turn, rise, X, U[:, geo.motors], Kfb, names,
