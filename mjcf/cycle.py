@@ -66,6 +66,8 @@ LQR_TORQUE_WEIGHTS = (1e-2, 1e-1)
 #: the perturbed starts the gains are chosen on: joint and root velocities plus normal noise of these
 #: standard deviations (rad/s, m/s), three draws each (a fixed seed), each run for two chained cycles
 PERTURBATIONS = (0.05, 0.1)
+#: the selection's unperturbed run chains this many cycles (the model holds one more cycle of treads)
+CHAINED = 3
 #: a run of the selection has failed when a joint is this far from the cycle's (rad) or the pelvis this
 #: far below it (m)
 DIVERGED_JOINT = 0.5
@@ -89,18 +91,15 @@ class FeasibleCycle:
     timestep: float
     start_time: float  # the reference's time of the start (mid stance)
     period: float
-    turn: float  # rad: the cycle's heading change
-    rise: float  # m: its height gain (stairs)
+    transform: CycleTransform  # how the next cycle sits against this one; what the feedback compares
     states: np.ndarray
     controls: np.ndarray
     gains: np.ndarray
     motor_names: tuple[str, ...]
-    coordinate_qpos: np.ndarray
-    coordinate_dof: np.ndarray
     record: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        for name in ("states", "controls", "gains", "coordinate_qpos", "coordinate_dof"):
+        for name in ("states", "controls", "gains"):
             a = np.array(getattr(self, name))
             a.setflags(write=False)
             object.__setattr__(self, name, a)
@@ -121,22 +120,43 @@ def _weights(nv: int, geometry: ModelGeometry) -> np.ndarray:
     return np.concatenate([wq, wv])
 
 
-def _moved(x: np.ndarray, k: int, turn: float, rise: float, nv: int, cq: np.ndarray, cd: np.ndarray) -> np.ndarray:
-    """State ``x`` moved by k cycle transforms: heading + k turn, height + k rise, horizontal velocity
-    turned (the horizontal position is left: it is never compared)."""
-    y = x.copy()
-    c, s = math.cos(k * turn), math.sin(k * turn)
-    y[cq[3]] += k * turn
-    y[cq[ROOT_Z]] += k * rise
-    vx, vy = x[nv + cd[0]], x[nv + cd[1]]
-    y[nv + cd[0]], y[nv + cd[1]] = c * vx - s * vy, s * vx + c * vy
-    return y
+@dataclass(frozen=True, eq=False)
+class CycleTransform:
+    """How cycle k of a chain sits against the first: turned by k × ``turn`` about the vertical and
+    raised by k × ``rise``; and which state entries are compared (``qpos``/``dof``: the root's and
+    joints' addresses). The horizontal position is never compared: the walk may drift. (Compared too,
+    on stairs, at 5 cm: the DeepMimic stairs down's cycle then walked 1.98 cycles instead of 3.0.)"""
 
+    turn: float
+    rise: float
+    nv: int
+    qpos: np.ndarray
+    dof: np.ndarray
 
-def _difference(x: np.ndarray, target: np.ndarray, cq: np.ndarray) -> np.ndarray:
-    e = x - target
-    e[cq[:2]] = 0.0
-    return e
+    def _turn_velocity(self, x: np.ndarray, angle: float) -> None:
+        ix, iy = self.nv + self.dof[0], self.nv + self.dof[1]
+        c, s = math.cos(angle), math.sin(angle)
+        x[ix], x[iy] = c * x[ix] - s * x[iy], s * x[ix] + c * x[iy]
+
+    def moved(self, x: np.ndarray, k: int) -> np.ndarray:
+        """State ``x`` moved by k cycle transforms: heading + k turn, height + k rise, horizontal velocity
+        turned (the horizontal position is left as it is)."""
+        y = x.copy()
+        y[self.qpos[3]] += k * self.turn
+        y[self.qpos[ROOT_Z]] += k * self.rise
+        self._turn_velocity(y, k * self.turn)
+        return y
+
+    def difference(self, x: np.ndarray, target: np.ndarray) -> np.ndarray:
+        e = x - target
+        e[self.qpos[:2]] = 0.0
+        return e
+
+    def back(self, e: np.ndarray, k: int) -> np.ndarray:
+        """A difference in cycle k's frame turned back into the first cycle's (the gains act there)."""
+        e = e.copy()
+        self._turn_velocity(e, -k * self.turn)
+        return e
 
 
 def _linearize(m: mujoco.MjModel, X: np.ndarray, U: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -151,7 +171,7 @@ def _linearize(m: mujoco.MjModel, X: np.ndarray, U: np.ndarray) -> tuple[np.ndar
 
 def _rollout_open(m: mujoco.MjModel, x0: np.ndarray, U: np.ndarray, Xn: np.ndarray | None = None,
                   K: np.ndarray | None = None, kff: np.ndarray | None = None, alpha: float = 1.0,
-                  cq: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                  tf: CycleTransform | None = None) -> tuple[np.ndarray, np.ndarray]:
     """States from ``x0`` under U (+ α k + K (x − Xn), iLQR's forward pass)."""
     nv, N = m.nv, U.shape[0]
     d = mujoco.MjData(m)
@@ -161,8 +181,8 @@ def _rollout_open(m: mujoco.MjModel, x0: np.ndarray, U: np.ndarray, Xn: np.ndarr
     X[0] = x0
     Uo = U.copy()
     for s in range(N):
-        if K is not None and kff is not None and Xn is not None and cq is not None:
-            Uo[s] = U[s] + alpha * kff[s] + K[s] @ _difference(X[s], Xn[s], cq)
+        if K is not None and kff is not None and Xn is not None and tf is not None:
+            Uo[s] = U[s] + alpha * kff[s] + K[s] @ tf.difference(X[s], Xn[s])
         d.ctrl[:] = Uo[s]
         mujoco.mj_step(m, d)
         X[s + 1, :nv], X[s + 1, nv:] = d.qpos, d.qvel
@@ -209,17 +229,17 @@ def despiked(K: np.ndarray) -> np.ndarray:
 
 
 def _backward(A: np.ndarray, B: np.ndarray, X: np.ndarray, U: np.ndarray, Xt: np.ndarray, Ut: np.ndarray,
-              Q: np.ndarray, r: np.ndarray, Qf: np.ndarray, target: np.ndarray, cq: np.ndarray,
+              Q: np.ndarray, r: np.ndarray, Qf: np.ndarray, target: np.ndarray, tf: CycleTransform,
               mu: float) -> tuple[np.ndarray, np.ndarray]:
     """iLQR's backward pass: the feedforward steps k and gains K of the quadratic model of the cost
     (states toward Xt, torques toward Ut, the end state toward ``target``) on the linearizations."""
     N, nu, nx = B.shape[0], B.shape[2], A.shape[1]
     R = np.diag(r)
-    Vx = Qf @ _difference(X[-1], target, cq)
+    Vx = Qf @ tf.difference(X[-1], target)
     Vxx = Qf.copy()
     kff, K = np.zeros((N, nu)), np.zeros((N, nu, nx))
     for s in range(N - 1, -1, -1):
-        Qx = Q @ _difference(X[s], Xt[s], cq) + A[s].T @ Vx
+        Qx = Q @ tf.difference(X[s], Xt[s]) + A[s].T @ Vx
         Qu = r * (U[s] - Ut[s]) + B[s].T @ Vx
         Qxx = Q + A[s].T @ Vxx @ A[s]
         Quu = R + B[s].T @ Vxx @ B[s] + mu * np.eye(nu)
@@ -236,10 +256,10 @@ def _step(m: mujoco.MjModel, x0: np.ndarray, problem: tuple, mu: float, cost: An
           c0: float) -> tuple[float, float, np.ndarray, np.ndarray]:
     """One iLQR step at regularization ``mu``: the backward pass, then the line search's first step that
     lowers the cost below ``c0``: (cost, step length, states, controls); (inf, 0, …) when none does."""
-    A, B, X, U, Xt, Ut, Q, r, Qf, target, cq = problem
-    kff, K = _backward(A, B, X, U, Xt, Ut, Q, r, Qf, target, cq, mu)
+    A, B, X, U, Xt, Ut, Q, r, Qf, target, tf = problem
+    kff, K = _backward(A, B, X, U, Xt, Ut, Q, r, Qf, target, tf, mu)
     for alpha in LINE_SEARCH:
-        Xn, Un = _rollout_open(m, x0, U, X, K, kff, alpha, cq)
+        Xn, Un = _rollout_open(m, x0, U, X, K, kff, alpha, tf)
         cn = cost(Xn, Un)
         if cn < c0:
             return cn, alpha, Xn, Un
@@ -247,7 +267,7 @@ def _step(m: mujoco.MjModel, x0: np.ndarray, problem: tuple, mu: float, cost: An
 
 
 def _chained(m: mujoco.MjModel, X: np.ndarray, U: np.ndarray, K: np.ndarray, motors: np.ndarray, x0: np.ndarray,
-             cycles: int, turn: float, rise: float, cq: np.ndarray, cd: np.ndarray) -> float:
+             cycles: int, tf: CycleTransform) -> float:
     """Cycles the feedback ``K`` (motors) performs chained from ``x0`` before it diverges (module constants)."""
     nv, N = m.nv, U.shape[0]
     d = mujoco.MjData(m)
@@ -256,25 +276,24 @@ def _chained(m: mujoco.MjModel, X: np.ndarray, U: np.ndarray, K: np.ndarray, mot
     for k in range(cycles):
         for s in range(N):
             x = np.concatenate([d.qpos, d.qvel])
-            e = _difference(x, _moved(X[s], k, turn, rise, nv, cq, cd), cq)
-            if (not np.all(np.isfinite(e)) or np.abs(e[cq[6:]]).max() > DIVERGED_JOINT
-                    or e[cq[ROOT_Z]] < -DIVERGED_HEIGHT):
+            e = tf.difference(x, tf.moved(X[s], k))
+            if (not np.all(np.isfinite(e)) or np.abs(e[tf.qpos[6:]]).max() > DIVERGED_JOINT
+                    or e[tf.qpos[ROOT_Z]] < -DIVERGED_HEIGHT):
                 return k + s / N
             u = U[s].copy()
-            u[motors] += K[s] @ e
+            u[motors] += K[s] @ tf.back(e, k)
             d.ctrl[:] = u
             mujoco.mj_step(m, d)
     return float(cycles)
 
 
 def _select_gains(m: mujoco.MjModel, geo: ModelGeometry, X: np.ndarray, U: np.ndarray, w: np.ndarray,
-                  turn: float, rise: float) -> tuple[np.ndarray, dict[str, Any]]:
+                  tf: CycleTransform) -> tuple[np.ndarray, dict[str, Any]]:
     """The periodic LQR gains (motors only, despiked) for each of ``LQR_TORQUE_WEIGHTS``, and the one
     whose feedback performs the most cycles over the selection's runs: the cycle chained three times from
     its start, and two chained cycles from each perturbed start (``PERTURBATIONS``). The cycle's own
     residual is not applied (the performing model has none)."""
     nv = m.nv
-    cq, cd = geo.coordinate_qpos, geo.coordinate_dof
     A, B = _linearize(m, X, U)
     Um = U.copy()
     Um[:, geo.residual] = 0.0
@@ -292,7 +311,7 @@ def _select_gains(m: mujoco.MjModel, geo: ModelGeometry, X: np.ndarray, U: np.nd
         rl[geo.motors] = weight
         rl[geo.residual] = 1e12  # never used by the feedback
         K = despiked(periodic_gains(A, B, np.diag(w) * LQR_STATE_WEIGHT, np.diag(rl))[:, geo.motors, :])
-        score = sum(_chained(m, X, Um, K, geo.motors, x, 3 if i == 0 else 2, turn, rise, cq, cd)
+        score = sum(_chained(m, X, Um, K, geo.motors, x, CHAINED if i == 0 else 2, tf)
                     for i, x in enumerate(starts))
         scores[f"{weight:g}"] = round(score, 3)
         if best is None or score > best[0] + 1e-9:
@@ -309,7 +328,8 @@ def feasible_cycle(motion: Motion, gains: Gains | None = None, *, iterations: in
     gains = gains or Gains()
     cpu0 = _time.process_time()
     ref = Reference(motion)
-    _xml, m, geo = performable_model(motion, 2, ref, gains.sole_half_width, gains.inversion, root_residual=True)
+    _xml, m, geo = performable_model(motion, CHAINED + 1, ref, gains.sole_half_width, gains.inversion,
+                                          root_residual=True)
     nv, nu = m.nv, m.nu
     if m.nq != nv:
         raise ValueError("the offline cycle needs a model of hinges and slides (qpos and qvel of one size)")
@@ -326,7 +346,8 @@ def feasible_cycle(motion: Motion, gains: Gains | None = None, *, iterations: in
     U = first.ctrl.copy()
     X, _ = _rollout_open(m, x0, U)
     turn, _d, rise = ref.transform(1)
-    target = _moved(x0, 1, turn, rise, nv, cq, cd)
+    tf = CycleTransform(turn, rise, nv, cq.copy(), cd.copy())
+    target = tf.moved(x0, 1)
     w = _weights(nv, geo)
     Q = np.diag(w) * TRACK_WEIGHT
     r = np.zeros(nu)
@@ -341,7 +362,7 @@ def feasible_cycle(motion: Motion, gains: Gains | None = None, *, iterations: in
         e = X[:-1] - Xt[:-1]
         e[:, cq[:2]] = 0.0
         du = U - Ut
-        ef = _difference(X[-1], target, cq)
+        ef = tf.difference(X[-1], target)
         return float(0.5 * np.sum((e**2) @ np.diag(Q)) + 0.5 * np.sum((du**2) @ r) + 0.5 * wf * ef @ (w * ef))
 
     def residual_rms(U: np.ndarray) -> float:
@@ -349,7 +370,7 @@ def feasible_cycle(motion: Motion, gains: Gains | None = None, *, iterations: in
         return float(np.sqrt(np.mean(np.sum(res**2, axis=1))))
 
     rec: dict[str, Any] = {"steps": N, "residual_rms_bw_before": residual_rms(U),
-                           "end_error_before": _end_error(X[-1], target, nv, cq, cd), "log": []}
+                           "end_error_before": _end_error(X[-1], target, tf), "log": []}
     mu = MU_MIN
     lin_cpu = 0.0
     it = 0
@@ -361,7 +382,7 @@ def feasible_cycle(motion: Motion, gains: Gains | None = None, *, iterations: in
         A, B = _linearize(m, X, U)
         lin_cpu += _time.process_time() - c
         c0 = cost(X, U, wf)
-        problem = (A, B, X, U, Xt, Ut, Q, r, wf * np.diag(w), target, cq)
+        problem = (A, B, X, U, Xt, Ut, Q, r, wf * np.diag(w), target, tf)
 
         def step(mu: float) -> tuple[float, float, np.ndarray, np.ndarray]:
             return _step(m, x0, problem, mu, lambda Xn, Un: cost(Xn, Un, wf), c0)  # noqa: B023
@@ -384,21 +405,21 @@ def feasible_cycle(motion: Motion, gains: Gains | None = None, *, iterations: in
         if wf == CLOSURE_WEIGHT and c0 - cn < tolerance * c0:
             break
     # the feedback: periodic LQR on the final cycle's linearizations, its torque weight chosen on perturbed starts
-    Kfb, rec["feedback"] = _select_gains(m, geo, X, U, w, turn, rise)
-    end = _end_error(X[-1], target, nv, cq, cd)
+    Kfb, rec["feedback"] = _select_gains(m, geo, X, U, w, tf)
+    end = _end_error(X[-1], target, tf)
     rec.update({"iterations": it, "residual_rms_bw_after": residual_rms(U), "end_error_after": end,
                 # the resync's closing tolerance: the next cycle can start where this one ends
                 "closes": all(abs(end[k]) <= tol for k, tol in CLOSE_TOLERANCE.items()),
                 "linearization_cpu_s": lin_cpu, "cpu_s": _time.process_time() - cpu0, "status": "computed"})
     names = tuple(mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_ACTUATOR, int(a)) for a in geo.motors)
-    return FeasibleCycle(float(m.opt.timestep), t0, ref.period, turn, rise, X, U[:, geo.motors], Kfb, names,
-                         cq.copy(), cd.copy(), rec)
+    return FeasibleCycle(float(m.opt.timestep), t0, ref.period, tf, X, U[:, geo.motors], Kfb, names, rec)
 
 
-def _end_error(x: np.ndarray, target: np.ndarray, nv: int, cq: np.ndarray, cd: np.ndarray) -> dict[str, float]:
+def _end_error(x: np.ndarray, target: np.ndarray, tf: CycleTransform) -> dict[str, float]:
     """The end state against the start's under the cycle transform, in the units of
     ``mjcf.simulate.CLOSE_TOLERANCE``."""
-    e = _difference(x, target, cq)
+    e = tf.difference(x, target)
+    nv, cq, cd = tf.nv, tf.qpos, tf.dof
     return {"joint_rms_deg": float(np.degrees(np.sqrt(np.mean(e[cq[6:]] ** 2)))),
             "joint_velocity_rms_deg_s": float(np.degrees(np.sqrt(np.mean(e[nv + cd[6:]] ** 2)))),
             "pelvis_height_m": float(e[cq[ROOT_Z]]),
@@ -412,9 +433,9 @@ def _failed(motion: Motion, m: mujoco.MjModel, geo: ModelGeometry, ref: Referenc
     empty = np.zeros((0, len(geo.motors)))
     names = tuple(mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_ACTUATOR, int(a)) for a in geo.motors)
     turn, _d, rise = ref.transform(1)
-    return FeasibleCycle(float(m.opt.timestep), t0, ref.period, turn, rise, np.zeros((0, 2 * nv)), empty,
-                         np.zeros((0, len(geo.motors), 2 * nv)), names, geo.coordinate_qpos.copy(),
-                         geo.coordinate_dof.copy(),
+    tf = CycleTransform(turn, rise, nv, geo.coordinate_qpos.copy(), geo.coordinate_dof.copy())
+    return FeasibleCycle(float(m.opt.timestep), t0, ref.period, tf, np.zeros((0, 2 * nv)), empty,
+                         np.zeros((0, len(geo.motors), 2 * nv)), names,
                          {"status": "failed", "message": why, "cpu_s": _time.process_time() - cpu0})
 
 
@@ -447,12 +468,8 @@ class CycleController(ControllerBase):
         c = self.cycle
         k, s = divmod(self.step, c.steps)
         x = np.concatenate([data.qpos, data.qvel])
-        target = _moved(c.states[s], k, c.turn, c.rise, self.nv, c.coordinate_qpos, c.coordinate_dof)
-        e = _difference(x, target, c.coordinate_qpos)
-        # the gains act in the first cycle's frame: the horizontal velocity's difference turned back
-        ix, iy = self.nv + c.coordinate_dof[0], self.nv + c.coordinate_dof[1]
-        ca, sa = math.cos(-k * c.turn), math.sin(-k * c.turn)
-        e[ix], e[iy] = ca * e[ix] - sa * e[iy], sa * e[ix] + ca * e[iy]
+        tf = c.transform
+        e = tf.back(tf.difference(x, tf.moved(c.states[s], k)), k)  # the gains act in the first cycle's frame
         out = np.zeros(self.nu)
         out[self.act] = c.controls[s] + c.gains[s] @ e
         return out
