@@ -29,7 +29,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                 raise CliError(f"no offline cycle: {offline.get('message', '')}")
             controller = cycle_controller(cycle)
         res = simulate(motion, args.cycles, controller=controller, resync=not args.no_resync)
-    except SimulationError as e:
+    except (SimulationError, ValueError) as e:  # a motion this model or the offline cycle cannot take
         raise CliError(str(e)) from e
     if offline is not None:
         res = replace(res, report={**res.report, "offline_cycle": offline})
