@@ -35,6 +35,15 @@ OPTIMA = {"uphill_11.25": Target(slope_deg=11.25), "downhill_11.25": Target(slop
 OPTIMA_OF = "deepmimic_walk"
 
 
+def _run_figures(r: dict) -> dict:
+    """A continuous run's figures from its report: how far it walked, its fall, its tracking."""
+    return {"cycles_walked": round(float(r["cycles_walked"]), 3), "fell": bool(r["fell"]),
+            "fall_reason": (r.get("fall") or {}).get("reason"),
+            "joint_tracking_rms_deg": round(float(r["joint_tracking_rms_deg"]), 3),
+            "foot_force_rms_bw": round(float(r["foot_force_rms_bw"]), 4),
+            "peak_torque_ratio_max": round(float(r["peak_torque_ratio_max"]), 3)}
+
+
 def _row(motion: Motion) -> dict:
     wall, cpu = time.perf_counter(), time.process_time()
     res = simulate(motion, CYCLES)
@@ -46,12 +55,7 @@ def _row(motion: Motion) -> dict:
     cpu_continuous = cpu - float(rs["cpu_s"])
     return {
         "cycles_requested": CYCLES,
-        "cycles_walked": round(float(r["cycles_walked"]), 3),
-        "fell": bool(r["fell"]),
-        "fall_reason": (r.get("fall") or {}).get("reason"),
-        "joint_tracking_rms_deg": round(float(r["joint_tracking_rms_deg"]), 3),
-        "foot_force_rms_bw": round(float(r["foot_force_rms_bw"]), 4),
-        "peak_torque_ratio_max": round(float(r["peak_torque_ratio_max"]), 3),
+        **_run_figures(r),
         "resync_cycles": rs["cycles"],
         "resync_completed": rs["completed"],
         "resync_closed": rs["closed"],
@@ -95,12 +99,7 @@ def _cycle_row(motion: Motion) -> dict:
         "residual_rms_bw_after": round(float(rec["residual_rms_bw_after"]), 5),
         "end_error_before": {k: round(float(v), 4) for k, v in rec["end_error_before"].items()},
         "end_error_after": {k: round(float(v), 4) for k, v in rec["end_error_after"].items()},
-        "cycles_walked": round(float(r["cycles_walked"]), 3),
-        "fell": bool(r["fell"]),
-        "fall_reason": (r.get("fall") or {}).get("reason"),
-        "joint_tracking_rms_deg": round(float(r["joint_tracking_rms_deg"]), 3),
-        "foot_force_rms_bw": round(float(r["foot_force_rms_bw"]), 4),
-        "peak_torque_ratio_max": round(float(r["peak_torque_ratio_max"]), 3),
+        **_run_figures(r),
         "cpu_per_simulated_s": round(run_cpu / simulated_s, 3) if simulated_s > 0 else None,
     }
 

@@ -334,6 +334,9 @@ def feasible_cycle(motion: Motion, gains: Gains | None = None, *, iterations: in
     if m.nq != nv:
         raise ValueError("the offline cycle needs a model of hinges and slides (qpos and qvel of one size)")
     cq, cd = geo.coordinate_qpos, geo.coordinate_dof
+    turn, _d, rise = ref.transform(1)
+    tf = CycleTransform(turn, rise, nv, cq.copy(), cd.copy())
+    names = tuple(mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_ACTUATOR, int(a)) for a in geo.motors)
     t0 = mid_stance_time(motion)
     N = int(round(ref.period / float(m.opt.timestep)))
     bw = body_weight(motion)
@@ -342,11 +345,12 @@ def feasible_cycle(motion: Motion, gains: Gains | None = None, *, iterations: in
     x0 = np.concatenate([d0.qpos, d0.qvel])
     first = _rollout(m, d0, tracker, ref, geo, t0, N, True)
     if first.fell or len(first.ctrl) < N:
-        return _failed(motion, m, geo, ref, t0, f"the tracker's first cycle falls: {first.fall_reason}", cpu0)
+        return FeasibleCycle(float(m.opt.timestep), t0, ref.period, tf, np.zeros((0, 2 * nv)),
+                             np.zeros((0, len(names))), np.zeros((0, len(names), 2 * nv)), names,
+                             {"status": "failed", "message": f"the tracker's first cycle falls: {first.fall_reason}",
+                              "cpu_s": _time.process_time() - cpu0})
     U = first.ctrl.copy()
     X, _ = _rollout_open(m, x0, U)
-    turn, _d, rise = ref.transform(1)
-    tf = CycleTransform(turn, rise, nv, cq.copy(), cd.copy())
     target = tf.moved(x0, 1)
     w = _weights(nv, geo)
     Q = np.diag(w) * TRACK_WEIGHT
@@ -411,7 +415,6 @@ def feasible_cycle(motion: Motion, gains: Gains | None = None, *, iterations: in
                 # the resync's closing tolerance: the next cycle can start where this one ends
                 "closes": all(abs(end[k]) <= tol for k, tol in CLOSE_TOLERANCE.items()),
                 "linearization_cpu_s": lin_cpu, "cpu_s": _time.process_time() - cpu0, "status": "computed"})
-    names = tuple(mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_ACTUATOR, int(a)) for a in geo.motors)
     return FeasibleCycle(float(m.opt.timestep), t0, ref.period, tf, X, U[:, geo.motors], Kfb, names, rec)
 
 
@@ -425,18 +428,6 @@ def _end_error(x: np.ndarray, target: np.ndarray, tf: CycleTransform) -> dict[st
             "pelvis_height_m": float(e[cq[ROOT_Z]]),
             "root_attitude_deg": float(np.degrees(np.max(np.abs(e[cq[3:6]])))),
             "root_velocity_m_s": float(np.linalg.norm(e[nv + cd[:3]]))}
-
-
-def _failed(motion: Motion, m: mujoco.MjModel, geo: ModelGeometry, ref: Reference, t0: float, why: str,
-            cpu0: float) -> FeasibleCycle:
-    nv = m.nv
-    empty = np.zeros((0, len(geo.motors)))
-    names = tuple(mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_ACTUATOR, int(a)) for a in geo.motors)
-    turn, _d, rise = ref.transform(1)
-    tf = CycleTransform(turn, rise, nv, geo.coordinate_qpos.copy(), geo.coordinate_dof.copy())
-    return FeasibleCycle(float(m.opt.timestep), t0, ref.period, tf, np.zeros((0, 2 * nv)), empty,
-                         np.zeros((0, len(geo.motors), 2 * nv)), names,
-                         {"status": "failed", "message": why, "cpu_s": _time.process_time() - cpu0})
 
 
 class CycleController(ControllerBase):
